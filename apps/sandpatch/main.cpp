@@ -1,1 +1,159 @@
-int main() { return 0; }
+// sandpatch: the command-line program (docs/cli.md).
+//   sandpatch run [SCENE] [--out DIR] [--seconds S | --frames N] [--backend cpu|gl] [--threads T]
+//   sandpatch check SCENE
+//   sandpatch info
+//   sandpatch bench dem [--granules N] [--steps S] [--backend cpu|gl] [--threads T] [--json]
+// Exit codes: 0 ok, 1 runtime failure (with the stage that failed), 2 bad input.
+#include <CLI/CLI.hpp>
+#include <Eigen/Core>
+#include <LinearMath/btScalar.h>
+#include <fcl/config.h>
+#include <omp.h>
+#include <png.h>
+
+#include <cstdio>
+#include <iostream>
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "bench/bench.hpp"
+#include "gl/context.hpp"
+#include "manager/run.hpp"
+#include "scene/scene.hpp"
+
+using namespace sandpatch;
+
+namespace {
+
+int code(ExitCode c) { return static_cast<int>(c); }
+
+Result<SceneDef> load(const std::string& path) {
+  return path.empty() ? load_default_scene() : load_scene_file(path);
+}
+
+void print_errors(const std::string& what, const std::string& text) {
+  std::fprintf(stderr, "sandpatch: %s\n%s", what.c_str(), text.c_str());
+  if (!text.empty() && text.back() != '\n') std::fputc('\n', stderr);
+}
+
+int cmd_info() {
+  std::printf("sandpatch %s\n", SANDPATCH_VERSION);
+  std::printf("threads: %d (OpenMP max), %d hardware\n", omp_get_max_threads(), omp_get_num_procs());
+  std::printf("libraries: Eigen %d.%d.%d, Bullet %d.%02d, FCL %s, libpng %s, nlohmann_json %d.%d.%d, CLI11 %s\n",
+              EIGEN_WORLD_VERSION, EIGEN_MAJOR_VERSION, EIGEN_MINOR_VERSION, btGetVersion() / 100,
+              btGetVersion() % 100, FCL_VERSION, PNG_LIBPNG_VER_STRING, NLOHMANN_JSON_VERSION_MAJOR,
+              NLOHMANN_JSON_VERSION_MINOR, NLOHMANN_JSON_VERSION_PATCH, CLI11_VERSION);
+  auto ctx = gl::Context::create();
+  if (!ctx) {
+    std::printf("OpenGL: none: %s\n", ctx.message().c_str());
+    return code(ExitCode::Ok);
+  }
+  const auto& i = (*ctx)->info();
+  std::printf("OpenGL: %s (%s) via EGL %s, %s platform%s\n", i.gl_renderer.c_str(), i.gl_version.c_str(),
+              i.egl_version.c_str(), i.platform.c_str(), i.software ? ", software rasteriser" : "");
+  std::printf("OpenGL limits: %d SSBO bindings, %lld MiB per SSBO, %d invocations per work group\n",
+              i.max_ssbo_bindings, i.max_ssbo_bytes >> 20, i.max_work_group_invocations);
+  return code(ExitCode::Ok);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"Sandpatch: real-time granular terrain (hybrid heightfield / DEM level of detail)", "sandpatch"};
+  app.require_subcommand(1);
+  app.set_version_flag("--version", std::string("sandpatch ") + SANDPATCH_VERSION);
+
+  std::string scene_path, out_dir, backend;
+  double seconds = -1;
+  long long frames = -1;
+  int threads = -1;
+  bool quiet = false;
+  auto* run = app.add_subcommand("run", "Run a scene headless and write DIR/report.json (default scene if none given)");
+  run->add_option("scene", scene_path, "Scene file (JSON, docs/scene-format.md); omitted = the embedded default");
+  run->add_option("--out", out_dir, "Output directory (default: out/<scene name>)");
+  auto* o_sec = run->add_option("--seconds", seconds, "Simulated seconds (overrides simulation.duration)")
+                    ->check(CLI::PositiveNumber);
+  auto* o_frames = run->add_option("--frames", frames, "Number of fixed steps to run")->check(CLI::PositiveNumber);
+  o_sec->excludes(o_frames);
+  run->add_option("--backend", backend, "DEM backend")->check(CLI::IsMember({"cpu", "gl"}));
+  run->add_option("--threads", threads, "Worker threads (0 = all)")->check(CLI::NonNegativeNumber);
+  run->add_flag("--quiet", quiet, "No progress output");
+
+  std::string check_path;
+  auto* check = app.add_subcommand("check", "Validate a scene file and exit (0 valid, 2 invalid)");
+  check->add_option("scene", check_path, "Scene file")->required();
+
+  app.add_subcommand("info", "Print versions, thread count and the OpenGL renderer EGL finds");
+
+  auto* bench = app.add_subcommand("bench", "Benchmarks (programs, not tests; docs/BENCHMARKS.md)");
+  bench->require_subcommand(1);
+  BenchDemArgs dem;
+  auto* bdem = bench->add_subcommand("dem", "Granule DEM throughput on a settled bed (sphere-steps/s)");
+  bdem->add_option("--granules", dem.granules, "Granules in the bed (4 spheres each)")->check(CLI::PositiveNumber);
+  bdem->add_option("--steps", dem.steps, "Timed steps")->check(CLI::PositiveNumber);
+  bdem->add_option("--backend", dem.backend, "DEM backend")->check(CLI::IsMember({"cpu", "gl"}));
+  bdem->add_option("--threads", dem.threads, "Worker threads (0 = all)")->check(CLI::NonNegativeNumber);
+  bdem->add_flag("--json", dem.json, "Print one JSON object on the last line");
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    const int rc = app.exit(e);
+    return rc == 0 ? 0 : code(ExitCode::BadInput);
+  }
+
+  if (app.got_subcommand("info")) return cmd_info();
+
+  if (app.got_subcommand("check")) {
+    auto scene = load_scene_file(check_path);
+    if (!scene) {
+      print_errors(check_path + ": invalid scene (" + std::to_string(scene.errors().size()) + " error(s))",
+                   scene.message());
+      return code(ExitCode::BadInput);
+    }
+    std::printf("%s: valid scene '%s' (hash %s): %zu bodies, %zu materials\n", check_path.c_str(),
+                scene->name.c_str(), scene->hash.c_str(), scene->bodies.size(), scene->materials.size());
+    return code(ExitCode::Ok);
+  }
+
+  if (app.got_subcommand("bench")) {
+    if (bench->got_subcommand("dem")) return run_bench_dem(dem);
+  }
+
+  if (app.got_subcommand("run")) {
+    auto scene = load(scene_path);
+    if (!scene) {
+      print_errors((scene_path.empty() ? std::string("<embedded default>") : scene_path) + ": invalid scene (" +
+                       std::to_string(scene.errors().size()) + " error(s))",
+                   scene.message());
+      return code(ExitCode::BadInput);
+    }
+    RunOptions opt;
+    opt.out_dir = out_dir;
+    opt.seconds = seconds;
+    opt.frames = frames;
+    opt.backend = backend;
+    opt.threads = threads;
+    opt.progress = quiet ? ProgressStyle::None : ProgressStyle::Auto;
+    for (int i = 0; i < argc; ++i) opt.command_line += (i ? " " : "") + std::string(argv[i]);
+    RunResult r = run_scene(*scene, opt);
+    if (r.code != ExitCode::Ok) {
+      print_errors(r.code == ExitCode::BadInput ? "bad input (stage " + r.stage + ")"
+                                                : "run failed in stage '" + r.stage + "'",
+                   r.message);
+      return code(r.code);
+    }
+    const auto& rep = r.report;
+    std::printf("scene '%s': %lld frames, %.2f s simulated in %.2f s (real-time factor %.2fx), final state %s\n",
+                scene->name.c_str(), rep["frames"].get<long long>(), rep["simulated_s"].get<double>(),
+                rep["wall_s"].get<double>(), rep["real_time_factor"].get<double>(),
+                rep["final_state_hash"].get<std::string>().c_str());
+    std::printf("stages (total ms):");
+    for (const auto& [name, t] : rep["stages"].items()) std::printf(" %s %.1f", name.c_str(), t["total_ms"].get<double>());
+    std::printf("\n");
+    for (const auto& w : rep["warnings"]) std::printf("warning: %s\n", w.get<std::string>().c_str());
+    if (!r.report_path.empty()) std::printf("report: %s\n", r.report_path.c_str());
+    return code(ExitCode::Ok);
+  }
+  return code(ExitCode::BadInput);
+}

@@ -1,0 +1,137 @@
+// bench dem: throughput of the CPU granule DEM on a settled bed (DESIGN.md "Yardsticks").
+//
+// 1. build   granules on a loose lattice with random orientations in a walled box of the
+//            peer's footprint (particles/bed.hpp)
+// 2. settle  real parameters, dt = 5e-5 s, until the fastest granule is below 0.05 m/s
+//            (at most 1.5 s of simulated time)
+// 3. time    `steps` steps of the settled bed with the same parameters and count contacts
+#include "bench/bench.hpp"
+
+#include <omp.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+
+#include <nlohmann/json.hpp>
+
+#include "particles/bed.hpp"
+#include "particles/dem.hpp"
+
+namespace sandpatch {
+
+int run_bench_dem(const BenchDemArgs& a) {
+  if (a.granules < 1 || a.granules > 4000000) {
+    std::fprintf(stderr, "bench dem: --granules = %d: must be in [1, 4000000]\n", a.granules);
+    return 2;
+  }
+  if (a.steps < 1) {
+    std::fprintf(stderr, "bench dem: --steps = %d: must be >= 1\n", a.steps);
+    return 2;
+  }
+  if (a.threads < 0) {
+    std::fprintf(stderr, "bench dem: --threads = %d: must be >= 0 (0 = all cores)\n", a.threads);
+    return 2;
+  }
+  if (a.backend != "cpu") {
+    std::fprintf(stderr, "bench dem: --backend = %s: only 'cpu' is available in this build\n", a.backend.c_str());
+    return 2;
+  }
+  const float r = 0.005f;
+  const double dt = 5e-5;
+  SimulationDef def;
+  def.max_bodies = a.granules;
+  def.max_particles = 4 * a.granules;
+  def.particle_radius = r;
+  def.material.density = 2500;
+  def.material.normal_stiffness = 3292;
+  def.material.restitution = 0.3f;
+  def.material.friction = 0.5f;
+  def.threads = a.threads;
+  def.sleep_time = 0;  // never sleep: we time the work
+  const float L = float(peer_footprint(a.granules, r));
+  def.bounds_min = {0, 0, 0};
+  def.side_walls = true;
+  LatticeBedDef bed;
+  const GranuleShape shape = make_granule_shape(r, def.granule_edge_factor, def.material.density);
+  const float spacing = 2.0f * (shape.centre_distance + shape.radius) * 1.02f;
+  bed.nx = bed.nz = std::max(1, int(std::floor((L - spacing) / spacing)) + 1);
+  bed.layers = (a.granules + bed.nx * bed.nz - 1) / (bed.nx * bed.nz);
+  bed.count = a.granules;
+  bed.spacing = spacing;
+  bed.min = {0.5f * (L - (bed.nx - 1) * spacing), shape.centre_distance + r + 1e-4f,
+             0.5f * (L - (bed.nz - 1) * spacing)};
+  bed.seed = 12345;
+  def.bounds_max = {L, bed.min.y + bed.layers * spacing + 4 * r, L};
+  auto sim = Simulation::create(def);
+  if (!sim) {
+    std::fprintf(stderr, "bench dem: %s", sim.message().c_str());
+    return 2;
+  }
+  if (auto st = add_lattice_bed(*sim, bed); !st) {
+    std::fprintf(stderr, "bench dem: %s", st.message().c_str());
+    return 1;
+  }
+  const int threads = a.threads > 0 ? a.threads : omp_get_max_threads();
+  const int spheres = sim->particle_count();
+  if (!a.json)
+    std::printf("bench dem: %d granules (%d spheres), box %.3f m x %.3f m, %d layers, dt %g s, %d threads\n",
+                a.granules, spheres, L, L, bed.layers, dt, threads);
+
+  // settle
+  auto t0 = std::chrono::steady_clock::now();
+  int settle = 0;
+  const int max_settle = int(1.5 / dt);
+  for (; settle < max_settle; ++settle) {
+    if (auto st = sim->step(dt); !st) {
+      std::fprintf(stderr, "bench dem: settling: %s", st.message().c_str());
+      return 1;
+    }
+    if (settle % 200 == 199 && settle * dt > 0.2 && sim->max_granule_speed() < 0.05) break;
+  }
+  double settle_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  double vmax_settled = sim->max_granule_speed();
+  if (!a.json)
+    std::printf("settled: %d steps (%.3f s simulated) in %.1f s wall, max granule speed %.4f m/s\n", settle + 1,
+                (settle + 1) * dt, settle_s, vmax_settled);
+
+  // timed
+  std::int64_t contacts = 0, wall_contacts = 0, resorts = 0;
+  t0 = std::chrono::steady_clock::now();
+  for (int k = 0; k < a.steps; ++k) {
+    if (auto st = sim->step(dt); !st) {
+      std::fprintf(stderr, "bench dem: timed step %d: %s", k, st.message().c_str());
+      return 1;
+    }
+    contacts += sim->last_step().contacts;
+    wall_contacts += sim->last_step().wall_contacts;
+    resorts += sim->last_step().resorts;
+  }
+  double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  double ssps = double(spheres) * a.steps / wall;
+  double cps = 2.0 * double(contacts) / a.steps / spheres;  // sphere-sphere contacts per sphere
+  if (!a.json) {
+    std::printf("timed: %d steps in %.3f s: %.3g sphere-steps/s (%.2f ms/step)\n", a.steps, wall, ssps,
+                1e3 * wall / a.steps);
+    std::printf("contacts per sphere %.2f (sphere-sphere, other bodies), wall contacts per sphere %.3f, "
+                "grid rebuilds %lld, max granule speed %.4f m/s\n",
+                cps, double(wall_contacts) / a.steps / spheres, (long long)resorts, sim->max_granule_speed());
+  }
+  nlohmann::json j = {{"bench", "dem"},
+                      {"backend", a.backend},
+                      {"granules", a.granules},
+                      {"spheres", spheres},
+                      {"steps", a.steps},
+                      {"dt", dt},
+                      {"threads", threads},
+                      {"wall_seconds", wall},
+                      {"sphere_steps_per_s", ssps},
+                      {"contacts_per_sphere", cps},
+                      {"settle_steps", settle + 1},
+                      {"settled_max_speed", vmax_settled},
+                      {"contact_model", "linear spring-dashpot + tangential spring with history"}};
+  if (a.json) std::printf("%s\n", j.dump().c_str());
+  return 0;
+}
+
+}  // namespace sandpatch

@@ -1,0 +1,95 @@
+// The one place Sandpatch wraps Bullet (../shared/STYLE.md counter-examples: Bullet's global
+// state and its hidden time accumulator). Bodies outside active patches collide with the
+// heightfield through one btHeightfieldTerrainShape per heightfield tile, reading Sandpatch's
+// own tile arrays (no copy). step(dt) advances exactly dt: stepSimulation(dt, 0) makes Bullet
+// take one step of dt with no accumulator and no interpolation.
+//
+// Precision boundary (../shared/STYLE.md 11): Bullet runs in float, relative to the terrain's
+// world origin; world positions given to and returned from this class are double.
+#pragma once
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <array>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "common/error.hpp"
+
+namespace sandpatch {
+
+class Heightfield;
+
+enum class RigidShapeKind { Sphere, Box, Cylinder, Capsule, Mesh };
+
+struct RigidShape {
+  RigidShapeKind kind = RigidShapeKind::Sphere;
+  float radius = 0.5f;                                   // m (sphere, cylinder, capsule)
+  float height = 1.0f;                                   // m, full length along local y (cylinder, capsule: of the straight part)
+  Eigen::Vector3f half_extents = Eigen::Vector3f::Constant(0.5f);  // m (box)
+  std::vector<Eigen::Vector3f> vertices;                 // m, body frame (mesh)
+  std::vector<std::array<int, 3>> triangles;             // indices into vertices (mesh, closed)
+};
+
+struct RigidBodyDef {
+  std::string name;
+  RigidShape shape;
+  float mass = 1.0f;                                     // kg (> 0)
+  Eigen::Vector3d position = Eigen::Vector3d::Zero();    // m, world
+  Eigen::Quaternionf orientation = Eigen::Quaternionf::Identity();
+  Eigen::Vector3f linear_velocity = Eigen::Vector3f::Zero();   // m/s
+  Eigen::Vector3f angular_velocity = Eigen::Vector3f::Zero();  // rad/s
+  float friction = 0.5f;                                 // Coulomb μ against the heightfield
+  float restitution = 0.1f;                              // against the heightfield
+  float rolling_friction = 0.05f;                        // rolling resistance (dimensionless torque arm / radius);
+                                                         // soil resists rolling, and it damps the sideways kicks
+                                                         // Bullet gives a body landing on triangle edges
+};
+
+struct BodyState {
+  Eigen::Vector3d position;          // m, world
+  Eigen::Quaternionf orientation;
+  Eigen::Vector3f linear_velocity;   // m/s
+  Eigen::Vector3f angular_velocity;  // rad/s
+};
+
+// Handle of a body in a BulletWorld: index + generation (stale handles are detected).
+struct BodyId {
+  int index = -1;
+  int generation = 0;
+  bool valid() const { return index >= 0; }
+};
+
+class BulletWorld {
+ public:
+  // `terrain` must outlive the world: its tile arrays are read in place by Bullet.
+  static Result<std::unique_ptr<BulletWorld>> create(const Heightfield& terrain, const Eigen::Vector3f& gravity);
+  ~BulletWorld();
+  BulletWorld(const BulletWorld&) = delete;
+  BulletWorld& operator=(const BulletWorld&) = delete;
+
+  Result<BodyId> add_body(const RigidBodyDef& def);
+  void remove_body(BodyId id);
+  bool alive(BodyId id) const;
+  BodyState state(BodyId id) const;
+  // Axis-aligned bounds of the body's collision shape (m, world).
+  void bounds(BodyId id, Eigen::Vector3d* lo, Eigen::Vector3d* hi) const;
+  int body_count() const;
+
+  // Advances every body by exactly dt seconds (one Bullet step, no accumulator).
+  void step(float dt);
+
+  // Re-reads the heights of every tile (after the heightfield was edited): updates the
+  // vertical bounds of the tile shapes that changed.
+  void terrain_changed();
+
+  int terrain_tile_count() const;
+
+ private:
+  BulletWorld() = default;
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace sandpatch

@@ -1,0 +1,131 @@
+// Particles -> heightfield (Leach & Marais §5.2); see depth_conversion.hpp.
+#include "manager/depth_conversion.hpp"
+
+#include <GL/glcorearb.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "gl/context.hpp"
+#include "gl/program.hpp"
+#include "heightfield/filter.hpp"
+#include "shaders/shaders.hpp"
+
+namespace sandpatch {
+
+float HeightImage::box_mean(float x, float z, float hx, float hz) const {
+  const float du = (x1 - x0) / float(width), dv = (z1 - z0) / float(height);
+  // Texels with centres in [x - hx, x + hx]: u from ceil((x - hx - x0)/du - ½) to floor((x + hx - x0)/du - ½).
+  int u0 = int(std::ceil((x - hx - x0) / du - 0.5f)), u1 = int(std::floor((x + hx - x0) / du - 0.5f));
+  int v0 = int(std::ceil((z - hz - z0) / dv - 0.5f)), v1 = int(std::floor((z + hz - z0) / dv - 0.5f));
+  u0 = std::clamp(u0, 0, width - 1);
+  u1 = std::clamp(u1, 0, width - 1);
+  v0 = std::clamp(v0, 0, height - 1);
+  v1 = std::clamp(v1, 0, height - 1);
+  if (u1 < u0 || v1 < v0) {  // footprint smaller than a texel: nearest texel
+    const int u = std::clamp(int((x - x0) / du), 0, width - 1), v = std::clamp(int((z - z0) / dv), 0, height - 1);
+    return at(u, v);
+  }
+  double sum = 0;
+  for (int v = v0; v <= v1; ++v)
+    for (int u = u0; u <= u1; ++u) sum += at(u, v);
+  return float(sum / double((u1 - u0 + 1) * (v1 - v0 + 1)));
+}
+
+Result<std::unique_ptr<ParticleDepthRenderer>> ParticleDepthRenderer::create(const DepthConversionDef& def) {
+  if (def.resolution < 16 || def.resolution > 8192) {
+    return Error{"", "depth_conversion.resolution", std::to_string(def.resolution), "must be in [16, 8192] texels"};
+  }
+  auto prog = gl::Program::graphics("convert/particle_depth", std::string(shaders::source("convert/particle_depth.vert")),
+                                    std::string(shaders::source("convert/particle_depth.frag")));
+  if (!prog) return prog.errors();
+  std::unique_ptr<ParticleDepthRenderer> r(new ParticleDepthRenderer());
+  r->resolution_ = def.resolution;
+  r->program_ = std::move(*prog);
+  glGenFramebuffers(1, &r->fbo_);
+  glGenTextures(1, &r->depth_tex_);
+  glBindTexture(GL_TEXTURE_2D, r->depth_tex_);
+  glTexStorage2D(GL_TEXTURE_2D, 1, GL_DEPTH_COMPONENT32F, def.resolution, def.resolution);
+  glBindFramebuffer(GL_FRAMEBUFFER, r->fbo_);
+  glFramebufferTexture2D(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_TEXTURE_2D, r->depth_tex_, 0);
+  glDrawBuffer(GL_NONE);
+  glReadBuffer(GL_NONE);
+  const GLenum status = glCheckFramebufferStatus(GL_FRAMEBUFFER);
+  glBindFramebuffer(GL_FRAMEBUFFER, 0);
+  if (status != GL_FRAMEBUFFER_COMPLETE) {
+    return Error{"", "depth_conversion", "", "depth framebuffer incomplete (status " + std::to_string(status) + ")"};
+  }
+  glGenVertexArrays(1, &r->vao_);
+  glGenBuffers(1, &r->ssbo_);
+  return r;
+}
+
+ParticleDepthRenderer::~ParticleDepthRenderer() {
+  if (fbo_) glDeleteFramebuffers(1, &fbo_);
+  if (depth_tex_) glDeleteTextures(1, &depth_tex_);
+  if (vao_) glDeleteVertexArrays(1, &vao_);
+  if (ssbo_) glDeleteBuffers(1, &ssbo_);
+}
+
+Result<HeightImage> ParticleDepthRenderer::render(const float* s, std::size_t n, float x0, float z0, float x1, float z1,
+                                                  float floor_y, float top_y) {
+  if (!(x1 > x0) || !(z1 > z0) || !(top_y > floor_y) || !std::isfinite(x0 + x1 + z0 + z1 + floor_y + top_y)) {
+    return Error{"", "depth render rectangle", "", "needs finite x1 > x0, z1 > z0, top_y > floor_y"};
+  }
+  // Camera at y_c = top_y looking down, near n = 0, far f = top_y - floor_y.
+  const float yc = top_y, near_m = 0.0f, far_m = top_y - floor_y;
+  const std::size_t bytes = std::max<std::size_t>(n, 1) * 4 * sizeof(float);
+  glBindBuffer(GL_SHADER_STORAGE_BUFFER, ssbo_);
+  if (bytes > ssbo_bytes_) {
+    glBufferData(GL_SHADER_STORAGE_BUFFER, GLsizeiptr(bytes), nullptr, GL_STREAM_DRAW);
+    ssbo_bytes_ = bytes;
+  }
+  if (n > 0) glBufferSubData(GL_SHADER_STORAGE_BUFFER, 0, GLsizeiptr(n * 4 * sizeof(float)), s);
+  glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, ssbo_);
+
+  glBindFramebuffer(GL_FRAMEBUFFER, fbo_);
+  glViewport(0, 0, resolution_, resolution_);
+  glEnable(GL_DEPTH_TEST);
+  glDepthFunc(GL_LESS);
+  glDepthMask(GL_TRUE);
+  glDisable(GL_CULL_FACE);
+  glClearDepth(1.0);  // the far plane: the patch floor
+  glClear(GL_DEPTH_BUFFER_BIT);
+  if (n > 0) {
+    glUseProgram(program_.id());
+    glUniform4f(glGetUniformLocation(program_.id(), "u_region"), x0, z0, x1, z1);
+    glUniform3f(glGetUniformLocation(program_.id(), "u_camera"), yc, near_m, far_m);
+    glBindVertexArray(vao_);
+    glDrawArrays(GL_TRIANGLES, 0, GLsizei(6 * n));
+    glBindVertexArray(0);
+    glUseProgram(0);
+  }
+  HeightImage img;
+  img.width = img.height = resolution_;
+  img.x0 = x0;
+  img.z0 = z0;
+  img.x1 = x1;
+  img.z1 = z1;
+  img.h.resize(std::size_t(resolution_) * resolution_);
+  glPixelStorei(GL_PACK_ALIGNMENT, 4);
+  glReadPixels(0, 0, resolution_, resolution_, GL_DEPTH_COMPONENT, GL_FLOAT, img.h.data());
+  glBindFramebuffer(GL_FRAMEBUFFER, 0);
+  const std::string errs = gl::Context::drain_errors();
+  if (!errs.empty()) return Error{"", "depth render", "", "OpenGL error " + errs};
+  // height = y_c − n − z (f − n); row v of the image is z = z0 + (v + ½) dz (NDC y ↔ z).
+  for (float& z : img.h) z = yc - near_m - z * (far_m - near_m);
+  return img;
+}
+
+void write_to_heightfield(const HeightImage& image, GridRegion r, Heightfield& hf, int border_width) {
+  const float sp = hf.spacing();
+  std::vector<float> h(std::size_t(r.ni) * r.nj);
+  for (int j = 0; j < r.nj; ++j)
+    for (int i = 0; i < r.ni; ++i)
+      h[std::size_t(j) * r.ni + i] = image.box_mean(float(r.i0 + i) * sp, float(r.j0 + j) * sp, 0.5f * sp, 0.5f * sp);
+  hf.write(r, h.data());
+  gaussian3x3(hf, r);
+  if (border_width > 0) smooth_border_band(hf, r, border_width);
+}
+
+}  // namespace sandpatch

@@ -1,0 +1,67 @@
+// Particles -> heightfield by a top-down orthographic depth render (Leach & Marais §5.2).
+//
+// 1. render():  the patch's spheres are drawn from above into a depth buffer of
+//    resolution² texels (default 1024², far finer than the particle spacing), through the
+//    one headless EGL context (GPU or llvmpipe). Each sphere writes the depth of its upper
+//    surface; the depth test keeps the highest. For the linear orthographic depth z in [0, 1]
+//    of a camera at height y_c with near n and far f:  height = y_c − n − z (f − n).
+//    The far plane is the patch floor, so a texel no particle covers reads as the floor.
+// 2. write_to_heightfield(): each heightfield sample of the region takes the mean height of
+//    the texels in its cell footprint (spacing × spacing centred on the sample), the region
+//    is smoothed with the 3×3 Gaussian, and then a 3×3 Gaussian band along its border
+//    stitches it into the untouched terrain around it.
+#pragma once
+
+#include <memory>
+#include <vector>
+
+#include "common/error.hpp"
+#include "gl/program.hpp"
+#include "heightfield/heightfield.hpp"
+
+namespace sandpatch {
+
+// Heights (m, heightfield-local) on a regular grid of texels over [x0, x1] × [z0, z1];
+// texel (u, v) has its centre at x0 + (u + ½)(x1 − x0)/width, z0 + (v + ½)(z1 − z0)/height.
+struct HeightImage {
+  int width = 0, height = 0;
+  float x0 = 0, z0 = 0, x1 = 0, z1 = 0;  // m, local
+  std::vector<float> h;                 // width × height, u fastest
+  float at(int u, int v) const { return h[std::size_t(v) * width + u]; }
+  // Mean of the texels whose centres lie in [x − hx, x + hx] × [z − hz, z + hz] (at least the
+  // nearest texel).
+  float box_mean(float x, float z, float hx, float hz) const;
+};
+
+struct DepthConversionDef {
+  int resolution = 1024;  // texels per side of the depth render (Leach & Marais used 1024)
+};
+
+class ParticleDepthRenderer {
+ public:
+  // Needs the GL context (gl::Context) current on the calling thread.
+  static Result<std::unique_ptr<ParticleDepthRenderer>> create(const DepthConversionDef& def = {});
+  ~ParticleDepthRenderer();
+  ParticleDepthRenderer(const ParticleDepthRenderer&) = delete;
+  ParticleDepthRenderer& operator=(const ParticleDepthRenderer&) = delete;
+
+  // spheres: n × (x, y, z, radius), m, heightfield-local. The rectangle [x0, x1] × [z0, z1]
+  // is imaged; floor_y and top_y (m) bound the heights (top_y above every sphere top).
+  Result<HeightImage> render(const float* spheres_xyzr, std::size_t n, float x0, float z0, float x1, float z1,
+                             float floor_y, float top_y);
+
+  int resolution() const { return resolution_; }
+
+ private:
+  ParticleDepthRenderer() = default;
+  int resolution_ = 0;
+  gl::Program program_;
+  unsigned fbo_ = 0, depth_tex_ = 0, vao_ = 0, ssbo_ = 0;
+  std::size_t ssbo_bytes_ = 0;
+};
+
+// Writes `image` into `region` of `hf` (footprint means, 3×3 Gaussian over the region,
+// then a Gaussian band of `border_width` samples along the region's border).
+void write_to_heightfield(const HeightImage& image, GridRegion region, Heightfield& hf, int border_width = 1);
+
+}  // namespace sandpatch

@@ -1,0 +1,350 @@
+#include "manager/run.hpp"
+
+#include <omp.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+
+#include "common/hash.hpp"
+#include "heightfield/heightfield.hpp"
+#include "heightfield/io.hpp"
+#include "manager/bullet_world.hpp"
+#include "manager/profile.hpp"
+#include "manager/terrain.hpp"
+#include "scene/mesh.hpp"
+
+namespace fs = std::filesystem;
+
+namespace sandpatch {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+using ojson = nlohmann::ordered_json;
+
+Eigen::Vector3f vec3f(const Vec3d& v) { return {float(v[0]), float(v[1]), float(v[2])}; }
+ojson vec_json(const Eigen::Vector3d& v) { return ojson::array({v.x(), v.y(), v.z()}); }
+ojson vec_json(const Eigen::Vector3f& v) { return ojson::array({v.x(), v.y(), v.z()}); }
+
+// Scene body -> Bullet definition (meshes are read again from their validated OBJ).
+Result<RigidBodyDef> to_rigid_body(const SceneDef& scene, std::size_t index) {
+  const BodyDef& b = scene.bodies[index];
+  RigidBodyDef d;
+  d.name = b.name;
+  d.mass = float(b.mass_value());
+  d.position = {b.pose.position[0], b.pose.position[1], b.pose.position[2]};
+  const auto& q = b.pose.orientation;
+  d.orientation = Eigen::Quaternionf(float(q[0]), float(q[1]), float(q[2]), float(q[3])).normalized();
+  d.linear_velocity = vec3f(b.linear_velocity);
+  d.angular_velocity = vec3f(b.angular_velocity);
+  d.friction = float(b.friction);
+  d.restitution = float(b.restitution);
+  const ShapeDef& s = b.shape;
+  d.shape.radius = float(s.radius);
+  d.shape.height = float(s.height);
+  d.shape.half_extents = vec3f(s.half_extents);
+  switch (s.kind) {
+    case ShapeKind::Sphere: d.shape.kind = RigidShapeKind::Sphere; break;
+    case ShapeKind::Box: d.shape.kind = RigidShapeKind::Box; break;
+    case ShapeKind::Cylinder: d.shape.kind = RigidShapeKind::Cylinder; break;
+    case ShapeKind::Capsule: d.shape.kind = RigidShapeKind::Capsule; break;
+    case ShapeKind::Mesh: {
+      d.shape.kind = RigidShapeKind::Mesh;
+      auto mesh = load_obj_mesh(s.file, s.scale);
+      if (!mesh) return mesh.errors();
+      // Bodies are centred on their centre of mass.
+      const Eigen::Vector3f c = mesh->centroid().cast<float>();
+      for (const auto& v : mesh->vertices) d.shape.vertices.push_back(v - c);
+      d.shape.triangles = mesh->triangles;
+      break;
+    }
+  }
+  return d;
+}
+
+std::string expand_pattern(std::string pattern, long long frame, double t, const char* ext) {
+  char frame_s[32], time_s[32];
+  std::snprintf(frame_s, sizeof frame_s, "%06lld", frame);
+  std::snprintf(time_s, sizeof time_s, "%08lld", static_cast<long long>(std::llround(t * 1000.0)));
+  auto replace = [&](const std::string& key, const std::string& val) {
+    for (std::size_t p; (p = pattern.find(key)) != std::string::npos;) pattern.replace(p, key.size(), val);
+  };
+  replace("{frame}", frame_s);
+  replace("{time_ms}", time_s);
+  replace("{ext}", ext);
+  return pattern;
+}
+
+const char* format_ext(HeightfieldFormat f) {
+  switch (f) {
+    case HeightfieldFormat::Png16: return "png";
+    case HeightfieldFormat::RawF32: return "raw";
+    case HeightfieldFormat::EsriAscii: return "asc";
+  }
+  return "bin";
+}
+
+// Writes `text` to `path` atomically (temporary file + rename): nothing is written half.
+Status write_atomic(const fs::path& path, const std::string& text) {
+  const fs::path tmp = path.string() + ".tmp";
+  {
+    std::ofstream f(tmp, std::ios::binary);
+    f << text;
+    f.flush();
+    if (!f) return Error{path.string(), "", "", "cannot write file"};
+  }
+  std::error_code ec;
+  fs::rename(tmp, path, ec);
+  if (ec) return Error{path.string(), "", "", "cannot rename temporary file: " + ec.message()};
+  return Ok{};
+}
+
+class ProgressPrinter {
+ public:
+  ProgressPrinter(ProgressStyle style, long long frames, double dt) : frames_(frames), dt_(dt) {
+    if (style == ProgressStyle::Auto) style = isatty(STDERR_FILENO) ? ProgressStyle::Bar : ProgressStyle::Lines;
+    style_ = style;
+  }
+  void update(long long frame, double wall_s, bool final = false) {
+    if (style_ == ProgressStyle::None) return;
+    const double sim = double(frame) * dt_, total = double(frames_) * dt_;
+    const double rtf = wall_s > 0 ? sim / wall_s : 0.0;
+    const int pct = frames_ > 0 ? int(100 * frame / frames_) : 100;
+    if (style_ == ProgressStyle::Bar) {
+      if (!final && wall_s - last_wall_ < 0.1) return;
+      last_wall_ = wall_s;
+      const int width = 30, fill = pct * width / 100;
+      std::fprintf(stderr, "\r[%.*s%*s] %3d%%  t = %.2f / %.2f s  real-time factor %.2fx ", fill,
+                   "##############################", width - fill, "", pct, sim, total, rtf);
+      if (final) std::fputc('\n', stderr);
+    } else {
+      // Plain lines every 10% (and at the end) for logs and CI.
+      if (!final && pct < next_pct_) return;
+      next_pct_ = pct / 10 * 10 + 10;
+      std::fprintf(stderr, "progress %3d%%  t = %.2f / %.2f s  real-time factor %.2fx\n", pct, sim, total, rtf);
+    }
+    std::fflush(stderr);
+  }
+
+ private:
+  ProgressStyle style_;
+  long long frames_;
+  double dt_;
+  double last_wall_ = -1;
+  int next_pct_ = 0;
+};
+
+double median(std::vector<double> v) {
+  if (v.empty()) return 0;
+  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+  return v[v.size() / 2];
+}
+
+}  // namespace
+
+RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
+  RunResult res;
+  auto fail = [&](ExitCode code, const std::string& stage, const std::string& msg) {
+    res.code = code;
+    res.stage = stage;
+    res.message = msg;
+    return res;
+  };
+  const SimulationDef& sim = scene.simulation;
+
+  // ---- everything that can be refused is checked before the first frame ----
+  if (!opt.backend.empty() && opt.backend != "cpu" && opt.backend != "gl")
+    return fail(ExitCode::BadInput, "options", "--backend " + opt.backend + ": allowed values are cpu, gl");
+  const std::string backend = opt.backend.empty() ? to_string(sim.backend) : opt.backend;
+  const int threads_req = opt.threads >= 0 ? opt.threads : sim.threads;
+  const int threads = threads_req > 0 ? threads_req : omp_get_num_procs();
+  omp_set_num_threads(threads);
+
+  const double dt = sim.dt;
+  long long frames = opt.frames > 0 ? opt.frames : std::llround(std::ceil((opt.seconds > 0 ? opt.seconds : sim.duration) / dt - 1e-9));
+  if (frames < 1) frames = 1;
+
+  auto hf_result = load_scene_terrain(scene);
+  if (!hf_result) return fail(ExitCode::BadInput, "terrain", hf_result.message());
+  Heightfield& hf = *hf_result;
+
+  auto below = check_bodies_against_terrain(
+      scene, [&](double x, double z) { return float(bedrock_world_height(scene, hf, x, z)); });
+  if (!below.empty()) return fail(ExitCode::BadInput, "bodies", Result<Ok>(below).message());
+
+  std::vector<RigidBodyDef> body_defs;
+  for (std::size_t i = 0; i < scene.bodies.size(); ++i) {
+    auto d = to_rigid_body(scene, i);
+    if (!d) return fail(ExitCode::BadInput, "bodies", d.message());
+    body_defs.push_back(std::move(*d));
+  }
+
+  const fs::path out_dir = opt.out_dir.empty() ? fs::path("out") / scene.name : fs::path(opt.out_dir);
+  {
+    std::error_code ec;
+    fs::create_directories(out_dir, ec);
+    if (ec || !fs::is_directory(out_dir))
+      return fail(ExitCode::BadInput, "outputs", out_dir.string() + ": cannot create output directory" +
+                                                     (ec ? ": " + ec.message() : ""));
+  }
+
+  std::vector<std::string> warnings;
+  warnings.push_back(
+      "particles: granular patches are not simulated in this build (the DEM and the terrain manager land with "
+      "issues 3-5); bodies collide with the heightfield only");
+  if (backend == "gl")
+    warnings.push_back("backend gl: no DEM patch runs yet, so the backend choice has no effect on this run");
+  std::size_t frames_requested = 0;
+  for (const auto& f : scene.outputs.frames)
+    frames_requested += f.every_k_frames > 0 ? std::size_t(frames / f.every_k_frames) : f.times.size();
+  if (frames_requested > 0)
+    warnings.push_back("outputs.frames: " + std::to_string(frames_requested) +
+                       " image(s) requested, none written: the renderer lands with issue 6");
+
+  auto world_result = BulletWorld::create(hf, vec3f(sim.gravity));
+  if (!world_result) return fail(ExitCode::BadInput, "bodies", world_result.message());
+  BulletWorld& world = **world_result;
+
+  // ---- the frame loop ----
+  Profile profile;
+  std::vector<BodyId> ids(scene.bodies.size());
+  std::vector<bool> spawned(scene.bodies.size(), false);
+  std::vector<std::size_t> next_export(scene.outputs.heightfields.size(), 0);
+  std::vector<std::string> written;
+  std::vector<double> frame_ms;
+  frame_ms.reserve(std::size_t(frames));
+  ProgressPrinter progress(opt.progress, frames, dt);
+  const auto t_start = Clock::now();
+  const float sub_dt = float(dt / sim.substeps);
+
+  auto export_heightfield = [&](const HeightfieldOutputDef& o, long long frame, double t) -> Status {
+    const fs::path p = out_dir / expand_pattern(o.file, frame, t, format_ext(o.format));
+    Status s = Ok{};
+    switch (o.format) {
+      case HeightfieldFormat::Png16: s = save_png16(p.string(), hf); break;
+      case HeightfieldFormat::RawF32: s = save_raw_f32(p.string(), hf); break;
+      case HeightfieldFormat::EsriAscii: s = save_esri_ascii(p.string(), hf); break;
+    }
+    if (s) written.push_back(p.string());
+    return s;
+  };
+
+  for (long long frame = 0; frame < frames; ++frame) {
+    const auto f0 = Clock::now();
+    const double t = double(frame) * dt;  // s, simulated time at the start of this frame
+    {
+      auto timer = profile.time(Stage::Spawn);
+      for (std::size_t i = 0; i < scene.bodies.size(); ++i) {
+        if (spawned[i] || scene.bodies[i].spawn_time > t + 1e-9) continue;
+        auto id = world.add_body(body_defs[i]);
+        if (!id) return fail(ExitCode::RuntimeFailure, "spawn", id.message());
+        ids[i] = *id;
+        spawned[i] = true;
+      }
+    }
+    {
+      auto timer = profile.time(Stage::Bodies);
+      for (int s = 0; s < sim.substeps; ++s) world.step(sub_dt);
+      for (std::size_t i = 0; i < ids.size(); ++i) {
+        if (!spawned[i]) continue;
+        const BodyState st = world.state(ids[i]);
+        if (!st.position.allFinite() || !st.linear_velocity.allFinite())
+          return fail(ExitCode::RuntimeFailure, "bodies",
+                      "body '" + scene.bodies[i].name + "' has a non-finite state at t = " + std::to_string(t + dt) + " s");
+      }
+    }
+    {
+      auto timer = profile.time(Stage::Outputs);
+      const double t_end = t + dt;
+      for (std::size_t k = 0; k < scene.outputs.heightfields.size(); ++k) {
+        const auto& o = scene.outputs.heightfields[k];
+        while (next_export[k] < o.times.size() && o.times[next_export[k]] <= t_end + 1e-9) {
+          if (Status s = export_heightfield(o, frame + 1, t_end); !s)
+            return fail(ExitCode::RuntimeFailure, "outputs", s.message());
+          ++next_export[k];
+        }
+        if (o.at_end && frame + 1 == frames) {
+          if (Status s = export_heightfield(o, frame + 1, t_end); !s)
+            return fail(ExitCode::RuntimeFailure, "outputs", s.message());
+        }
+      }
+    }
+    frame_ms.push_back(std::chrono::duration<double, std::milli>(Clock::now() - f0).count());
+    progress.update(frame + 1, std::chrono::duration<double>(Clock::now() - t_start).count());
+  }
+  const double wall_s = std::chrono::duration<double>(Clock::now() - t_start).count();
+  progress.update(frames, wall_s, true);
+
+  // ---- the report ----
+  Hasher state_hash;
+  ojson bodies = ojson::array();
+  int resting = 0;
+  for (std::size_t i = 0; i < ids.size(); ++i) {
+    ojson b = {{"name", scene.bodies[i].name}, {"spawned", bool(spawned[i])}};
+    if (spawned[i]) {
+      const BodyState s = world.state(ids[i]);
+      state_hash.str(scene.bodies[i].name);
+      state_hash.pod(s.position);
+      state_hash.pod(s.orientation.coeffs());
+      state_hash.pod(s.linear_velocity);
+      state_hash.pod(s.angular_velocity);
+      const bool rest = s.linear_velocity.norm() < 0.05f && s.angular_velocity.norm() < 0.05f;
+      resting += rest;
+      b["position_m"] = vec_json(s.position);
+      b["orientation_wxyz"] = ojson::array({s.orientation.w(), s.orientation.x(), s.orientation.y(), s.orientation.z()});
+      b["linear_velocity_m_s"] = vec_json(s.linear_velocity);
+      b["angular_velocity_rad_s"] = vec_json(s.angular_velocity);
+      b["at_rest"] = rest;
+    }
+    bodies.push_back(b);
+  }
+  state_hash.pod(hf.hash());
+
+  const double med = median(frame_ms);
+  const double mx = frame_ms.empty() ? 0 : *std::max_element(frame_ms.begin(), frame_ms.end());
+  ojson& r = res.report;
+  r["sandpatch_version"] = SANDPATCH_VERSION;
+  r["command"] = opt.command_line;
+  r["scene"] = {{"name", scene.name}, {"file", scene.source_path}, {"hash", scene.hash}};
+  r["backend"] = backend;
+  r["threads"] = threads;
+  r["dt_s"] = dt;
+  r["substeps"] = sim.substeps;
+  r["frames"] = frames;
+  r["simulated_s"] = double(frames) * dt;
+  r["wall_s"] = wall_s;
+  r["real_time_factor"] = wall_s > 0 ? double(frames) * dt / wall_s : 0.0;
+  r["stages"] = profile.to_json();
+  r["frame_ms"] = {{"median_ms", med}, {"max_ms", mx}, {"max_over_median", med > 0 ? mx / med : 0.0}};
+  r["counts"] = {{"bodies", scene.bodies.size()},
+                 {"bodies_spawned", std::count(spawned.begin(), spawned.end(), true)},
+                 {"bodies_at_rest", resting},
+                 {"terrain_samples", std::int64_t(hf.samples_x()) * hf.samples_z()},
+                 {"terrain_tiles", world.terrain_tile_count()},
+                 {"granules", 0},
+                 {"active_patches", 0}};
+  r["terrain"] = {{"samples_x", hf.samples_x()},
+                  {"samples_z", hf.samples_z()},
+                  {"spacing_m", hf.spacing()},
+                  {"origin_m", ojson::array({hf.origin_x(), hf.origin_y(), hf.origin_z()})},
+                  {"min_height_m", hf.origin_y() + hf.min_height()},
+                  {"max_height_m", hf.origin_y() + hf.max_height()},
+                  {"hash", Hasher::to_hex(hf.hash())}};
+  r["bodies"] = bodies;
+  r["outputs"] = written;
+  r["warnings"] = warnings;
+  r["final_state_hash"] = state_hash.hex();
+
+  if (scene.outputs.report) {
+    const fs::path rp = out_dir / "report.json";
+    if (Status s = write_atomic(rp, r.dump(2) + "\n"); !s) return fail(ExitCode::RuntimeFailure, "report", s.message());
+    res.report_path = rp.string();
+  }
+  return res;
+}
+
+}  // namespace sandpatch

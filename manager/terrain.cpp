@@ -1,0 +1,116 @@
+#include "manager/terrain.hpp"
+
+#include <cmath>
+#include <string>
+#include <vector>
+
+#include "heightfield/io.hpp"
+#include "heightfield/procedural.hpp"
+
+namespace sandpatch {
+namespace {
+
+constexpr double kDefaultSoilDepth = 2.0;  // m, docs/scene-format.md terrain.soil_depth
+
+// Re-grids `hf` to another (square) spacing, keeping the samples: used when the scene gives
+// the terrain's size instead of its spacing, which is only known after the file is read.
+Result<Heightfield> with_spacing(const Heightfield& hf, float spacing) {
+  HeightfieldDef d;
+  d.samples_x = hf.samples_x();
+  d.samples_z = hf.samples_z();
+  d.spacing = spacing;
+  d.origin_x = hf.origin_x();
+  d.origin_y = hf.origin_y();
+  d.origin_z = hf.origin_z();
+  d.tile_cells = hf.tile_cells();
+  auto out = Heightfield::create(d);
+  if (!out) return out.errors();
+  std::vector<float> rows(std::size_t(d.samples_x) * d.samples_z);
+  const GridRegion all{0, 0, d.samples_x, d.samples_z};
+  hf.read(all, rows.data());
+  out->write(all, rows.data());
+  return out;
+}
+
+}  // namespace
+
+Result<Heightfield> load_scene_terrain(const SceneDef& scene) {
+  const TerrainDef& t = scene.terrain;
+  const TerrainSourceDef& s = t.source;
+  HeightmapImport imp;
+  imp.origin_x = t.origin[0];
+  imp.origin_y = t.origin[1];
+  imp.origin_z = t.origin[2];
+  imp.spacing = float(t.spacing);
+  imp.vertical_scale = float(t.vertical_scale);
+  imp.vertical_offset = float(t.vertical_offset);
+
+  Result<Heightfield> hf = Error{scene.source_path, "terrain.source", "", "unknown source kind"};
+  switch (s.kind) {
+    case TerrainSourceKind::Png16: hf = load_png16(s.file, imp); break;
+    case TerrainSourceKind::RawF32: hf = load_raw_f32(s.file, s.samples_x, s.samples_z, imp); break;
+    case TerrainSourceKind::EsriAscii:
+      imp.override_spacing = t.spacing_given;  // else the file's cellsize
+      hf = load_esri_ascii(s.file, imp);
+      break;
+    case TerrainSourceKind::Procedural: {
+      const ProceduralDef& p = s.procedural;
+      HeightfieldDef grid;
+      grid.samples_x = p.samples_x;
+      grid.samples_z = p.samples_z;
+      const auto sp = t.spacing_xz(p.samples_x, p.samples_z);
+      grid.spacing = float(sp[0]);
+      grid.origin_x = t.origin[0];
+      grid.origin_y = t.origin[1];
+      grid.origin_z = t.origin[2];
+      ProceduralHeightsDef g;
+      g.kind = to_string(p.kind);
+      g.height = float(p.height);
+      g.slope_x = float(p.slope_x);
+      g.slope_z = float(p.slope_z);
+      g.amplitude = float(p.amplitude);
+      g.wavelength = float(p.wavelength);
+      g.seed = std::uint32_t(p.seed);
+      g.octaves = p.octaves;
+      hf = make_procedural(grid, g);
+      if (hf && (t.vertical_scale != 1.0 || t.vertical_offset != 0.0)) {
+        Heightfield& h = *hf;
+        for (int j = 0; j < h.samples_z(); ++j)
+          for (int i = 0; i < h.samples_x(); ++i)
+            h.set_height(i, j, float(t.vertical_offset + t.vertical_scale * h.height(i, j)));
+      }
+      break;
+    }
+  }
+  if (!hf) {
+    // Heightfield errors name the heightmap file; add the scene field they came from.
+    std::vector<Error> errs = hf.errors();
+    for (Error& e : errs) {
+      if (e.field.empty()) e.field = "terrain.source";
+      else if (e.field.rfind("terrain", 0) != 0) e.field = "terrain.source (" + e.field + ")";
+      if (e.file.empty()) e.file = scene.source_path;
+    }
+    return errs;
+  }
+  if (t.size && s.kind != TerrainSourceKind::Procedural) {
+    const auto sp = t.spacing_xz(hf->samples_x(), hf->samples_z());
+    if (std::abs(sp[0] - sp[1]) > 1e-6 * sp[0]) {
+      return Error{scene.source_path, "terrain.size",
+                   "[" + std::to_string((*t.size)[0]) + ", " + std::to_string((*t.size)[1]) + "]",
+                   "must give square cells for a " + std::to_string(hf->samples_x()) + " x " +
+                       std::to_string(hf->samples_z()) + " sample heightmap (spacing x " + std::to_string(sp[0]) +
+                       " m vs z " + std::to_string(sp[1]) + " m)"};
+    }
+    return with_spacing(*hf, float(sp[0]));
+  }
+  return hf;
+}
+
+double bedrock_world_height(const SceneDef& scene, const Heightfield& hf, double x, double z) {
+  const TerrainDef& t = scene.terrain;
+  if (t.bedrock_height) return t.origin[1] + *t.bedrock_height;
+  const double surface = hf.origin_y() + hf.sample(float(x - hf.origin_x()), float(z - hf.origin_z()));
+  return surface - t.soil_depth.value_or(kDefaultSoilDepth);
+}
+
+}  // namespace sandpatch

@@ -1,0 +1,88 @@
+// Contact force laws of the granule DEM, for one sphere of a pair (sim units).
+// Used by the contact stage of particles/dem.cpp; header-only so it inlines.
+//
+// Notation: n = unit normal pointing from the partner to this sphere; delta = overlap (m);
+// v = velocity of this sphere's contact point relative to the partner's (m/s).
+//   normal      f_n = max(0, k_n delta - c_n v.n)                     (N, never attractive)
+//   tangential  v_t = v - (v.n) n
+//     SpringHistory (Cundall-Strack): xi <- xi - (xi.n) n, rescaled to its old length;
+//                 xi <- xi + v_t dt; slip: if k_t |xi| > mu f_n, xi is shortened to
+//                 |xi| = mu f_n / k_t; then f_t = -k_t xi - beta c_t v_t with the largest
+//                 beta in [0, 1] that keeps |f_t| <= mu f_n.
+//                 Why not LAMMPS' xi <- -(f_t + c_t v_t)/k_t: that stores the damper's force
+//                 in the spring and releases it later as work, so energy can rise (measured:
+//                 +0.3% of the total in one step in a damped granule gas). Here the spring is
+//                 only ever shortened by slip and the damper only ever removes energy.
+//     Bell:       f_t = -min(mu f_n, k_b |v_t|) v_t/|v_t|
+#pragma once
+
+#include <cmath>
+
+#include "particles/math.hpp"
+
+namespace sandpatch {
+
+struct ContactParams {
+  float kn = 0;      // N/m
+  float cn = 0;      // N s/m for this pair
+  float kt = 0;      // N/m (spring) 
+  float ct = 0;      // N s/m (spring law tangential damping)
+  float mu = 0;      // friction coefficient
+  float kb = 0;      // N s/m (Bell's velocity cap)
+  float dt = 0;      // s, substep
+  bool bell = false;
+};
+
+struct ContactForce {
+  Vec3 f;            // total force on this sphere, N
+  Vec3 ft;           // tangential part, N
+  float energy = 0;  // elastic energy of the pair's springs, J
+};
+
+// xi is the tangential spring (m) of this contact from the previous substep (zero for a new
+// contact); it is updated in place (SpringHistory only).
+inline ContactForce contact_force(const ContactParams& p, Vec3 n, float delta, Vec3 v, Vec3& xi) {
+  ContactForce out;
+  float vn = dot(v, n);
+  float fn = p.kn * delta - p.cn * vn;
+  fn = fn > 0.0f ? fn : 0.0f;
+  Vec3 vt = v - vn * n;
+  Vec3 ft{};
+  if (!p.bell) {
+    float xi2 = dot(xi, xi);
+    if (xi2 > 0.0f) {
+      Vec3 xr = xi - dot(xi, n) * n;  // rotate into the new tangent plane
+      float xr2 = dot(xr, xr);
+      xi = xr2 > 0.0f ? xr * std::sqrt(xi2 / xr2) : Vec3{};
+    }
+    xi = xi + vt * p.dt;
+    const float cap = p.mu * fn;
+    float xl2 = dot(xi, xi);
+    if (p.kt * p.kt * xl2 > cap * cap) xi = xi * (cap / (p.kt * std::sqrt(xl2)));  // slip
+    Vec3 a = -p.kt * xi, b = -p.ct * vt;
+    ft = a + b;
+    float ft2 = dot(ft, ft);
+    if (ft2 > cap * cap) {
+      // largest beta with |a + beta b| <= cap; |a| <= cap so beta = 0 is always feasible
+      float bb = dot(b, b), ab = dot(a, b), aa = dot(a, a);
+      float disc = ab * ab - bb * (aa - cap * cap);
+      float beta = bb > 0.0f ? (-ab + std::sqrt(disc > 0.0f ? disc : 0.0f)) / bb : 0.0f;
+      beta = beta < 0.0f ? 0.0f : (beta > 1.0f ? 1.0f : beta);
+      ft = a + beta * b;
+    }
+    out.energy = 0.5f * p.kn * delta * delta + 0.5f * p.kt * dot(xi, xi);
+  } else {
+    float vt2 = dot(vt, vt);
+    if (vt2 > 0.0f) {
+      float s = std::sqrt(vt2);
+      float m = std::fmin(p.mu * fn, p.kb * s);
+      ft = vt * (-m / s);
+    }
+    out.energy = 0.5f * p.kn * delta * delta;
+  }
+  out.f = fn * n + ft;
+  out.ft = ft;
+  return out;
+}
+
+}  // namespace sandpatch

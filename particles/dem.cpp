@@ -1,0 +1,897 @@
+// Granule DEM, CPU/OpenMP reference backend. The stages are listed in dem.hpp; the force
+// laws are in contact.hpp, the material formulas in material.hpp.
+#include "particles/dem.hpp"
+
+#include <omp.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <limits>
+#include <numbers>
+
+#include "common/hash.hpp"
+#include "particles/contact.hpp"
+#include "particles/fields.hpp"
+
+namespace sandpatch {
+
+namespace {
+
+std::string num(double v) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%g", v);
+  return b;
+}
+
+// Tangential springs against the boundaries, per sphere: floor, walls x0, x1, z0, z1, terrain.
+constexpr int kWallSlots = 6;
+
+// Structure-of-arrays generated from fields.hpp: a field of n components is (cap x n).
+struct ParticleArrays {
+#define SP_DECL(type, name, n, hashed, unit) std::vector<type> name;
+  SANDPATCH_PARTICLE_FIELDS(SP_DECL)
+#undef SP_DECL
+  void resize(std::size_t cap) {
+#define SP_RESIZE(type, name, n, hashed, unit) name.assign(cap * (n), type{});
+    SANDPATCH_PARTICLE_FIELDS(SP_RESIZE)
+#undef SP_RESIZE
+  }
+};
+
+struct BodyArrays {
+#define SP_DECL(type, name, n, hashed, unit) std::vector<type> name;
+  SANDPATCH_BODY_FIELDS(SP_DECL)
+#undef SP_DECL
+  void resize(std::size_t cap) {
+#define SP_RESIZE(type, name, n, hashed, unit) name.assign(cap * (n), type{});
+    SANDPATCH_BODY_FIELDS(SP_RESIZE)
+#undef SP_RESIZE
+  }
+};
+
+inline Vec3 ld3(const std::vector<float>& a, std::size_t i) { return {a[4 * i], a[4 * i + 1], a[4 * i + 2]}; }
+inline void st3(std::vector<float>& a, std::size_t i, Vec3 v) {
+  a[4 * i] = v.x;
+  a[4 * i + 1] = v.y;
+  a[4 * i + 2] = v.z;
+}
+inline Quat ldq(const std::vector<float>& a, std::size_t i) { return {a[4 * i], a[4 * i + 1], a[4 * i + 2], a[4 * i + 3]}; }
+inline void stq(std::vector<float>& a, std::size_t i, Quat q) {
+  a[4 * i] = q.x;
+  a[4 * i + 1] = q.y;
+  a[4 * i + 2] = q.z;
+  a[4 * i + 3] = q.w;
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------
+// Terrain grid
+float TerrainGrid::height(float x, float z) const {
+  float fx = std::clamp((x - x0) / spacing, 0.0f, float(nx - 1));
+  float fz = std::clamp((z - z0) / spacing, 0.0f, float(nz - 1));
+  int ix = std::min(int(fx), nx - 2 < 0 ? 0 : nx - 2), iz = std::min(int(fz), nz - 2 < 0 ? 0 : nz - 2);
+  int ix1 = std::min(ix + 1, nx - 1), iz1 = std::min(iz + 1, nz - 1);
+  float tx = fx - float(ix), tz = fz - float(iz);
+  auto h = [&](int i, int k) { return heights[std::size_t(k) * nx + i]; };
+  return (1 - tz) * ((1 - tx) * h(ix, iz) + tx * h(ix1, iz)) + tz * ((1 - tx) * h(ix, iz1) + tx * h(ix1, iz1));
+}
+
+Vec3 TerrainGrid::normal(float x, float z) const {
+  float e = 0.5f * spacing;
+  float dhdx = (height(x + e, z) - height(x - e, z)) / (2 * e);
+  float dhdz = (height(x, z + e) - height(x, z - e)) / (2 * e);
+  Vec3 n{-dhdx, 1.0f, -dhdz};
+  return n * (1.0f / length(n));
+}
+
+// ---------------------------------------------------------------------------------------
+struct Simulation::Impl {
+  SimulationDef def;
+  GranuleShape shape;
+  Vec3 gravity;            // sim units, m/s^2
+  int threads = 1;
+
+  // bodies (creation order) and particles (cell-sorted order)
+  int nb = 0, np = 0;
+  BodyArrays b;
+  ParticleArrays p;
+  std::vector<std::int32_t> slot_of;   // particle id -> sorted index
+  std::vector<std::int32_t> cell;      // sorted index -> cell at the last sort
+  std::vector<float> pos_at_sort;      // sorted index -> xyz (stride 4) at the last sort
+  bool need_sort = true;
+
+  // Verlet neighbour list (CSR, sorted order, no cap): for sphere i the entries
+  // [nstart[i], nstart[i+1]) hold every sphere j of another body with
+  // |x_i - x_j| < r_i + r_j + skin at the last rebuild. Each entry carries the tangential
+  // spring of the pair as seen from i (3 floats); both spheres of a pair keep their own copy.
+  std::vector<std::int32_t> nstart;    // np + 1
+  std::vector<std::int32_t> nbr;       // sorted index of the partner
+  std::vector<std::int32_t> nbr_id;    // stable id of the partner (history carry-over)
+  std::vector<float> nxi;              // 3 per entry, m
+  std::vector<float> wxi;              // 3 per boundary plane (kWallSlots) per sphere, sorted order
+
+  // grid
+  float r_max = 0, h = 0, inv_h = 0, skin = 0;
+  int gx = 1, gy = 1, gz = 1;
+  std::vector<std::int32_t> cell_start;  // gx*gy*gz + 1
+
+  // guard
+  double min_point_mass = std::numeric_limits<double>::infinity();  // kg, dynamic bodies
+  double zeta = 0;
+
+  // state
+  double time = 0;
+  bool asleep = false;
+  double below_time = 0;
+  bool has_moving_kinematic = false;
+  StepStats stats;
+
+  // ---- setup
+  void size_grid() {
+    h = 2.0f * r_max + skin;
+    inv_h = 1.0f / h;
+    Vec3 ext = def.bounds_max - def.bounds_min;
+    gx = std::max(1, int(std::ceil(ext.x * inv_h)));
+    gy = std::max(1, int(std::ceil(ext.y * inv_h)));
+    gz = std::max(1, int(std::ceil(ext.z * inv_h)));
+    cell_start.assign(std::size_t(gx) * gy * gz + 1, 0);
+    need_sort = true;
+  }
+  int cell_coord(float v, float lo, int n) const {
+    int c = int(std::floor((v - lo) * inv_h));
+    return c < 0 ? 0 : (c >= n ? n - 1 : c);
+  }
+  int cell_of(Vec3 x) const {
+    int cx = cell_coord(x.x, def.bounds_min.x, gx), cy = cell_coord(x.y, def.bounds_min.y, gy),
+        cz = cell_coord(x.z, def.bounds_min.z, gz);
+    return (cz * gy + cy) * gx + cx;
+  }
+
+  // Rebuild the spheres of body i from its pose and velocity; returns the largest squared
+  // displacement of one of them since the last sort.
+  float rebuild_body(int i) {
+    Vec3 x = ld3(b.pos, i), v = ld3(b.vel, i), w = ld3(b.omega, i);
+    Quat q = ldq(b.quat, i);
+    float invm = b.mass[4 * i + 1];
+    float d2max = 0;
+    for (int k = 0; k < b.count[i]; ++k) {
+      int s = slot_of[b.first[i] + k];
+      Vec3 arm = rotate(q, ld3(p.offset, s));
+      Vec3 xs = x + arm;
+      st3(p.pos, s, xs);
+      st3(p.vel, s, v + cross(w, arm));
+      p.vel[4 * s + 3] = invm;
+      st3(p.omega, s, w);
+      Vec3 d = xs - ld3(pos_at_sort, s);
+      d2max = std::max(d2max, dot(d, d));
+    }
+    return d2max;
+  }
+
+  // Counting sort of the particles by cell (stable, serial: deterministic), permuting every
+  // particle field, then the neighbour list is rebuilt and the springs carried over.
+  void sort() {
+    std::vector<std::int32_t> old_slot(slot_of.begin(), slot_of.begin() + np);
+    std::fill(cell_start.begin(), cell_start.end(), 0);
+    std::vector<std::int32_t> c(np);
+    for (int s = 0; s < np; ++s) {
+      c[s] = cell_of(ld3(p.pos, s));
+      cell_start[c[s] + 1]++;
+    }
+    for (std::size_t i = 1; i < cell_start.size(); ++i) cell_start[i] += cell_start[i - 1];
+    std::vector<std::int32_t> fill(cell_start.begin(), cell_start.end() - 1), dest(np);
+    for (int s = 0; s < np; ++s) dest[s] = fill[c[s]]++;
+    auto permute = [&](auto& arr, int n) {
+      auto tmp = arr;
+      for (int s = 0; s < np; ++s)
+        for (int k = 0; k < n; ++k) tmp[std::size_t(dest[s]) * n + k] = arr[std::size_t(s) * n + k];
+      arr.swap(tmp);
+    };
+#define SP_PERMUTE(type, name, n, hashed, unit) permute(p.name, n);
+    SANDPATCH_PARTICLE_FIELDS(SP_PERMUTE)
+#undef SP_PERMUTE
+    permute(wxi, 3 * kWallSlots);
+    cell.resize(np);
+    for (int s = 0; s < np; ++s) cell[dest[s]] = c[s];
+    for (int s = 0; s < np; ++s) slot_of[p.id[s]] = s;
+    pos_at_sort.assign(p.pos.begin(), p.pos.end());
+    need_sort = false;
+    stats.resorts++;
+    build_list(old_slot);
+  }
+
+  // Visits the spheres j of other bodies within r_i + r_j + skin of sphere i, in a fixed
+  // order (cells z, y, x, then sorted index).
+  template <class F>
+  void for_near(int i, F&& f) const {
+    const float* P = p.pos.data();
+    const Vec3 pi{P[4 * i], P[4 * i + 1], P[4 * i + 2]};
+    const float ri = P[4 * i + 3];
+    const std::int32_t bi = p.body[i];
+    const bool dyn_i = p.vel[4 * i + 3] > 0.0f;
+    const int c = cell[i];
+    const int cx = c % gx, cy = (c / gx) % gy, cz = c / (gx * gy);
+    const int x0 = cx > 0 ? cx - 1 : 0, x1 = cx < gx - 1 ? cx + 1 : gx - 1;
+    for (int zz = (cz > 0 ? cz - 1 : 0); zz <= (cz < gz - 1 ? cz + 1 : gz - 1); ++zz)
+      for (int yy = (cy > 0 ? cy - 1 : 0); yy <= (cy < gy - 1 ? cy + 1 : gy - 1); ++yy) {
+        const int row = (zz * gy + yy) * gx;
+        for (int j = cell_start[row + x0], j1 = cell_start[row + x1 + 1]; j < j1; ++j) {
+          const float dx = pi.x - P[4 * j], dy = pi.y - P[4 * j + 1], dz = pi.z - P[4 * j + 2];
+          const float rs = ri + P[4 * j + 3] + skin;
+          if (dx * dx + dy * dy + dz * dz >= rs * rs || p.body[j] == bi) continue;
+          if (!dyn_i && p.vel[4 * j + 3] == 0.0f) continue;  // neither moves under forces
+          f(j);
+        }
+      }
+  }
+
+  // Rebuilds the CSR neighbour list (two parallel passes: count, fill) and carries each
+  // pair's spring over from the old list (found by partner id).
+  void build_list(const std::vector<std::int32_t>& old_slot) {
+    std::vector<std::int32_t> ostart, onbr_id;
+    std::vector<float> oxi;
+    ostart.swap(nstart);
+    onbr_id.swap(nbr_id);
+    oxi.swap(nxi);
+    const int n = np;
+    const int old_np = ostart.empty() ? 0 : int(ostart.size()) - 1;
+    nstart.assign(n + 1, 0);
+#pragma omp parallel for num_threads(threads) schedule(dynamic, 256) if (n > 4096)
+    for (int i = 0; i < n; ++i) {
+      if (b.flags[p.body[i]] & kBodyStatic) continue;
+      int cnt = 0;
+      for_near(i, [&](int) { ++cnt; });
+      nstart[i + 1] = cnt;
+    }
+    for (int i = 0; i < n; ++i) nstart[i + 1] += nstart[i];
+    nbr.resize(nstart[n]);
+    nbr_id.resize(nstart[n]);
+    nxi.assign(std::size_t(nstart[n]) * 3, 0.0f);
+#pragma omp parallel for num_threads(threads) schedule(dynamic, 256) if (n > 4096)
+    for (int i = 0; i < n; ++i) {
+      if (b.flags[p.body[i]] & kBodyStatic) continue;
+      int e = nstart[i];
+      const int id = p.id[i];
+      const int oi = id < int(old_slot.size()) ? old_slot[id] : -1;
+      const bool has_old = oi >= 0 && oi < old_np;
+      for_near(i, [&](int j) {
+        nbr[e] = j;
+        nbr_id[e] = p.id[j];
+        if (has_old)
+          for (int k = ostart[oi]; k < ostart[oi + 1]; ++k)
+            if (onbr_id[k] == p.id[j]) {
+              nxi[3 * e] = oxi[3 * k];
+              nxi[3 * e + 1] = oxi[3 * k + 1];
+              nxi[3 * e + 2] = oxi[3 * k + 2];
+              break;
+            }
+        ++e;
+      });
+    }
+  }
+
+  // ---- guard
+  double guard_meff() const {
+    double mp = std::min(min_point_mass,
+                         point_effective_mass(shape.mass, shape.inertia, shape.centre_distance));
+    return 0.5 * mp;
+  }
+  double body_pair_meff() const { return 0.5 * double(shape.mass); }
+  double contact_time_() const {
+    double m = guard_meff();
+    double c = 2.0 * zeta * std::sqrt(double(def.material.normal_stiffness) * body_pair_meff());
+    double rad = def.material.normal_stiffness / m - (c / (2 * m)) * (c / (2 * m));
+    return rad > 0 ? std::numbers::pi / std::sqrt(rad) : std::numbers::pi * std::sqrt(m / def.material.normal_stiffness);
+  }
+  double max_dt() const {
+    double m = guard_meff();
+    double tc = std::min(contact_time_(), std::numbers::pi * std::sqrt(m / def.material.normal_stiffness));
+    double dt = tc / def.accuracy_steps_per_contact;
+    double c = 2.0 * zeta * std::sqrt(double(def.material.normal_stiffness) * body_pair_meff());
+    if (c > 0) dt = std::min(dt, m / c);  // explicit damper: dt < 2 m/c, with a factor 2 margin
+    return dt;
+  }
+
+  // ---- contact stage: every sphere walks its neighbour list and sums all its forces
+  template <bool kBell>
+  void contacts(float dt) {
+    const Material& mat = def.material;
+    const float kn = mat.normal_stiffness;
+    const float cn0 = float(2.0 * zeta * std::sqrt(double(mat.normal_stiffness)));  // c_n = cn0 sqrt(m_eff)
+    const float kt = mat.normal_stiffness * mat.tangential_stiffness_ratio;
+    const float ctr = mat.tangential_damping_ratio;
+    const float mu = mat.friction, kb = mat.bell_shear_viscosity;
+    const float* P = p.pos.data();
+    const float* V = p.vel.data();
+    const float* W = p.omega.data();
+    const std::int32_t* NS = nstart.data();
+    const std::int32_t* NB = nbr.data();
+    float* XI = nxi.data();
+    float* WX = wxi.data();
+    float* FO = p.force.data();
+    float* TO = p.torque.data();
+    const std::uint32_t* BF = b.flags.data();
+    const std::int32_t* B = p.body.data();
+    const Vec3 bmin = def.bounds_min, bmax = def.bounds_max;
+    const float floor_y = def.floor_height;
+    const bool walls = def.side_walls, terrain = !def.terrain.empty();
+    std::int64_t npairs = 0, nwall = 0;
+    const int n = np;
+
+#pragma omp parallel for num_threads(threads) schedule(dynamic, 512) reduction(+ : npairs, nwall) if (n > 4096)
+    for (int i = 0; i < n; ++i) {
+      Vec3 F{}, T{};
+      float E = 0;
+      if (!(BF[B[i]] & kBodyStatic)) {
+        const Vec3 pi{P[4 * i], P[4 * i + 1], P[4 * i + 2]};
+        const float ri = P[4 * i + 3];
+        const Vec3 ui{V[4 * i], V[4 * i + 1], V[4 * i + 2]};
+        const float invm_i = V[4 * i + 3];
+        const Vec3 wi{W[4 * i], W[4 * i + 1], W[4 * i + 2]};
+
+        // sphere-sphere
+        for (int e = NS[i], e1 = NS[i + 1]; e < e1; ++e) {
+          const int j = NB[e];
+          const float dx = pi.x - P[4 * j], dy = pi.y - P[4 * j + 1], dz = pi.z - P[4 * j + 2];
+          const float rj = P[4 * j + 3];
+          const float rs = ri + rj;
+          const float d2 = dx * dx + dy * dy + dz * dz;
+          float* xe = XI + 3 * std::size_t(e);
+          if (d2 >= rs * rs || d2 <= 0.0f) {  // not touching: the spring is forgotten
+            xe[0] = xe[1] = xe[2] = 0.0f;
+            continue;
+          }
+          ++npairs;
+          const float inv = 1.0f / std::sqrt(d2);
+          const float dist = d2 * inv;
+          const Vec3 nrm{dx * inv, dy * inv, dz * inv};
+          const Vec3 uj{V[4 * j], V[4 * j + 1], V[4 * j + 2]};
+          const Vec3 wj{W[4 * j], W[4 * j + 1], W[4 * j + 2]};
+          const Vec3 v = (ui + cross(wi, nrm * (-ri))) - (uj + cross(wj, nrm * rj));
+          const float cn = cn0 / std::sqrt(invm_i + V[4 * j + 3]);
+          Vec3 xi{xe[0], xe[1], xe[2]};
+          ContactParams cp{kn, cn, kt, ctr * cn, mu, kb, dt, kBell};
+          ContactForce cf = contact_force(cp, nrm, rs - dist, v, xi);
+          xe[0] = xi.x;
+          xe[1] = xi.y;
+          xe[2] = xi.z;
+          F = F + cf.f;
+          T = T + cross(nrm * (-ri), cf.ft);
+          E += cf.energy;
+        }
+        E *= 0.5f;  // each pair is gathered by both spheres
+
+        // boundaries: static planes (floor, side walls) and the terrain outside the fill
+        if (invm_i > 0.0f) {
+          const float cnw = cn0 / std::sqrt(invm_i);
+          float* wx = WX + std::size_t(i) * 3 * kWallSlots;
+          auto plane = [&](int slot, Vec3 nrm, float dist) {
+            float* xe = wx + 3 * slot;
+            if (dist >= ri) {
+              xe[0] = xe[1] = xe[2] = 0.0f;
+              return;
+            }
+            ++nwall;
+            const Vec3 v = ui + cross(wi, nrm * (-ri));
+            Vec3 xi{xe[0], xe[1], xe[2]};
+            ContactParams cp{kn, cnw, kt, ctr * cnw, mu, kb, dt, kBell};
+            ContactForce cf = contact_force(cp, nrm, ri - dist, v, xi);
+            xe[0] = xi.x;
+            xe[1] = xi.y;
+            xe[2] = xi.z;
+            F = F + cf.f;
+            T = T + cross(nrm * (-ri), cf.ft);
+            E += cf.energy;
+          };
+          plane(0, {0, 1, 0}, pi.y - floor_y);
+          if (walls) {
+            plane(1, {1, 0, 0}, pi.x - bmin.x);
+            plane(2, {-1, 0, 0}, bmax.x - pi.x);
+            plane(3, {0, 0, 1}, pi.z - bmin.z);
+            plane(4, {0, 0, -1}, bmax.z - pi.z);
+          }
+          if (terrain) {
+            const TerrainGrid& tg = def.terrain;
+            if (pi.x < tg.fill_min_x || pi.x > tg.fill_max_x || pi.z < tg.fill_min_z || pi.z > tg.fill_max_z) {
+              const float hh = tg.height(pi.x, pi.z);
+              const Vec3 tn = tg.normal(pi.x, pi.z);
+              plane(5, tn, (pi.y - hh) * tn.y);
+            } else {
+              plane(5, {0, 1, 0}, 1e30f);
+            }
+          }
+        }
+      }
+      FO[4 * i] = F.x;
+      FO[4 * i + 1] = F.y;
+      FO[4 * i + 2] = F.z;
+      FO[4 * i + 3] = E;
+      TO[4 * i] = T.x;
+      TO[4 * i + 1] = T.y;
+      TO[4 * i + 2] = T.z;
+    }
+    stats.contacts = npairs / 2;
+    stats.wall_contacts = nwall;
+  }
+
+  // ---- body stage: sum the spheres' forces in id order, integrate, rebuild the spheres
+  bool bodies(float dt, float* d2max_out) {
+    const Vec3 g = gravity;
+    float d2max = 0;
+    int bad = 0;
+    const int n = nb;
+#pragma omp parallel for num_threads(threads) schedule(static) reduction(max : d2max) reduction(+ : bad) if (n > 2048)
+    for (int i = 0; i < n; ++i) {
+      const std::uint32_t fl = b.flags[i];
+      const Vec3 x = ld3(b.pos, i);
+      Vec3 F{}, T{};
+      for (int k = 0; k < b.count[i]; ++k) {
+        int s = slot_of[b.first[i] + k];
+        Vec3 f = ld3(p.force, s);
+        F = F + f;
+        T = T + ld3(p.torque, s) + cross(ld3(p.pos, s) - x, f);
+      }
+      st3(b.force, i, F);
+      st3(b.torque, i, T);
+      if (fl & kBodyStatic) continue;
+      Vec3 v = ld3(b.vel, i), w = ld3(b.omega, i);
+      Quat q = ldq(b.quat, i);
+      if (fl & kBodyDynamic) {
+        const float invm = b.mass[4 * i + 1];
+        v = v + dt * (F * invm + g);
+        const Vec3 iI = ld3(b.inv_inertia, i);
+        if (fl & kBodyGranule) {
+          w = w + T * (dt * iI.x);  // isotropic inertia
+        } else {
+          // body frame: I dw/dt = T - w x I w
+          Vec3 wb = rotate_inv(q, w), tb = rotate_inv(q, T);
+          Vec3 Iw{iI.x > 0 ? wb.x / iI.x : 0, iI.y > 0 ? wb.y / iI.y : 0, iI.z > 0 ? wb.z / iI.z : 0};
+          Vec3 rhs = tb - cross(wb, Iw);
+          wb = wb + dt * Vec3{rhs.x * iI.x, rhs.y * iI.y, rhs.z * iI.z};
+          w = rotate(q, wb);
+        }
+        st3(b.vel, i, v);
+        st3(b.omega, i, w);
+      }
+      Vec3 xn = x + dt * v;
+      Quat dq{w.x, w.y, w.z, 0.0f};
+      Quat qd = dq * q;
+      q = normalized(Quat{q.x + 0.5f * dt * qd.x, q.y + 0.5f * dt * qd.y, q.z + 0.5f * dt * qd.z, q.w + 0.5f * dt * qd.w});
+      if (!std::isfinite(xn.x + xn.y + xn.z + v.x + v.y + v.z + w.x + w.y + w.z + q.w)) ++bad;
+      st3(b.pos, i, xn);
+      stq(b.quat, i, q);
+      d2max = std::max(d2max, rebuild_body(i));
+    }
+    *d2max_out = d2max;
+    return bad == 0;
+  }
+
+  Status substep(float dt) {
+    if (need_sort) sort();
+    if (def.material.shear == ShearLaw::BellVelocityCapped)
+      contacts<true>(dt);
+    else
+      contacts<false>(dt);
+    float d2max = 0;
+    if (!bodies(dt, &d2max))
+      return Error{"", "step", "NaN", "a body state became non-finite in the integrate stage",
+                   "reduce the frame dt or material.normal_stiffness, or check the inputs"};
+    if (4.0f * d2max > skin * skin) need_sort = true;
+    if (need_sort) sort();
+    time += dt;
+    return Ok{};
+  }
+
+  double max_granule_speed() const {
+    double m = 0;
+    for (int i = 0; i < nb; ++i) {
+      if (!(b.flags[i] & kBodyGranule)) continue;
+      double s = length(ld3(b.vel, i)) + length(ld3(b.omega, i)) * (shape.centre_distance + shape.radius);
+      m = std::max(m, s);
+    }
+    return m;
+  }
+
+  // Asleep: move the kinematic bodies; true if one of their spheres would touch a dynamic one.
+  bool kinematic_touch(double dt) {
+    for (int i = 0; i < nb; ++i) {
+      if (!(b.flags[i] & kBodyKinematic)) continue;
+      Vec3 v = ld3(b.vel, i), w = ld3(b.omega, i);
+      if (dot(v, v) == 0.0f && dot(w, w) == 0.0f) continue;
+      Vec3 x = ld3(b.pos, i) + float(dt) * v;
+      Quat q = ldq(b.quat, i);
+      Quat qd = Quat{w.x, w.y, w.z, 0} * q;
+      float hd = 0.5f * float(dt);
+      q = normalized(Quat{q.x + hd * qd.x, q.y + hd * qd.y, q.z + hd * qd.z, q.w + hd * qd.w});
+      for (int k = 0; k < b.count[i]; ++k) {
+        int s = slot_of[b.first[i] + k];
+        Vec3 xs = x + rotate(q, ld3(p.offset, s));
+        float r = p.pos[4 * s + 3];
+        int c = cell_of(xs);
+        int cx = c % gx, cy = (c / gx) % gy, cz = c / (gx * gy);
+        for (int zz = std::max(0, cz - 1); zz <= std::min(gz - 1, cz + 1); ++zz)
+          for (int yy = std::max(0, cy - 1); yy <= std::min(gy - 1, cy + 1); ++yy)
+            for (int xx = std::max(0, cx - 1); xx <= std::min(gx - 1, cx + 1); ++xx) {
+              int cc = (zz * gy + yy) * gx + xx;
+              for (int j = cell_start[cc]; j < cell_start[cc + 1]; ++j) {
+                if (p.vel[4 * j + 3] == 0.0f) continue;
+                Vec3 d = xs - ld3(p.pos, j);
+                float rs = r + p.pos[4 * j + 3] + 0.5f * skin;
+                if (dot(d, d) < rs * rs) return true;
+              }
+            }
+      }
+    }
+    return false;
+  }
+
+  void move_kinematic(double dt) {
+    for (int i = 0; i < nb; ++i) {
+      if (!(b.flags[i] & kBodyKinematic)) continue;
+      Vec3 v = ld3(b.vel, i), w = ld3(b.omega, i);
+      if (dot(v, v) == 0.0f && dot(w, w) == 0.0f) continue;
+      st3(b.pos, i, ld3(b.pos, i) + float(dt) * v);
+      Quat q = ldq(b.quat, i);
+      Quat qd = Quat{w.x, w.y, w.z, 0} * q;
+      float hd = 0.5f * float(dt);
+      stq(b.quat, i, normalized(Quat{q.x + hd * qd.x, q.y + hd * qd.y, q.z + hd * qd.z, q.w + hd * qd.w}));
+      rebuild_body(i);
+      need_sort = true;
+    }
+  }
+
+  // Appends a body and its spheres; the caller has checked the capacities.
+  int push_body(std::uint32_t flags, Vec3 x, Quat q, Vec3 v, Vec3 w, float mass, float invm, Vec3 inv_inertia,
+                const Vec3* offsets, const float* radii, int count, bool one_radius) {
+    int i = nb++;
+    st3(b.pos, i, x);
+    stq(b.quat, i, normalized(q));
+    st3(b.vel, i, v);
+    st3(b.omega, i, w);
+    b.mass[4 * i] = mass;
+    b.mass[4 * i + 1] = invm;
+    st3(b.inv_inertia, i, inv_inertia);
+    b.flags[i] = flags;
+    b.first[i] = np;
+    b.count[i] = count;
+    for (int k = 0; k < count; ++k) {
+      int s = np++;
+      p.id[s] = s;
+      p.body[s] = i;
+      slot_of[s] = s;
+      st3(p.offset, s, offsets[k]);
+      p.pos[4 * s + 3] = one_radius ? radii[0] : radii[k];
+      for (int c = 0; c < 3; ++c) pos_at_sort[4 * s + c] = std::numeric_limits<float>::infinity();
+      for (int kk = 0; kk < 3 * kWallSlots; ++kk) wxi[std::size_t(s) * 3 * kWallSlots + kk] = 0.0f;
+    }
+    rebuild_body(i);
+    need_sort = true;
+    asleep = false;
+    below_time = 0;
+    return i;
+  }
+};
+
+// ---------------------------------------------------------------------------------------
+Simulation::Simulation(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+Simulation::Simulation(Simulation&&) noexcept = default;
+Simulation& Simulation::operator=(Simulation&&) noexcept = default;
+Simulation::~Simulation() = default;
+
+Result<Simulation> Simulation::create(const SimulationDef& d) {
+  std::vector<Error> es;
+  auto bad = [&](const std::string& f, double v, const char* allowed) {
+    es.push_back(Error{"", "SimulationDef." + f, num(v), allowed, ""});
+  };
+  if (d.max_bodies < 1 || d.max_bodies > (1 << 28)) bad("max_bodies", d.max_bodies, "must be in [1, 2^28]");
+  if (d.max_particles < 1 || d.max_particles > (1 << 28))
+    bad("max_particles", d.max_particles, "must be in [1, 2^28]");
+  if (!(d.particle_radius > 0) || !std::isfinite(d.particle_radius))
+    bad("particle_radius", d.particle_radius, "must be a finite number > 0 (m)");
+  if (!(d.granule_edge_factor >= 0.5f && d.granule_edge_factor <= 1.0f))
+    bad("granule_edge_factor", d.granule_edge_factor, "must be in [0.5, 1] (edge = 2 r s)");
+  if (auto st = validate(d.material, "SimulationDef.material"); !st)
+    for (auto& e : st.errors()) es.push_back(e);
+  const char* axes[3] = {"x", "y", "z"};
+  float lo[3] = {d.bounds_min.x, d.bounds_min.y, d.bounds_min.z};
+  float hi[3] = {d.bounds_max.x, d.bounds_max.y, d.bounds_max.z};
+  for (int a = 0; a < 3; ++a)
+    if (!(hi[a] > lo[a]) || !std::isfinite(lo[a]) || !std::isfinite(hi[a]))
+      bad(std::string("bounds_max.") + axes[a], hi[a], "must be finite and > bounds_min");
+  if (!std::isfinite(d.floor_height)) bad("floor_height", d.floor_height, "must be finite (m)");
+  if (!std::isfinite(d.gravity_world.x + d.gravity_world.y + d.gravity_world.z))
+    bad("gravity_world", 0, "must be finite (m/s^2)");
+  if (!(d.cell_skin >= 0) || !std::isfinite(d.cell_skin)) bad("cell_skin", d.cell_skin, "must be >= 0 (m)");
+  if (d.accuracy_steps_per_contact < 2)
+    bad("accuracy_steps_per_contact", d.accuracy_steps_per_contact, "must be >= 2 (20 or more for accuracy)");
+  if (d.max_substeps < 1) bad("max_substeps", d.max_substeps, "must be >= 1");
+  if (!(d.sleep_speed >= 0)) bad("sleep_speed", d.sleep_speed, "must be >= 0 (m/s)");
+  if (!(d.sleep_time >= 0)) bad("sleep_time", d.sleep_time, "must be >= 0 (s)");
+  if (d.threads < 0) bad("threads", d.threads, "must be >= 0 (0 = OpenMP default)");
+  if (!d.terrain.empty()) {
+    const TerrainGrid& t = d.terrain;
+    if (t.nx < 2 || t.nz < 2 || std::size_t(t.nx) * std::size_t(t.nz) != t.heights.size())
+      bad("terrain.heights", double(t.heights.size()), "must hold nx * nz >= 4 samples (nx, nz >= 2)");
+    if (!(t.spacing > 0)) bad("terrain.spacing", t.spacing, "must be > 0 (m)");
+  }
+  if (!es.empty()) return es;
+
+  auto im = std::make_unique<Impl>();
+  Impl& s = *im;
+  s.def = d;
+  s.shape = make_granule_shape(d.particle_radius, d.granule_edge_factor, d.material.density);
+  s.gravity = d.scale.gravity_to_sim(d.gravity_world);
+  s.threads = d.threads > 0 ? d.threads : omp_get_max_threads();
+  s.zeta = damping_ratio_from_restitution(d.material.restitution);
+  s.r_max = d.particle_radius;
+  s.skin = d.cell_skin > 0 ? d.cell_skin : 0.2f * d.particle_radius;
+  {
+    float h = 2.0f * s.r_max + s.skin;
+    Vec3 ext = d.bounds_max - d.bounds_min;
+    double cells = std::ceil(ext.x / h) * std::ceil(ext.y / h) * std::ceil(ext.z / h);
+    if (cells > double(1 << 26))
+      return Error{"", "SimulationDef.bounds_max", num(cells) + " grid cells",
+                   "the grid (cell = 2 particle_radius + cell_skin) must have <= 2^26 cells",
+                   "shrink the bounds or raise particle_radius"};
+  }
+  s.b.resize(d.max_bodies);
+  s.p.resize(d.max_particles);
+  s.slot_of.assign(d.max_particles, -1);
+  s.cell.assign(d.max_particles, 0);
+  s.pos_at_sort.assign(std::size_t(d.max_particles) * 4, 0.0f);
+  s.wxi.assign(std::size_t(d.max_particles) * 3 * kWallSlots, 0.0f);
+  s.size_grid();
+  return Simulation(std::move(im));
+}
+
+Result<BodyId> Simulation::add_granule(Vec3 x, Quat q, Vec3 v, Vec3 w) {
+  Impl& s = *impl_;
+  if (s.nb + 1 > s.def.max_bodies)
+    return Error{"", "SimulationDef.max_bodies", num(s.def.max_bodies), "is full: raise max_bodies",
+                 "add_granule needs 1 more body"};
+  if (s.np + 4 > s.def.max_particles)
+    return Error{"", "SimulationDef.max_particles", num(s.def.max_particles), "is full: raise max_particles",
+                 "add_granule needs 4 more particles"};
+  if (!std::isfinite(x.x + x.y + x.z + q.x + q.y + q.z + q.w + v.x + v.y + v.z + w.x + w.y + w.z))
+    return Error{"", "add_granule", "non-finite", "position, orientation and velocities must be finite", ""};
+  const GranuleShape& g = s.shape;
+  float r = g.radius;
+  float inv_i = 1.0f / g.inertia;
+  int i = s.push_body(kBodyGranule | kBodyDynamic, x, q, v, w, g.mass, 1.0f / g.mass, {inv_i, inv_i, inv_i},
+                      g.offsets.data(), &r, 4, true);
+  return BodyId{i};
+}
+
+Result<BodyId> Simulation::add_shell(const ShellDef& sh) {
+  Impl& s = *impl_;
+  int count = int(sh.offsets.size());
+  if (count < 1) return Error{"", "ShellDef.offsets", "0 spheres", "must hold at least one sphere", ""};
+  bool one = sh.radii.size() == 1;
+  if (!one && int(sh.radii.size()) != count)
+    return Error{"", "ShellDef.radii", num(double(sh.radii.size())) + " radii",
+                 "must hold one radius, or one per offset (" + std::to_string(count) + ")", ""};
+  if (s.nb + 1 > s.def.max_bodies)
+    return Error{"", "SimulationDef.max_bodies", num(s.def.max_bodies), "is full: raise max_bodies",
+                 "add_shell needs 1 more body"};
+  if (s.np + count > s.def.max_particles)
+    return Error{"", "SimulationDef.max_particles", num(s.def.max_particles), "is full: raise max_particles",
+                 "add_shell needs " + std::to_string(count) + " more particles"};
+  float rmax = 0, arm = 0;
+  for (int k = 0; k < count; ++k) {
+    float r = one ? sh.radii[0] : sh.radii[k];
+    if (!(r > 0) || !std::isfinite(r))
+      return Error{"", "ShellDef.radii[" + std::to_string(one ? 0 : k) + "]", num(r), "must be > 0 (m)", ""};
+    if (!std::isfinite(sh.offsets[k].x + sh.offsets[k].y + sh.offsets[k].z))
+      return Error{"", "ShellDef.offsets[" + std::to_string(k) + "]", "non-finite", "must be finite (m)", ""};
+    rmax = std::max(rmax, r);
+    arm = std::max(arm, length(sh.offsets[k]));
+  }
+  std::uint32_t flags = 0;
+  float invm = 0;
+  Vec3 iI{};
+  if (sh.motion == MotionType::Dynamic) {
+    if (!(sh.mass > 0) || !std::isfinite(sh.mass)) return Error{"", "ShellDef.mass", num(sh.mass), "must be > 0 (kg)", ""};
+    if (!(sh.inertia.x > 0 && sh.inertia.y > 0 && sh.inertia.z > 0))
+      return Error{"", "ShellDef.inertia", num(std::min({sh.inertia.x, sh.inertia.y, sh.inertia.z})),
+                   "principal moments must be > 0 (kg m^2)", ""};
+    flags = kBodyDynamic;
+    invm = 1.0f / sh.mass;
+    iI = {1.0f / sh.inertia.x, 1.0f / sh.inertia.y, 1.0f / sh.inertia.z};
+  } else {
+    flags = sh.motion == MotionType::Static ? kBodyStatic : kBodyKinematic;
+  }
+  // a new dynamic body may shorten the contact time: check the guard still has a substep
+  double min_pm_old = s.min_point_mass;
+  if (sh.motion == MotionType::Dynamic) {
+    double imin = std::min({sh.inertia.x, sh.inertia.y, sh.inertia.z});
+    s.min_point_mass = std::min(s.min_point_mass, point_effective_mass(sh.mass, imin, arm));
+  }
+  (void)min_pm_old;
+  if (rmax > s.r_max) {
+    float h = 2.0f * rmax + s.skin;
+    Vec3 ext = s.def.bounds_max - s.def.bounds_min;
+    double cells = std::ceil(ext.x / h) * std::ceil(ext.y / h) * std::ceil(ext.z / h);
+    (void)cells;
+    s.r_max = rmax;
+    s.size_grid();
+  }
+  int i = s.push_body(flags, sh.position, sh.orientation, sh.velocity, sh.angular_velocity,
+                      sh.motion == MotionType::Dynamic ? sh.mass : 0.0f, invm, iI, sh.offsets.data(),
+                      sh.radii.data(), count, one);
+  if (sh.motion == MotionType::Kinematic) s.has_moving_kinematic = true;
+  return BodyId{i};
+}
+
+Status Simulation::set_kinematic_velocity(BodyId id, Vec3 v, Vec3 w) {
+  Impl& s = *impl_;
+  if (id.index < 0 || id.index >= s.nb || !(s.b.flags[id.index] & kBodyKinematic))
+    return Error{"", "set_kinematic_velocity.body", std::to_string(id.index), "must be a kinematic shell", ""};
+  st3(s.b.vel, id.index, v);
+  st3(s.b.omega, id.index, w);
+  return Ok{};
+}
+
+Result<int> Simulation::substeps_for(double dt_frame) const {
+  const Impl& s = *impl_;
+  if (!(dt_frame > 0) || !std::isfinite(dt_frame))
+    return Error{"", "step.dt_frame", num(dt_frame), "must be a finite number > 0 (s)", ""};
+  double mdt = s.max_dt();
+  double n = std::ceil(dt_frame / mdt * (1.0 - 1e-9));
+  if (n < 1) n = 1;
+  if (n > s.def.max_substeps)
+    return Error{"", "step.dt_frame", num(dt_frame),
+                 "needs " + num(n) + " substeps of <= " + num(mdt) + " s (t_c = " + num(s.contact_time_()) +
+                     " s / " + std::to_string(s.def.accuracy_steps_per_contact) + ") but max_substeps = " +
+                     std::to_string(s.def.max_substeps),
+                 "lower dt_frame, raise SimulationDef.max_substeps, or lower material.normal_stiffness"};
+  return int(n);
+}
+
+Status Simulation::step(double dt_frame) {
+  Impl& s = *impl_;
+  auto ns = substeps_for(dt_frame);
+  if (!ns) return ns.errors();
+  s.stats = StepStats{};
+  s.stats.substeps = *ns;
+  s.stats.substep_dt = dt_frame / *ns;
+  if (s.asleep) {
+    if (!s.kinematic_touch(dt_frame)) {
+      s.move_kinematic(dt_frame);
+      s.time += dt_frame;
+      s.stats.slept = true;
+      s.stats.substeps = 0;
+      return Ok{};
+    }
+    s.asleep = false;
+    s.below_time = 0;
+  }
+  const float dt = float(dt_frame / *ns);
+  for (int k = 0; k < *ns; ++k)
+    if (auto st = s.substep(dt); !st) return st;
+  // sleep bookkeeping
+  if (s.max_granule_speed() < s.def.sleep_speed) {
+    s.below_time += dt_frame;
+    if (s.below_time >= s.def.sleep_time && s.def.sleep_time > 0) s.asleep = true;
+  } else {
+    s.below_time = 0;
+  }
+  return Ok{};
+}
+
+double Simulation::contact_time() const { return impl_->contact_time_(); }
+double Simulation::max_substep_dt() const { return impl_->max_dt(); }
+bool Simulation::asleep() const { return impl_->asleep; }
+void Simulation::wake() {
+  impl_->asleep = false;
+  impl_->below_time = 0;
+}
+int Simulation::body_count() const { return impl_->nb; }
+int Simulation::particle_count() const { return impl_->np; }
+Vec3 Simulation::body_position(BodyId b) const { return ld3(impl_->b.pos, b.index); }
+Quat Simulation::body_orientation(BodyId b) const { return ldq(impl_->b.quat, b.index); }
+Vec3 Simulation::body_velocity(BodyId b) const { return ld3(impl_->b.vel, b.index); }
+Vec3 Simulation::body_angular_velocity(BodyId b) const { return ld3(impl_->b.omega, b.index); }
+Vec3 Simulation::body_force(BodyId b) const { return ld3(impl_->b.force, b.index); }
+Vec3 Simulation::body_torque(BodyId b) const { return ld3(impl_->b.torque, b.index); }
+const StepStats& Simulation::last_step() const { return impl_->stats; }
+const SimulationDef& Simulation::def() const { return impl_->def; }
+const GranuleShape& Simulation::granule_shape() const { return impl_->shape; }
+double Simulation::time() const { return impl_->time; }
+double Simulation::max_granule_speed() const { return impl_->max_granule_speed(); }
+
+std::vector<Vec3> Simulation::particle_positions() const {
+  const Impl& s = *impl_;
+  std::vector<Vec3> out(s.np);
+  for (int id = 0; id < s.np; ++id) out[id] = ld3(s.p.pos, s.slot_of[id]);
+  return out;
+}
+
+double Simulation::kinetic_energy() const {
+  const Impl& s = *impl_;
+  double e = 0;
+  for (int i = 0; i < s.nb; ++i) {
+    if (!(s.b.flags[i] & kBodyDynamic)) continue;
+    Vec3 v = ld3(s.b.vel, i);
+    e += 0.5 * s.b.mass[4 * i] * double(dot(v, v));
+    Vec3 wb = rotate_inv(ldq(s.b.quat, i), ld3(s.b.omega, i));
+    Vec3 iI = ld3(s.b.inv_inertia, i);
+    e += 0.5 * (double(wb.x) * wb.x / iI.x + double(wb.y) * wb.y / iI.y + double(wb.z) * wb.z / iI.z);
+  }
+  return e;
+}
+
+double Simulation::potential_energy() const {
+  const Impl& s = *impl_;
+  double e = 0;
+  // gravity
+  for (int i = 0; i < s.nb; ++i) {
+    if (!(s.b.flags[i] & kBodyDynamic)) continue;
+    e -= double(s.b.mass[4 * i]) * double(dot(s.gravity, ld3(s.b.pos, i)));
+  }
+  // elastic: normal springs at the current positions, tangential springs from the history
+  const Material& m = s.def.material;
+  const float kn = m.normal_stiffness, kt = m.normal_stiffness * m.tangential_stiffness_ratio;
+  for (int i = 0; i < s.np; ++i) {
+    Vec3 pi = ld3(s.p.pos, i);
+    float ri = s.p.pos[4 * i + 3];
+    bool dyn_i = s.p.vel[4 * i + 3] > 0;
+    int c = s.cell_of(pi);
+    int cx = c % s.gx, cy = (c / s.gx) % s.gy, cz = c / (s.gx * s.gy);
+    for (int zz = std::max(0, cz - 1); zz <= std::min(s.gz - 1, cz + 1); ++zz)
+      for (int yy = std::max(0, cy - 1); yy <= std::min(s.gy - 1, cy + 1); ++yy)
+        for (int xx = std::max(0, cx - 1); xx <= std::min(s.gx - 1, cx + 1); ++xx) {
+          int cc = (zz * s.gy + yy) * s.gx + xx;
+          for (int j = s.cell_start[cc]; j < s.cell_start[cc + 1]; ++j) {
+            if (s.p.body[j] == s.p.body[i]) continue;
+            if (!dyn_i && s.p.vel[4 * j + 3] == 0) continue;
+            float d = length(pi - ld3(s.p.pos, j));
+            float del = ri + s.p.pos[4 * j + 3] - d;
+            if (del > 0) e += 0.25 * kn * double(del) * del;  // half of the pair, counted twice
+          }
+        }
+    if (dyn_i) {
+      auto plane = [&](float dist) {
+        if (dist < ri) e += 0.5 * kn * double(ri - dist) * (ri - dist);
+      };
+      plane(pi.y - s.def.floor_height);
+      if (s.def.side_walls) {
+        plane(pi.x - s.def.bounds_min.x);
+        plane(s.def.bounds_max.x - pi.x);
+        plane(pi.z - s.def.bounds_min.z);
+        plane(s.def.bounds_max.z - pi.z);
+      }
+    }
+    if (m.shear == ShearLaw::SpringHistory && i < int(s.nstart.size()) - 1) {
+      for (int k = s.nstart[i]; k < s.nstart[i + 1]; ++k) {
+        const float* x = &s.nxi[3 * std::size_t(k)];
+        e += 0.25 * kt * (double(x[0]) * x[0] + double(x[1]) * x[1] + double(x[2]) * x[2]);  // pair on both
+      }
+      for (int k = 0; k < kWallSlots; ++k) {
+        const float* x = &s.wxi[(std::size_t(i) * kWallSlots + k) * 3];
+        e += 0.5 * kt * (double(x[0]) * x[0] + double(x[1]) * x[1] + double(x[2]) * x[2]);
+      }
+    }
+  }
+  return e;
+}
+
+std::uint64_t Simulation::state_hash() const {
+  const Impl& s = *impl_;
+  Hasher h;
+  h.pod(s.nb);
+  h.pod(s.np);
+#define SP_HASH_B(type, name, n, hashed, unit) \
+  if (hashed) h.bytes(s.b.name.data(), sizeof(type) * std::size_t(n) * s.nb);
+  SANDPATCH_BODY_FIELDS(SP_HASH_B)
+#undef SP_HASH_B
+#define SP_HASH_P(type, name, n, hashed, unit) \
+  if (hashed) h.bytes(s.p.name.data(), sizeof(type) * std::size_t(n) * s.np);
+  SANDPATCH_PARTICLE_FIELDS(SP_HASH_P)
+#undef SP_HASH_P
+  return h.value();
+}
+
+}  // namespace sandpatch

@@ -1,0 +1,171 @@
+// Granule DEM, CPU/OpenMP reference backend (Leach & Marais 2014 §4; Bell et al. 2005;
+// Longmore et al. 2013; Cundall & Strack 1979 for the tangential spring).
+//
+// One Simulation is one particle patch: tetrahedral granules (4 spheres, one rigid body
+// each) and rigid shells (many spheres, one body; static, kinematic or dynamic), inside a
+// box with a bedrock floor, optional side walls and an optional terrain height grid outside
+// the filled region. Everything inside is float, in simulation units (unit particle scale,
+// patch-relative); ParticleScale maps to the world. y is up.
+//
+// The step (Simulation::step), per substep:
+//   1. rebuild   sphere positions/velocities from the bodies
+//   2. grid      when a sphere moved more than skin/2 since the last rebuild: counting-sort
+//                the spheres by cell (cell = 2 r_max + skin, no cap) and rebuild the Verlet
+//                neighbour list from the 27 cells, carrying each pair's spring over
+//   3. contacts  every sphere walks its own list and sums all its forces, so each pair is
+//                computed twice and every sum has a fixed order (no atomics)
+//   4. bodies    each body sums its own spheres' forces in sphere-id order
+//   5. integrate symplectic Euler; quaternions normalised; NaN check
+// The same state in, the same state out, for any number of threads (a test).
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "common/error.hpp"
+#include "particles/granule.hpp"
+#include "particles/material.hpp"
+#include "particles/math.hpp"
+#include "particles/scale.hpp"
+
+namespace sandpatch {
+
+enum class MotionType : std::uint32_t { Static, Kinematic, Dynamic };
+
+struct BodyId {
+  std::int32_t index = -1;
+  bool valid() const { return index >= 0; }
+};
+
+// Terrain outside the filled region as a small regular height grid (sim units): height
+// h(x, z) is bilinear between samples heights[iz * nx + ix] at (x0 + ix*spacing,
+// z0 + iz*spacing), clamped at the grid edge. Spheres whose (x, z) lie outside the filled
+// rectangle [fill_min, fill_max] rest on the plane through h with the grid's normal.
+struct TerrainGrid {
+  int nx = 0, nz = 0;
+  float x0 = 0, z0 = 0, spacing = 1;
+  std::vector<float> heights;
+  float fill_min_x = 0, fill_min_z = 0, fill_max_x = 0, fill_max_z = 0;
+  bool empty() const { return heights.empty(); }
+  float height(float x, float z) const;
+  Vec3 normal(float x, float z) const;
+};
+
+struct SimulationDef {
+  // capacities (fixed; exceeding one returns an Error naming it)
+  int max_bodies = 1024;                 // granules + shells
+  int max_particles = 4096;              // spheres of granules (4 each) + shell spheres
+
+  // granules
+  float particle_radius = 0.005f;        // r, m (sim units): radius of a granule's spheres
+  float granule_edge_factor = 1.0f;      // s: tetrahedron edge = 2 r s, in [0.5, 1.0]
+  Material material;
+
+  // world coupling
+  ParticleScale scale;                   // sim <-> world mapping (default: unit, origin 0)
+  Vec3 gravity_world{0.0f, -9.81f, 0.0f};  // m/s^2 (world); the sim uses scale.gravity_to_sim
+
+  // domain (sim units): the grid covers [bounds_min, bounds_max]; spheres outside are kept
+  // (binned into the border cells) but slow the search
+  Vec3 bounds_min{-0.5f, 0.0f, -0.5f};
+  Vec3 bounds_max{0.5f, 0.5f, 0.5f};
+  float floor_height = 0.0f;             // bedrock plane y = floor_height (m)
+  bool side_walls = false;               // planes x = bounds_min.x/max.x, z = bounds_min.z/max.z
+  TerrainGrid terrain;                   // optional
+
+  // grid
+  float cell_skin = 0.0f;                // m added to the cell size 2 r_max; 0 -> 0.2 r
+
+  // stability guard
+  int accuracy_steps_per_contact = 20;   // N: substep dt <= t_c / N
+  int max_substeps = 64;                 // refuse frames that would need more
+
+  // sleep
+  float sleep_speed = 0.005f;            // m/s (sim units): asleep when every granule is slower
+  float sleep_time = 0.5f;               // s held below sleep_speed
+
+  int threads = 0;                       // OpenMP threads; 0 = OpenMP's default
+};
+
+struct ShellDef {
+  std::vector<Vec3> offsets;             // sphere centres in the body frame (about the COM), m
+  std::vector<float> radii;              // one radius per sphere, or a single radius for all
+  MotionType motion = MotionType::Static;
+  float mass = 0;                        // kg (dynamic only)
+  Vec3 inertia{0, 0, 0};                 // principal moments, body frame, kg m^2 (dynamic only)
+  Vec3 position{};
+  Quat orientation{};
+  Vec3 velocity{};                       // m/s (kinematic and dynamic)
+  Vec3 angular_velocity{};               // rad/s, world frame
+};
+
+struct StepStats {
+  int substeps = 0;
+  double substep_dt = 0;                 // s
+  std::int64_t contacts = 0;             // sphere-sphere contacts (pairs) at the last substep
+  std::int64_t wall_contacts = 0;        // sphere-floor/wall/terrain contacts, last substep
+  int resorts = 0;                       // grid rebuilds this step
+  bool slept = false;                    // the step did nothing because the sim was asleep
+};
+
+class Simulation {
+ public:
+  static Result<Simulation> create(const SimulationDef& def);
+  Simulation(Simulation&&) noexcept;
+  Simulation& operator=(Simulation&&) noexcept;
+  ~Simulation();
+
+  // Bodies. Errors name the capacity to raise or the bad field.
+  Result<BodyId> add_granule(Vec3 position, Quat orientation = {}, Vec3 velocity = {},
+                             Vec3 angular_velocity = {});
+  Result<BodyId> add_shell(const ShellDef& shell);
+  // Kinematic shells: velocity used by the integrator (m/s, rad/s). Wakes the simulation.
+  Status set_kinematic_velocity(BodyId b, Vec3 velocity, Vec3 angular_velocity);
+
+  // Advances dt_frame seconds in substeps of dt_frame / n, n = substeps_for(dt_frame).
+  // Refuses (Error naming the parameter) when n would exceed max_substeps, and stops with an
+  // Error naming the stage if a NaN appears. The contact store (a CSR neighbour list with one
+  // tangential spring per entry) has no per-sphere cap, so nothing can overflow.
+  Status step(double dt_frame);
+  // Substeps a frame of dt_frame needs (>= 1), or an Error if dt_frame is not > 0.
+  Result<int> substeps_for(double dt_frame) const;
+
+  // Stability: contact time (s) of the stiffest/lightest pair and the largest substep (s).
+  double contact_time() const;
+  double max_substep_dt() const;  // contact_time / accuracy_steps_per_contact
+
+  // Sleep.
+  bool asleep() const;
+  void wake();
+
+  // Queries (sim units).
+  int body_count() const;
+  int particle_count() const;
+  Vec3 body_position(BodyId b) const;
+  Quat body_orientation(BodyId b) const;
+  Vec3 body_velocity(BodyId b) const;
+  Vec3 body_angular_velocity(BodyId b) const;
+  Vec3 body_force(BodyId b) const;   // contact force of the last substep, N (no gravity)
+  Vec3 body_torque(BodyId b) const;  // contact torque about the COM, N m
+  std::vector<Vec3> particle_positions() const;  // by stable particle id
+  double kinetic_energy() const;                 // J, translational + rotational, dynamic bodies
+  double potential_energy() const;               // J, gravity (rel. y = 0) + elastic springs
+  double max_granule_speed() const;              // m/s, max |v| + |w| d over granules
+  const StepStats& last_step() const;
+  std::uint64_t state_hash() const;              // over the fields marked hashed in fields.hpp
+  const SimulationDef& def() const;
+  const GranuleShape& granule_shape() const;
+  double time() const;                           // simulated seconds
+
+  struct Impl;
+
+ private:
+  explicit Simulation(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace sandpatch

@@ -1,0 +1,77 @@
+// Particle splats (Leach & Marais §4.2): one GL point per particle, read straight from the
+// simulation's GL buffer through a stride/offset description (no CPU copy), cut to a disc,
+// shaded as a sphere and written with the sphere's depth; sized by the patch's particle scale
+// (Leach §4.3) and faded in by a factor (Leach §5.1).
+#pragma once
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include "common/error.hpp"
+#include "gl/program.hpp"
+
+namespace sandpatch::render {
+
+class TerrainRenderer;
+
+// Where one patch's particles live in a GL buffer. The buffer is the caller's (e.g. the DEM's
+// position SSBO); it must stay alive while it is set on a renderer.
+struct ParticleSource {
+  unsigned buffer = 0;         // GL buffer name (any buffer object; bound as GL_ARRAY_BUFFER to draw)
+  std::int64_t count = 0;      // particles to draw (>= 0)
+  std::int64_t first = 0;      // index of the first particle
+  int stride = 16;             // bytes between consecutive particles (>= 12)
+  int position_offset = 0;     // bytes to three floats x, y, z (m, patch frame, unit particle scale)
+  int radius_offset = 12;      // bytes to one float radius (m, unit scale); < 0: every particle has `radius`
+  float radius = 0.005f;       // m, unit scale: used when radius_offset < 0 (> 0)
+  Eigen::Vector3d origin{0, 0, 0};  // world position (m) of the patch frame's origin
+  float scale = 1.0f;          // particle scale: drawn centre = origin + scale p, radius = scale r (> 0)
+  float fade = 1.0f;           // fade-in factor in [0, 1] (1 = opaque)
+};
+
+// Checks a source; errors name the field ("particles[2].stride = 8: ...").
+Status validate(const ParticleSource& s, int index);
+
+// A GL buffer of vec4 (x, y, z, radius) filled from CPU arrays: for tests and tools.
+class ParticleBuffer {
+ public:
+  explicit ParticleBuffer(const std::vector<Eigen::Vector4f>& xyzr);
+  ~ParticleBuffer();
+  ParticleBuffer(const ParticleBuffer&) = delete;
+  ParticleBuffer& operator=(const ParticleBuffer&) = delete;
+  unsigned id() const { return id_; }
+  std::int64_t count() const { return count_; }
+  // A source over the whole buffer (stride 16, radius in w).
+  ParticleSource source(const Eigen::Vector3d& origin, float scale = 1.0f, float fade = 1.0f) const;
+
+ private:
+  unsigned id_ = 0;
+  std::int64_t count_ = 0;
+};
+
+class ParticleRenderer {
+ public:
+  static Result<std::unique_ptr<ParticleRenderer>> create();
+  ~ParticleRenderer();
+  ParticleRenderer(const ParticleRenderer&) = delete;
+  ParticleRenderer& operator=(const ParticleRenderer&) = delete;
+
+  // Draws the sources into the bound framebuffer with depth test and write, alpha-blended by
+  // each source's fade. view: local -> eye; proj: eye -> clip; world_origin: the heightfield's
+  // origin (world m), subtracted from each source's origin. Material weights come from the
+  // terrain's clipmap textures (terrain.update() must have run this frame). normal_bend in
+  // [0, 1]: lighting normal = normalize(mix(sphere normal, terrain normal, normal_bend)).
+  // Returns the number of particles drawn.
+  std::int64_t draw(const std::vector<ParticleSource>& sources, const Eigen::Matrix4f& view,
+                    const Eigen::Matrix4f& proj, int viewport_height, const TerrainRenderer& terrain,
+                    const Eigen::Vector3d& world_origin, float normal_bend = 0.5f);
+
+ private:
+  ParticleRenderer() = default;
+  gl::Program program_;
+  unsigned vao_ = 0;
+};
+
+}  // namespace sandpatch::render

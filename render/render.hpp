@@ -1,0 +1,141 @@
+// Sandpatch's renderer, the one entry point for the CLI (`sandpatch render`, `sandpatch bench
+// render`) and the scene runner's PNG frames. docs/rendering.md describes what is drawn.
+//
+// One frame (DESIGN.md "One frame" step 7; Leach & Marais §5.1):
+//   1. move the clipmap windows to the camera (toroidal texel updates);
+//   2. clear colour (the background) and depth; draw the terrain (geometry clipmaps);
+//   3. when particles are set: clear depth, draw the particle splats, draw the terrain again,
+//      so particles below the surface never show and fading patches blend over the terrain;
+//   4. read the framebuffer back as an RGBA8 image (and write a PNG atomically).
+// Everything renders into an offscreen framebuffer of the camera's resolution through the
+// headless EGL context (gl/context.hpp); on machines with no GPU that is Mesa's llvmpipe.
+#pragma once
+
+#include <Eigen/Core>
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "common/error.hpp"
+#include "gl/context.hpp"
+#include "heightfield/heightfield.hpp"
+#include "render/clipmap.hpp"
+#include "render/image.hpp"
+#include "render/particle_renderer.hpp"
+
+namespace sandpatch::render {
+
+class TerrainRenderer;
+
+struct RendererDef {
+  // Clipmap layout. base_spacing <= 0 (the default here) = the heightfield's spacing;
+  // levels <= 0 = enough levels for the coarsest to cover the whole terrain from anywhere on it.
+  ClipmapDef clipmap = [] {
+    ClipmapDef d;
+    d.base_spacing = 0;
+    d.levels = 0;
+    return d;
+  }();
+  std::array<std::uint8_t, 3> background{140, 180, 230};  // sRGB bytes of the sky; no terrain colour equals it
+  Eigen::Vector3f sun_direction{0.45f, 0.8f, 0.35f};        // toward the sun (normalised on use)
+  // Particle lighting normal = normalize(mix(sphere normal, terrain normal under it, bend)), in
+  // [0, 1]: 0 is pure sphere shading; 0.5 keeps each splat's roundness while a packed bed's
+  // caps light like the surface they came from.
+  float particle_normal_bend = 0.5f;
+};
+
+// A camera in world coordinates (m), y up.
+struct CameraView {
+  Eigen::Vector3d position{0, 10, 0};
+  Eigen::Vector3d target{1, 0, 1};
+  float fov_deg = 60;       // vertical field of view, in (0, 180)
+  int width = 128;          // pixels, [1, 16384]
+  int height = 96;
+  // Clip planes (m); 0 = automatic: far reaches the farthest terrain corner, near = a quarter of
+  // the height above the terrain clamped to [0.01, 10].
+  float near_m = 0;
+  float far_m = 0;
+};
+// Errors name the field ("camera.fov_deg = 190: must be in (0, 180) degrees").
+Status validate(const CameraView& c);
+
+struct RenderStats {
+  std::int64_t terrain_triangles = 0;  // clipmap triangles of one terrain pass
+  int terrain_passes = 0;              // 1, or 2 with particles (Leach's order)
+  int pieces = 0;                      // clipmap pieces drawn per pass
+  int culled_pieces = 0;               // pieces skipped (frustum or terrain extent)
+  int active_levels = 0;
+  std::int64_t texels_uploaded = 0;    // clipmap texels written for this frame (toroidal + dirty)
+  std::int64_t particles = 0;          // splats drawn
+  double frame_ms = 0;                 // wall time of the frame including glFinish (CPU time on llvmpipe)
+};
+
+class SceneRenderer {
+ public:
+  // hf must outlive the renderer; ctx must be current on this thread. Errors name the
+  // RendererDef field (clipmap.*), or carry the shader compiler's log.
+  static Result<std::unique_ptr<SceneRenderer>> create(gl::Context& ctx, const Heightfield& hf,
+                                                       const RendererDef& def = {});
+  ~SceneRenderer();
+  SceneRenderer(const SceneRenderer&) = delete;
+  SceneRenderer& operator=(const SceneRenderer&) = delete;
+
+  // Renders one frame and reads it back (top row first).
+  Result<Image> render(const CameraView& camera);
+  // render() and save_png() (atomic: temporary file + rename). Errors name the path.
+  Status render_png(const CameraView& camera, const std::string& path);
+
+  // The heightfield samples in `dirty` changed (a demoted patch, a track): only the clipmap
+  // texels that depend on them are rewritten (now; the context must be current).
+  void heightfield_changed(GridRegion dirty);
+
+  // Particle patches to draw from now on (replaces the previous set). The buffers are the
+  // caller's and must stay alive while set. Errors name the source and field; nothing changes
+  // on error.
+  Status set_particles(const std::vector<ParticleSource>& sources);
+  void clear_particles() { particles_.clear(); }
+
+  RenderStats stats() const { return stats_; }
+  const RendererDef& def() const { return def_; }
+  TerrainRenderer& terrain() { return *terrain_; }
+  const std::string& renderer_string() const;  // GL_RENDERER of the context
+
+ private:
+  SceneRenderer() = default;
+  void ensure_framebuffer(int w, int h);
+
+  gl::Context* ctx_ = nullptr;
+  const Heightfield* hf_ = nullptr;
+  RendererDef def_;
+  std::unique_ptr<TerrainRenderer> terrain_;
+  std::unique_ptr<ParticleRenderer> particle_renderer_;
+  std::vector<ParticleSource> particles_;
+  unsigned fbo_ = 0, color_rb_ = 0, depth_rb_ = 0;
+  int fb_w_ = 0, fb_h_ = 0;
+  std::int64_t pending_texels_ = 0;  // written by heightfield_changed() since the last frame
+  RenderStats stats_;
+};
+
+// The number of levels for which the coarsest level covers the whole terrain from any viewer
+// position on it: the smallest L with (n - 1) s_0 2^(L-1) >= 2 max(extent_x, extent_z), at most 24.
+int auto_levels(const ClipmapDef& def, const Heightfield& hf);
+
+// ---- `sandpatch bench render` ----
+// For each terrain size N (N x N samples, 1 m spacing, procedural hills): triangles per frame
+// and frame time of the clipmap renderer and of a full-resolution grid of the same terrain,
+// same camera, same run. Prints a table; with json the last line is one JSON object
+// {"renderer": ..., "results": [{"terrain": N, "clipmap_triangles": ..., "full_grid_triangles": ...,
+//   "clipmap_ms": ..., "full_grid_ms": ...}, ...]}. Frame times are wall times with glFinish
+// (on llvmpipe they are CPU times).
+struct BenchRenderArgs {
+  std::vector<int> terrains;  // empty = {1024, 2048, 4096, 8192}
+  int frames = 3;             // timed frames per renderer and size (median reported), >= 1
+  int width = 640, height = 360;
+  bool json = false;
+};
+// Exit code: 0 ok, 1 runtime failure, 2 bad input. Prints to stdout (errors to stderr).
+int run_bench_render(const BenchRenderArgs& args);
+
+}  // namespace sandpatch::render

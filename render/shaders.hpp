@@ -1,0 +1,15 @@
+// The render/ GLSL programs, built from the sources embedded at build time
+// (shaders/render/*, render/embed_shaders.cmake). shaders/render/common.glsl is inserted after
+// each stage's #version line. Needs a current GL context.
+#pragma once
+
+#include "common/error.hpp"
+#include "gl/program.hpp"
+
+namespace sandpatch::render {
+
+Result<gl::Program> build_terrain_program();
+Result<gl::Program> build_particle_program();
+Result<gl::Program> build_full_grid_program();
+
+}  // namespace sandpatch::render

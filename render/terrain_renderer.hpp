@@ -1,0 +1,102 @@
+// GL geometry-clipmap terrain (Asirvatham & Hoppe 2005; selection in clipmap.hpp).
+//
+// Per level three layers of T x T texture arrays (T = n + 1), addressed toroidally (vertex g at
+// texel g mod T):
+//   elevation  R32F     Heightfield::sample(g s_l)            (m, local), read with texelFetch
+//   normals    RGBA16F  Heightfield::normal(g s_l)            (unit), linear filtering
+//   materials  RGBA8    Heightfield::sample_layer(Material0..3, g s_l)  (weights), linear
+// so level l is the heightfield point-sampled every s_l metres (no prefilter: coarse levels
+// hold exact heightfield values, which keeps every level's surface on the same samples).
+// When the viewer moves, update() writes only the vertices that entered each level's window;
+// heightfield_changed() rewrites only the texels that depend on the dirty samples.
+//
+// Drawing: the vertex shader (shaders/render/terrain.vert) fetches the height and morphs it
+// toward the coarser level in the transition band (alpha), the fragment shader blends normals
+// and material weights with the same alpha, blends the materials with the normalised blend
+// operator (Huhtiranta §6.2 eq. 2) and lights them with one directional light.
+#pragma once
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <utility>
+#include <vector>
+
+#include "common/error.hpp"
+#include "gl/program.hpp"
+#include "heightfield/heightfield.hpp"
+#include "render/clipmap.hpp"
+
+namespace sandpatch::render {
+
+class TerrainRenderer {
+ public:
+  // hf must outlive the renderer; def.base_spacing <= 0 means hf.spacing(). Needs a current
+  // GL context. Errors name the clipmap field.
+  static Result<std::unique_ptr<TerrainRenderer>> create(const Heightfield& hf, const ClipmapDef& def);
+  ~TerrainRenderer();
+  TerrainRenderer(const TerrainRenderer&) = delete;
+  TerrainRenderer& operator=(const TerrainRenderer&) = delete;
+
+  // Moves every level's window to the viewer (local m), writing only the texels of vertices
+  // that entered it. Returns the number of texels written (per layer).
+  std::int64_t update(const Eigen::Vector3f& viewer_local);
+  // Rewrites the texels (of the current windows) that depend on the heightfield samples in
+  // `dirty`. Returns texels written. Call after editing the heightfield.
+  std::int64_t heightfield_changed(GridRegion dirty);
+  // Forgets the windows: the next update() rebuilds every level from scratch.
+  void invalidate();
+
+  // Selects the pieces for this view (select_clipmap with the viewer of the last update()) and
+  // draws them into the bound framebuffer with depth testing. view_proj: local -> clip.
+  void draw(const Eigen::Matrix4f& view_proj, bool cull = true);
+  // Draws the last selection again (Leach's second terrain pass).
+  void redraw();
+
+  const ClipmapSelection& selection() const { return selection_; }
+  const ClipmapDef& def() const { return def_; }
+  const Heightfield& heightfield() const { return *hf_; }
+  int texture_size() const { return T_; }
+  // The window of level coordinates each level's texture holds (empty before update()).
+  const std::vector<LevelRect>& windows() const { return windows_; }
+  std::int64_t texels_written_total() const { return texels_total_; }
+  unsigned normals_texture() const { return tex_[1]; }
+  unsigned materials_texture() const { return tex_[2]; }
+  int first_active_level() const;
+  void set_sun_direction(const Eigen::Vector3f& toward_sun) { sun_ = toward_sun.normalized(); }
+  const Eigen::Vector3f& sun_direction() const { return sun_; }
+
+  // Reads back one layer of a texture array for tests: 0 elevation (1 float a texel),
+  // 1 normals (4 floats), 2 materials (4 floats in [0, 1]); row-major T x T, x fastest.
+  std::vector<float> read_texture(int which, int level) const;
+
+ private:
+  struct Mesh {
+    unsigned vao = 0, vbo = 0, ibo = 0;
+    int indices = 0;
+  };
+  TerrainRenderer() = default;
+  std::int64_t write_rect(int level, const LevelRect& r);
+  const Mesh& mesh_for(const ClipmapPiece& p);
+  Mesh make_mesh(const std::vector<int>& xy, const std::vector<unsigned>& idx);
+  void draw_selection();
+
+  const Heightfield* hf_ = nullptr;
+  ClipmapDef def_;
+  int T_ = 0;
+  gl::Program program_;
+  unsigned tex_[3] = {0, 0, 0};  // elevation, normals, materials
+  std::vector<LevelRect> windows_;
+  Eigen::Vector3f viewer_{0, 0, 0};
+  Eigen::Matrix4f view_proj_ = Eigen::Matrix4f::Identity();
+  Eigen::Vector3f sun_ = Eigen::Vector3f(0.45f, 0.8f, 0.35f).normalized();
+  ClipmapSelection selection_;
+  std::map<std::pair<int, int>, Mesh> meshes_;  // grid meshes by (cells_x, cells_z)
+  Mesh degenerate_[2];  // one border side along x, along z
+  std::int64_t texels_total_ = 0;
+  // Scratch arrays for uploads.
+  std::vector<float> elev_, normal_, material_;
+};
+
+}  // namespace sandpatch::render

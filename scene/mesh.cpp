@@ -1,0 +1,180 @@
+// Triangle meshes for bodies: see mesh.hpp.
+#include "scene/mesh.hpp"
+
+#include <Eigen/Geometry>
+#include <tiny_obj_loader.h>
+
+#include <cassert>
+#include <cmath>
+#include <cstdio>
+#include <cstdint>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <unordered_map>
+
+namespace sandpatch {
+
+double TriangleMesh::signed_volume() const {
+  // Divergence theorem: V = Σ a·(b×c) / 6 over outward triangles (a, b, c).
+  double v6 = 0.0;
+  for (const auto& t : triangles) {
+    const Eigen::Vector3d a = vertices[t[0]].cast<double>();
+    const Eigen::Vector3d b = vertices[t[1]].cast<double>();
+    const Eigen::Vector3d c = vertices[t[2]].cast<double>();
+    v6 += a.dot(b.cross(c));
+  }
+  return v6 / 6.0;
+}
+
+Eigen::Vector3d TriangleMesh::centroid() const {
+  // Each signed tetrahedron (0, a, b, c) has volume a·(b×c)/6 and centroid (a+b+c)/4.
+  double v6 = 0.0;
+  Eigen::Vector3d m = Eigen::Vector3d::Zero();
+  for (const auto& t : triangles) {
+    const Eigen::Vector3d a = vertices[t[0]].cast<double>();
+    const Eigen::Vector3d b = vertices[t[1]].cast<double>();
+    const Eigen::Vector3d c = vertices[t[2]].cast<double>();
+    const double w = a.dot(b.cross(c));
+    v6 += w;
+    m += w * (a + b + c) / 4.0;
+  }
+  if (std::abs(v6) > 0.0) return m / v6;
+  // Degenerate (flat or empty): the mean of the vertices.
+  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+  for (const auto& v : vertices) mean += v.cast<double>();
+  return vertices.empty() ? mean : Eigen::Vector3d(mean / static_cast<double>(vertices.size()));
+}
+
+Eigen::Vector3f TriangleMesh::bounds_min() const {
+  if (vertices.empty()) return Eigen::Vector3f::Zero();
+  Eigen::Vector3f lo = vertices.front();
+  for (const auto& v : vertices) lo = lo.cwiseMin(v);
+  return lo;
+}
+
+Eigen::Vector3f TriangleMesh::bounds_max() const {
+  if (vertices.empty()) return Eigen::Vector3f::Zero();
+  Eigen::Vector3f hi = vertices.front();
+  for (const auto& v : vertices) hi = hi.cwiseMax(v);
+  return hi;
+}
+
+MeshTopology mesh_topology(const TriangleMesh& mesh) {
+  // Count each directed edge; an undirected edge {a, b} of a closed oriented surface is
+  // traversed exactly once as a→b and once as b→a.
+  std::map<std::pair<int, int>, std::array<int, 2>> uses;  // (min, max) → {min→max, max→min}
+  for (const auto& t : mesh.triangles) {
+    for (int k = 0; k < 3; ++k) {
+      const int a = t[k], b = t[(k + 1) % 3];
+      auto& u = uses[{std::min(a, b), std::max(a, b)}];
+      ++u[a < b ? 0 : 1];
+    }
+  }
+  MeshTopology topo;
+  topo.edges = uses.size();
+  for (const auto& [edge, u] : uses) {
+    const int total = u[0] + u[1];
+    if (total == 1) ++topo.open_edges;
+    else if (total > 2) ++topo.non_manifold_edges;
+    else if (u[0] != 1) ++topo.misoriented_edges;  // total == 2, both the same direction
+  }
+  return topo;
+}
+
+Result<TriangleMesh> load_obj_mesh(const std::string& path, double scale) {
+  assert(scale > 0.0 && std::isfinite(scale));
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  if (!fs::exists(path, ec)) return Error{path, "", "", "", "file not found"};
+  if (!fs::is_regular_file(path, ec)) return Error{path, "", "", "", "not a regular file"};
+  if (!std::ifstream(path).good()) return Error{path, "", "", "", "file cannot be opened for reading"};
+
+  tinyobj::attrib_t attrib;
+  std::vector<tinyobj::shape_t> shapes;
+  std::vector<tinyobj::material_t> materials;
+  std::string warn, err;
+  // No .mtl search: materials are irrelevant to a body's shape.
+  const std::string mtl_dir = fs::path(path).parent_path().string() + "/";
+  const bool ok = tinyobj::LoadObj(&attrib, &shapes, &materials, &warn, &err, path.c_str(),
+                                   mtl_dir.c_str(), /*triangulate=*/true);
+  if (!ok) return Error{path, "", "", "a Wavefront OBJ file", "OBJ parse failed: " + err};
+
+  // Weld bit-identical positions so that duplicated vertices do not open the surface.
+  TriangleMesh mesh;
+  const std::size_t nv = attrib.vertices.size() / 3;
+  std::vector<int> remap(nv, -1);
+  std::map<std::array<float, 3>, int> welded;
+  for (std::size_t i = 0; i < nv; ++i) {
+    const std::array<float, 3> p{attrib.vertices[3 * i], attrib.vertices[3 * i + 1],
+                                 attrib.vertices[3 * i + 2]};
+    if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2])) {
+      return Error{path, "", "v " + std::to_string(i + 1), "finite vertex coordinates",
+                   "vertex " + std::to_string(i + 1) + " is NaN or infinite"};
+    }
+    auto [it, inserted] = welded.emplace(p, static_cast<int>(mesh.vertices.size()));
+    if (inserted) {
+      mesh.vertices.emplace_back(static_cast<float>(p[0] * scale), static_cast<float>(p[1] * scale),
+                                 static_cast<float>(p[2] * scale));
+    }
+    remap[i] = it->second;
+  }
+
+  for (const auto& shape : shapes) {
+    std::size_t offset = 0;
+    for (const auto fv : shape.mesh.num_face_vertices) {
+      if (fv != 3) {  // triangulation leaves only triangles; anything else is malformed
+        return Error{path, "", "", "faces with at least 3 vertices",
+                     "face with " + std::to_string(fv) + " vertices in shape '" + shape.name + "'"};
+      }
+      std::array<int, 3> t{};
+      for (int k = 0; k < 3; ++k) {
+        const int vi = shape.mesh.indices[offset + k].vertex_index;
+        if (vi < 0 || static_cast<std::size_t>(vi) >= nv) {
+          return Error{path, "", std::to_string(vi + 1), "vertex indices within the file",
+                       "face refers to a vertex that does not exist"};
+        }
+        t[k] = remap[vi];
+      }
+      offset += 3;
+      if (t[0] == t[1] || t[1] == t[2] || t[0] == t[2]) continue;  // degenerate after welding
+      mesh.triangles.push_back(t);
+    }
+  }
+  if (mesh.triangles.empty()) return Error{path, "", "", "at least one triangle", "the OBJ has no faces"};
+  return mesh;
+}
+
+std::vector<Error> check_solid_mesh(const TriangleMesh& mesh, const std::string& file,
+                                    const std::string& field) {
+  std::vector<Error> errors;
+  const MeshTopology topo = mesh_topology(mesh);
+  const std::string rule = "a closed mesh (every edge shared by exactly two triangles, consistently oriented)";
+  if (topo.open_edges > 0) {
+    errors.push_back({file, field, "", rule,
+                      "mesh is not closed: " + std::to_string(topo.open_edges) + " open edges of " +
+                          std::to_string(topo.edges)});
+  }
+  if (topo.non_manifold_edges > 0) {
+    errors.push_back({file, field, "", rule,
+                      "mesh is not manifold: " + std::to_string(topo.non_manifold_edges) +
+                          " edges shared by three or more triangles"});
+  }
+  if (topo.misoriented_edges > 0) {
+    errors.push_back({file, field, "", rule,
+                      "mesh is not consistently oriented: " + std::to_string(topo.misoriented_edges) +
+                          " edges traversed twice in the same direction"});
+  }
+  if (errors.empty()) {
+    const double v = mesh.signed_volume();
+    if (!(v > 0.0)) {
+      char buf[64];
+      std::snprintf(buf, sizeof buf, "%.6g", v);
+      errors.push_back({file, field, "", "faces wound counter-clockwise seen from outside (positive volume)",
+                        std::string("signed volume is ") + buf + " m^3: the mesh is inside out or flat"});
+    }
+  }
+  return errors;
+}
+
+}  // namespace sandpatch

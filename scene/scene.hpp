@@ -1,0 +1,271 @@
+// Scene files: the plain definition of everything a run needs (terrain, materials, bodies,
+// simulation, cameras, outputs), parsed from JSON and fully validated before anything runs.
+//
+// The format is documented field by field in docs/scene-format.md; this header is its
+// single source of truth for names, units and defaults. Conventions: SI units, y up, the
+// terrain grid in x–z, world positions double. Parsing never stops at the first mistake:
+// every error found (unknown keys with a "did you mean", wrong types, missing fields,
+// missing or unreadable files, non-finite or out-of-range values, broken cross references,
+// open meshes, bodies below a flat bedrock) comes back as an Error naming the file, the
+// field path (e.g. "bodies[1].shape.radius"), the value as written and what is allowed.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <functional>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json_fwd.hpp>
+
+#include "common/error.hpp"
+
+namespace sandpatch {
+
+using Vec3d = std::array<double, 3>;  // x, y, z
+
+// ---- terrain ----
+
+enum class TerrainSourceKind { Png16, RawF32, EsriAscii, Procedural };
+enum class ProceduralKind { Flat, Plane, Hills, Noise };
+
+// A generated elevation grid (the generator is heightfield/procedural.hpp's make_procedural,
+// which documents the exact formulas). Local heights before vertical_scale/offset:
+//   flat:  height
+//   plane: height + slope_x·x + slope_z·z                   (x, z in m from sample (0, 0))
+//   hills: height + amplitude·c(x)·c(z), c a smooth periodic wave of period `wavelength`
+//   noise: height + amplitude·(fractal value noise, coarsest feature `wavelength`, `octaves`)
+struct ProceduralDef {
+  ProceduralKind kind = ProceduralKind::Flat;
+  double height = 0.0;         // m, base height
+  double slope_x = 0.0;        // m/m, dh/dx (plane)
+  double slope_z = 0.0;        // m/m, dh/dz (plane)
+  double amplitude = 1.0;      // m, peak height variation (hills, noise)
+  double wavelength = 32.0;    // m, hills period / noise coarsest feature
+  std::uint64_t seed = 1;      // noise lattice seed, in [0, 2^32 − 1]
+  int octaves = 4;             // noise octaves, each half the wavelength and amplitude
+  int samples_x = 129;         // grid samples along x
+  int samples_z = 129;         // grid samples along z
+};
+
+struct TerrainSourceDef {
+  TerrainSourceKind kind = TerrainSourceKind::Procedural;
+  std::string file;            // resolved path of the heightmap (png16, raw_f32, esri_ascii)
+  int samples_x = 0;           // raw_f32 only: samples along x (row length, x fastest)
+  int samples_z = 0;           // raw_f32 only: samples along z (rows)
+  ProceduralDef procedural;    // procedural only
+};
+
+// World height of sample s:  y = origin[1] + vertical_offset + vertical_scale · s, where s is
+// the 16-bit value / 65535 for png16 and the stored value for raw_f32 / esri_ascii.
+// Sample (i, j) sits at world x = origin[0] + i·spacing_x, z = origin[2] + j·spacing_z.
+struct TerrainDef {
+  TerrainSourceDef source;
+  double spacing = 1.0;                        // m between samples in x and z (when size is not given)
+  bool spacing_given = false;                  // "spacing" was in the file (esri_ascii: overrides cellsize)
+  std::optional<std::array<double, 2>> size;   // m, total extent [x, z]; overrides spacing:
+                                               //   spacing_x = size[0] / (samples_x − 1)
+  double vertical_scale = 1.0;                 // m per sample unit (png16: m for the full 0..65535 range)
+  double vertical_offset = 0.0;                // m, added after scaling
+  Vec3d origin = {0.0, 0.0, 0.0};              // m, world position of sample (0, 0) at height 0
+  std::optional<double> soil_depth;            // m, bedrock = surface − soil_depth (default 2 m)
+  std::optional<double> bedrock_height;        // m above origin[1], flat bedrock (instead of soil_depth)
+  std::string material;                        // name of a MaterialDef (default: the first material)
+
+  // Spacing along x and z (m) for a grid of nx × nz samples.
+  std::array<double, 2> spacing_xz(int nx, int nz) const;
+};
+
+// ---- materials ----
+
+struct MaterialDef {
+  std::string name;                            // unique, referenced by terrain.material
+  double density = 2650.0;                     // kg/m³ of the grain solid (quartz)
+  double friction = 0.5;                       // μ, Coulomb coefficient between spheres
+  std::optional<double> restitution;           // e in (0, 1]  } exactly one of the two is set
+  std::optional<double> damping_ratio;         // ζ in [0, 1)  }
+  double stiffness = 1.0e5;                    // k_n, N/m, normal contact stiffness
+  double tangential_stiffness_ratio = 2.0 / 7.0;  // k_t / k_n
+  double granule_radius = 0.025;               // m, radius of each of the 4 spheres of a granule
+  double packing_fraction = 0.6;               // φ, granule solid volume / bulk volume
+
+  // ζ from whichever was given: ζ = −ln e / sqrt(π² + ln² e).
+  double damping_ratio_value() const;
+  // e from whichever was given: e = exp(−π ζ / sqrt(1 − ζ²)).
+  double restitution_value() const;
+};
+
+// ---- bodies ----
+
+enum class ShapeKind { Sphere, Box, Cylinder, Capsule, Mesh };
+
+// Shapes are centred on the body frame's origin; cylinders and capsules have their axis on y.
+struct ShapeDef {
+  ShapeKind kind = ShapeKind::Sphere;
+  double radius = 0.5;                         // m (sphere, cylinder, capsule)
+  Vec3d half_extents = {0.5, 0.5, 0.5};        // m (box)
+  double height = 1.0;                         // m (cylinder: total height; capsule: distance
+                                               //   between the cap centres, total = height + 2·radius)
+  std::string file;                            // resolved path of the OBJ (mesh)
+  double scale = 1.0;                          // OBJ units → m (mesh)
+  bool solid = true;                           // mesh: must be closed (needed for density, DEM shell)
+  double mesh_volume = 0.0;                    // m³, filled by the loader from the OBJ (mesh)
+
+  // Volume (m³): analytic for primitives, mesh_volume for meshes.
+  double volume() const;
+};
+
+struct PoseDef {
+  Vec3d position = {0.0, 0.0, 0.0};                   // m, world
+  std::array<double, 4> orientation = {1.0, 0.0, 0.0, 0.0};  // unit quaternion [w, x, y, z]
+  // In the file either "orientation" or "euler_deg" [α, β, γ] (degrees, R = Rz(γ)·Ry(β)·Rx(α));
+  // both are stored here as the normalised quaternion.
+};
+
+struct BodyDef {
+  std::string name;                            // unique
+  ShapeDef shape;
+  std::optional<double> mass;                  // kg        } exactly one of the two is set
+  std::optional<double> density;               // kg/m³     }
+  PoseDef pose;
+  Vec3d linear_velocity = {0.0, 0.0, 0.0};     // m/s, world
+  Vec3d angular_velocity = {0.0, 0.0, 0.0};    // rad/s, world
+  double spawn_time = 0.0;                     // s, simulated time at which the body appears
+  double friction = 0.5;                       // μ against terrain and other bodies
+  double restitution = 0.2;                    // e in [0, 1] for body–body / body–heightfield contacts
+
+  // Mass in kg: `mass`, or density × shape.volume().
+  double mass_value() const;
+};
+
+// ---- simulation ----
+
+enum class Backend { Cpu, Gl };
+
+struct PoolDef {
+  int slots = 4;                               // simulations kept ready (active patches at once)
+  int granules_per_slot = 32768;               // capacity of each slot
+};
+
+struct SleepDef {
+  double speed_threshold = 0.01;               // m/s, every granule slower than this ...
+  double hold_time = 1.0;                      // s, ... for this long puts a patch to sleep
+};
+
+struct SimulationDef {
+  double dt = 1.0 / 60.0;                      // s, fixed step of bodies and the frame
+  int substeps = 1;                            // substeps per step (the DEM may substep further)
+  double duration = 10.0;                      // s, simulated time of a run
+  Backend backend = Backend::Cpu;              // DEM backend
+  int threads = 0;                             // worker threads, 0 = all hardware threads
+  PoolDef pool;
+  double particle_scale = 1.0;                 // render size / simulated size (Leach §4.3)
+  SleepDef sleep;
+  double idle_timeout = 120.0;                 // s asleep and untouched before demotion (Leach & Marais)
+  Vec3d gravity = {0.0, -9.81, 0.0};           // m/s²
+  std::uint64_t seed = 1;                      // all randomness of a run
+};
+
+// ---- cameras ----
+
+struct CameraKeyDef {
+  double time = 0.0;                           // s
+  Vec3d position = {0.0, 0.0, 0.0};            // m, world
+  Vec3d target = {0.0, 0.0, 0.0};              // m, world point looked at
+};
+
+struct CameraDef {
+  std::string name;                            // unique, referenced by outputs.frames[].camera
+  Vec3d position = {0.0, 10.0, 20.0};          // m, world (fixed camera)
+  Vec3d target = {0.0, 0.0, 0.0};              // m, world (fixed camera)
+  std::vector<CameraKeyDef> path;              // keyframes, times ascending; non-empty = animated
+                                               //   (linear interpolation, held outside the range)
+  double fov_deg = 60.0;                       // vertical field of view, degrees
+  int width = 1280;                            // pixels
+  int height = 720;                            // pixels
+};
+
+// ---- outputs ----
+
+// File name patterns are relative to the run's output directory. Placeholders:
+// {camera} (frames only), {frame} (step index, 6 digits), {time_ms} (simulated ms, 8 digits),
+// {ext} (heightfield: png, raw or asc).
+struct FrameOutputDef {
+  std::string camera;                          // name of a CameraDef
+  std::vector<double> times;                   // s, ascending   } exactly one of the two
+  int every_k_frames = 0;                      // > 0 when used  }
+  std::string file = "{camera}_{frame}.png";
+};
+
+enum class HeightfieldFormat { Png16, RawF32, EsriAscii };
+
+struct HeightfieldOutputDef {
+  HeightfieldFormat format = HeightfieldFormat::Png16;
+  std::vector<double> times;                   // s, ascending
+  bool at_end = false;                         // also (or only) at the end of the run
+  std::string file = "heightfield_{frame}.{ext}";
+};
+
+struct OutputsDef {
+  std::vector<FrameOutputDef> frames;
+  std::vector<HeightfieldOutputDef> heightfields;
+  bool report = true;                          // write report.json
+};
+
+// ---- the scene ----
+
+struct SceneDef {
+  std::string name;                            // default: the file's stem
+  std::string description;
+  std::string source_path;                     // the file it came from ("<embedded default>" if none)
+  std::string hash;                            // 16 hex digits: canonical JSON + referenced files' bytes
+  TerrainDef terrain;
+  std::vector<MaterialDef> materials;
+  std::vector<BodyDef> bodies;
+  SimulationDef simulation;
+  std::vector<CameraDef> cameras;
+  OutputsDef outputs;
+
+  const MaterialDef* find_material(const std::string& n) const;
+  const CameraDef* find_camera(const std::string& n) const;
+};
+
+// The version of the format this library reads (the optional top-level "version" key).
+inline constexpr int kSceneFormatVersion = 1;
+
+// Reads and validates a scene file; relative paths inside resolve against its directory.
+Result<SceneDef> load_scene_file(const std::string& path);
+
+// Validates JSON text. `source_name` is the file name used in errors; `base_dir` resolves
+// relative paths (empty = the current directory).
+Result<SceneDef> parse_scene(const std::string& json_text, const std::string& source_name,
+                             const std::string& base_dir);
+
+// The embedded default scene: the bytes of scenes/default.json, compiled in at build time.
+const char* default_scene_json();
+// parse_scene(default_scene_json(), "<embedded default>", "").
+Result<SceneDef> load_default_scene();
+
+// Canonical JSON of a scene with every default filled in: resolved paths, orientations as
+// quaternions; derived values (masses from densities, mesh volumes) are not added. Parsing
+// it again gives a scene with the same canonical JSON (its hash differs: the text does).
+nlohmann::json scene_to_json(const SceneDef& scene);
+
+// Lowest point of a body below its position (m, ≥ 0), for its pose's orientation. Meshes
+// are reloaded from shape.file; if that fails the mesh's bounds are unknown and 0 is returned.
+double body_extent_below(const BodyDef& body);
+
+// The check only the terrain can answer: a body whose lowest point starts below the
+// bedrock (world y) under its position. Called after the terrain is loaded.
+std::vector<Error> check_bodies_against_terrain(
+    const SceneDef& scene, const std::function<float(double x, double z)>& bedrock_world_height);
+
+// Names used in files and errors.
+const char* to_string(TerrainSourceKind k);
+const char* to_string(ProceduralKind k);
+const char* to_string(ShapeKind k);
+const char* to_string(Backend b);
+const char* to_string(HeightfieldFormat f);
+
+}  // namespace sandpatch

@@ -1,0 +1,129 @@
+// tests manager/depth_conversion.cpp: the top-down depth render of spheres (Leach & Marais
+// §5.2) against the analytic sphere surface and a CPU ray-cast reference, and the write
+// back into the heightfield.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+
+#include "gl/context.hpp"
+#include "heightfield/heightfield.hpp"
+#include "manager/depth_conversion.hpp"
+
+using namespace sandpatch;
+
+namespace {
+
+// One GL context for the whole test program (created lazily on the test thread).
+gl::Context& context() {
+  static auto ctx = gl::Context::create();
+  EXPECT_TRUE(ctx.ok()) << (ctx.ok() ? "" : ctx.message());
+  return **ctx;
+}
+
+// CPU reference: the highest sphere surface above a texel centre, or the floor.
+float raycast(const std::vector<float>& s, float x, float z, float floor_y) {
+  float best = floor_y;
+  for (std::size_t i = 0; i < s.size(); i += 4) {
+    const float dx = x - s[i], dz = z - s[i + 2], r = s[i + 3];
+    const float d2 = dx * dx + dz * dz;
+    if (d2 <= r * r) best = std::max(best, s[i + 1] + std::sqrt(r * r - d2));
+  }
+  return best;
+}
+
+}  // namespace
+
+// A single sphere (R = 1 m, centre height 0.5 m): texels inside 0.98 R read the analytic
+// cap height 0.5 + sqrt(R² − d²) within 2 mm (the quad is rasterised at texel centres, depth is
+// 32-bit float over 4 m); texels outside 1.02 R read the floor exactly (1e-5 m).
+TEST(DepthConversion, SingleSphereMatchesAnalyticCap) {
+  context();
+  auto r = ParticleDepthRenderer::create({.resolution = 256});
+  ASSERT_TRUE(r.ok()) << r.message();
+  const std::vector<float> s = {0.0f, 0.5f, 0.0f, 1.0f};
+  auto img = (*r)->render(s.data(), 1, -2, -2, 2, 2, -1.0f, 3.0f);
+  ASSERT_TRUE(img.ok()) << img.message();
+  int inside = 0;
+  for (int v = 0; v < img->height; ++v) {
+    for (int u = 0; u < img->width; ++u) {
+      const float x = -2 + (u + 0.5f) * 4.0f / 256, z = -2 + (v + 0.5f) * 4.0f / 256;
+      const float d = std::sqrt(x * x + z * z);
+      if (d < 0.98f) {
+        ++inside;
+        ASSERT_NEAR(img->at(u, v), 0.5f + std::sqrt(1 - d * d), 2e-3f) << u << "," << v;
+      } else if (d > 1.02f) {
+        ASSERT_NEAR(img->at(u, v), -1.0f, 1e-5f) << u << "," << v;
+      }
+    }
+  }
+  EXPECT_GT(inside, 3000);  // π (0.98·64)² ≈ 12,300 texels; guards against an empty image
+}
+
+// A random heap of 800 spheres: every texel equals the CPU ray-cast reference within 2 mm,
+// except texels within half a texel of a silhouette edge (counted; at most 3% of texels).
+TEST(DepthConversion, RandomSpheresMatchCpuRaycast) {
+  context();
+  auto r = ParticleDepthRenderer::create({.resolution = 128});
+  ASSERT_TRUE(r.ok()) << r.message();
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<float> ux(0.0f, 2.0f), uy(0.0f, 0.5f), ur(0.03f, 0.08f);
+  std::vector<float> s;
+  for (int i = 0; i < 800; ++i) s.insert(s.end(), {ux(rng), uy(rng), ux(rng), ur(rng)});
+  auto img = (*r)->render(s.data(), 800, 0, 0, 2, 2, -0.2f, 1.0f);
+  ASSERT_TRUE(img.ok()) << img.message();
+  int off = 0;
+  for (int v = 0; v < 128; ++v)
+    for (int u = 0; u < 128; ++u) {
+      const float x = (u + 0.5f) * 2.0f / 128, z = (v + 0.5f) * 2.0f / 128;
+      if (std::abs(img->at(u, v) - raycast(s, x, z, -0.2f)) > 2e-3f) ++off;
+    }
+  EXPECT_LE(off, int(0.03 * 128 * 128)) << off << " texels differ";
+}
+
+// Writing a flat layer back: a square lattice of touching spheres (r = 5 cm) whose tops are
+// at 1.0 m covers the region; every written sample lies between the lowest visible surface
+// (the floor at 0.9 m, seen between spheres) and 1.0 m, the region is smooth (neighbouring
+// samples differ by < 1 cm), and samples two or more beyond the border band are untouched.
+TEST(DepthConversion, WritesRegionAndStitchesBorder) {
+  context();
+  HeightfieldDef d;
+  d.samples_x = d.samples_z = 41;
+  d.spacing = 0.1f;
+  d.initial_height = 0.5f;
+  auto hf = Heightfield::create(d);
+  ASSERT_TRUE(hf.ok());
+  const GridRegion region{10, 10, 21, 21};  // samples 10..30: x, z in [1.0, 3.0] m
+  std::vector<float> s;
+  for (float z = 0.95f; z < 3.1f; z += 0.1f)
+    for (float x = 0.95f; x < 3.1f; x += 0.1f) s.insert(s.end(), {x, 0.95f, z, 0.05f});
+  auto r = ParticleDepthRenderer::create({.resolution = 512});
+  ASSERT_TRUE(r.ok()) << r.message();
+  auto img = (*r)->render(s.data(), s.size() / 4, 0.95f, 0.95f, 3.05f, 3.05f, 0.9f, 2.0f);
+  ASSERT_TRUE(img.ok()) << img.message();
+  write_to_heightfield(*img, region, *hf, 1);
+  // Interior: samples whose 3x3 neighbourhood and its neighbours stay inside the region (the
+  // outer two rows mix with the 0.5 m terrain outside, which is the stitch's job).
+  for (int j = 12; j < 28; ++j)
+    for (int i = 12; i < 28; ++i) {
+      const float h = hf->height(i, j);
+      EXPECT_GE(h, 0.9f);
+      EXPECT_LE(h, 1.0f + 1e-4f);
+      EXPECT_LT(std::abs(h - hf->height(i + 1, j)), 0.01f) << i << "," << j;
+    }
+  for (int j = 0; j < 41; ++j)
+    for (int i = 0; i < 41; ++i)
+      if (i < 8 || i > 32 || j < 8 || j > 32) {
+        ASSERT_EQ(hf->height(i, j), 0.5f) << i << "," << j;
+      }
+}
+
+TEST(DepthConversion, RefusesBadResolutionAndRectangle) {
+  context();
+  auto bad = ParticleDepthRenderer::create({.resolution = 4});
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.message().find("resolution"), std::string::npos);
+  auto r = ParticleDepthRenderer::create({.resolution = 32});
+  ASSERT_TRUE(r.ok());
+  EXPECT_FALSE((*r)->render(nullptr, 0, 1, 0, 0, 1, 0, 1).ok());
+}

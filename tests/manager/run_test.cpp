@@ -1,0 +1,119 @@
+// tests manager/run.cpp and manager/terrain.cpp: a scene run writes a complete report, is
+// deterministic, refuses late bad input before writing anything, and lands bodies where
+// the heightfield says.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+
+#include "manager/run.hpp"
+#include "scene/scene.hpp"
+
+namespace fs = std::filesystem;
+using namespace sandpatch;
+
+namespace {
+
+fs::path fresh_dir(const std::string& name) {
+  fs::path p = fs::temp_directory_path() / ("sandpatch_run_test_" + name);
+  fs::remove_all(p);
+  return p;
+}
+
+SceneDef scene_from(const std::string& json) {
+  auto s = parse_scene(json, "test.json", "");
+  EXPECT_TRUE(s.ok()) << (s.ok() ? "" : s.message());
+  return s.ok() ? *s : SceneDef{};
+}
+
+// A sphere on a plane tilted 0 degrees at height 1.5 m, origin far from zero.
+const char* kFlatScene = R"({
+  "name": "flat",
+  "terrain": {"source": {"type": "procedural", "kind": "flat", "height": 1.5, "samples_x": 65, "samples_z": 65},
+              "spacing": 0.5, "origin": [5000.0, 100.0, -3000.0], "soil_depth": 1.0},
+  "materials": [{"name": "sand", "restitution": 0.3}],
+  "bodies": [{"name": "ball", "shape": {"type": "sphere", "radius": 0.5}, "mass": 20.0,
+              "pose": {"position": [5016.0, 104.0, -2984.0]}, "restitution": 0.0}],
+  "simulation": {"dt": 0.01, "duration": 3.0},
+  "outputs": {"heightfields": [{"format": "raw_f32", "at_end": true}]}
+})";
+
+}  // namespace
+
+TEST(Run, DefaultSceneWritesCompleteReport) {
+  auto scene = load_default_scene();
+  ASSERT_TRUE(scene.ok()) << scene.message();
+  RunOptions opt;
+  opt.out_dir = fresh_dir("default").string();
+  opt.seconds = 1.0;
+  opt.progress = ProgressStyle::None;
+  RunResult r = run_scene(*scene, opt);
+  ASSERT_EQ(r.code, ExitCode::Ok) << r.stage << ": " << r.message;
+  std::ifstream f(fs::path(opt.out_dir) / "report.json");
+  ASSERT_TRUE(f.good());
+  const auto rep = nlohmann::json::parse(f);
+  for (const char* key : {"sandpatch_version", "scene", "stages", "counts", "warnings", "final_state_hash",
+                          "real_time_factor", "frames", "bodies", "frame_ms"})
+    EXPECT_TRUE(rep.contains(key)) << key;
+  EXPECT_EQ(rep["scene"]["hash"], scene->hash);
+  EXPECT_EQ(rep["frames"].get<long long>(), std::llround(1.0 / scene->simulation.dt));
+  EXPECT_TRUE(rep["stages"].contains("bodies"));
+  EXPECT_EQ(rep["final_state_hash"].get<std::string>().size(), 16u);
+  EXPECT_FALSE(rep["warnings"].empty());  // the run says what it did not simulate
+}
+
+// Same scene and thread count -> same final state hash; and the thread count does not
+// change it (Bullet runs single-threaded; the DEM will be held to the same rule).
+TEST(Run, FinalStateHashIsDeterministic) {
+  auto scene = load_default_scene();
+  ASSERT_TRUE(scene.ok());
+  std::string hashes[3];
+  const int threads[3] = {1, 1, 2};
+  for (int k = 0; k < 3; ++k) {
+    RunOptions opt;
+    opt.out_dir = fresh_dir("det" + std::to_string(k)).string();
+    opt.seconds = 1.0;
+    opt.threads = threads[k];
+    opt.progress = ProgressStyle::None;
+    RunResult r = run_scene(*scene, opt);
+    ASSERT_EQ(r.code, ExitCode::Ok) << r.message;
+    hashes[k] = r.report["final_state_hash"];
+  }
+  EXPECT_EQ(hashes[0], hashes[1]);
+  EXPECT_EQ(hashes[0], hashes[2]);
+}
+
+// A sphere of radius 0.5 m dropped on a flat terrain at world height 100 + 1.5 m, 5 km from
+// the origin, rests with its centre at 102.0 m (tolerance 2 cm, Bullet's contact slop), and
+// the exported heightfield exists.
+TEST(Run, BodyRestsOnTheHeightfieldFarFromOrigin) {
+  SceneDef scene = scene_from(kFlatScene);
+  RunOptions opt;
+  opt.out_dir = fresh_dir("flat").string();
+  opt.progress = ProgressStyle::None;
+  RunResult r = run_scene(scene, opt);
+  ASSERT_EQ(r.code, ExitCode::Ok) << r.message;
+  const auto& b = r.report["bodies"][0];
+  EXPECT_NEAR(b["position_m"][1].get<double>(), 102.0, 0.02);
+  EXPECT_NEAR(b["position_m"][0].get<double>(), 5016.0, 0.01);
+  EXPECT_TRUE(b["at_rest"].get<bool>());
+  ASSERT_EQ(r.report["outputs"].size(), 1u);
+  EXPECT_TRUE(fs::exists(r.report["outputs"][0].get<std::string>()));
+  EXPECT_EQ(fs::file_size(r.report["outputs"][0].get<std::string>()), 65u * 65u * 4u);
+}
+
+// A body that starts below the bedrock (surface 101.5 m - soil 1 m = 100.5 m) is bad input:
+// refused before the first frame, the message names the body, and nothing is written.
+TEST(Run, BodyBelowBedrockIsRefusedAndNothingWritten) {
+  std::string json = kFlatScene;
+  json.replace(json.find("[5016.0, 104.0, -2984.0]"), 24, "[5016.0, 99.00, -2984.0]");
+  SceneDef scene = scene_from(json);
+  RunOptions opt;
+  opt.out_dir = fresh_dir("below").string();
+  opt.progress = ProgressStyle::None;
+  RunResult r = run_scene(scene, opt);
+  EXPECT_EQ(r.code, ExitCode::BadInput);
+  EXPECT_NE(r.message.find("bodies[0]"), std::string::npos) << r.message;
+  EXPECT_FALSE(fs::exists(opt.out_dir));
+}

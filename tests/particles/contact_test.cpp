@@ -1,0 +1,212 @@
+// Contact laws (particles/contact.hpp) and the collisions they produce in a Simulation:
+// head-on restitution and contact time, sliding and sticking on an incline.
+#include "particles/contact.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <numbers>
+
+#include "particles/dem.hpp"
+
+namespace sandpatch {
+namespace {
+
+const double kR = 0.005, kRho = 2500;
+double sphere_mass() { return kRho * 4.0 / 3.0 * std::numbers::pi * kR * kR * kR; }
+
+ShellDef sphere_shell(Vec3 pos, Vec3 vel) {
+  ShellDef s;
+  s.offsets = {{0, 0, 0}};
+  s.radii = {float(kR)};
+  s.motion = MotionType::Dynamic;
+  s.mass = float(sphere_mass());
+  float I = float(0.4 * sphere_mass() * kR * kR);
+  s.inertia = {I, I, I};
+  s.position = pos;
+  s.velocity = vel;
+  return s;
+}
+
+}  // namespace
+
+// Normal force is never attractive: a fast separating contact gives f_n = 0, not < 0.
+TEST(ContactLaw, NeverAttractive) {
+  ContactParams p{1000, 10, 300, 5, 0.5f, 2, 1e-4f, false};
+  Vec3 xi{};
+  ContactForce f = contact_force(p, {0, 1, 0}, 1e-4f, {0, 10, 0}, xi);  // separating at 10 m/s
+  EXPECT_EQ(f.f.y, 0.0f);
+  EXPECT_EQ(f.f.x, 0.0f);
+  // golden value: approaching at 0.1 m/s, overlap 1e-4 m: f_n = 1000*1e-4 + 10*0.1 = 1.1 N
+  xi = {};
+  f = contact_force(p, {0, 1, 0}, 1e-4f, {0, -0.1f, 0}, xi);
+  EXPECT_NEAR(f.f.y, 1.1f, 1e-6f);
+}
+
+// Spring law: xi grows by v_t dt while it sticks, then is capped at mu f_n (slip).
+TEST(ContactLaw, SpringStickThenSlip) {
+  ContactParams p{1000, 0, 300, 0, 0.5f, 0, 1e-3f, false};
+  Vec3 xi{};
+  // f_n = 1000 * 1e-3 = 1 N; cap 0.5 N; v_t = 0.1 m/s -> after one step xi = 1e-4, f_t = -0.03
+  ContactForce f = contact_force(p, {0, 1, 0}, 1e-3f, {0.1f, 0, 0}, xi);
+  EXPECT_NEAR(f.ft.x, -0.03f, 1e-6f);
+  EXPECT_NEAR(xi.x, 1e-4f, 1e-9f);
+  for (int k = 0; k < 100; ++k) f = contact_force(p, {0, 1, 0}, 1e-3f, {0.1f, 0, 0}, xi);
+  EXPECT_NEAR(f.ft.x, -0.5f, 1e-6f);             // capped at mu f_n
+  EXPECT_NEAR(xi.x, 0.5f / 300.0f, 1e-7f);       // spring holds the cap force
+  // history rotates with the normal: a tilted normal keeps |xi| and removes its normal part
+  Vec3 n{std::sin(0.1f), std::cos(0.1f), 0};
+  float len = length(xi);
+  f = contact_force(p, n, 1e-3f, {0, 0, 0}, xi);
+  EXPECT_NEAR(dot(xi, n), 0.0f, 1e-7f);
+  EXPECT_NEAR(length(xi), len, len * 1e-5f);
+}
+
+// Bell's law: f_t = -min(mu f_n, k_b |v_t|) v_t/|v_t|.
+TEST(ContactLaw, BellVelocityCapped) {
+  ContactParams p{1000, 0, 0, 0, 0.5f, 2, 1e-3f, true};
+  Vec3 xi{};
+  ContactForce f = contact_force(p, {0, 1, 0}, 1e-3f, {0.1f, 0, 0}, xi);  // k_b v = 0.2 < 0.5
+  EXPECT_NEAR(f.ft.x, -0.2f, 1e-6f);
+  f = contact_force(p, {0, 1, 0}, 1e-3f, {1.0f, 0, 0}, xi);  // capped at 0.5
+  EXPECT_NEAR(f.ft.x, -0.5f, 1e-6f);
+  f = contact_force(p, {0, 1, 0}, 1e-3f, {0, 0, 0}, xi);  // at rest: no shear force at all
+  EXPECT_EQ(f.ft.x, 0.0f);
+}
+
+// Head-on collision of two spheres (single-sphere shells, no gravity, no friction) at
+// dt = t_c/100 (<= t_c/50). Restitution and geometric contact time are measured with
+// linear interpolation of the touching instants.
+//   e = 0.9: within 2% of the textbook e(zeta) and t_c (DESIGN.md formulas);
+//   e = 0.5, 0.1: the "never attractive" clamp ends the contact early, so the textbook
+//   values are out of reach (docs/dem.md); measured e and contact time are within 2% of
+//   the clamped law's closed form (clamped_restitution, clamped_contact_time).
+class HeadOn : public ::testing::TestWithParam<double> {};
+
+TEST_P(HeadOn, RestitutionAndContactTime) {
+  const double e = GetParam();
+  Material mat;
+  mat.restitution = float(e);
+  mat.friction = 0;
+  const double meff = sphere_mass() / 2;
+  const double tc = contact_time(mat, meff);
+  SimulationDef def;
+  def.material = mat;
+  def.gravity_world = {0, 0, 0};
+  def.floor_height = -1;
+  def.bounds_min = {-0.05f, -0.05f, -0.05f};
+  def.bounds_max = {0.05f, 0.05f, 0.05f};
+  def.accuracy_steps_per_contact = 100;
+  def.sleep_time = 0;
+  auto sim = Simulation::create(def);
+  ASSERT_TRUE(sim.ok()) << sim.message();
+  const float v0 = 0.05f;
+  auto a = sim->add_shell(sphere_shell({-float(kR) - 1e-4f, 0, 0}, {v0, 0, 0}));
+  auto b = sim->add_shell(sphere_shell({float(kR) + 1e-4f, 0, 0}, {-v0, 0, 0}));
+  ASSERT_TRUE(a.ok() && b.ok());
+  const double dt = tc / 100;
+  double t_in = -1, t_out = -1;
+  double gap_prev = 2e-4;
+  for (int k = 0; k < 1000 && t_out < 0; ++k) {
+    ASSERT_TRUE(sim->step(dt).ok());
+    double gap = double(sim->body_position(*b).x - sim->body_position(*a).x) - 2 * kR;
+    double t = sim->time();
+    if (t_in < 0 && gap < 0) t_in = t - dt * gap / (gap - gap_prev);
+    if (t_in >= 0 && gap >= 0 && gap_prev < 0) t_out = t - dt * gap / (gap - gap_prev);
+    gap_prev = gap;
+  }
+  ASSERT_GT(t_out, 0);
+  for (int k = 0; k < 5; ++k) ASSERT_TRUE(sim->step(dt).ok());
+  double v_rel = double(sim->body_velocity(*b).x - sim->body_velocity(*a).x);
+  double e_meas = v_rel / (2 * v0);
+  double t_meas = t_out - t_in;
+  double zeta = damping_ratio_from_restitution(e);
+  double e_clamped = clamped_restitution(zeta);
+  double t_clamped = clamped_contact_time(mat, meff);
+  EXPECT_NEAR(e_meas, e_clamped, 0.02 * e_clamped) << "e = " << e;
+  EXPECT_NEAR(t_meas, t_clamped, 0.02 * t_clamped) << "e = " << e;
+  if (e >= 0.9) {
+    EXPECT_NEAR(e_meas, e, 0.02 * e);
+    EXPECT_NEAR(t_meas, tc, 0.02 * tc);
+  }
+  RecordProperty("e_measured", std::to_string(e_meas));
+  RecordProperty("t_measured_over_tc", std::to_string(t_meas / tc));
+  std::printf("e %.2f: measured e %.4f (clamped theory %.4f), contact %.4g s = %.4f t_c (clamped theory %.4f t_c)\n", e,
+              e_meas, e_clamped, t_meas, t_meas / tc, t_clamped / tc);
+}
+
+INSTANTIATE_TEST_SUITE_P(Restitutions, HeadOn, ::testing::Values(0.1, 0.5, 0.9));
+
+namespace {
+// A rigid 3 x 3 plate of spheres (spacing 2r) resting on the floor, gravity tilted by theta
+// about z (equivalent to a plane tilted by theta). Returns x(t) samples.
+struct Incline {
+  double a_measured = 0, drift = 0;
+};
+Incline run_incline(double theta_deg, ShearLaw law, double t0, double t1) {
+  SimulationDef def;
+  def.material.friction = 0.5f;
+  def.material.shear = law;
+  double th = theta_deg * std::numbers::pi / 180;
+  def.gravity_world = {float(9.81 * std::sin(th)), float(-9.81 * std::cos(th)), 0};
+  def.bounds_min = {-0.1f, -0.02f, -0.1f};
+  def.bounds_max = {2.0f, 0.05f, 0.1f};
+  def.sleep_time = 0;
+  auto sim = Simulation::create(def);
+  EXPECT_TRUE(sim.ok());
+  ShellDef p;
+  double ms = sphere_mass();
+  double I = 0;
+  for (int i = -1; i <= 1; ++i)
+    for (int k = -1; k <= 1; ++k) {
+      p.offsets.push_back({float(2 * kR * i), 0, float(2 * kR * k)});
+      I += 0.4 * ms * kR * kR + ms * 4 * kR * kR * (i * i + k * k) / 2.0;
+    }
+  p.radii = {float(kR)};
+  p.motion = MotionType::Dynamic;
+  p.mass = float(9 * ms);
+  p.inertia = {float(I), float(2 * I), float(I)};
+  p.position = {0, float(kR), 0};
+  auto id = sim->add_shell(p);
+  EXPECT_TRUE(id.ok());
+  const double dt = 5e-5;
+  double x0 = 0, v0 = 0;
+  int n0 = int(t0 / dt), n1 = int(t1 / dt);
+  for (int k = 1; k <= n1; ++k) {
+    EXPECT_TRUE(sim->step(dt).ok());
+    if (k == n0) {
+      x0 = sim->body_position(*id).x;
+      v0 = sim->body_velocity(*id).x;
+    }
+  }
+  Incline out;
+  out.a_measured = (sim->body_velocity(*id).x - v0) / (t1 - t0);
+  out.drift = sim->body_position(*id).x - x0;
+  return out;
+}
+}  // namespace
+
+// Above atan(mu) = 26.57 deg: at 35 deg the plate slides with a = g (sin - mu cos) within 2%.
+TEST(Friction, SlidesAboveFrictionAngle) {
+  Incline r = run_incline(35.0, ShearLaw::SpringHistory, 0.1, 0.4);
+  double th = 35.0 * std::numbers::pi / 180;
+  double a = 9.81 * (std::sin(th) - 0.5 * std::cos(th));
+  EXPECT_NEAR(r.a_measured, a, 0.02 * a);
+}
+
+// Below: at 20 deg the plate stays; after 0.1 s its displacement over the next 1 s is below
+// 0.001 sphere diameters (elastic deflection of the tangential springs is ~5e-4 d).
+TEST(Friction, StaysBelowFrictionAngle) {
+  Incline r = run_incline(20.0, ShearLaw::SpringHistory, 0.1, 1.1);
+  EXPECT_LT(std::abs(r.drift), 0.001 * 2 * kR);
+}
+
+// Bell's velocity-capped law cannot stick: at 20 deg the plate creeps at the speed where
+// 9 k_b v = M g sin(theta), i.e. v = m_s g sin(theta) / k_b (within 5%).
+TEST(Friction, BellLawCreepsBelowFrictionAngle) {
+  Incline r = run_incline(20.0, ShearLaw::BellVelocityCapped, 0.5, 1.5);
+  double v = sphere_mass() * 9.81 * std::sin(20.0 * std::numbers::pi / 180) / Material{}.bell_shear_viscosity;
+  EXPECT_NEAR(r.drift / 1.0, v, 0.05 * v);
+}
+
+}  // namespace sandpatch

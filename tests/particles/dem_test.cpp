@@ -1,0 +1,267 @@
+// Simulation API (particles/dem.cpp): validation and capacities, the stability guard,
+// determinism across threads, energy, sleep and wake, terrain outside the patch.
+#include "particles/dem.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <numbers>
+
+#include "particles/bed.hpp"
+
+namespace sandpatch {
+namespace {
+
+SimulationDef small_box() {
+  SimulationDef d;
+  d.bounds_min = {0, 0, 0};
+  d.bounds_max = {0.12f, 0.2f, 0.12f};
+  d.side_walls = true;
+  d.sleep_time = 0;
+  return d;
+}
+
+std::uint64_t splitmix(std::uint64_t& s) {
+  std::uint64_t z = (s += 0x9e3779b97f4a7c15ull);
+  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
+  z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
+  return z ^ (z >> 31);
+}
+float urand(std::uint64_t& s) { return float(double(splitmix(s) >> 11) / 9007199254740992.0); }
+
+}  // namespace
+
+TEST(Simulation, CreateNamesBadField) {
+  SimulationDef d;
+  d.particle_radius = -1;
+  auto s = Simulation::create(d);
+  ASSERT_FALSE(s.ok());
+  EXPECT_EQ(s.error().field, "SimulationDef.particle_radius");
+  d = SimulationDef{};
+  d.material.normal_stiffness = 0;
+  s = Simulation::create(d);
+  ASSERT_FALSE(s.ok());
+  EXPECT_EQ(s.error().field, "SimulationDef.material.normal_stiffness");
+}
+
+// Full pools return an Error naming the capacity to raise; nothing is half-added.
+TEST(Simulation, CapacityExceededNamesCapacity) {
+  SimulationDef d = small_box();
+  d.max_bodies = 2;
+  d.max_particles = 100;
+  auto s = Simulation::create(d);
+  ASSERT_TRUE(s.ok());
+  ASSERT_TRUE(s->add_granule({0.05f, 0.05f, 0.05f}).ok());
+  ASSERT_TRUE(s->add_granule({0.08f, 0.05f, 0.05f}).ok());
+  auto r = s->add_granule({0.05f, 0.1f, 0.05f});
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.error().field, "SimulationDef.max_bodies");
+  EXPECT_EQ(s->body_count(), 2);
+  d.max_bodies = 100;
+  d.max_particles = 6;
+  s = Simulation::create(d);
+  ASSERT_TRUE(s->add_granule({0.05f, 0.05f, 0.05f}).ok());
+  r = s->add_granule({0.08f, 0.05f, 0.05f});
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.error().field, "SimulationDef.max_particles");
+  EXPECT_EQ(s->particle_count(), 4);
+}
+
+// The guard: a frame of 1/60 s with k_n = 1e9 needs ~1e4 substeps: refused, naming dt_frame
+// and what to change; no state changes, no NaN. A frame 2x the stable limit is substepped
+// (2 substeps) and stays finite; 0.5x runs in one.
+TEST(Simulation, StabilityGuard) {
+  SimulationDef d = small_box();
+  d.material.normal_stiffness = 1e9f;
+  auto s = Simulation::create(d);
+  ASSERT_TRUE(s.ok());
+  ASSERT_TRUE(s->add_granule({0.06f, 0.05f, 0.06f}).ok());
+  auto st = s->step(1.0 / 60);
+  ASSERT_FALSE(st.ok());
+  EXPECT_EQ(st.error().field, "step.dt_frame");
+  EXPECT_NE(st.error().detail.find("max_substeps"), std::string::npos);
+  EXPECT_EQ(s->time(), 0.0);
+
+  d.material.normal_stiffness = 3292;
+  s = Simulation::create(d);
+  ASSERT_TRUE(s->add_granule({0.06f, 0.0075f, 0.06f}).ok());
+  const double lim = s->max_substep_dt();
+  // the limit is the undamped contact time of two granules touching at a sphere (point
+  // effective mass, particles/granule.hpp), divided by N = 20; it is below the damped t_c/20
+  const GranuleShape& g = s->granule_shape();
+  double mp = point_effective_mass(g.mass, g.inertia, g.centre_distance) / 2;
+  EXPECT_NEAR(lim, std::numbers::pi * std::sqrt(mp / 3292.0) / 20, 1e-9);
+  EXPECT_LE(lim, s->contact_time() / 20);
+  EXPECT_EQ(*s->substeps_for(0.5 * lim), 1);
+  EXPECT_EQ(*s->substeps_for(2.0 * lim), 2);
+  for (int k = 0; k < 2000; ++k) ASSERT_TRUE(s->step(2.0 * lim).ok());
+  Vec3 p = s->body_position(BodyId{0});
+  EXPECT_TRUE(std::isfinite(p.x + p.y + p.z));
+  EXPECT_GT(p.y, 0.0f);  // resting on the floor, not through it
+  EXPECT_FALSE(s->step(-1).ok());
+}
+
+namespace {
+// A loose lattice of granules falling into a box (a few hundred contacts per step).
+std::uint64_t run_pile(int threads, int steps) {
+  SimulationDef d = small_box();
+  d.threads = threads;
+  d.max_bodies = 200;
+  d.max_particles = 800;
+  auto s = Simulation::create(d);
+  LatticeBedDef bed;
+  bed.nx = bed.nz = 5;
+  bed.layers = 6;
+  bed.min = {0.012f, 0.012f, 0.012f};
+  bed.seed = 7;
+  EXPECT_TRUE(add_lattice_bed(*s, bed).ok());
+  for (int k = 0; k < steps; ++k) EXPECT_TRUE(s->step(5e-5).ok());
+  EXPECT_GT(s->last_step().contacts, 0);
+  return s->state_hash();
+}
+}  // namespace
+
+// Same scene: the same hash for 1 and 2 threads and for two runs (no FP atomics; every sum
+// in a fixed order).
+TEST(Simulation, DeterministicAcrossThreadsAndRuns) {
+  std::uint64_t h1 = run_pile(1, 3000);
+  std::uint64_t h2 = run_pile(2, 3000);
+  std::uint64_t h2b = run_pile(2, 3000);
+  EXPECT_EQ(h1, h2);
+  EXPECT_EQ(h2, h2b);
+}
+
+namespace {
+// A dilute gas of granules in a walled box without gravity (volume fraction ~2%).
+Simulation make_gas(float e, float mu, int n) {
+  SimulationDef d = small_box();
+  d.bounds_max = {0.15f, 0.15f, 0.15f};
+  d.gravity_world = {0, 0, 0};
+  d.floor_height = 0;
+  d.material.restitution = e;
+  d.material.friction = mu;
+  d.max_bodies = n;
+  d.max_particles = 4 * n;
+  auto s = Simulation::create(d);
+  EXPECT_TRUE(s.ok());
+  std::uint64_t seed = 42;
+  int side = int(std::ceil(std::cbrt(double(n))));
+  float a = 0.15f / float(side);
+  for (int i = 0; i < n; ++i) {
+    int ix = i % side, iy = (i / side) % side, iz = i / (side * side);
+    Vec3 x{(ix + 0.5f) * a, (iy + 0.5f) * a, (iz + 0.5f) * a};
+    Vec3 v{urand(seed) - 0.5f, urand(seed) - 0.5f, urand(seed) - 0.5f};
+    Vec3 w{20 * (urand(seed) - 0.5f), 20 * (urand(seed) - 0.5f), 20 * (urand(seed) - 0.5f)};
+    Quat q = normalized(Quat{urand(seed) - 0.5f, urand(seed) - 0.5f, urand(seed) - 0.5f, urand(seed) - 0.5f});
+    EXPECT_TRUE(s->add_granule(x, q, v, w).ok());
+  }
+  return std::move(*s);
+}
+}  // namespace
+
+// e = 1, mu = 0: total energy (kinetic + elastic) conserved within 1% over 1e4 steps at
+// dt = 5e-5 s (t_c/39). The gas is dilute but collides: we check collisions happened.
+TEST(Energy, ConservedWithoutDampingOrFriction) {
+  Simulation s = make_gas(1.0f, 0.0f, 125);
+  double e0 = s.kinetic_energy() + s.potential_energy();
+  std::int64_t contacts = 0;
+  double worst = 0;
+  for (int k = 0; k < 10000; ++k) {
+    ASSERT_TRUE(s.step(5e-5).ok());
+    contacts += s.last_step().contacts + s.last_step().wall_contacts;
+    double e = s.kinetic_energy() + s.potential_energy();
+    worst = std::max(worst, std::abs(e - e0) / e0);
+  }
+  EXPECT_GT(contacts, 100);
+  EXPECT_LT(worst, 0.01);
+  std::printf("energy: worst relative deviation %.3g over 1e4 steps, %lld contact-steps\n", worst,
+              (long long)contacts);
+}
+
+// e = 0.5, mu = 0.5: energy never rises, checked every step. Tolerance: 1e-4 of the initial
+// energy per step (the symplectic-Euler energy of a contact oscillates by O(w dt) of the
+// contact's elastic energy; measured worst rise is printed).
+TEST(Energy, NeverRisesWithDamping) {
+  Simulation s = make_gas(0.5f, 0.5f, 125);
+  double e0 = s.kinetic_energy() + s.potential_energy();
+  double prev = e0, worst_rise = 0;
+  for (int k = 0; k < 10000; ++k) {
+    ASSERT_TRUE(s.step(5e-5).ok());
+    double e = s.kinetic_energy() + s.potential_energy();
+    worst_rise = std::max(worst_rise, (e - prev) / e0);
+    prev = e;
+  }
+  EXPECT_LT(worst_rise, 1e-4);
+  EXPECT_LT(prev, e0);
+  std::printf("damped: worst per-step rise %.3g of E0, final/initial %.3f\n", worst_rise, prev / e0);
+}
+
+// A granule dropped on the floor comes to rest; the simulation falls asleep after
+// sleep_time below sleep_speed and then does nothing; a kinematic shell that moves towards
+// the granule wakes it when it comes within contact range, and not before.
+TEST(Sleep, SleepsAndKinematicContactWakes) {
+  SimulationDef d = small_box();
+  d.sleep_time = 0.2f;
+  d.sleep_speed = 0.005f;
+  auto s = Simulation::create(d);
+  ASSERT_TRUE(s.ok());
+  auto g = s->add_granule({0.06f, 0.02f, 0.06f});
+  ShellDef k;
+  k.offsets = {{0, 0, 0}};
+  k.radii = {0.005f};
+  k.motion = MotionType::Kinematic;
+  k.position = {0.1f, 0.008f, 0.06f};
+  auto kid = s->add_shell(k);
+  ASSERT_TRUE(g.ok() && kid.ok());
+  int n = 0;
+  while (!s->asleep() && n < 40000) {
+    ASSERT_TRUE(s->step(1e-3).ok());
+    ++n;
+  }
+  ASSERT_TRUE(s->asleep()) << "max speed " << s->max_granule_speed();
+  std::uint64_t h = s->state_hash();
+  ASSERT_TRUE(s->step(1e-3).ok());
+  EXPECT_TRUE(s->last_step().slept);
+  EXPECT_EQ(s->state_hash(), h);  // nothing moved
+  // drive the kinematic sphere towards the granule at 0.05 m/s
+  ASSERT_TRUE(s->set_kinematic_velocity(*kid, {-0.05f, 0, 0}, {}).ok());
+  int woke_at = -1;
+  for (int i = 0; i < 1000 && woke_at < 0; ++i) {
+    ASSERT_TRUE(s->step(1e-3).ok());
+    if (!s->asleep()) woke_at = i;
+  }
+  ASSERT_GE(woke_at, 0);
+  // at wake-up the kinematic sphere is within contact range (+ skin) of a granule sphere
+  float gap = 1e9f;
+  auto ps = s->particle_positions();
+  for (int i = 0; i < 4; ++i) gap = std::min(gap, length(ps[i] - ps[4]) - 0.01f);
+  EXPECT_LT(gap, 0.002f);
+}
+
+// Terrain outside the filled region: a sphere dropped beyond the fill rests on the grid's
+// height (0.05 m there), not on the floor (0).
+TEST(Boundaries, RestsOnTerrainOutsideFill) {
+  SimulationDef d;
+  d.bounds_min = {-0.1f, 0, -0.1f};
+  d.bounds_max = {0.1f, 0.2f, 0.1f};
+  d.sleep_time = 0;
+  d.terrain.nx = d.terrain.nz = 3;
+  d.terrain.x0 = d.terrain.z0 = -0.1f;
+  d.terrain.spacing = 0.1f;
+  d.terrain.heights.assign(9, 0.05f);
+  d.terrain.fill_min_x = d.terrain.fill_min_z = -0.05f;
+  d.terrain.fill_max_x = d.terrain.fill_max_z = 0.05f;
+  auto s = Simulation::create(d);
+  ASSERT_TRUE(s.ok()) << s.message();
+  auto out = s->add_granule({0.08f, 0.1f, 0.0f});
+  auto in = s->add_granule({0.0f, 0.1f, 0.0f});
+  for (int k = 0; k < 20000; ++k) ASSERT_TRUE(s->step(5e-5).ok());
+  auto ps = s->particle_positions();
+  float low_out = 1e9f, low_in = 1e9f;
+  for (int i = 0; i < 4; ++i) low_out = std::min(low_out, ps[i].y);
+  for (int i = 4; i < 8; ++i) low_in = std::min(low_in, ps[i].y);
+  EXPECT_NEAR(low_out, 0.05f + 0.005f, 0.0005f);  // lowest sphere centre = terrain + r
+  EXPECT_NEAR(low_in, 0.0f + 0.005f, 0.0005f);
+}
+
+}  // namespace sandpatch

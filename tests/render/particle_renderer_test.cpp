@@ -1,0 +1,217 @@
+// tests render/particle_renderer.cpp through SceneRenderer: Leach's draw order hides particles
+// under the surface, a fully faded-in patch stacked at the surface looks like the heightfield,
+// fade 0 shows nothing, buffer layouts (stride/offset) and bad sources.
+#include "render/particle_renderer.hpp"
+
+#include <gtest/gtest.h>
+
+#include <GL/glcorearb.h>
+
+#include "render/camera.hpp"
+#include "render_test_util.hpp"
+
+using namespace sandpatch;
+using namespace sandpatch::render;
+using namespace sandpatch::render::test;
+
+namespace {
+
+constexpr float kR = 0.125f;  // particle radius (m)
+
+// Columns of particles on a 2r grid over [x0, x0+w] x [z0, z0+w], `layers` deep, the top
+// layer's centres at the surface + lift (m). Positions are relative to `origin` (the patch frame).
+std::vector<Eigen::Vector4f> stacked_patch(const Heightfield& hf, float x0, float z0, float w, int layers, float lift,
+                                           const Eigen::Vector3f& origin) {
+  std::vector<Eigen::Vector4f> p;
+  for (float z = z0 + kR; z < z0 + w; z += 2 * kR)
+    for (float x = x0 + kR; x < x0 + w; x += 2 * kR) {
+      const float top = hf.sample(x, z) + lift;
+      for (int k = 0; k < layers; ++k)
+        p.emplace_back(x - origin.x(), top - 2 * kR * float(k) - origin.y(), z - origin.z(), kR);
+    }
+  return p;
+}
+
+struct Scene {
+  std::unique_ptr<gl::Context> ctx;
+  Heightfield hf;
+  std::unique_ptr<SceneRenderer> renderer;
+  CameraView cam;
+};
+
+Scene make_scene() {
+  Scene s{make_context(), terrain(129, 0.5f, hills(1.5f, 24)), nullptr, {}};
+  if (!s.ctx) return s;
+  auto r = SceneRenderer::create(*s.ctx, s.hf);
+  EXPECT_TRUE(r.ok()) << r.message();
+  if (r.ok()) s.renderer = std::move(r.value());
+  s.cam.position = {32, double(s.hf.sample(32, 26)) + 7.0, 26};
+  s.cam.target = {32, double(s.hf.sample(32, 32)), 32};
+  return s;
+}
+
+// Pixels whose view ray falls inside the patch square (shrunk by `margin` pixels).
+std::vector<std::uint8_t> patch_mask(const Scene& s, float x0, float z0, float w, int margin) {
+  const Eigen::Vector3f eye = s.cam.position.cast<float>(), target = s.cam.target.cast<float>();
+  const Eigen::Matrix4f vp = perspective(s.cam.fov_deg, float(s.cam.width) / float(s.cam.height), 0.1f, 100.0f) * look_at(eye, target);
+  int px0 = s.cam.width, px1 = 0, py0 = s.cam.height, py1 = 0;
+  for (float x : {x0, x0 + w})
+    for (float z : {z0, z0 + w}) {
+      Eigen::Vector4f c = vp * Eigen::Vector4f(x, s.hf.sample(x, z), z, 1);
+      const int px = int((c.x() / c.w() * 0.5f + 0.5f) * float(s.cam.width));
+      const int py = int((0.5f - c.y() / c.w() * 0.5f) * float(s.cam.height));
+      px0 = std::min(px0, px);
+      px1 = std::max(px1, px);
+      py0 = std::min(py0, py);
+      py1 = std::max(py1, py);
+    }
+  std::vector<std::uint8_t> mask(std::size_t(s.cam.width) * s.cam.height, 0);
+  for (int y = std::max(0, py0 + margin); y <= std::min(s.cam.height - 1, py1 - margin); ++y)
+    for (int x = std::max(0, px0 + margin); x <= std::min(s.cam.width - 1, px1 - margin); ++x) mask[std::size_t(y) * s.cam.width + x] = 1;
+  return mask;
+}
+
+int masked(const std::vector<std::uint8_t>& m) {
+  int c = 0;
+  for (auto v : m) c += v;
+  return c;
+}
+
+}  // namespace
+
+// Leach's order (terrain, clear depth, particles, terrain again): particles whose tops are
+// below the surface leave the image exactly as the terrain alone; lifted above it they show.
+TEST(ParticleRenderer, ParticlesUnderTheSurfaceAreInvisible) {
+  Scene s = make_scene();
+  ASSERT_TRUE(s.renderer);
+  auto alone = s.renderer->render(s.cam);
+  ASSERT_TRUE(alone.ok()) << alone.message();
+  const Eigen::Vector3f origin(29, 0, 29);
+  ParticleBuffer under(stacked_patch(s.hf, 29, 29, 6, 3, -1.5f * kR, origin));
+  ASSERT_TRUE(s.renderer->set_particles({under.source(origin.cast<double>())}).ok());
+  auto with_under = s.renderer->render(s.cam);
+  ASSERT_TRUE(with_under.ok()) << with_under.message();
+  EXPECT_EQ(s.renderer->stats().terrain_passes, 2);
+  EXPECT_EQ(s.renderer->stats().particles, under.count());
+  EXPECT_EQ(compare_images(alone.value(), with_under.value()).max_abs, 0);
+
+  ParticleBuffer above(stacked_patch(s.hf, 29, 29, 6, 1, 3 * kR, origin));
+  ASSERT_TRUE(s.renderer->set_particles({above.source(origin.cast<double>())}).ok());
+  auto with_above = s.renderer->render(s.cam);
+  ASSERT_TRUE(with_above.ok());
+  const auto mask = patch_mask(s, 29, 29, 6, 2);
+  EXPECT_GT(compare_images(alone.value(), with_above.value(), &mask).mean_abs, 5.0);
+}
+
+// A fully faded-in patch stacked to the surface (top centres on it, as Leach §5.1 fills a patch)
+// and the heightfield it came from look alike inside the patch; with fade 0 the image is the
+// terrain's exactly, and half faded lies in between.
+TEST(ParticleRenderer, FadedInPatchLooksLikeTheHeightfield) {
+  Scene s = make_scene();
+  ASSERT_TRUE(s.renderer);
+  s.hf.fill({56, 56, 14, 14}, 1.0f, Layer::Material1);  // gravel under part of the patch
+  s.renderer->heightfield_changed({56, 56, 14, 14});
+  auto alone = s.renderer->render(s.cam);
+  ASSERT_TRUE(alone.ok());
+  const Eigen::Vector3f origin(29, 0, 29);
+  ParticleBuffer patch(stacked_patch(s.hf, 29, 29, 6, 3, 0.0f, origin));
+  const auto mask = patch_mask(s, 29, 29, 6, 2);
+  ASSERT_GT(masked(mask), 500);
+  double mean[3];
+  int k = 0;
+  for (float fade : {1.0f, 0.5f, 0.0f}) {
+    ASSERT_TRUE(s.renderer->set_particles({patch.source(origin.cast<double>(), 1.0f, fade)}).ok());
+    auto img = s.renderer->render(s.cam);
+    ASSERT_TRUE(img.ok()) << img.message();
+    const ImageDiff d = compare_images(alone.value(), img.value(), &mask);
+    std::printf("fade %.1f: patch vs heightfield mean %.2f p99 %.1f max %d\n", fade, d.mean_abs, d.p99, d.max_abs);
+    mean[k++] = d.mean_abs;
+    if (fade == 1.0f) save_png(std::string(SANDPATCH_TEST_OUTPUT_DIR) + "/patch_fade1.actual.png", img.value());
+  }
+  save_png(std::string(SANDPATCH_TEST_OUTPUT_DIR) + "/patch_alone.actual.png", alone.value());
+  EXPECT_LE(mean[0], 20.0);          // alike: the documented bound (docs/rendering.md; measured 17.0)
+  EXPECT_GT(mean[0], 0.5);           // but really drawn
+  EXPECT_LT(mean[1], mean[0]);
+  EXPECT_EQ(mean[2], 0.0);
+}
+
+// Positions in one buffer and a constant radius (stride 12, radius_offset -1), or interleaved
+// with other fields (stride 32, position at byte 16): the same image as vec4 (x, y, z, r).
+TEST(ParticleRenderer, BufferLayoutsByStrideAndOffset) {
+  Scene s = make_scene();
+  ASSERT_TRUE(s.renderer);
+  const Eigen::Vector3f origin(29, 0, 29);
+  const auto pts = stacked_patch(s.hf, 30, 30, 3, 1, kR, origin);
+  ParticleBuffer vec4(pts);
+  ASSERT_TRUE(s.renderer->set_particles({vec4.source(origin.cast<double>())}).ok());
+  auto ref = s.renderer->render(s.cam);
+  ASSERT_TRUE(ref.ok());
+
+  std::vector<float> packed, interleaved;
+  for (const auto& p : pts) {
+    packed.insert(packed.end(), {p.x(), p.y(), p.z()});
+    interleaved.insert(interleaved.end(), {-1, -1, -1, -1, p.x(), p.y(), p.z(), -1});
+  }
+  unsigned bufs[2];
+  glGenBuffers(2, bufs);
+  glBindBuffer(GL_ARRAY_BUFFER, bufs[0]);
+  glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(packed.size() * 4), packed.data(), GL_STATIC_DRAW);
+  glBindBuffer(GL_ARRAY_BUFFER, bufs[1]);
+  glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(interleaved.size() * 4), interleaved.data(), GL_STATIC_DRAW);
+  glBindBuffer(GL_ARRAY_BUFFER, 0);
+  ParticleSource a;
+  a.buffer = bufs[0];
+  a.count = std::int64_t(pts.size());
+  a.stride = 12;
+  a.position_offset = 0;
+  a.radius_offset = -1;
+  a.radius = kR;
+  a.origin = origin.cast<double>();
+  ParticleSource b = a;
+  b.buffer = bufs[1];
+  b.stride = 32;
+  b.position_offset = 16;
+  for (const auto& src : {a, b}) {
+    ASSERT_TRUE(s.renderer->set_particles({src}).ok());
+    auto img = s.renderer->render(s.cam);
+    ASSERT_TRUE(img.ok());
+    EXPECT_EQ(compare_images(ref.value(), img.value()).max_abs, 0) << "stride " << src.stride;
+  }
+  glDeleteBuffers(2, bufs);
+}
+
+// Particle scale (Leach §4.3): a patch simulated at unit scale and drawn at scale 2 around its
+// origin covers the same pixels as the same patch built at twice the size.
+TEST(ParticleRenderer, ParticleScaleScalesPositionsAndRadii) {
+  Scene s = make_scene();
+  ASSERT_TRUE(s.renderer);
+  const Eigen::Vector3d origin(30, double(s.hf.sample(31, 31)) + 1.0, 30);
+  std::vector<Eigen::Vector4f> unit, twice;
+  for (int j = 0; j < 4; ++j)
+    for (int i = 0; i < 4; ++i) {
+      unit.emplace_back(0.25f * float(i), 0.0f, 0.25f * float(j), 0.1f);
+      twice.emplace_back(0.5f * float(i), 0.0f, 0.5f * float(j), 0.2f);
+    }
+  ParticleBuffer bu(unit), bt(twice);
+  ASSERT_TRUE(s.renderer->set_particles({bu.source(origin, 2.0f)}).ok());
+  auto a = s.renderer->render(s.cam);
+  ASSERT_TRUE(s.renderer->set_particles({bt.source(origin, 1.0f)}).ok());
+  auto b = s.renderer->render(s.cam);
+  ASSERT_TRUE(a.ok() && b.ok());
+  EXPECT_LE(compare_images(a.value(), b.value()).mean_abs, 0.05);
+}
+
+// Bad sources are refused with errors naming the source and field; nothing changes.
+TEST(ParticleRenderer, BadSourceIsRefused) {
+  Scene s = make_scene();
+  ASSERT_TRUE(s.renderer);
+  ParticleSource bad;
+  bad.buffer = 7;
+  bad.stride = 8;
+  bad.fade = 2;
+  auto st = s.renderer->set_particles({ParticleSource{}, bad});
+  ASSERT_FALSE(st.ok());
+  EXPECT_NE(st.message().find("particles[0].buffer"), std::string::npos) << st.message();
+  EXPECT_NE(st.message().find("particles[1].stride = 8"), std::string::npos) << st.message();
+  EXPECT_NE(st.message().find("particles[1].fade"), std::string::npos) << st.message();
+}

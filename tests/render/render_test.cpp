@@ -1,0 +1,255 @@
+// tests render/render.cpp (SceneRenderer): no cracks from any viewpoint, triangle count
+// independent of terrain size, reference images, PNG output, refusal of bad cameras.
+#include "render/render.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+
+#include "render/terrain_renderer.hpp"
+#include "render_test_util.hpp"
+
+using namespace sandpatch;
+using namespace sandpatch::render;
+using namespace sandpatch::render::test;
+
+namespace {
+
+// A camera at (x, ground + h, z) looking along yaw (degrees from +x toward +z), pitched down
+// by pitch degrees.
+CameraView look_down(const Heightfield& hf, double x, double z, double h, double yaw_deg, double pitch_deg) {
+  CameraView c;
+  const double y = hf.sample(float(x), float(z)) + h;
+  const double yaw = yaw_deg * M_PI / 180, pitch = pitch_deg * M_PI / 180;
+  c.position = {x, y, z};
+  c.target = c.position + Eigen::Vector3d(std::cos(yaw) * std::cos(pitch), -std::sin(pitch), std::sin(yaw) * std::cos(pitch));
+  c.fov_deg = 60;
+  c.width = 128;
+  c.height = 96;
+  return c;
+}
+
+// Four materials: sand everywhere, a gravel band, a soil square, and grass ramping in
+// along x (so the normalised blend of eq. 2 is exercised with unnormalised weights).
+void paint_materials(Heightfield& hf) {
+  const int n = hf.samples_x();
+  hf.fill({0, n / 4, n, n / 8}, 1.0f, Layer::Material1);
+  hf.fill({n / 2, n / 2, n / 5, n / 5}, 1.0f, Layer::Material2);
+  hf.fill({n / 2, n / 2, n / 5, n / 5}, 0.0f, Layer::Material0);
+  std::vector<float> ramp(std::size_t(n) * (n / 6));
+  for (int j = 0; j < n / 6; ++j)
+    for (int i = 0; i < n; ++i) ramp[std::size_t(j) * n + i] = 2.0f * float(i) / float(n - 1);
+  hf.write({0, 3 * n / 4, n, n / 6}, ramp.data(), Layer::Material3);
+}
+
+}  // namespace
+
+// A plane, a slope and hills, each seen from several positions, heights and headings with the
+// whole image below the horizon: not one background pixel shows through the terrain (no cracks
+// between levels, trims or fix-ups, whatever the trim parity).
+TEST(SceneRenderer, NoCracksOnPlaneSlopeAndHills) {
+  auto ctx = make_context();
+  ASSERT_TRUE(ctx);
+  struct Case {
+    const char* name;
+    ProceduralHeightsDef p;
+  };
+  const Case cases[] = {{"plane", plane(0, 0, 3)}, {"slope", plane(0.2f, 0.1f)}, {"hills", hills(6, 48)}};
+  for (const Case& c : cases) {
+    const Heightfield hf = terrain(1025, 1.0f, c.p);
+    RendererDef def;
+    def.clipmap.n = 31;  // small rings: many level transitions in a 128 x 96 image
+    auto r = SceneRenderer::create(*ctx, hf, def);
+    ASSERT_TRUE(r.ok()) << r.message();
+    int views = 0;
+    for (double x : {500.0, 517.3, 530.9}) {
+      for (double h : {8.0, 23.5, 40.0}) {
+        for (double yaw : {0.0, 37.0, 135.0, 250.0}) {
+          const CameraView cam = look_down(hf, x, 1024.0 - x, h, yaw, 55);
+          auto img = (*r)->render(cam);
+          ASSERT_TRUE(img.ok()) << img.message();
+          ASSERT_EQ(background_pixels(img.value(), def.background), 0)
+              << c.name << " x " << x << " h " << h << " yaw " << yaw;
+          ++views;
+        }
+      }
+    }
+    std::printf("%s: %d views, no background pixels; last frame %lld triangles, %d levels, %.1f ms\n", c.name, views,
+                (long long)(*r)->stats().terrain_triangles, (*r)->stats().active_levels, (*r)->stats().frame_ms);
+  }
+}
+
+// No popping: when the camera crosses x = 512 m every level's window moves by two vertices at
+// once, yet a 2 mm step across it changes the image by almost nothing, because the transition
+// morph (alpha) depends continuously on the viewer. (Without the morph the rings visibly jump.)
+TEST(SceneRenderer, NoPoppingWhenLevelsMove) {
+  auto ctx = make_context();
+  ASSERT_TRUE(ctx);
+  const Heightfield hf = terrain(1025, 1.0f, hills(6, 40));
+  RendererDef def;
+  def.clipmap.n = 31;
+  auto r = SceneRenderer::create(*ctx, hf, def);
+  ASSERT_TRUE(r.ok()) << r.message();
+  for (double yaw : {0.0, 90.0, 200.0}) {
+    Image img[2];
+    for (int k = 0; k < 2; ++k) {
+      CameraView cam = look_down(hf, 512.0, 500.0, 15.0, yaw, 30);
+      const Eigen::Vector3d step(k == 0 ? -0.001 : 0.001, 0, 0);
+      cam.position += step;
+      cam.target += step;
+      auto im = (*r)->render(cam);
+      ASSERT_TRUE(im.ok()) << im.message();
+      img[k] = std::move(im.value());
+    }
+    const ImageDiff d = compare_images(img[0], img[1]);
+    std::printf("yaw %.0f: 2 mm step across a level move: mean %.3f p99 %.1f max %d\n", yaw, d.mean_abs, d.p99, d.max_abs);
+    EXPECT_LE(d.mean_abs, 0.3) << "yaw " << yaw;
+    EXPECT_LE(d.p99, 4.0) << "yaw " << yaw;
+  }
+}
+
+// The same view over a 512^2 and an 8192^2 terrain (default renderer settings, levels chosen
+// automatically for each size): the same clipmap triangles.
+TEST(SceneRenderer, TriangleCountSameFor512And8192Terrains) {
+  auto ctx = make_context();
+  ASSERT_TRUE(ctx);
+  std::int64_t tris[2];
+  int k = 0;
+  for (int n : {512, 8192}) {
+    const Heightfield hf = terrain(n, 1.0f, plane(0, 0, 0));
+    auto r = SceneRenderer::create(*ctx, hf);
+    ASSERT_TRUE(r.ok()) << r.message();
+    CameraView cam;
+    cam.position = {256.3, 25.0, 255.7};
+    cam.target = {330.0, 0.0, 320.0};
+    cam.far_m = 150;  // the whole frustum (corners reach ~205 m) stays inside the 512 m terrain
+    auto img = (*r)->render(cam);
+    ASSERT_TRUE(img.ok()) << img.message();
+    tris[k++] = (*r)->stats().terrain_triangles;
+    std::printf("terrain %d^2: %d levels, %lld triangles, %d pieces\n", n, (*r)->def().clipmap.levels,
+                (long long)(*r)->stats().terrain_triangles, (*r)->stats().pieces);
+  }
+  EXPECT_EQ(tris[0], tris[1]);
+}
+
+// Small reference scenes (128 x 96) against tests/render/reference/*.png.
+TEST(SceneRenderer, ReferenceImages) {
+  auto ctx = make_context();
+  ASSERT_TRUE(ctx);
+  {
+    Heightfield hf = terrain(257, 1.0f, hills(8, 64));
+    paint_materials(hf);
+    auto r = SceneRenderer::create(*ctx, hf);
+    ASSERT_TRUE(r.ok()) << r.message();
+    CameraView cam;
+    cam.position = {20, 30, 20};
+    cam.target = {140, 0, 150};
+    auto img = (*r)->render(cam);
+    ASSERT_TRUE(img.ok()) << img.message();
+    expect_matches_reference(img.value(), "hills_materials");
+    cam.position = {128, 90, -30};
+    cam.target = {128, 0, 110};
+    img = (*r)->render(cam);
+    ASSERT_TRUE(img.ok()) << img.message();
+    expect_matches_reference(img.value(), "hills_overview");
+  }
+  {
+    Heightfield hf = terrain(513, 0.5f, plane(0.15f, -0.05f, 10));
+    paint_materials(hf);
+    RendererDef def;
+    def.clipmap.n = 63;
+    auto r = SceneRenderer::create(*ctx, hf, def);
+    ASSERT_TRUE(r.ok()) << r.message();
+    CameraView cam = look_down(hf, 60, 60, 12, 45, 25);
+    auto img = (*r)->render(cam);
+    ASSERT_TRUE(img.ok()) << img.message();
+    expect_matches_reference(img.value(), "slope_levels");
+  }
+  {
+    // A mound of splats (3 layers, r = 0.15 m) on hills, half of it sunk into a rise.
+    Heightfield hf = terrain(129, 0.5f, hills(1.5f, 24));
+    paint_materials(hf);
+    auto r = SceneRenderer::create(*ctx, hf);
+    ASSERT_TRUE(r.ok()) << r.message();
+    std::vector<Eigen::Vector4f> pts;
+    for (int k = 0; k < 3; ++k)
+      for (float z = 0; z < 4.0f - 0.6f * float(k); z += 0.3f)
+        for (float x = 0; x < 4.0f - 0.6f * float(k); x += 0.3f)
+          pts.emplace_back(x + 0.3f * float(k), hf.sample(30 + x, 30 + z) + 0.15f + 0.26f * float(k), z + 0.3f * float(k), 0.15f);
+    ParticleBuffer buf(pts);
+    ASSERT_TRUE((*r)->set_particles({buf.source({30, 0, 30})}).ok());
+    CameraView cam;
+    cam.position = {27, double(hf.sample(27, 27)) + 4.0, 27};
+    cam.target = {32, double(hf.sample(32, 32)), 32};
+    auto img = (*r)->render(cam);
+    ASSERT_TRUE(img.ok()) << img.message();
+    expect_matches_reference(img.value(), "particles_mound");
+  }
+}
+
+// render_png writes a PNG that loads back as the rendered image.
+TEST(SceneRenderer, RenderPngWritesTheImage) {
+  auto ctx = make_context();
+  ASSERT_TRUE(ctx);
+  const Heightfield hf = terrain(129, 1.0f, hills(4, 32));
+  auto r = SceneRenderer::create(*ctx, hf);
+  ASSERT_TRUE(r.ok()) << r.message();
+  CameraView cam;
+  cam.position = {10, 20, 10};
+  cam.target = {64, 0, 64};
+  const std::string path = std::string(SANDPATCH_TEST_OUTPUT_DIR) + "/render_png_test.png";
+  ASSERT_TRUE((*r)->render_png(cam, path).ok());
+  auto back = load_png(path);
+  ASSERT_TRUE(back.ok()) << back.message();
+  auto img = (*r)->render(cam);
+  ASSERT_TRUE(img.ok());
+  EXPECT_EQ(back->rgba, img->rgba);
+  EXPECT_EQ(back->width, 128);
+  EXPECT_EQ(back->height, 96);
+  // Unwritable path: an error naming it, no file.
+  auto st = (*r)->render_png(cam, "/nonexistent-dir/frame.png");
+  ASSERT_FALSE(st.ok());
+  EXPECT_NE(st.message().find("/nonexistent-dir/frame.png"), std::string::npos);
+}
+
+// A heightfield edit reported through heightfield_changed shows in the next frame exactly as a
+// renderer built on the edited heightfield shows it, having rewritten only a few texels.
+TEST(SceneRenderer, HeightfieldEditShowsNextFrame) {
+  auto ctx = make_context();
+  ASSERT_TRUE(ctx);
+  Heightfield hf = terrain(257, 1.0f, hills(4, 64));
+  auto r = SceneRenderer::create(*ctx, hf);
+  ASSERT_TRUE(r.ok());
+  CameraView cam;
+  cam.position = {100, 25, 100};
+  cam.target = {140, 0, 140};
+  ASSERT_TRUE((*r)->render(cam).ok());
+  const GridRegion pit{125, 125, 12, 12};
+  hf.fill(pit, -3.0f);
+  (*r)->heightfield_changed(pit);
+  auto edited = (*r)->render(cam);
+  ASSERT_TRUE(edited.ok());
+  EXPECT_GT((*r)->stats().texels_uploaded, 0);
+  EXPECT_LT((*r)->stats().texels_uploaded, 400);
+  auto fresh_r = SceneRenderer::create(*ctx, hf);
+  auto fresh = (*fresh_r)->render(cam);
+  ASSERT_TRUE(fresh.ok());
+  EXPECT_EQ(compare_images(edited.value(), fresh.value()).max_abs, 0);
+}
+
+// Bad cameras are refused with errors naming the field.
+TEST(SceneRenderer, BadCameraIsRefused) {
+  auto ctx = make_context();
+  ASSERT_TRUE(ctx);
+  const Heightfield hf = terrain(65, 1.0f, plane(0, 0));
+  auto r = SceneRenderer::create(*ctx, hf);
+  ASSERT_TRUE(r.ok());
+  CameraView cam;
+  cam.fov_deg = 190;
+  cam.width = 0;
+  auto img = (*r)->render(cam);
+  ASSERT_FALSE(img.ok());
+  EXPECT_NE(img.message().find("camera.fov_deg = 190"), std::string::npos) << img.message();
+  EXPECT_NE(img.message().find("camera.width = 0"), std::string::npos) << img.message();
+}

@@ -1,0 +1,536 @@
+// Tests scene/scene.cpp: every documented field parsed, every class of bad input reported
+// with its file, field path and value, the embedded default, the scene hash.
+#include "scene/scene.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include <nlohmann/json.hpp>
+
+namespace sandpatch {
+namespace {
+
+namespace fs = std::filesystem;
+const std::string kScenes = SANDPATCH_SOURCE_DIR "/scenes";
+const std::string kData = SANDPATCH_TEST_DATA_DIR "/data";
+constexpr double kPi = 3.14159265358979323846;
+
+std::string read_text(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::ostringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+// The messages of a failed result, for assertion output.
+std::string all(const Result<SceneDef>& r) { return r.ok() ? std::string("(no errors)") : r.message(); }
+
+// True when some error's message names `field` and shows `value` (and `extra`, if given).
+bool has_error(const Result<SceneDef>& r, const std::string& field, const std::string& value,
+               const std::string& extra = "") {
+  if (r.ok()) return false;
+  for (const auto& e : r.errors()) {
+    const std::string m = e.message();
+    if (e.field == field && m.find(value) != std::string::npos && m.find(extra) != std::string::npos) return true;
+  }
+  return false;
+}
+
+// A minimal valid scene with `patch` merged in (RFC 7386 merge patch).
+std::string scene_with(const nlohmann::json& patch) {
+  nlohmann::json j = {
+      {"terrain", {{"source", {{"type", "procedural"}, {"kind", "flat"}}}, {"spacing", 0.5}}},
+      {"materials", {{{"name", "sand"}, {"restitution", 0.3}}}},
+  };
+  j.merge_patch(patch);
+  return j.dump(2);
+}
+
+Result<SceneDef> parse(const std::string& text) { return parse_scene(text, "test.json", kData); }
+
+// ---- valid scenes ----
+
+TEST(Scene, EveryFieldOfTheFullSceneIsParsed) {
+  const auto r = load_scene_file(kData + "/full.json");
+  ASSERT_TRUE(r.ok()) << all(r);
+  const SceneDef& s = *r;
+  EXPECT_EQ(s.name, "full");
+  EXPECT_NE(s.description.find("Every field"), std::string::npos);
+  EXPECT_EQ(s.source_path, kData + "/full.json");
+  EXPECT_EQ(s.hash.size(), 16u);
+
+  const auto& t = s.terrain;
+  EXPECT_EQ(t.source.kind, TerrainSourceKind::EsriAscii);
+  EXPECT_EQ(t.source.file, (fs::path(kData) / "tiny.asc").lexically_normal().string());
+  ASSERT_TRUE(t.size.has_value());
+  EXPECT_EQ((*t.size)[0], 40.0);
+  EXPECT_EQ((*t.size)[1], 20.0);
+  EXPECT_EQ(t.spacing_xz(3, 2)[0], 20.0);
+  EXPECT_EQ(t.spacing_xz(3, 2)[1], 20.0);
+  EXPECT_FALSE(t.spacing_given);
+  EXPECT_EQ(t.vertical_scale, 2.5);
+  EXPECT_EQ(t.vertical_offset, -1.25);
+  EXPECT_EQ(t.origin, (Vec3d{1000000.5, -3.0, -2000000.25}));
+  EXPECT_FALSE(t.soil_depth.has_value());
+  EXPECT_EQ(t.bedrock_height, -4.0);
+  EXPECT_EQ(t.material, "gravel");
+
+  ASSERT_EQ(s.materials.size(), 2u);
+  const auto& sand = s.materials[0];
+  EXPECT_EQ(sand.name, "sand");
+  EXPECT_EQ(sand.density, 2600.0);
+  EXPECT_EQ(sand.friction, 0.55);
+  EXPECT_EQ(sand.restitution, 0.35);
+  EXPECT_FALSE(sand.damping_ratio.has_value());
+  EXPECT_EQ(sand.stiffness, 150000.0);
+  EXPECT_EQ(sand.tangential_stiffness_ratio, 0.3);
+  EXPECT_EQ(sand.granule_radius, 0.02);
+  EXPECT_EQ(sand.packing_fraction, 0.62);
+  // e and ζ are two views of one damping: e = exp(−πζ/√(1−ζ²)).
+  const double z = sand.damping_ratio_value();
+  EXPECT_NEAR(std::exp(-kPi * z / std::sqrt(1 - z * z)), 0.35, 1e-12);
+  const auto& gravel = s.materials[1];
+  EXPECT_EQ(gravel.damping_ratio, 0.4);
+  EXPECT_FALSE(gravel.restitution.has_value());
+  EXPECT_EQ(gravel.stiffness, 2.0e6);
+  EXPECT_EQ(gravel.tangential_stiffness_ratio, 0.25);
+  EXPECT_EQ(gravel.granule_radius, 0.05);
+  EXPECT_EQ(gravel.packing_fraction, 0.58);
+  EXPECT_EQ(gravel.density, 2700.0);
+  EXPECT_EQ(gravel.friction, 0.8);
+  EXPECT_NEAR(gravel.restitution_value(), std::exp(-kPi * 0.4 / std::sqrt(1 - 0.16)), 1e-12);
+
+  ASSERT_EQ(s.bodies.size(), 5u);
+  const auto& ball = s.bodies[0];
+  EXPECT_EQ(ball.name, "ball");
+  EXPECT_EQ(ball.shape.kind, ShapeKind::Sphere);
+  EXPECT_EQ(ball.shape.radius, 0.4);
+  EXPECT_EQ(ball.mass, 12.5);
+  EXPECT_FALSE(ball.density.has_value());
+  EXPECT_EQ(ball.pose.position, (Vec3d{1000001.0, 5.0, -2000000.0}));
+  EXPECT_EQ(ball.pose.orientation, (std::array<double, 4>{0.0, 1.0, 0.0, 0.0}));
+  EXPECT_EQ(ball.linear_velocity, (Vec3d{1.0, -2.0, 3.0}));
+  EXPECT_EQ(ball.angular_velocity, (Vec3d{0.1, 0.2, 0.3}));
+  EXPECT_EQ(ball.spawn_time, 0.75);
+  EXPECT_EQ(ball.friction, 0.45);
+  EXPECT_EQ(ball.restitution, 0.65);
+  EXPECT_EQ(ball.mass_value(), 12.5);
+
+  const auto& crate = s.bodies[1];
+  EXPECT_EQ(crate.shape.kind, ShapeKind::Box);
+  EXPECT_EQ(crate.shape.half_extents, (Vec3d{0.5, 0.25, 0.125}));
+  EXPECT_EQ(crate.density, 800.0);
+  EXPECT_NEAR(crate.mass_value(), 800.0 * 8 * 0.5 * 0.25 * 0.125, 1e-9);
+  // euler_deg [0, 90, 0]: a quarter turn about y.
+  const double h = std::sqrt(0.5);
+  EXPECT_NEAR(crate.pose.orientation[0], h, 1e-12);
+  EXPECT_NEAR(crate.pose.orientation[2], h, 1e-12);
+  EXPECT_EQ(crate.friction, 0.5);  // defaults
+  EXPECT_EQ(crate.restitution, 0.2);
+  EXPECT_EQ(crate.spawn_time, 0.0);
+
+  const auto& can = s.bodies[2];
+  EXPECT_EQ(can.shape.kind, ShapeKind::Cylinder);
+  EXPECT_EQ(can.shape.radius, 0.3);
+  EXPECT_EQ(can.shape.height, 0.9);
+  EXPECT_NEAR(can.shape.volume(), kPi * 0.09 * 0.9, 1e-12);
+
+  const auto& pill = s.bodies[3];
+  EXPECT_EQ(pill.shape.kind, ShapeKind::Capsule);
+  EXPECT_EQ(pill.shape.radius, 0.2);
+  EXPECT_EQ(pill.shape.height, 0.6);
+  EXPECT_NEAR(pill.mass_value(), 1000.0 * (kPi * 0.04 * 0.6 + 4.0 / 3.0 * kPi * 0.008), 1e-9);
+
+  const auto& barrel = s.bodies[4];
+  EXPECT_EQ(barrel.shape.kind, ShapeKind::Mesh);
+  EXPECT_EQ(barrel.shape.file, (fs::path(kScenes) / "meshes/barrel.obj").lexically_normal().string());
+  EXPECT_EQ(barrel.shape.scale, 2.0);
+  EXPECT_TRUE(barrel.shape.solid);
+  // Scale 2: 8 × the barrel's volume (within the 0.16 % tessellation deficit).
+  EXPECT_NEAR(barrel.shape.mesh_volume, 8 * kPi * 0.09 * 0.9, 0.002 * 8 * kPi * 0.09 * 0.9);
+  EXPECT_NEAR(body_extent_below(barrel), 0.9, 1e-6);
+
+  const auto& sim = s.simulation;
+  EXPECT_EQ(sim.dt, 0.005);
+  EXPECT_EQ(sim.substeps, 4);
+  EXPECT_EQ(sim.duration, 12.5);
+  EXPECT_EQ(sim.backend, Backend::Gl);
+  EXPECT_EQ(sim.threads, 2);
+  EXPECT_EQ(sim.pool.slots, 8);
+  EXPECT_EQ(sim.pool.granules_per_slot, 100000);
+  EXPECT_EQ(sim.particle_scale, 4.0);
+  EXPECT_EQ(sim.sleep.speed_threshold, 0.02);
+  EXPECT_EQ(sim.sleep.hold_time, 2.5);
+  EXPECT_EQ(sim.idle_timeout, 60.0);
+  EXPECT_EQ(sim.gravity, (Vec3d{0.0, -1.62, 0.0}));
+  EXPECT_EQ(sim.seed, 12345678901234u);
+
+  ASSERT_EQ(s.cameras.size(), 2u);
+  const auto& fixed = s.cameras[0];
+  EXPECT_EQ(fixed.name, "fixed");
+  EXPECT_EQ(fixed.position, (Vec3d{10.0, 5.0, 10.0}));
+  EXPECT_EQ(fixed.target, (Vec3d{0.0, 1.0, 0.0}));
+  EXPECT_EQ(fixed.fov_deg, 50.0);
+  EXPECT_EQ(fixed.width, 320);
+  EXPECT_EQ(fixed.height, 240);
+  EXPECT_TRUE(fixed.path.empty());
+  const auto& flyby = s.cameras[1];
+  ASSERT_EQ(flyby.path.size(), 2u);
+  EXPECT_EQ(flyby.path[1].time, 5.0);
+  EXPECT_EQ(flyby.path[1].position, (Vec3d{10.0, 5.0, 0.0}));
+  EXPECT_EQ(flyby.path[1].target, (Vec3d{1.0, 0.0, 0.0}));
+  EXPECT_EQ(flyby.fov_deg, 60.0);
+
+  const auto& out = s.outputs;
+  ASSERT_EQ(out.frames.size(), 2u);
+  EXPECT_EQ(out.frames[0].camera, "fixed");
+  EXPECT_EQ(out.frames[0].times, (std::vector<double>{0.5, 1.0}));
+  EXPECT_EQ(out.frames[0].file, "fixed_{time_ms}.png");
+  EXPECT_EQ(out.frames[1].camera, "flyby");
+  EXPECT_EQ(out.frames[1].every_k_frames, 10);
+  EXPECT_EQ(out.frames[1].file, "{camera}_{frame}.png");
+  ASSERT_EQ(out.heightfields.size(), 1u);
+  EXPECT_EQ(out.heightfields[0].format, HeightfieldFormat::RawF32);
+  EXPECT_EQ(out.heightfields[0].times, (std::vector<double>{2.0}));
+  EXPECT_TRUE(out.heightfields[0].at_end);
+  EXPECT_EQ(out.heightfields[0].file, "hf/{frame}.{ext}");
+  EXPECT_FALSE(out.report);
+}
+
+TEST(Scene, ProceduralFieldsAndDefaults) {
+  const auto r = parse(scene_with({{"terrain",
+                                    {{"source",
+                                      {{"kind", "plane"}, {"height", 1.5}, {"slope_x", 0.1}, {"slope_z", -0.2},
+                                       {"amplitude", 2.0}, {"wavelength", 8.0}, {"seed", 99}, {"octaves", 2},
+                                       {"samples_x", 33}, {"samples_z", 17}}}}}}));
+  ASSERT_TRUE(r.ok()) << all(r);
+  const auto& p = r->terrain.source.procedural;
+  EXPECT_EQ(p.kind, ProceduralKind::Plane);
+  EXPECT_EQ(p.height, 1.5);
+  EXPECT_EQ(p.slope_x, 0.1);
+  EXPECT_EQ(p.slope_z, -0.2);
+  EXPECT_EQ(p.amplitude, 2.0);
+  EXPECT_EQ(p.wavelength, 8.0);
+  EXPECT_EQ(p.seed, 99u);
+  EXPECT_EQ(p.octaves, 2);
+  EXPECT_EQ(p.samples_x, 33);
+  EXPECT_EQ(p.samples_z, 17);
+  // Defaults of everything left out.
+  EXPECT_EQ(r->name, "test");
+  EXPECT_EQ(r->terrain.soil_depth, 2.0);
+  EXPECT_EQ(r->terrain.material, "sand");
+  EXPECT_EQ(r->terrain.spacing_xz(33, 17)[0], 0.5);
+  const SimulationDef d;
+  EXPECT_EQ(r->simulation.idle_timeout, 120.0);
+  EXPECT_EQ(r->simulation.gravity, (Vec3d{0.0, -9.81, 0.0}));
+  EXPECT_EQ(r->simulation.dt, d.dt);
+  EXPECT_TRUE(r->outputs.report);
+  EXPECT_NEAR(r->materials[0].tangential_stiffness_ratio, 2.0 / 7.0, 1e-15);
+}
+
+TEST(Scene, Png16AndRawF32SourcesAreChecked) {
+  const fs::path dir = fs::temp_directory_path() / "sandpatch_scene_test";
+  fs::create_directories(dir);
+  // raw_f32: 3 × 2 floats = 24 bytes.
+  { std::ofstream(dir / "h.raw", std::ios::binary).write(std::string(24, '\0').data(), 24); }
+  // png16: only the signature and IHDR are checked here (16-bit, greyscale).
+  const std::string ihdr = std::string("\x89PNG\r\n\x1a\n", 8) + std::string("\0\0\0\x0dIHDR", 8) +
+                           std::string("\0\0\0\x03\0\0\0\x02", 8) + std::string("\x10\0\0\0\0", 5);
+  { std::ofstream(dir / "h.png", std::ios::binary) << ihdr; }
+  std::string rgb = ihdr;
+  rgb[25] = 2;  // colour type 2: RGB
+  { std::ofstream(dir / "rgb.png", std::ios::binary) << rgb; }
+
+  auto raw = parse_scene(
+      scene_with({{"terrain", {{"source", {{"type", "raw_f32"}, {"kind", nullptr}, {"file", "h.raw"}, {"samples_x", 3}, {"samples_z", 2}}}}}}),
+      "t.json", dir.string());
+  ASSERT_TRUE(raw.ok()) << all(raw);
+  EXPECT_EQ(raw->terrain.source.kind, TerrainSourceKind::RawF32);
+  EXPECT_EQ(raw->terrain.source.samples_x, 3);
+  EXPECT_EQ(raw->terrain.source.samples_z, 2);
+  EXPECT_EQ(raw->terrain.source.file, (dir / "h.raw").string());
+
+  auto raw_bad = parse_scene(
+      scene_with({{"terrain", {{"source", {{"type", "raw_f32"}, {"kind", nullptr}, {"file", "h.raw"}, {"samples_x", 4}, {"samples_z", 2}}}}}}),
+      "t.json", dir.string());
+  EXPECT_TRUE(has_error(raw_bad, "terrain.source.file", "\"h.raw\"", "24 bytes")) << all(raw_bad);
+
+  auto png = parse_scene(scene_with({{"terrain", {{"source", {{"type", "png16"}, {"kind", nullptr}, {"file", "h.png"}}}}}}), "t.json",
+                         dir.string());
+  ASSERT_TRUE(png.ok()) << all(png);
+  EXPECT_EQ(png->terrain.source.kind, TerrainSourceKind::Png16);
+  auto png_rgb = parse_scene(scene_with({{"terrain", {{"source", {{"type", "png16"}, {"kind", nullptr}, {"file", "rgb.png"}}}}}}),
+                             "t.json", dir.string());
+  EXPECT_TRUE(has_error(png_rgb, "terrain.source.file", "\"rgb.png\"", "colour type 2")) << all(png_rgb);
+  // A directory is not a readable heightmap.
+  auto as_dir = parse_scene(scene_with({{"terrain", {{"source", {{"type", "png16"}, {"kind", nullptr}, {"file", "."}}}}}}), "t.json",
+                            dir.string());
+  EXPECT_TRUE(has_error(as_dir, "terrain.source.file", "\".\"", "not a regular file")) << all(as_dir);
+}
+
+TEST(Scene, ShippedScenesParse) {
+  for (const char* name : {"default.json", "barrel_drop.json", "mesh_drop.json"}) {
+    const auto r = load_scene_file(kScenes + "/" + name);
+    EXPECT_TRUE(r.ok()) << name << ":\n" << all(r);
+  }
+  const auto barrel = load_scene_file(kScenes + "/barrel_drop.json");
+  ASSERT_TRUE(barrel.ok());
+  ASSERT_EQ(barrel->bodies.size(), 1u);
+  EXPECT_EQ(barrel->bodies[0].shape.kind, ShapeKind::Cylinder);
+  EXPECT_EQ(barrel->bodies[0].shape.radius, 0.3);
+  EXPECT_EQ(barrel->bodies[0].shape.height, 0.9);
+  const double m = barrel->bodies[0].mass_value();
+  EXPECT_GE(m, 50.0);
+  EXPECT_LE(m, 200.0);
+  const auto mesh = load_scene_file(kScenes + "/mesh_drop.json");
+  ASSERT_TRUE(mesh.ok());
+  EXPECT_NEAR(mesh->bodies[0].mass_value(), 400.0 * kPi * 0.09 * 0.9, 0.01 * 400.0 * kPi * 0.09 * 0.9);
+}
+
+TEST(Scene, EmbeddedDefaultIsScenesDefaultJson) {
+  EXPECT_EQ(std::string(default_scene_json()), read_text(kScenes + "/default.json"));
+  const auto r = load_default_scene();
+  ASSERT_TRUE(r.ok()) << all(r);
+  EXPECT_EQ(r->name, "default");
+  EXPECT_EQ(r->terrain.source.kind, TerrainSourceKind::Procedural);
+  // 64 m × 64 m at 0.5 m spacing.
+  const auto& p = r->terrain.source.procedural;
+  EXPECT_EQ((p.samples_x - 1) * r->terrain.spacing_xz(p.samples_x, p.samples_z)[0], 64.0);
+  EXPECT_EQ(r->bodies.size(), 2u);
+  EXPECT_EQ(r->hash, load_scene_file(kScenes + "/default.json")->hash);
+}
+
+TEST(Scene, CanonicalJsonRoundTrips) {
+  for (const std::string& path : {kScenes + "/default.json", kData + "/full.json"}) {
+    const auto a = load_scene_file(path);
+    ASSERT_TRUE(a.ok()) << all(a);
+    const nlohmann::json ja = scene_to_json(*a);
+    const auto b = parse_scene(ja.dump(), "canonical.json", "");
+    ASSERT_TRUE(b.ok()) << all(b);
+    EXPECT_EQ(scene_to_json(*b), ja) << path;
+  }
+}
+
+TEST(Scene, HashIgnoresWhitespaceAndKeyOrderButNotValues) {
+  const nlohmann::json j = nlohmann::json::parse(read_text(kScenes + "/default.json"));
+  const auto a = parse_scene(j.dump(), "a.json", "");
+  const auto b = parse_scene(j.dump(8), "b.json", "");
+  ASSERT_TRUE(a.ok() && b.ok());
+  EXPECT_EQ(a->hash, b->hash);
+  nlohmann::json changed = j;
+  changed["bodies"][0]["pose"]["position"][1] = 3.5;
+  const auto c = parse_scene(changed.dump(), "c.json", "");
+  ASSERT_TRUE(c.ok());
+  EXPECT_NE(a->hash, c->hash);
+}
+
+// ---- broken scenes: one file per class of bad input ----
+
+Result<SceneDef> broken(const std::string& name) { return load_scene_file(kScenes + "/broken/" + name); }
+
+TEST(SceneErrors, EveryErrorNamesTheFile) {
+  for (const auto& entry : fs::directory_iterator(kScenes + "/broken")) {
+    if (entry.path().extension() != ".json") continue;
+    const auto r = load_scene_file(entry.path().string());
+    ASSERT_FALSE(r.ok()) << entry.path();
+    for (const auto& e : r.errors()) {
+      EXPECT_EQ(e.file, entry.path().string());
+      EXPECT_EQ(e.message().rfind(entry.path().string() + ": ", 0), 0u) << e.message();
+    }
+  }
+}
+
+TEST(SceneErrors, UnknownKeySuggestsTheNearMiss) {
+  const auto r = broken("unknown_key.json");
+  ASSERT_EQ(r.ok() ? 0u : r.errors().size(), 1u) << all(r);
+  EXPECT_TRUE(has_error(r, "materials[0].frction", "0.5", "did you mean 'friction'?")) << all(r);
+}
+
+TEST(SceneErrors, WrongType) {
+  const auto r = broken("wrong_type.json");
+  EXPECT_TRUE(has_error(r, "simulation.dt", "\"0.01\"", "without quotes")) << all(r);
+  const auto b = parse(scene_with({{"simulation", {{"substeps", 2.5}, {"backend", 3}, {"pool", {1, 2}}}}}));
+  EXPECT_TRUE(has_error(b, "simulation.substeps", "2.5", "integer")) << all(b);
+  EXPECT_TRUE(has_error(b, "simulation.backend", "3", "one of: cpu, gl")) << all(b);
+  EXPECT_TRUE(has_error(b, "simulation.pool", "[1,2]", "object")) << all(b);
+}
+
+TEST(SceneErrors, MissingFile) {
+  const auto r = broken("missing_file.json");
+  EXPECT_TRUE(has_error(r, "terrain.source.file", "\"heightmaps/does_not_exist.png\"", "file not found")) << all(r);
+}
+
+TEST(SceneErrors, NanAndInfinity) {
+  const auto r = broken("nan_inf.json");
+  ASSERT_EQ(r.ok() ? 0u : r.errors().size(), 2u) << all(r);
+  EXPECT_TRUE(has_error(r, "materials[0].friction", "\"nan\"", "NaN")) << all(r);
+  EXPECT_TRUE(has_error(r, "bodies[0].pose.position[1]", "1e999", "too large")) << all(r);
+}
+
+TEST(SceneErrors, AbsurdValues) {
+  const auto r = broken("absurd_value.json");
+  EXPECT_TRUE(has_error(r, "simulation.dt", "5", "(0, 0.1] s")) << all(r);
+  EXPECT_TRUE(has_error(r, "materials[0].stiffness", "1e+15", "[1, 1e+12] N/m")) << all(r);
+}
+
+TEST(SceneErrors, NegativeSize) {
+  const auto r = broken("negative_size.json");
+  ASSERT_EQ(r.ok() ? 0u : r.errors().size(), 1u) << all(r);
+  EXPECT_TRUE(has_error(r, "bodies[1].shape.radius", "-0.5", "negative")) << all(r);
+}
+
+TEST(SceneErrors, BodyBelowFlatBedrock) {
+  // origin y 10 + bedrock_height −1 = 9; the ball's bottom is at 8.7 − 0.5 = 8.2.
+  const auto r = broken("below_bedrock.json");
+  EXPECT_TRUE(has_error(r, "bodies[0].pose.position", "8.7", "below bedrock")) << all(r);
+}
+
+TEST(SceneErrors, BodyBelowTerrainBedrockAfterLoading) {
+  const auto r = load_scene_file(kScenes + "/default.json");
+  ASSERT_TRUE(r.ok());
+  EXPECT_TRUE(check_bodies_against_terrain(*r, [](double, double) { return -1.0f; }).empty());
+  // Bedrock at 2.9 m: the ball (y 3, r 0.25) starts below it, and so does the tilted crate.
+  const auto errors = check_bodies_against_terrain(*r, [](double, double) { return 2.9f; });
+  ASSERT_EQ(errors.size(), 2u);
+  EXPECT_EQ(errors[0].field, "bodies[0].pose.position");
+  EXPECT_NE(errors[0].message().find("below bedrock"), std::string::npos);
+}
+
+TEST(SceneErrors, OpenMeshNamesTheObjAndItsOpenEdges) {
+  const auto r = broken("open_mesh.json");
+  EXPECT_TRUE(has_error(r, "bodies[0].shape.file", "\"meshes/open_barrel.obj\"", "64 open edges")) << all(r);
+  EXPECT_NE(all(r).find("broken/meshes/open_barrel.obj"), std::string::npos);
+  // The same surface as a non-solid shell with a mass is accepted.
+  nlohmann::json j = nlohmann::json::parse(read_text(kScenes + "/broken/open_mesh.json"));
+  j["bodies"][0]["shape"]["solid"] = false;
+  j["bodies"][0].erase("density");
+  j["bodies"][0]["mass"] = 20.0;
+  const auto shell = parse_scene(j.dump(), "shell.json", kScenes + "/broken");
+  EXPECT_TRUE(shell.ok()) << all(shell);
+}
+
+TEST(SceneErrors, MissingRequiredField) {
+  const auto r = broken("missing_field.json");
+  EXPECT_TRUE(has_error(r, "bodies[0].shape", "", "missing required field")) << all(r);
+  const auto no_terrain = parse(R"({"materials": [{"name": "sand", "restitution": 0.3}]})");
+  EXPECT_TRUE(has_error(no_terrain, "terrain", "", "missing required field")) << all(no_terrain);
+}
+
+TEST(SceneErrors, MalformedJsonGivesLineAndColumn) {
+  const auto r = broken("malformed.json");
+  ASSERT_FALSE(r.ok());
+  ASSERT_EQ(r.errors().size(), 1u);
+  // The '}' after the trailing comma on line 4: "    { "name": "sand", "restitution": 0.3, }".
+  EXPECT_EQ(r.error().field, "line 4, column 43") << r.message();
+  EXPECT_NE(r.message().find("valid JSON"), std::string::npos);
+}
+
+TEST(SceneErrors, AllErrorsAreCollected) {
+  const auto r = broken("three_mistakes.json");
+  ASSERT_EQ(r.ok() ? 0u : r.errors().size(), 3u) << all(r);
+  EXPECT_TRUE(has_error(r, "simulaton", "", "did you mean 'simulation'?")) << all(r);
+  EXPECT_TRUE(has_error(r, "bodies[0].shape.radius", "-1")) << all(r);
+  EXPECT_TRUE(has_error(r, "terrain.material", "\"snad\"", "did you mean 'sand'?")) << all(r);
+}
+
+TEST(SceneErrors, CrossFieldChecks) {
+  const auto r = broken("cross_reference.json");
+  EXPECT_TRUE(has_error(r, "materials[0].damping_ratio", "0.2", "only one of 'restitution' and 'damping_ratio'")) << all(r);
+  EXPECT_TRUE(has_error(r, "bodies[0].density", "1000", "only one of 'mass' and 'density'")) << all(r);
+  EXPECT_TRUE(has_error(r, "bodies[1].mass", "", "one of 'mass' (kg) or 'density'")) << all(r);
+  EXPECT_TRUE(has_error(r, "bodies[1].name", "\"ball\"", "unique")) << all(r);
+  EXPECT_TRUE(has_error(r, "outputs.frames[0].camera", "\"mian\"", "did you mean 'main'?")) << all(r);
+}
+
+TEST(SceneErrors, MoreChecks) {
+  // Duplicate keys, bad enum with suggestion, non-unit quaternion, both orientation forms,
+  // unsorted times, unknown placeholder, absolute output path, camera looking at itself.
+  const std::string text = R"({
+    "terrain": {"source": {"type": "procedural", "kind": "hils"}, "spacing": 0.5, "spacing": 0.25},
+    "materials": [{"name": "sand", "restitution": 0.3, "packing_fraction": 0.8}],
+    "bodies": [{"name": "b", "shape": {"type": "sphere", "radius": 1}, "mass": 1,
+                "pose": {"position": [0, 5, 0], "orientation": [1, 1, 0, 0]}},
+               {"name": "c", "shape": {"type": "sphere", "radius": 1}, "mass": 1,
+                "pose": {"orientation": [1, 0, 0, 0], "euler_deg": [0, 0, 0]}}],
+    "cameras": [{"name": "cam", "position": [1, 1, 1], "target": [1, 1, 1]}],
+    "outputs": {"frames": [{"camera": "cam", "times": [2, 1], "file": "/tmp/{fame}.png"}],
+                "heightfields": [{"format": "png16", "at_end": true, "file": "x_{frme}.{ext}"}]}
+  })";
+  const auto r = parse(text);
+  EXPECT_TRUE(has_error(r, "terrain.spacing", "", "duplicate key")) << all(r);
+  EXPECT_TRUE(has_error(r, "terrain.source.kind", "\"hils\"", "did you mean 'hills'?")) << all(r);
+  EXPECT_TRUE(has_error(r, "materials[0].packing_fraction", "0.8", "(0, 0.74]")) << all(r);
+  EXPECT_TRUE(has_error(r, "bodies[0].pose.orientation", "[1,1,0,0]", "unit quaternion")) << all(r);
+  EXPECT_TRUE(has_error(r, "bodies[1].pose.euler_deg", "[0,0,0]", "only one")) << all(r);
+  EXPECT_TRUE(has_error(r, "cameras[0].target", "[1,1,1]", "no view direction")) << all(r);
+  EXPECT_TRUE(has_error(r, "outputs.frames[0].times[1]", "1", "ascending")) << all(r);
+  EXPECT_TRUE(has_error(r, "outputs.frames[0].file", "/tmp/{fame}.png", "output directory")) << all(r);
+  EXPECT_TRUE(has_error(r, "outputs.heightfields[0].file", "x_{frme}.{ext}", "did you mean '{frame}'?")) << all(r);
+  const auto empty_times = parse(scene_with({{"outputs", {{"heightfields", {{{"times", nlohmann::json::array()}}}}}}}));
+  EXPECT_TRUE(has_error(empty_times, "outputs.heightfields[0].times", "[]", "at least one time")) << all(empty_times);
+}
+
+TEST(SceneErrors, ProceduralSizeMustGiveSquareCells) {
+  const auto r = parse(scene_with({{"terrain", {{"spacing", nullptr}, {"size", {64.0, 32.0}},
+                                                {"source", {{"samples_x", 129}, {"samples_z", 129}}}}}}));
+  EXPECT_TRUE(has_error(r, "terrain.size", "[64.0,32.0]", "square cells")) << all(r);
+  const auto ok = parse(scene_with({{"terrain", {{"spacing", nullptr}, {"size", {64.0, 32.0}},
+                                                 {"source", {{"samples_x", 129}, {"samples_z", 65}}}}}}));
+  ASSERT_TRUE(ok.ok()) << all(ok);
+  EXPECT_EQ(ok->terrain.spacing_xz(129, 65)[1], 0.5);
+}
+
+TEST(SceneErrors, ScenelessInputs) {
+  EXPECT_FALSE(load_scene_file("/nonexistent/scene.json").ok());
+  const auto empty = parse("");
+  ASSERT_FALSE(empty.ok());
+  EXPECT_EQ(empty.error().field, "line 1, column 1");
+  const auto array = parse("[1, 2]");
+  EXPECT_TRUE(has_error(array, "(top level)", "[1,2]", "object")) << all(array);
+}
+
+// ---- robustness ----
+
+TEST(SceneFuzz, MutatedScenesNeverCrashAndAlwaysExplain) {
+  // Deterministic byte mutations of the default scene (flip, delete, insert, duplicate a
+  // span): each must parse or fail with at least one error that names the source.
+  const std::string base = default_scene_json();
+  std::uint64_t state = 0x9e3779b97f4a7c15ull;
+  auto next = [&] {  // splitmix64
+    state += 0x9e3779b97f4a7c15ull;
+    std::uint64_t z = state;
+    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
+    z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
+    return z ^ (z >> 31);
+  };
+  const std::string alphabet = "{}[]\",:0123456789.-+eE aAzZ\n\\nulltruefalse";
+  int failures = 0;
+  for (int iter = 0; iter < 3000; ++iter) {
+    std::string text = base;
+    const int edits = 1 + static_cast<int>(next() % 3);
+    for (int e = 0; e < edits && !text.empty(); ++e) {
+      const std::size_t pos = next() % text.size();
+      switch (next() % 4) {
+        case 0: text[pos] = alphabet[next() % alphabet.size()]; break;
+        case 1: text.erase(pos, 1 + next() % 8); break;
+        case 2: text.insert(pos, 1, alphabet[next() % alphabet.size()]); break;
+        case 3: text.insert(pos, text.substr(pos, 1 + next() % 16)); break;
+      }
+    }
+    const auto r = parse_scene(text, "fuzz.json", "");
+    if (r.ok()) continue;
+    ++failures;
+    for (const auto& err : r.errors()) {
+      ASSERT_EQ(err.file, "fuzz.json") << text;
+      ASSERT_FALSE(err.message().empty());
+    }
+  }
+  EXPECT_GT(failures, 0);
+}
+
+}  // namespace
+}  // namespace sandpatch
