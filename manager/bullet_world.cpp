@@ -133,7 +133,7 @@ BulletWorld::~BulletWorld() {
   for (auto& t : impl_->tiles) impl_->world->removeCollisionObject(t.object.get());
 }
 
-Result<BodyId> BulletWorld::add_body(const RigidBodyDef& def) {
+Result<RigidBodyId> BulletWorld::add_body(const RigidBodyDef& def) {
   auto& m = *impl_;
   const std::string field = "bodies." + def.name;
   if (!(def.mass > 0.0f) || !std::isfinite(def.mass)) {
@@ -193,15 +193,15 @@ Result<BodyId> BulletWorld::add_body(const RigidBodyDef& def) {
     index = int(m.bodies.size());
     m.bodies.push_back(std::move(b));
   }
-  return BodyId{index, m.bodies[index].generation};
+  return RigidBodyId{index, m.bodies[index].generation};
 }
 
-bool BulletWorld::alive(BodyId id) const {
+bool BulletWorld::alive(RigidBodyId id) const {
   return id.index >= 0 && id.index < int(impl_->bodies.size()) && impl_->bodies[id.index].body &&
          impl_->bodies[id.index].generation == id.generation;
 }
 
-void BulletWorld::remove_body(BodyId id) {
+void BulletWorld::remove_body(RigidBodyId id) {
   assert(alive(id));
   auto& b = impl_->bodies[id.index];
   impl_->world->removeRigidBody(b.body.get());
@@ -212,7 +212,7 @@ void BulletWorld::remove_body(BodyId id) {
   impl_->free_slots.push_back(id.index);
 }
 
-BodyState BulletWorld::state(BodyId id) const {
+BodyState BulletWorld::state(RigidBodyId id) const {
   assert(alive(id));
   const btRigidBody& rb = *impl_->bodies[id.index].body;
   const btTransform& tr = rb.getWorldTransform();
@@ -225,7 +225,7 @@ BodyState BulletWorld::state(BodyId id) const {
   return s;
 }
 
-void BulletWorld::bounds(BodyId id, Eigen::Vector3d* lo, Eigen::Vector3d* hi) const {
+void BulletWorld::bounds(RigidBodyId id, Eigen::Vector3d* lo, Eigen::Vector3d* hi) const {
   assert(alive(id));
   btVector3 a, b;
   impl_->bodies[id.index].body->getAabb(a, b);

@@ -55,7 +55,7 @@ struct BodyState {
 };
 
 // Handle of a body in a BulletWorld: index + generation (stale handles are detected).
-struct BodyId {
+struct RigidBodyId {
   int index = -1;
   int generation = 0;
   bool valid() const { return index >= 0; }
@@ -69,12 +69,12 @@ class BulletWorld {
   BulletWorld(const BulletWorld&) = delete;
   BulletWorld& operator=(const BulletWorld&) = delete;
 
-  Result<BodyId> add_body(const RigidBodyDef& def);
-  void remove_body(BodyId id);
-  bool alive(BodyId id) const;
-  BodyState state(BodyId id) const;
+  Result<RigidBodyId> add_body(const RigidBodyDef& def);
+  void remove_body(RigidBodyId id);
+  bool alive(RigidBodyId id) const;
+  BodyState state(RigidBodyId id) const;
   // Axis-aligned bounds of the body's collision shape (m, world).
-  void bounds(BodyId id, Eigen::Vector3d* lo, Eigen::Vector3d* hi) const;
+  void bounds(RigidBodyId id, Eigen::Vector3d* lo, Eigen::Vector3d* hi) const;
   int body_count() const;
 
   // Advances every body by exactly dt seconds (one Bullet step, no accumulator).

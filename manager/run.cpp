@@ -122,8 +122,8 @@ class ProgressPrinter {
                    "##############################", width - fill, "", pct, sim, total, rtf);
       if (final) std::fputc('\n', stderr);
     } else {
-      // Plain lines every 10% (and at the end) for logs and CI.
-      if (!final && pct < next_pct_) return;
+      // Plain lines every 10% for logs and CI (100% once).
+      if (pct < next_pct_) return;
       next_pct_ = pct / 10 * 10 + 10;
       std::fprintf(stderr, "progress %3d%%  t = %.2f / %.2f s  real-time factor %.2fx\n", pct, sim, total, rtf);
     }
@@ -211,7 +211,7 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
 
   // ---- the frame loop ----
   Profile profile;
-  std::vector<BodyId> ids(scene.bodies.size());
+  std::vector<RigidBodyId> ids(scene.bodies.size());
   std::vector<bool> spawned(scene.bodies.size(), false);
   std::vector<std::size_t> next_export(scene.outputs.heightfields.size(), 0);
   std::vector<std::string> written;

@@ -1,0 +1,60 @@
+// Predictive activation (../shared/DESIGN.md "One frame" step 2; Leach & Marais §3): before
+// a body touches the terrain, request a granular patch around the predicted contact, so a
+// fast body never lands on a patch that is not ready.
+//
+// Prediction: the body's world bounds are swept along its ballistic path
+//   p(t) = p0 + v0 t + ½ g t²        (t in [0, horizon], sampled every horizon/samples s)
+// and the first sample whose bounds' bottom comes within `margin` of the highest heightfield
+// sample under the bounds' footprint is the predicted contact. The bounds are inflated by the
+// distance travelled in one sample interval, so a contact between two samples is not missed.
+// The request covers the footprint at contact plus `apron` on every side.
+//
+// Pure functions of their inputs (no GL, no Bullet), after CDLOD's split of LOD selection
+// from everything else (../shared/STYLE.md).
+#pragma once
+
+#include <Eigen/Core>
+#include <vector>
+
+#include "heightfield/heightfield.hpp"
+
+namespace sandpatch {
+
+struct LodDef {
+  double horizon = 0.5;   // s, how far ahead contacts are predicted
+  int samples = 16;       // samples of the path over the horizon (>= 1)
+  double margin = 0.05;   // m, clearance that already counts as contact
+  double apron = 1.0;     // m, added around the contact footprint on every side
+};
+
+struct BodyMotion {
+  Eigen::Vector3d lo, hi;         // m, world bounds now
+  Eigen::Vector3d velocity;       // m/s
+};
+
+// A square-or-rectangular region of the terrain that should become particles.
+struct PatchRequest {
+  double x0 = 0, z0 = 0, x1 = 0, z1 = 0;  // m, world rectangle
+  double time_to_contact = 0;             // s from now (0 = touching already)
+  double speed = 0;                       // m/s of the fastest body in it (a priority key)
+  std::vector<int> bodies;                // indices into the BodyMotion list
+  double width() const { return x1 - x0; }
+  double depth() const { return z1 - z0; }
+  bool overlaps(const PatchRequest& o) const { return x0 < o.x1 && o.x0 < x1 && z0 < o.z1 && o.z0 < z1; }
+};
+
+// Highest Elevation (m, world) of the heightfield samples in the world rectangle
+// [x0, x1] × [z0, z1] and the samples bracketing it; -inf when it is off the terrain.
+double max_height_under(const Heightfield& hf, double x0, double z0, double x1, double z1);
+
+// One request per body that is predicted to touch the terrain within the horizon
+// (bodies off the terrain or moving clear of it yield none).
+std::vector<PatchRequest> predict_contacts(const Heightfield& hf, const std::vector<BodyMotion>& bodies,
+                                           const Eigen::Vector3d& gravity, const LodDef& def);
+
+// Merges overlapping requests into their bounding rectangle while the result stays within
+// max_side (m) on both axes; a merged request keeps the earliest contact and fastest speed.
+// The result is ordered by time to contact, then by speed (fastest first).
+std::vector<PatchRequest> merge_requests(std::vector<PatchRequest> requests, double max_side);
+
+}  // namespace sandpatch
