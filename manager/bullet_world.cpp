@@ -52,8 +52,13 @@ struct BulletWorld::Impl {
   };
   std::vector<Tile> tiles;
 
+  // Collision groups: terrain tiles vs bodies, so a body can stop colliding with the terrain.
+  static constexpr int kGroupBody = 1, kGroupTerrain = 2;
+
   struct Body {
     int generation = 0;
+    RigidBodyDef def;
+    bool terrain = true;  // collides with the heightfield
     std::unique_ptr<btCollisionShape> shape;
     std::unique_ptr<btTriangleMesh> mesh;  // mesh bodies keep their triangles alive
     std::unique_ptr<btDefaultMotionState> motion;
@@ -120,7 +125,7 @@ Result<std::unique_ptr<BulletWorld>> BulletWorld::create(const Heightfield& terr
       t.tx = tx;
       t.tz = tz;
       m.build_tile(t);
-      m.world->addCollisionObject(t.object.get());
+      m.world->addCollisionObject(t.object.get(), Impl::kGroupTerrain, Impl::kGroupBody);
     }
   }
   return w;
@@ -181,7 +186,8 @@ Result<RigidBodyId> BulletWorld::add_body(const RigidBodyDef& def) {
   const float min_extent = (hi - lo).minAxis() >= 0 ? (hi - lo)[(hi - lo).minAxis()] : 0.1f;
   b.body->setCcdMotionThreshold(0.05f * min_extent);
   b.body->setCcdSweptSphereRadius(0.5f * min_extent);
-  m.world->addRigidBody(b.body.get());
+  m.world->addRigidBody(b.body.get(), Impl::kGroupBody, Impl::kGroupBody | Impl::kGroupTerrain);
+  b.def = def;
 
   int index;
   if (!m.free_slots.empty()) {
@@ -247,11 +253,69 @@ void BulletWorld::terrain_changed() {
     if (lo < t.min_h || hi > t.max_h) {
       impl_->world->removeCollisionObject(t.object.get());
       impl_->build_tile(t);
-      impl_->world->addCollisionObject(t.object.get());
+      impl_->world->addCollisionObject(t.object.get(), Impl::kGroupTerrain, Impl::kGroupBody);
     }
   }
 }
 
 int BulletWorld::terrain_tile_count() const { return int(impl_->tiles.size()); }
+
+void BulletWorld::apply_force(RigidBodyId id, const Eigen::Vector3f& force, const Eigen::Vector3f& torque) {
+  assert(alive(id));
+  btRigidBody& rb = *impl_->bodies[id.index].body;
+  rb.applyCentralForce(bt(force));
+  rb.applyTorque(bt(torque));
+  rb.activate(true);
+}
+
+void BulletWorld::set_terrain_collision(RigidBodyId id, bool enabled) {
+  assert(alive(id));
+  auto& b = impl_->bodies[id.index];
+  if (b.terrain == enabled) return;
+  b.terrain = enabled;
+  // Re-adding the body is Bullet's way to change its filter and drop its cached pairs.
+  impl_->world->removeRigidBody(b.body.get());
+  impl_->world->addRigidBody(b.body.get(), Impl::kGroupBody,
+                             enabled ? (Impl::kGroupBody | Impl::kGroupTerrain) : Impl::kGroupBody);
+  b.body->activate(true);
+}
+
+bool BulletWorld::terrain_collision(RigidBodyId id) const {
+  assert(alive(id));
+  return impl_->bodies[id.index].terrain;
+}
+
+float BulletWorld::mass(RigidBodyId id) const {
+  assert(alive(id));
+  const float inv = impl_->bodies[id.index].body->getInvMass();
+  return inv > 0 ? 1.0f / inv : 0.0f;
+}
+
+Eigen::Vector3f BulletWorld::principal_inertia(RigidBodyId id) const {
+  assert(alive(id));
+  const btVector3 inv = impl_->bodies[id.index].body->getInvInertiaDiagLocal();
+  return {inv.x() > 0 ? 1.0f / inv.x() : 0.0f, inv.y() > 0 ? 1.0f / inv.y() : 0.0f,
+          inv.z() > 0 ? 1.0f / inv.z() : 0.0f};
+}
+
+const RigidBodyDef& BulletWorld::definition(RigidBodyId id) const {
+  assert(alive(id));
+  return impl_->bodies[id.index].def;
+}
+
+void BulletWorld::set_state(RigidBodyId id, const BodyState& s) {
+  assert(alive(id));
+  btRigidBody& rb = *impl_->bodies[id.index].body;
+  btTransform tr;
+  const Eigen::Vector3d local = s.position - impl_->origin;
+  tr.setOrigin(btVector3(float(local.x()), float(local.y()), float(local.z())));
+  const Eigen::Quaternionf q = s.orientation.normalized();
+  tr.setRotation(btQuaternion(q.x(), q.y(), q.z(), q.w()));
+  rb.setWorldTransform(tr);
+  rb.getMotionState()->setWorldTransform(tr);
+  rb.setLinearVelocity(bt(s.linear_velocity));
+  rb.setAngularVelocity(bt(s.angular_velocity));
+  rb.activate(true);
+}
 
 }  // namespace sandpatch

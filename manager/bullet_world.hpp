@@ -86,6 +86,19 @@ class BulletWorld {
 
   int terrain_tile_count() const;
 
+  // ---- coupling with granular patches ----
+  // Adds a force (N, world, through the centre of mass) and a torque (N m, world) for the next
+  // step only.
+  void apply_force(RigidBodyId id, const Eigen::Vector3f& force, const Eigen::Vector3f& torque);
+  // Whether the body collides with the heightfield (off while granules carry it).
+  void set_terrain_collision(RigidBodyId id, bool enabled);
+  bool terrain_collision(RigidBodyId id) const;
+  float mass(RigidBodyId id) const;                   // kg
+  Eigen::Vector3f principal_inertia(RigidBodyId id) const;  // kg m², body frame (Bullet's shape axes)
+  const RigidBodyDef& definition(RigidBodyId id) const;
+  // Overwrites the body's state (after a patch integrated it). Wakes the body.
+  void set_state(RigidBodyId id, const BodyState& state);
+
  private:
   BulletWorld() = default;
   struct Impl;
