@@ -1,0 +1,67 @@
+// Pre-settled granule configurations (../shared/DESIGN.md "Heightfield → particles"; the
+// "pregenerated particle configurations" Leach & Marais name as future work, §7).
+//
+// A block of granules is settled once, at start-up, in a walled box; its interior, away
+// from the walls, becomes a tile that repeats in x and z (period P_x = P_z) and in y
+// (period P_y, a flat cut below the rough top). A patch is filled by repeating the tile
+// over the patch and cutting it to the surface, bottom up: the patch is divided into columns
+// one granule wide, and a granule is kept when it brings the mean top of the spheres in its
+// column (what the top-down depth render of §5.2 averages to) closer to the surface there.
+// Granules that would overlap one already placed (at tile seams) are left out. The patch
+// starts at rest because every granule came from a bed at rest.
+// Fills deeper than P_y stack copies of the tile; the flat-floor layer of one copy does not
+// interlock with the cut top of the copy below, which leaves gaps at the seam (measured:
+// surfaces cut just above a seam render up to 0.35 d low), so the tile is made at least as
+// deep as the deepest patch. Everything here is in simulation units (unit particle scale).
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <vector>
+
+#include "common/error.hpp"
+#include "particles/dem.hpp"
+
+namespace sandpatch {
+
+struct GranuleTileDef {
+  Material material;            // contact parameters of the granules
+  float radius = 0.025f;        // m, sphere radius r
+  int columns = 8;              // granules per side of the settling box
+  int layers = 10;              // lattice layers before settling
+  std::uint64_t seed = 1;
+  double settle_max_time = 4.0; // s of simulated settling at most
+  float settle_speed = 0.02f;   // m/s: settled when every granule is slower
+  Vec3 gravity{0.0f, -9.81f, 0.0f};  // m/s², sim units
+  int threads = 0;
+};
+
+struct PlacedGranule {
+  Vec3 position;
+  Quat orientation;
+};
+
+struct GranuleTile {
+  float period_xz = 0;          // m, horizontal repeat
+  float period_y = 0;           // m, vertical repeat
+  std::vector<PlacedGranule> granules;  // centres in [0, P_xz) × [0, P_y) × [0, P_xz)
+  float packing_fraction = 0;   // granule solid volume / tile volume (measured)
+  GranuleShape shape;
+  double settle_time = 0;       // s simulated to settle
+  float settled_speed = 0;      // m/s, max granule speed when captured
+};
+
+// Settles the block and calibrates the cut. Errors name the GranuleTileDef field.
+Result<GranuleTile> make_granule_tile(const GranuleTileDef& def);
+
+// Granules filling [0, W] × [0, D] from the floor y = 0 up to surface(x, z) (m), repeated from
+// the tile; no two granules overlap (spheres closer than 1.8 r are rejected).
+std::vector<PlacedGranule> fill_from_tile(const GranuleTile& tile, float width, float depth,
+                                          const std::function<float(float x, float z)>& surface);
+
+// Mean height of the top of the spheres over [x0, x1] × [z0, z1], sampled on a grid of
+// `step` m (what a top-down depth render averages to); `floor` where no sphere is.
+float mean_top_height(const std::vector<PlacedGranule>& granules, const GranuleShape& shape, float x0, float z0,
+                      float x1, float z1, float step, float floor);
+
+}  // namespace sandpatch

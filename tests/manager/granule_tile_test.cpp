@@ -1,0 +1,80 @@
+// tests manager/granule_tile.cpp: a pre-settled tile fills a patch that is already at rest
+// and whose surface renders back where it was cut.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "manager/granule_tile.hpp"
+
+using namespace sandpatch;
+
+namespace {
+
+const GranuleTile& tile() {
+  static GranuleTile t = [] {
+    GranuleTileDef d;
+    d.radius = 0.025f;
+    d.material.normal_stiffness = 2.0e4f;
+    d.material.density = 2650.0f;
+    d.columns = 8;
+    d.layers = 8;
+    auto r = make_granule_tile(d);
+    EXPECT_TRUE(r.ok()) << (r.ok() ? "" : r.message());
+    return r.ok() ? *r : GranuleTile{};
+  }();
+  return t;
+}
+
+}  // namespace
+
+// The tile settled (every granule slower than 2 cm/s), holds granules, and its packing
+// fraction is that of a loose random packing of tetrahedral granules (0.35..0.65).
+TEST(GranuleTile, SettlesAndMeasuresPackingFraction) {
+  const GranuleTile& t = tile();
+  EXPECT_LT(t.settled_speed, 0.02f);
+  EXPECT_GT(t.granules.size(), 20u);
+  EXPECT_GT(t.packing_fraction, 0.35f);
+  EXPECT_LT(t.packing_fraction, 0.65f);
+  EXPECT_GT(t.period_xz, 0.0f);
+  EXPECT_GT(t.period_y, 0.0f);
+}
+
+// Flat fills cut at heights across the tile's depth render back at their heights within
+// 0.1 d (d = 2 r, the sphere diameter), and no two spheres of different granules overlap by
+// more than 10% of r (the check is done on the last fill).
+TEST(GranuleTile, FlatFillRendersBackAtItsHeight) {
+  const GranuleTile& t = tile();
+  const float W = 2.3f * t.period_xz;
+  for (float f : {0.25f, 0.4f, 0.55f, 0.7f}) {
+    const float H = f * t.period_y;
+    auto g = fill_from_tile(t, W, W, [&](float, float) { return H; });
+    const float m = mean_top_height(g, t.shape, 0.1f * W, 0.1f * W, 0.9f * W, 0.9f * W, 0.25f * t.shape.radius, 0.0f);
+    EXPECT_NEAR(m, H, 0.1f * 2.0f * t.shape.radius) << "H = " << H;
+  }
+  const float H = 0.8f * t.period_y;
+  auto g = fill_from_tile(t, W, W, [&](float, float) { return H; });
+  const float m = mean_top_height(g, t.shape, 0.1f * W, 0.1f * W, 0.9f * W, 0.9f * W, 0.25f * t.shape.radius, 0.0f);
+  EXPECT_NEAR(m, H, 0.1f * 2.0f * t.shape.radius);
+  std::vector<Vec3> s;
+  for (const auto& p : g)
+    for (const auto& o : t.shape.offsets) s.push_back(p.position + rotate(p.orientation, o));
+  int overlaps = 0;
+  for (std::size_t i = 0; i < s.size(); ++i)
+    for (std::size_t j = i + 1; j < s.size(); ++j)
+      if (i / 4 != j / 4 && length(s[i] - s[j]) < 1.8f * t.shape.radius - 1e-6f) ++overlaps;
+  EXPECT_EQ(overlaps, 0);
+}
+
+// A sloped cut (rising 0.5 P_y across the patch) follows the slope: the mean height over
+// each half matches the slope's mean there within 0.1 d.
+TEST(GranuleTile, SlopedFillFollowsTheSurface) {
+  const GranuleTile& t = tile();
+  const float W = 2.0f * t.period_xz, H = 0.5f * t.period_y, slope = 0.5f * t.period_y / W;
+  auto surf = [&](float x, float) { return H + slope * (x - 0.5f * W); };
+  auto g = fill_from_tile(t, W, W, surf);
+  const float step = 0.25f * t.shape.radius, d = 2.0f * t.shape.radius;
+  const float left = mean_top_height(g, t.shape, 0.1f * W, 0.1f * W, 0.45f * W, 0.9f * W, step, 0.0f);
+  const float right = mean_top_height(g, t.shape, 0.55f * W, 0.1f * W, 0.9f * W, 0.9f * W, step, 0.0f);
+  EXPECT_NEAR(left, surf(0.275f * W, 0), 0.1f * d);
+  EXPECT_NEAR(right, surf(0.725f * W, 0), 0.1f * d);
+}
