@@ -239,6 +239,13 @@ void BulletWorld::bounds(RigidBodyId id, Eigen::Vector3d* lo, Eigen::Vector3d* h
   *hi = impl_->origin + eig(b).cast<double>();
 }
 
+std::vector<RigidBodyId> BulletWorld::bodies() const {
+  std::vector<RigidBodyId> out;
+  for (int i = 0; i < int(impl_->bodies.size()); ++i)
+    if (impl_->bodies[i].body) out.push_back({i, impl_->bodies[i].generation});
+  return out;
+}
+
 int BulletWorld::body_count() const { return int(impl_->bodies.size() - impl_->free_slots.size()); }
 
 void BulletWorld::step(float dt) {

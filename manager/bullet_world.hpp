@@ -76,6 +76,8 @@ class BulletWorld {
   // Axis-aligned bounds of the body's collision shape (m, world).
   void bounds(RigidBodyId id, Eigen::Vector3d* lo, Eigen::Vector3d* hi) const;
   int body_count() const;
+  // Handles of the live bodies, in slot order (deterministic).
+  std::vector<RigidBodyId> bodies() const;
 
   // Advances every body by exactly dt seconds (one Bullet step, no accumulator).
   void step(float dt);

@@ -117,6 +117,34 @@ Result<HeightImage> ParticleDepthRenderer::render(const float* s, std::size_t n,
   return img;
 }
 
+HeightImage render_heights_cpu(const float* s, std::size_t n, int res, float x0, float z0, float x1, float z1,
+                               float floor_y) {
+  HeightImage img;
+  img.width = img.height = res;
+  img.x0 = x0;
+  img.z0 = z0;
+  img.x1 = x1;
+  img.z1 = z1;
+  img.h.assign(std::size_t(res) * res, floor_y);
+  const float du = (x1 - x0) / float(res), dv = (z1 - z0) / float(res);
+  for (std::size_t k = 0; k < n; ++k) {
+    const float cx = s[4 * k], cy = s[4 * k + 1], cz = s[4 * k + 2], r = s[4 * k + 3];
+    const int u0 = std::max(0, int(std::ceil((cx - r - x0) / du - 0.5f)));
+    const int u1 = std::min(res - 1, int(std::floor((cx + r - x0) / du - 0.5f)));
+    const int v0 = std::max(0, int(std::ceil((cz - r - z0) / dv - 0.5f)));
+    const int v1 = std::min(res - 1, int(std::floor((cz + r - z0) / dv - 0.5f)));
+    for (int v = v0; v <= v1; ++v)
+      for (int u = u0; u <= u1; ++u) {
+        const float x = x0 + (u + 0.5f) * du - cx, z = z0 + (v + 0.5f) * dv - cz;
+        const float d2 = x * x + z * z;
+        if (d2 > r * r) continue;
+        float& h = img.h[std::size_t(v) * res + u];
+        h = std::max(h, cy + std::sqrt(r * r - d2));
+      }
+  }
+  return img;
+}
+
 void write_to_heightfield(const HeightImage& image, GridRegion r, Heightfield& hf, int border_width) {
   const float sp = hf.spacing();
   std::vector<float> h(std::size_t(r.ni) * r.nj);

@@ -60,6 +60,12 @@ class ParticleDepthRenderer {
   std::size_t ssbo_bytes_ = 0;
 };
 
+// The same image computed on the CPU (each sphere rasterised over the texels it covers,
+// keeping the highest top): the fallback when no GL context can be made, and the reference
+// the GL path is tested against.
+HeightImage render_heights_cpu(const float* spheres_xyzr, std::size_t n, int resolution, float x0, float z0, float x1,
+                               float z1, float floor_y);
+
 // Writes `image` into `region` of `hf` (footprint means, 3×3 Gaussian over the region,
 // then a Gaussian band of `border_width` samples along the region's border).
 void write_to_heightfield(const HeightImage& image, GridRegion region, Heightfield& hf, int border_width = 1);

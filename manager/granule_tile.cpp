@@ -6,6 +6,8 @@
 #include <numbers>
 #include <unordered_map>
 
+#include <Eigen/Geometry>
+
 #include "particles/bed.hpp"
 
 namespace sandpatch {
@@ -22,17 +24,17 @@ std::array<Vec3, 4> spheres(const PlacedGranule& g, const GranuleShape& s) {
 class SphereGrid {
  public:
   explicit SphereGrid(float cell) : cell_(cell) {}
-  void insert(Vec3 p) { cells_[key(p)].push_back(p); }
-  // True when some stored centre is closer than `dist` to p.
-  bool near(Vec3 p, float dist) const {
+  void insert(Vec3 p, int copy = 0) { cells_[key(p)].push_back({p, copy}); }
+  // True when some stored centre of another copy than `copy` (-1: any) is closer than `dist` to p.
+  bool near(Vec3 p, float dist, int copy = -1) const {
     const auto [i, j, k] = index(p);
     for (int a = -1; a <= 1; ++a)
       for (int b = -1; b <= 1; ++b)
         for (int c = -1; c <= 1; ++c) {
           auto it = cells_.find(pack(i + a, j + b, k + c));
           if (it == cells_.end()) continue;
-          for (const Vec3& q : it->second)
-            if (dot(q - p, q - p) < dist * dist) return true;
+          for (const auto& [q, owner] : it->second)
+            if (owner != copy && dot(q - p, q - p) < dist * dist) return true;
         }
     return false;
   }
@@ -50,7 +52,7 @@ class SphereGrid {
     return pack(i, j, k);
   }
   float cell_;
-  std::unordered_map<std::int64_t, std::vector<Vec3>> cells_;
+  std::unordered_map<std::int64_t, std::vector<std::pair<Vec3, int>>> cells_;
 };
 
 }  // namespace
@@ -92,86 +94,60 @@ std::vector<PlacedGranule> fill_from_tile(const GranuleTile& tile, float width, 
     for (float x = 0; x <= width + probe; x += probe) top = std::max(top, surface(std::min(x, width), std::min(z, depth)));
   const int cx = int(std::ceil(width / P)), cz = int(std::ceil(depth / P)), cy = int(std::ceil(top / Py)) + 1;
   std::vector<PlacedGranule> cand;
+  std::vector<int> cand_copy;  // which copy of the tile a candidate comes from
+  // Odd copies are mirrored (x -> P - x and/or z -> P - z), so across every seam a granule
+  // faces the mirror image of itself: where it touched the settling box's wall, it now
+  // touches its image (granule_tile.hpp).
+  const Eigen::Matrix3f S = (Eigen::Matrix3f() << 1, 0, 0, 0, 0, 1, 0, 1, 0).finished();  // y<->z: a symmetry of the tetrahedron
   for (int b = 0; b < cy; ++b)
     for (int c = 0; c < cz; ++c)
-      for (int a = 0; a < cx; ++a)
+      for (int a = 0; a < cx; ++a) {
+        const bool mx = a % 2 == 1, mz = c % 2 == 1;
+        const Eigen::Matrix3f M = Eigen::Vector3f(mx ? -1.0f : 1.0f, 1.0f, mz ? -1.0f : 1.0f).asDiagonal();
         for (const auto& g : tile.granules) {
-          const Vec3 p{g.position.x + a * P, g.position.y + b * Py, g.position.z + c * P};
+          const Vec3 p{a * P + (mx ? P - g.position.x : g.position.x), g.position.y + b * Py,
+                       c * P + (mz ? P - g.position.z : g.position.z)};
           if (p.x < 0 || p.x >= width || p.z < 0 || p.z >= depth) continue;
           if (p.y > surface(p.x, p.z) + bound) continue;
-          cand.push_back({p, g.orientation});
+          Quat q = g.orientation;
+          if (mx || mz) {
+            const Eigen::Matrix3f R = Eigen::Quaternionf(q.w, q.x, q.y, q.z).toRotationMatrix();
+            // One mirror flips handedness: M R S is a rotation again because S maps the
+            // tetrahedron onto itself with det S = -1. Two mirrors are a rotation already.
+            const Eigen::Quaternionf rq(mx != mz ? Eigen::Matrix3f(M * R * S) : Eigen::Matrix3f(M * R));
+            q = {rq.x(), rq.y(), rq.z(), rq.w()};
+          }
+          cand.push_back({p, q});
+          cand_copy.push_back((b * cz + c) * cx + a);
         }
-  std::stable_sort(cand.begin(), cand.end(),
-                   [](const PlacedGranule& u, const PlacedGranule& v) { return u.position.y < v.position.y; });
+      }
+  std::vector<std::size_t> order(cand.size());
+  for (std::size_t k = 0; k < order.size(); ++k) order[k] = k;
+  std::stable_sort(order.begin(), order.end(),
+                   [&](std::size_t u, std::size_t v) { return cand[u].position.y < cand[v].position.y; });
 
-  // 2. Greedy cut, bottom up: a texel map (step r/2) holds the top of the spheres placed so
-  //    far; the patch is divided into columns of one granule diameter, each with the mean
-  //    surface height it must render at. A candidate is placed when that brings the mean top
-  //    of its column closer to the column's target (and it overlaps nothing placed).
-  const float step = 0.5f * r, col = 2.0f * bound;
-  const int tx = std::max(1, int(std::ceil(width / step))), tz = std::max(1, int(std::ceil(depth / step)));
-  const int ncx = std::max(1, int(std::ceil(width / col))), ncz = std::max(1, int(std::ceil(depth / col)));
-  std::vector<float> texel(std::size_t(tx) * tz, 0.0f);
-  std::vector<double> col_sum(std::size_t(ncx) * ncz, 0.0), col_target(col_sum.size(), 0.0);
-  std::vector<int> col_count(col_sum.size(), 0);
-  auto column_of = [&](float x, float z) {
-    return std::size_t(std::min(ncz - 1, int(z / col))) * ncx + std::size_t(std::min(ncx - 1, int(x / col)));
-  };
-  for (int k = 0; k < tz; ++k)
-    for (int i = 0; i < tx; ++i) {
-      const float x = (i + 0.5f) * step, z = (k + 0.5f) * step;
-      const std::size_t c = column_of(x, z);
-      col_target[c] += surface(std::min(x, width), std::min(z, depth));
-      ++col_count[c];
-    }
-  for (std::size_t c = 0; c < col_sum.size(); ++c) col_target[c] /= std::max(1, col_count[c]);
-
+  // 2. The cut: a granule is kept when its centre lies below surface − surface_offset
+  //    (calibrated when the tile is made so the kept bed renders back at the surface) and it
+  //    overlaps nothing placed; lowest first.
+  // Granules of one copy keep the contacts they had in the settled block (in equilibrium);
+  // across a seam, overlaps are those of the wall contacts doubled (a few % of r); a larger
+  // one (> 10% of r) is left out.
   SphereGrid grid(2.0f * r);
-  const float min_dist = 1.8f * r;  // spheres closer than this overlap by more than 10% of r
+  const float min_dist = 1.8f * r;
   std::vector<PlacedGranule> out;
-  std::vector<std::pair<std::size_t, float>> raised;  // texel index, new top
-  for (const auto& g : cand) {
+  for (std::size_t idx : order) {
+    const PlacedGranule& g = cand[idx];
+    const int copy = cand_copy[idx];
+    if (g.position.y > surface(g.position.x, g.position.z) - tile.surface_offset) continue;
     const auto sph = spheres(g, tile.shape);
     bool clash = false;
-    for (const Vec3& sp : sph) clash = clash || sp.y < 0.5f * r || grid.near(sp, min_dist);
+    // Inside the patch with at most 10% of r overlap against the floor and the patch's
+    // sides (the soil around it holds the granules there).
+    for (const Vec3& sp : sph)
+      clash = clash || sp.y < 0.9f * r || sp.x < 0.9f * r || sp.x > width - 0.9f * r || sp.z < 0.9f * r ||
+              sp.z > depth - 0.9f * r || grid.near(sp, min_dist, copy);
     if (clash) continue;
-    // Texels this granule would raise, and by how much its own column's sum changes.
-    raised.clear();
-    const std::size_t home = column_of(g.position.x, g.position.z);
-    double delta = 0;
-    for (const Vec3& c : sph) {
-      const int i0 = std::max(0, int(std::floor((c.x - r) / step))), i1 = std::min(tx - 1, int((c.x + r) / step));
-      const int k0 = std::max(0, int(std::floor((c.z - r) / step))), k1 = std::min(tz - 1, int((c.z + r) / step));
-      for (int k = k0; k <= k1; ++k)
-        for (int i = i0; i <= i1; ++i) {
-          const float x = (i + 0.5f) * step, z = (k + 0.5f) * step;
-          const float d2 = (x - c.x) * (x - c.x) + (z - c.z) * (z - c.z);
-          if (d2 > r * r) continue;
-          const float h = c.y + std::sqrt(r * r - d2);
-          const std::size_t t = std::size_t(k) * tx + i;
-          if (h <= texel[t]) continue;
-          raised.emplace_back(t, h);
-        }
-    }
-    // Deduplicate per texel (keep the highest) while summing the home column's change.
-    std::sort(raised.begin(), raised.end());
-    for (std::size_t q = 0; q < raised.size(); ++q) {
-      if (q + 1 < raised.size() && raised[q + 1].first == raised[q].first) continue;  // a higher one follows
-      const std::size_t t = raised[q].first;
-      const int i = int(t % std::size_t(tx)), k = int(t / std::size_t(tx));
-      if (column_of((i + 0.5f) * step, (k + 0.5f) * step) == home) delta += raised[q].second - texel[t];
-    }
-    const double n = std::max(1, col_count[home]);
-    const double before = col_sum[home] / n - col_target[home], after = (col_sum[home] + delta) / n - col_target[home];
-    if (std::abs(after) >= std::abs(before)) continue;
-    for (std::size_t q = 0; q < raised.size(); ++q) {
-      if (q + 1 < raised.size() && raised[q + 1].first == raised[q].first) continue;
-      const std::size_t t = raised[q].first;
-      const int i = int(t % std::size_t(tx)), k = int(t / std::size_t(tx));
-      col_sum[column_of((i + 0.5f) * step, (k + 0.5f) * step)] += raised[q].second - texel[t];
-      texel[t] = raised[q].second;
-    }
-    for (const Vec3& sp : sph) grid.insert(sp);
+    for (const Vec3& sp : sph) grid.insert(sp, copy);
     out.push_back(g);
   }
   return out;
@@ -218,22 +194,34 @@ Result<GranuleTile> make_granule_tile(const GranuleTileDef& def) {
   tile.settled_speed = float(sim->max_granule_speed());
   tile.shape = shape;
 
-  // Interior: two bounding diameters from each wall; vertical period: below the rough top.
-  const float margin = 2.0f * bound;
-  tile.period_xz = L - 2.0f * margin;
+  // The whole block is the tile (mirrored copies tile it seamlessly); the vertical period
+  // stops two bounding radii below the highest granule, under the rough top.
+  tile.period_xz = L;
   float ymax = 0;
   for (int b = 0; b < sim->body_count(); ++b) ymax = std::max(ymax, sim->body_position(BodyId{b}).y);
   tile.period_y = ymax - 2.0f * bound;
   for (int b = 0; b < sim->body_count(); ++b) {
     const Vec3 p = sim->body_position(BodyId{b});
-    if (p.x < margin || p.x >= margin + tile.period_xz || p.z < margin || p.z >= margin + tile.period_xz) continue;
     if (p.y >= tile.period_y) continue;
-    tile.granules.push_back({{p.x - margin, p.y, p.z - margin}, sim->body_orientation(BodyId{b})});
+    tile.granules.push_back({p, sim->body_orientation(BodyId{b})});
   }
   const double vg = 4.0 * 4.0 / 3.0 * std::numbers::pi * double(def.radius) * def.radius * def.radius;
   tile.packing_fraction =
       float(double(tile.granules.size()) * vg / (double(tile.period_xz) * tile.period_xz * tile.period_y));
 
+  // Calibrate the cut: flat fills cut at heights spread over the tile's depth must render
+  // back, on average, at their heights.
+  const float W = 2.0f * tile.period_xz, step = 0.5f * def.radius;
+  const int phases = 6;
+  for (int it = 0; it < 3; ++it) {
+    double err = 0;
+    for (int k = 0; k < phases; ++k) {
+      const float H = tile.period_y * (0.25f + 0.5f * float(k) / float(phases - 1));
+      auto g = fill_from_tile(tile, W, W, [&](float, float) { return H; });
+      err += mean_top_height(g, shape, 0.1f * W, 0.1f * W, 0.9f * W, 0.9f * W, step, 0.0f) - H;
+    }
+    tile.surface_offset += float(err / phases);
+  }
   return tile;
 }
 

@@ -1,14 +1,18 @@
 // Pre-settled granule configurations (../shared/DESIGN.md "Heightfield → particles"; the
 // "pregenerated particle configurations" Leach & Marais name as future work, §7).
 //
-// A block of granules is settled once, at start-up, in a walled box; its interior, away
-// from the walls, becomes a tile that repeats in x and z (period P_x = P_z) and in y
-// (period P_y, a flat cut below the rough top). A patch is filled by repeating the tile
-// over the patch and cutting it to the surface, bottom up: the patch is divided into columns
-// one granule wide, and a granule is kept when it brings the mean top of the spheres in its
-// column (what the top-down depth render of §5.2 averages to) closer to the surface there.
-// Granules that would overlap one already placed (at tile seams) are left out. The patch
-// starts at rest because every granule came from a bed at rest.
+// A block of granules is settled once, at start-up, in a walled box of side P; it becomes a
+// tile that repeats in x and z with every other copy mirrored, so that across each seam a
+// granule faces its own mirror image and touches it where it touched the box's wall (the
+// seam holds like the wall did: no gaps, overlaps of a few % of r), and in y with period P_y
+// (a flat cut below the rough top). A patch is filled by repeating the tile
+// over the patch and keeping the granules whose centres lie below the surface minus
+// `surface_offset`, calibrated when the tile is made so that the kept bed's top (what the
+// top-down depth render of §5.2 averages to) renders back at the surface. A smooth cut
+// leaves no granule hanging over a removed one. Granules of different tile copies that would
+// overlap (at the seams) are left out. The patch starts near rest because every granule came
+// from a bed at rest (its contacts' tangential springs start at zero, so it creeps by about
+// a spring's stretch before friction holds it).
 // Fills deeper than P_y stack copies of the tile; the flat-floor layer of one copy does not
 // interlock with the cut top of the copy below, which leaves gaps at the seam (measured:
 // surfaces cut just above a seam render up to 0.35 d low), so the tile is made at least as
@@ -46,6 +50,7 @@ struct GranuleTile {
   float period_y = 0;           // m, vertical repeat
   std::vector<PlacedGranule> granules;  // centres in [0, P_xz) × [0, P_y) × [0, P_xz)
   float packing_fraction = 0;   // granule solid volume / tile volume (measured)
+  float surface_offset = 0;     // m, granule centres are cut this far below the surface (calibrated)
   GranuleShape shape;
   double settle_time = 0;       // s simulated to settle
   float settled_speed = 0;      // m/s, max granule speed when captured

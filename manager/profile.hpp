@@ -12,10 +12,10 @@ namespace sandpatch {
 // In frame order. A stage that has not run in a session is left out of the report.
 enum class Stage : int {
   Spawn,      // bodies whose spawn time has come enter the Bullet world
-  Bodies,     // Bullet advances the bodies one fixed step (heightfield collision outside patches)
   Lod,        // predict contacts, request patches
   Activation, // fill pool slots from the heightfield
-  Dem,        // coupled granule substeps
+  Dem,        // coupled granule substeps; contact forces handed to the bodies
+  Bodies,     // Bullet advances the bodies one fixed step (heightfield collision outside patches)
   Sleep,      // sleep / wake bookkeeping
   Demotion,   // particles -> heightfield, slot back to the pool
   Outputs,    // heightfield exports and images the scene asks for
@@ -23,7 +23,7 @@ enum class Stage : int {
 };
 
 constexpr std::array<const char*, int(Stage::Count)> kStageNames = {
-    "spawn", "bodies", "lod", "activation", "dem", "sleep", "demotion", "outputs"};
+    "spawn", "lod", "activation", "dem", "bodies", "sleep", "demotion", "outputs"};
 
 class Profile {
  public:

@@ -11,11 +11,14 @@
 #include <fstream>
 
 #include "common/hash.hpp"
+#include "gl/context.hpp"
 #include "heightfield/heightfield.hpp"
 #include "heightfield/io.hpp"
 #include "manager/bullet_world.hpp"
 #include "manager/profile.hpp"
 #include "manager/terrain.hpp"
+#include "manager/terrain_manager.hpp"
+#include "render/render.hpp"
 #include "scene/mesh.hpp"
 
 namespace fs = std::filesystem;
@@ -66,7 +69,8 @@ Result<RigidBodyDef> to_rigid_body(const SceneDef& scene, std::size_t index) {
   return d;
 }
 
-std::string expand_pattern(std::string pattern, long long frame, double t, const char* ext) {
+std::string expand_pattern(std::string pattern, long long frame, double t, const char* ext,
+                           const std::string& camera = "") {
   char frame_s[32], time_s[32];
   std::snprintf(frame_s, sizeof frame_s, "%06lld", frame);
   std::snprintf(time_s, sizeof time_s, "%08lld", static_cast<long long>(std::llround(t * 1000.0)));
@@ -76,6 +80,7 @@ std::string expand_pattern(std::string pattern, long long frame, double t, const
   replace("{frame}", frame_s);
   replace("{time_ms}", time_s);
   replace("{ext}", ext);
+  replace("{camera}", camera);
   return pattern;
 }
 
@@ -138,6 +143,117 @@ class ProgressPrinter {
   int next_pct_ = 0;
 };
 
+// The terrain manager's definition from the scene (docs/scene-format.md).
+TerrainManagerDef manager_def(const SceneDef& scene, int threads) {
+  const SimulationDef& sim = scene.simulation;
+  const MaterialDef* mat = scene.terrain.material.empty() ? &scene.materials.front()
+                                                         : scene.find_material(scene.terrain.material);
+  TerrainManagerDef d;
+  d.material.radius = float(mat->granule_radius);
+  d.material.density = float(mat->density);
+  d.material.friction = float(mat->friction);
+  d.material.restitution = float(mat->restitution_value());
+  d.material.stiffness = float(mat->stiffness);
+  d.material.tangential_stiffness_ratio = float(mat->tangential_stiffness_ratio);
+  d.particle_scale = sim.particle_scale;
+  d.slots = sim.pool.slots;
+  d.granules_per_slot = sim.pool.granules_per_slot;
+  d.soil_depth = scene.terrain.soil_depth.value_or(2.0);
+  d.patch_depth = std::min(d.patch_depth, d.soil_depth);
+  d.sleep_speed = sim.sleep.speed_threshold;
+  d.sleep_time = sim.sleep.hold_time;
+  d.idle_timeout = sim.idle_timeout;
+  d.gravity = {sim.gravity[0], sim.gravity[1], sim.gravity[2]};
+  d.threads = threads;
+  d.seed = sim.seed;
+  return d;
+}
+
+// Camera pose at simulated time t: fixed, or linear between path keyframes (held outside).
+render::CameraView camera_at(const CameraDef& c, double t) {
+  render::CameraView v;
+  Eigen::Vector3d p(c.position[0], c.position[1], c.position[2]), q(c.target[0], c.target[1], c.target[2]);
+  if (!c.path.empty()) {
+    auto key = [](const CameraKeyDef& k, Eigen::Vector3d& pos, Eigen::Vector3d& tgt) {
+      pos = {k.position[0], k.position[1], k.position[2]};
+      tgt = {k.target[0], k.target[1], k.target[2]};
+    };
+    key(c.path.front(), p, q);
+    for (std::size_t k = 1; k < c.path.size(); ++k) {
+      const CameraKeyDef& a = c.path[k - 1];
+      const CameraKeyDef& b = c.path[k];
+      if (t < a.time) break;
+      if (t >= b.time) {
+        key(b, p, q);
+        continue;
+      }
+      Eigen::Vector3d pa, qa, pb, qb;
+      key(a, pa, qa);
+      key(b, pb, qb);
+      const double u = (t - a.time) / (b.time - a.time);
+      p = pa + u * (pb - pa);
+      q = qa + u * (qb - qa);
+      break;
+    }
+  }
+  v.position = p;
+  v.target = q;
+  v.fov_deg = float(c.fov_deg);
+  v.width = c.width;
+  v.height = c.height;
+  return v;
+}
+
+// Images of the run: one GL context and one scene renderer, made on the first image.
+class FrameWriter {
+ public:
+  FrameWriter(const Heightfield& hf, TerrainManager& manager) : hf_(hf), manager_(manager) {}
+  bool unavailable() const { return !why_.empty(); }
+  const std::string& why() const { return why_; }
+  void heightfield_changed(const std::vector<GridRegion>& regions) {
+    if (renderer_)
+      for (const auto& r : regions) renderer_->heightfield_changed(r);
+  }
+  // Renders `view` (terrain and the live patches' granules) into `path`.
+  Status write(const render::CameraView& view, const std::string& path) {
+    if (!renderer_ && why_.empty()) {
+      auto ctx = gl::Context::create();
+      if (!ctx) {
+        why_ = ctx.message();
+        return Ok{};
+      }
+      ctx_ = std::move(*ctx);
+      auto r = render::SceneRenderer::create(*ctx_, hf_);
+      if (!r) return r.errors();
+      renderer_ = std::move(*r);
+    }
+    if (!renderer_) return Ok{};
+    if (Status s = ctx_->make_current(); !s) return s;
+    std::vector<float> xyzr;
+    manager_.particles(xyzr);
+    std::unique_ptr<render::ParticleBuffer> buf;
+    if (!xyzr.empty()) {
+      std::vector<Eigen::Vector4f> p(xyzr.size() / 4);
+      for (std::size_t k = 0; k < p.size(); ++k) p[k] = {xyzr[4 * k], xyzr[4 * k + 1], xyzr[4 * k + 2], xyzr[4 * k + 3]};
+      buf = std::make_unique<render::ParticleBuffer>(p);
+      if (Status s = renderer_->set_particles({buf->source({hf_.origin_x(), hf_.origin_y(), hf_.origin_z()})}); !s)
+        return s;
+    } else {
+      renderer_->clear_particles();
+    }
+    Status s = renderer_->render_png(view, path);
+    renderer_->clear_particles();
+    return s;
+  }
+
+ private:
+  const Heightfield& hf_;
+  TerrainManager& manager_;
+  std::unique_ptr<gl::Context> ctx_;
+  std::unique_ptr<render::SceneRenderer> renderer_;
+  std::string why_;
+};
+
 double median(std::vector<double> v) {
   if (v.empty()) return 0;
   std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
@@ -159,6 +275,8 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
   // ---- everything that can be refused is checked before the first frame ----
   if (!opt.backend.empty() && opt.backend != "cpu" && opt.backend != "gl")
     return fail(ExitCode::BadInput, "options", "--backend " + opt.backend + ": allowed values are cpu, gl");
+  if (!opt.final_camera.empty() && !scene.find_camera(opt.final_camera))
+    return fail(ExitCode::BadInput, "options", "--camera " + opt.final_camera + ": the scene has no such camera");
   const std::string backend = opt.backend.empty() ? to_string(sim.backend) : opt.backend;
   const int threads_req = opt.threads >= 0 ? opt.threads : sim.threads;
   const int threads = threads_req > 0 ? threads_req : omp_get_num_procs();
@@ -193,29 +311,27 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
   }
 
   std::vector<std::string> warnings;
-  warnings.push_back(
-      "particles: granular patches are not simulated in this build (the DEM and the terrain manager land with "
-      "issues 3-5); bodies collide with the heightfield only");
   if (backend == "gl")
-    warnings.push_back("backend gl: no DEM patch runs yet, so the backend choice has no effect on this run");
-  std::size_t frames_requested = 0;
-  for (const auto& f : scene.outputs.frames)
-    frames_requested += f.every_k_frames > 0 ? std::size_t(frames / f.every_k_frames) : f.times.size();
-  if (frames_requested > 0)
-    warnings.push_back("outputs.frames: " + std::to_string(frames_requested) +
-                       " image(s) requested, none written: the renderer lands with issue 6");
+    warnings.push_back("backend gl: the GL DEM backend lands with issue 4; granular patches ran on the CPU backend");
 
   auto world_result = BulletWorld::create(hf, vec3f(sim.gravity));
   if (!world_result) return fail(ExitCode::BadInput, "bodies", world_result.message());
   BulletWorld& world = **world_result;
+  auto manager_result = TerrainManager::create(manager_def(scene, threads), hf, world);
+  if (!manager_result) return fail(ExitCode::BadInput, "activation", manager_result.message());
+  TerrainManager& manager = **manager_result;
 
   // ---- the frame loop ----
   Profile profile;
   std::vector<RigidBodyId> ids(scene.bodies.size());
   std::vector<bool> spawned(scene.bodies.size(), false);
   std::vector<std::size_t> next_export(scene.outputs.heightfields.size(), 0);
+  std::vector<std::size_t> next_frame(scene.outputs.frames.size(), 0);
+  FrameWriter images(hf, manager);
+  std::size_t images_skipped = 0;
   std::vector<std::string> written;
   std::vector<double> frame_ms;
+  int peak_granules = 0;
   frame_ms.reserve(std::size_t(frames));
   ProgressPrinter progress(opt.progress, frames, dt);
   const auto t_start = Clock::now();
@@ -246,6 +362,8 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
         spawned[i] = true;
       }
     }
+    if (Status st = manager.before_bodies(t, dt, profile); !st)
+      return fail(ExitCode::RuntimeFailure, "dem", st.message());
     {
       auto timer = profile.time(Stage::Bodies);
       for (int s = 0; s < sim.substeps; ++s) world.step(sub_dt);
@@ -257,19 +375,34 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
                       "body '" + scene.bodies[i].name + "' has a non-finite state at t = " + std::to_string(t + dt) + " s");
       }
     }
+    if (Status st = manager.after_bodies(t, dt, profile); !st)
+      return fail(ExitCode::RuntimeFailure, "demotion", st.message());
+    peak_granules = std::max(peak_granules, manager.granules());
     {
       auto timer = profile.time(Stage::Outputs);
       const double t_end = t + dt;
+      images.heightfield_changed(manager.take_dirty_regions());
+      for (std::size_t k = 0; k < scene.outputs.frames.size(); ++k) {
+        const FrameOutputDef& o = scene.outputs.frames[k];
+        bool due = o.every_k_frames > 0 && (frame + 1) % o.every_k_frames == 0;
+        while (next_frame[k] < o.times.size() && o.times[next_frame[k]] <= t_end + 1e-9) {
+          due = true;
+          ++next_frame[k];
+        }
+        if (!due) continue;
+        const CameraDef* cam = scene.find_camera(o.camera);
+        const fs::path p = out_dir / expand_pattern(o.file, frame + 1, t_end, "png", o.camera);
+        if (Status s = images.write(camera_at(*cam, t_end), p.string()); !s)
+          return fail(ExitCode::RuntimeFailure, "outputs", s.message());
+        if (images.unavailable()) ++images_skipped;
+        else written.push_back(p.string());
+      }
       for (std::size_t k = 0; k < scene.outputs.heightfields.size(); ++k) {
         const auto& o = scene.outputs.heightfields[k];
         while (next_export[k] < o.times.size() && o.times[next_export[k]] <= t_end + 1e-9) {
           if (Status s = export_heightfield(o, frame + 1, t_end); !s)
             return fail(ExitCode::RuntimeFailure, "outputs", s.message());
           ++next_export[k];
-        }
-        if (o.at_end && frame + 1 == frames) {
-          if (Status s = export_heightfield(o, frame + 1, t_end); !s)
-            return fail(ExitCode::RuntimeFailure, "outputs", s.message());
         }
       }
     }
@@ -278,6 +411,43 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
   }
   const double wall_s = std::chrono::duration<double>(Clock::now() - t_start).count();
   progress.update(frames, wall_s, true);
+  {
+    auto timer = profile.time(Stage::Outputs);
+    if (!opt.final_image.empty()) {
+      render::CameraView view;
+      if (const CameraDef* c = opt.final_camera.empty() ? (scene.cameras.empty() ? nullptr : &scene.cameras.front())
+                                                        : scene.find_camera(opt.final_camera)) {
+        view = camera_at(*c, double(frames) * dt);
+      } else {
+        // No camera in the scene: look at the terrain's centre from a corner above it.
+        const double cx = hf.origin_x() + 0.5 * hf.extent_x(), cz = hf.origin_z() + 0.5 * hf.extent_z();
+        const double cy = hf.origin_y() + hf.max_height();
+        view.position = {cx - 0.4 * hf.extent_x(), cy + 0.3 * hf.extent_x(), cz - 0.4 * hf.extent_z()};
+        view.target = {cx, cy - 0.1 * hf.extent_x(), cz};
+        view.width = 640;
+        view.height = 360;
+      }
+      if (Status s = images.write(view, opt.final_image); !s) return fail(ExitCode::RuntimeFailure, "outputs", s.message());
+      if (images.unavailable()) return fail(ExitCode::RuntimeFailure, "outputs", "no image: " + images.why());
+      written.push_back(opt.final_image);
+    }
+  }
+  // The run ends by converting every live patch back, so the final terrain holds its changes.
+  const int live_patches = manager.active_patches();
+  if (Status st = manager.demote_all(double(frames) * dt, profile); !st)
+    return fail(ExitCode::RuntimeFailure, "demotion", st.message());
+  {
+    auto timer = profile.time(Stage::Outputs);
+    images.heightfield_changed(manager.take_dirty_regions());
+    for (const auto& o : scene.outputs.heightfields)
+      if (o.at_end)
+        if (Status s = export_heightfield(o, frames, double(frames) * dt); !s)
+          return fail(ExitCode::RuntimeFailure, "outputs", s.message());
+  }
+
+  if (images_skipped > 0)
+    warnings.push_back("outputs.frames: " + std::to_string(images_skipped) +
+                       " image(s) not written: no OpenGL context: " + images.why());
 
   // ---- the report ----
   Hasher state_hash;
@@ -303,6 +473,7 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
     bodies.push_back(b);
   }
   state_hash.pod(hf.hash());
+  state_hash.pod(manager.state_hash());
 
   const double med = median(frame_ms);
   const double mx = frame_ms.empty() ? 0 : *std::max_element(frame_ms.begin(), frame_ms.end());
@@ -314,19 +485,21 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
   r["threads"] = threads;
   r["dt_s"] = dt;
   r["substeps"] = sim.substeps;
-  r["frames"] = frames;
+  r["frame_count"] = frames;
   r["simulated_s"] = double(frames) * dt;
   r["wall_s"] = wall_s;
   r["real_time_factor"] = wall_s > 0 ? double(frames) * dt / wall_s : 0.0;
   r["stages"] = profile.to_json();
-  r["frame_ms"] = {{"median_ms", med}, {"max_ms", mx}, {"max_over_median", med > 0 ? mx / med : 0.0}};
+  r["frames"] = {{"median_ms", med}, {"max_ms", mx}, {"max_over_median", med > 0 ? mx / med : 0.0}};
   r["counts"] = {{"bodies", scene.bodies.size()},
                  {"bodies_spawned", std::count(spawned.begin(), spawned.end(), true)},
                  {"bodies_at_rest", resting},
                  {"terrain_samples", std::int64_t(hf.samples_x()) * hf.samples_z()},
                  {"terrain_tiles", world.terrain_tile_count()},
-                 {"granules", 0},
-                 {"active_patches", 0}};
+                 {"peak_granules", peak_granules},
+                 {"patches_live_at_end", live_patches}};
+  const nlohmann::ordered_json manager_report = manager.report();
+  for (const auto& [key, value] : manager_report.items()) r[key] = value;
   r["terrain"] = {{"samples_x", hf.samples_x()},
                   {"samples_z", hf.samples_z()},
                   {"spacing_m", hf.spacing()},

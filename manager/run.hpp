@@ -25,6 +25,8 @@ struct RunOptions {
   int threads = -1;           // >= 0 overrides simulation.threads (0 = all hardware threads)
   ProgressStyle progress = ProgressStyle::Auto;  // Auto: a bar on a terminal, plain lines otherwise
   std::string command_line;   // recorded in the report
+  std::string final_image;    // when set: after the last frame, render this PNG (`sandpatch render`)
+  std::string final_camera;   // camera for final_image ("" = the scene's first, or a default view)
 };
 
 struct RunResult {

@@ -53,7 +53,12 @@ inline ContactForce contact_force(const ContactParams& p, Vec3 n, float delta, V
     if (xi2 > 0.0f) {
       Vec3 xr = xi - dot(xi, n) * n;  // rotate into the new tangent plane
       float xr2 = dot(xr, xr);
-      xi = xr2 > 0.0f ? xr * std::sqrt(xi2 / xr2) : Vec3{};
+      // rescale to the old length: sqrt(q), q = xi2/xr2 >= 1. The normal turns by
+      // O(v dt / r) per substep, so q - 1 is tiny and (1 + q)/2 matches sqrt(q) to
+      // (q-1)^2/8; fall back to the sqrt for larger turns.
+      float q = xr2 > 0.0f ? xi2 / xr2 : 0.0f;
+      float sc = q < 1.001f ? 0.5f * (1.0f + q) : std::sqrt(q);
+      xi = xr2 > 0.0f ? xr * sc : Vec3{};
     }
     xi = xi + vt * p.dt;
     const float cap = p.mu * fn;

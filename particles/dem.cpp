@@ -5,6 +5,7 @@
 #include <omp.h>
 
 #include <algorithm>
+#include <cassert>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -110,8 +111,17 @@ struct Simulation::Impl {
   std::vector<std::int32_t> nstart;    // np + 1
   std::vector<std::int32_t> nbr;       // sorted index of the partner
   std::vector<std::int32_t> nbr_id;    // stable id of the partner (history carry-over)
-  std::vector<float> nxi;              // 3 per entry, m
+  std::vector<float> nxi;              // 3 per entry, m (used on owner entries only)
+  // Each pair is computed once, by its owner entry: the sphere with the lower stable id, or
+  // the only side that has an entry (a static partner has no list). mate[e] is the mirrored
+  // entry (j -> i) or -1. The owner writes the pair's force on itself and n x f_t into pf;
+  // then every sphere gathers its entries in list order (fixed order, no atomics).
+  std::vector<std::int32_t> mate;
+  std::vector<std::uint8_t> owner;     // 1 if entry e computes the pair
+  std::vector<std::int32_t> nown;      // per sphere: end of its owner entries ([nstart, nown) own)
+  std::vector<float> pf;               // 8 per entry: f (N), n x f_t (N), touching flag, pad
   std::vector<float> wxi;              // 3 per boundary plane (kWallSlots) per sphere, sorted order
+  std::vector<std::uint32_t> wmask;    // per sphere: bit k = plane k touched at the last substep
 
   // grid
   float r_max = 0, h = 0, inv_h = 0, skin = 0;
@@ -127,6 +137,7 @@ struct Simulation::Impl {
   bool asleep = false;
   double below_time = 0;
   bool has_moving_kinematic = false;
+  float granule_vmax = 0;              // max granule speed after the last substep, m/s
   StepStats stats;
 
   // ---- setup
@@ -153,19 +164,29 @@ struct Simulation::Impl {
   // Rebuild the spheres of body i from its pose and velocity; returns the largest squared
   // displacement of one of them since the last sort.
   float rebuild_body(int i) {
-    Vec3 x = ld3(b.pos, i), v = ld3(b.vel, i), w = ld3(b.omega, i);
-    Quat q = ldq(b.quat, i);
-    float invm = b.mass[4 * i + 1];
+    const Vec3 x = ld3(b.pos, i), v = ld3(b.vel, i), w = ld3(b.omega, i);
+    const Quat q = ldq(b.quat, i);
+    // rotation matrix of q (rows), cheaper than 4 quaternion rotations
+    const float xx = q.x * q.x, yy = q.y * q.y, zz = q.z * q.z, xy = q.x * q.y, xz = q.x * q.z, yz = q.y * q.z,
+                wx = q.w * q.x, wy = q.w * q.y, wz = q.w * q.z;
+    const Vec3 r0{1 - 2 * (yy + zz), 2 * (xy - wz), 2 * (xz + wy)};
+    const Vec3 r1{2 * (xy + wz), 1 - 2 * (xx + zz), 2 * (yz - wx)};
+    const Vec3 r2{2 * (xz - wy), 2 * (yz + wx), 1 - 2 * (xx + yy)};
+    const float invm = b.mass[4 * i + 1];
     float d2max = 0;
-    for (int k = 0; k < b.count[i]; ++k) {
-      int s = slot_of[b.first[i] + k];
-      Vec3 arm = rotate(q, ld3(p.offset, s));
-      Vec3 xs = x + arm;
-      st3(p.pos, s, xs);
-      st3(p.vel, s, v + cross(w, arm));
-      p.vel[4 * s + 3] = invm;
-      st3(p.omega, s, w);
-      Vec3 d = xs - ld3(pos_at_sort, s);
+    for (int k = 0, first = b.first[i], cnt = b.count[i]; k < cnt; ++k) {
+      const int s = slot_of[first + k];
+      const Vec3 o = ld3(p.offset, s);
+      const Vec3 arm{dot(r0, o), dot(r1, o), dot(r2, o)};
+      const Vec3 xs = x + arm;
+      const Vec3 us = v + cross(w, arm);
+      float* P = &p.pos[4 * s];
+      float* U = &p.vel[4 * s];
+      float* Wp = &p.omega[4 * s];
+      P[0] = xs.x, P[1] = xs.y, P[2] = xs.z;
+      U[0] = us.x, U[1] = us.y, U[2] = us.z, U[3] = invm;
+      Wp[0] = w.x, Wp[1] = w.y, Wp[2] = w.z;
+      const Vec3 d = xs - ld3(pos_at_sort, s);
       d2max = std::max(d2max, dot(d, d));
     }
     return d2max;
@@ -194,6 +215,7 @@ struct Simulation::Impl {
     SANDPATCH_PARTICLE_FIELDS(SP_PERMUTE)
 #undef SP_PERMUTE
     permute(wxi, 3 * kWallSlots);
+    permute(wmask, 1);
     cell.resize(np);
     for (int s = 0; s < np; ++s) cell[dest[s]] = c[s];
     for (int s = 0; s < np; ++s) slot_of[p.id[s]] = s;
@@ -250,6 +272,8 @@ struct Simulation::Impl {
     nbr.resize(nstart[n]);
     nbr_id.resize(nstart[n]);
     nxi.assign(std::size_t(nstart[n]) * 3, 0.0f);
+    nown.assign(n, 0);
+    for (int i = 0; i < n; ++i) nown[i] = nstart[i];
 #pragma omp parallel for num_threads(threads) schedule(dynamic, 256) if (n > 4096)
     for (int i = 0; i < n; ++i) {
       if (b.flags[p.body[i]] & kBodyStatic) continue;
@@ -257,19 +281,44 @@ struct Simulation::Impl {
       const int id = p.id[i];
       const int oi = id < int(old_slot.size()) ? old_slot[id] : -1;
       const bool has_old = oi >= 0 && oi < old_np;
-      for_near(i, [&](int j) {
-        nbr[e] = j;
-        nbr_id[e] = p.id[j];
-        if (has_old)
-          for (int k = ostart[oi]; k < ostart[oi + 1]; ++k)
-            if (onbr_id[k] == p.id[j]) {
-              nxi[3 * e] = oxi[3 * k];
-              nxi[3 * e + 1] = oxi[3 * k + 1];
-              nxi[3 * e + 2] = oxi[3 * k + 2];
-              break;
-            }
-        ++e;
-      });
+      // owner entries first (the pair pass walks only those), then the mirrored ones
+      for (int pass = 0; pass < 2; ++pass) {
+        for_near(i, [&](int j) {
+          const bool own = (b.flags[p.body[j]] & kBodyStatic) || id < p.id[j];
+          if (own != (pass == 0)) return;
+          nbr[e] = j;
+          nbr_id[e] = p.id[j];
+          if (has_old && own)
+            for (int k = ostart[oi]; k < ostart[oi + 1]; ++k)
+              if (onbr_id[k] == p.id[j]) {
+                nxi[3 * e] = oxi[3 * k];
+                nxi[3 * e + 1] = oxi[3 * k + 1];
+                nxi[3 * e + 2] = oxi[3 * k + 2];
+                break;
+              }
+          ++e;
+        });
+        if (pass == 0) nown[i] = e;
+      }
+    }
+    // mirrored entries and ownership (by stable id, so it survives re-sorts with the springs)
+    mate.resize(nstart[n]);
+    owner.resize(nstart[n]);
+    pf.assign(std::size_t(nstart[n]) * 8, 0.0f);
+#pragma omp parallel for num_threads(threads) schedule(dynamic, 256) if (n > 4096)
+    for (int i = 0; i < n; ++i) {
+      for (int e = nstart[i]; e < nstart[i + 1]; ++e) {
+        const int j = nbr[e];
+        int m = -1;
+        for (int k = nstart[j]; k < nstart[j + 1]; ++k)
+          if (nbr[k] == i) {
+            m = k;
+            break;
+          }
+        mate[e] = m;
+        owner[e] = e < nown[i] ? 1 : 0;
+        assert(owner[e] == ((m < 0 || p.id[i] < p.id[j]) ? 1 : 0));
+      }
     }
   }
 
@@ -311,6 +360,7 @@ struct Simulation::Impl {
     const std::int32_t* NB = nbr.data();
     float* XI = nxi.data();
     float* WX = wxi.data();
+    std::uint32_t* WM = wmask.data();
     float* FO = p.force.data();
     float* TO = p.torque.data();
     const std::uint32_t* BF = b.flags.data();
@@ -321,7 +371,68 @@ struct Simulation::Impl {
     std::int64_t npairs = 0, nwall = 0;
     const int n = np;
 
-#pragma omp parallel for num_threads(threads) schedule(dynamic, 512) reduction(+ : npairs, nwall) if (n > 4096)
+    const std::int32_t* MT = mate.data();
+    const std::int32_t* NO = nown.data();
+    float* PF = pf.data();
+#pragma omp parallel num_threads(threads) if (n > 4096)
+    {
+    // pair pass: each owner entry computes its pair once
+#pragma omp for schedule(dynamic, 512) reduction(+ : npairs)
+    for (int i = 0; i < n; ++i) {
+      const int e0 = NS[i], e1 = NO[i];
+      if (e0 == e1) continue;
+      const Vec3 pi{P[4 * i], P[4 * i + 1], P[4 * i + 2]};
+      const float ri = P[4 * i + 3];
+      const Vec3 ui{V[4 * i], V[4 * i + 1], V[4 * i + 2]};
+      const float invm_i = V[4 * i + 3];
+      const Vec3 rwi = ri * Vec3{W[4 * i], W[4 * i + 1], W[4 * i + 2]};
+      float last_invm_j = -1.0f, last_cn = 0.0f;
+      for (int e = e0; e < e1; ++e) {
+        const int j = NB[e];
+        const float dx = pi.x - P[4 * j], dy = pi.y - P[4 * j + 1], dz = pi.z - P[4 * j + 2];
+        const float rj = P[4 * j + 3];
+        const float rs = ri + rj;
+        const float d2 = dx * dx + dy * dy + dz * dz;
+        float* xe = XI + 3 * std::size_t(e);
+        float* q = PF + 8 * std::size_t(e);
+        if (d2 >= rs * rs || d2 <= 0.0f) {  // not touching: the spring is forgotten
+          q[0] = q[1] = q[2] = q[3] = q[4] = q[5] = 0.0f;
+          if (xe[0] != 0.0f || xe[1] != 0.0f || xe[2] != 0.0f) xe[0] = xe[1] = xe[2] = 0.0f;
+          continue;
+        }
+        ++npairs;
+        const float inv = 1.0f / std::sqrt(d2);
+        const float dist = d2 * inv;
+        const Vec3 nrm{dx * inv, dy * inv, dz * inv};
+        const Vec3 uj{V[4 * j], V[4 * j + 1], V[4 * j + 2]};
+        const Vec3 rwj = rj * Vec3{W[4 * j], W[4 * j + 1], W[4 * j + 2]};
+        // contact-point velocity: (u_i + w_i x (-r_i n)) - (u_j + w_j x (r_j n))
+        const Vec3 v = (ui - uj) + cross(nrm, rwi + rwj);
+        // c_n = 2 zeta sqrt(k_n m_eff); granule beds repeat the same mass pair, so the
+        // last value is reused when the partner's inverse mass is the same
+        const float invm_j = V[4 * j + 3];
+        if (invm_j != last_invm_j) {
+          last_invm_j = invm_j;
+          last_cn = cn0 / std::sqrt(invm_i + invm_j);
+        }
+        const float cn = last_cn;
+        Vec3 xi{xe[0], xe[1], xe[2]};  // zero for a new contact; carried over on rebuilds
+        ContactParams cp{kn, cn, kt, ctr * cn, mu, kb, dt, kBell};
+        ContactForce cf = contact_force(cp, nrm, rs - dist, v, xi);
+        xe[0] = xi.x;
+        xe[1] = xi.y;
+        xe[2] = xi.z;
+        const Vec3 c = cross(nrm, cf.ft);
+        q[0] = cf.f.x;
+        q[1] = cf.f.y;
+        q[2] = cf.f.z;
+        q[3] = c.x;
+        q[4] = c.y;
+        q[5] = c.z;
+      }
+    }
+    // sphere pass: gather pairs in list order, add the boundaries
+#pragma omp for schedule(dynamic, 512) reduction(+ : nwall)
     for (int i = 0; i < n; ++i) {
       Vec3 F{}, T{};
       float E = 0;
@@ -332,51 +443,36 @@ struct Simulation::Impl {
         const float invm_i = V[4 * i + 3];
         const Vec3 wi{W[4 * i], W[4 * i + 1], W[4 * i + 2]};
 
-        // sphere-sphere
-        for (int e = NS[i], e1 = NS[i + 1]; e < e1; ++e) {
-          const int j = NB[e];
-          const float dx = pi.x - P[4 * j], dy = pi.y - P[4 * j + 1], dz = pi.z - P[4 * j + 2];
-          const float rj = P[4 * j + 3];
-          const float rs = ri + rj;
-          const float d2 = dx * dx + dy * dy + dz * dz;
-          float* xe = XI + 3 * std::size_t(e);
-          if (d2 >= rs * rs || d2 <= 0.0f) {  // not touching: the spring is forgotten
-            xe[0] = xe[1] = xe[2] = 0.0f;
-            continue;
-          }
-          ++npairs;
-          const float inv = 1.0f / std::sqrt(d2);
-          const float dist = d2 * inv;
-          const Vec3 nrm{dx * inv, dy * inv, dz * inv};
-          const Vec3 uj{V[4 * j], V[4 * j + 1], V[4 * j + 2]};
-          const Vec3 wj{W[4 * j], W[4 * j + 1], W[4 * j + 2]};
-          const Vec3 v = (ui + cross(wi, nrm * (-ri))) - (uj + cross(wj, nrm * rj));
-          const float cn = cn0 / std::sqrt(invm_i + V[4 * j + 3]);
-          Vec3 xi{xe[0], xe[1], xe[2]};
-          ContactParams cp{kn, cn, kt, ctr * cn, mu, kb, dt, kBell};
-          ContactForce cf = contact_force(cp, nrm, rs - dist, v, xi);
-          xe[0] = xi.x;
-          xe[1] = xi.y;
-          xe[2] = xi.z;
-          F = F + cf.f;
-          T = T + cross(nrm * (-ri), cf.ft);
-          E += cf.energy;
+        // sphere-sphere: own entries from this substep's pair pass, mirrored ones negated
+        // (entries not touching hold zeros, so the sums need no branch)
+        Vec3 C{};
+        for (int e = NS[i], e1 = NO[i]; e < e1; ++e) {
+          const float* q = PF + 8 * std::size_t(e);
+          F = F + Vec3{q[0], q[1], q[2]};
+          C = C + Vec3{q[3], q[4], q[5]};
         }
-        E *= 0.5f;  // each pair is gathered by both spheres
+        for (int e = NO[i], e1 = NS[i + 1]; e < e1; ++e) {
+          const float* q = PF + 8 * std::size_t(MT[e]);
+          F = F - Vec3{q[0], q[1], q[2]};
+          C = C + Vec3{q[3], q[4], q[5]};
+        }
+        T = T + (-ri) * C;
 
-        // boundaries: static planes (floor, side walls) and the terrain outside the fill
+        // boundaries: static planes (floor, side walls) and the terrain outside the fill.
+        // WM[i] has bit k set while plane k touched the sphere at the last substep; a plane
+        // contact that was not in the mask starts with a fresh spring.
         if (invm_i > 0.0f) {
           const float cnw = cn0 / std::sqrt(invm_i);
           float* wx = WX + std::size_t(i) * 3 * kWallSlots;
-          auto plane = [&](int slot, Vec3 nrm, float dist) {
+          const std::uint32_t old_mask = WM[i];
+          std::uint32_t mask = 0;
+          auto plane = [&](int slot, Vec3 nrm, float dist) __attribute__((always_inline)) {
             float* xe = wx + 3 * slot;
-            if (dist >= ri) {
-              xe[0] = xe[1] = xe[2] = 0.0f;
-              return;
-            }
             ++nwall;
+            mask |= 1u << slot;
             const Vec3 v = ui + cross(wi, nrm * (-ri));
-            Vec3 xi{xe[0], xe[1], xe[2]};
+            Vec3 xi{};
+            if (old_mask & (1u << slot)) xi = {xe[0], xe[1], xe[2]};
             ContactParams cp{kn, cnw, kt, ctr * cnw, mu, kb, dt, kBell};
             ContactForce cf = contact_force(cp, nrm, ri - dist, v, xi);
             xe[0] = xi.x;
@@ -386,23 +482,36 @@ struct Simulation::Impl {
             T = T + cross(nrm * (-ri), cf.ft);
             E += cf.energy;
           };
-          plane(0, {0, 1, 0}, pi.y - floor_y);
+          if (pi.y - floor_y < ri) plane(0, {0, 1, 0}, pi.y - floor_y);
           if (walls) {
-            plane(1, {1, 0, 0}, pi.x - bmin.x);
-            plane(2, {-1, 0, 0}, bmax.x - pi.x);
-            plane(3, {0, 0, 1}, pi.z - bmin.z);
-            plane(4, {0, 0, -1}, bmax.z - pi.z);
+            if (pi.x - bmin.x < ri) plane(1, {1, 0, 0}, pi.x - bmin.x);
+            if (bmax.x - pi.x < ri) plane(2, {-1, 0, 0}, bmax.x - pi.x);
+            if (pi.z - bmin.z < ri) plane(3, {0, 0, 1}, pi.z - bmin.z);
+            if (bmax.z - pi.z < ri) plane(4, {0, 0, -1}, bmax.z - pi.z);
           }
           if (terrain) {
+            // The terrain outside the filled rectangle is solid up to its surface h(x, z):
+            // outside, a sphere rests on the surface; inside, the rectangle's sides are walls
+            // up to the outside surface, so the granules of a patch are held by the soil
+            // around them and can still spill over the top onto the terrain.
             const TerrainGrid& tg = def.terrain;
             if (pi.x < tg.fill_min_x || pi.x > tg.fill_max_x || pi.z < tg.fill_min_z || pi.z > tg.fill_max_z) {
               const float hh = tg.height(pi.x, pi.z);
               const Vec3 tn = tg.normal(pi.x, pi.z);
-              plane(5, tn, (pi.y - hh) * tn.y);
-            } else {
-              plane(5, {0, 1, 0}, 1e30f);
+              const float dist = (pi.y - hh) * tn.y;
+              if (dist < ri) plane(5, tn, dist);
+            } else if (!walls) {
+              if (pi.x - tg.fill_min_x < ri && pi.y < tg.height(tg.fill_min_x - ri, pi.z))
+                plane(1, {1, 0, 0}, pi.x - tg.fill_min_x);
+              if (tg.fill_max_x - pi.x < ri && pi.y < tg.height(tg.fill_max_x + ri, pi.z))
+                plane(2, {-1, 0, 0}, tg.fill_max_x - pi.x);
+              if (pi.z - tg.fill_min_z < ri && pi.y < tg.height(pi.x, tg.fill_min_z - ri))
+                plane(3, {0, 0, 1}, pi.z - tg.fill_min_z);
+              if (tg.fill_max_z - pi.z < ri && pi.y < tg.height(pi.x, tg.fill_max_z + ri))
+                plane(4, {0, 0, -1}, tg.fill_max_z - pi.z);
             }
           }
+          WM[i] = mask;
         }
       }
       FO[4 * i] = F.x;
@@ -413,17 +522,20 @@ struct Simulation::Impl {
       TO[4 * i + 1] = T.y;
       TO[4 * i + 2] = T.z;
     }
-    stats.contacts = npairs / 2;
+    }  // omp parallel
+    stats.contacts = npairs;
     stats.wall_contacts = nwall;
+    stats.neighbour_entries = nstart.empty() ? 0 : nstart[np];
   }
 
   // ---- body stage: sum the spheres' forces in id order, integrate, rebuild the spheres
   bool bodies(float dt, float* d2max_out) {
     const Vec3 g = gravity;
-    float d2max = 0;
+    const float reach = shape.centre_distance + shape.radius;
+    float d2max = 0, vmax = 0;
     int bad = 0;
     const int n = nb;
-#pragma omp parallel for num_threads(threads) schedule(static) reduction(max : d2max) reduction(+ : bad) if (n > 2048)
+#pragma omp parallel for num_threads(threads) schedule(static) reduction(max : d2max, vmax) reduction(+ : bad) if (n > 2048)
     for (int i = 0; i < n; ++i) {
       const std::uint32_t fl = b.flags[i];
       const Vec3 x = ld3(b.pos, i);
@@ -455,6 +567,7 @@ struct Simulation::Impl {
         }
         st3(b.vel, i, v);
         st3(b.omega, i, w);
+        if (fl & kBodyGranule) vmax = std::max(vmax, std::sqrt(dot(v, v)) + std::sqrt(dot(w, w)) * reach);
       }
       Vec3 xn = x + dt * v;
       Quat dq{w.x, w.y, w.z, 0.0f};
@@ -466,6 +579,7 @@ struct Simulation::Impl {
       d2max = std::max(d2max, rebuild_body(i));
     }
     *d2max_out = d2max;
+    granule_vmax = vmax;
     return bad == 0;
   }
 
@@ -566,6 +680,7 @@ struct Simulation::Impl {
       p.pos[4 * s + 3] = one_radius ? radii[0] : radii[k];
       for (int c = 0; c < 3; ++c) pos_at_sort[4 * s + c] = std::numeric_limits<float>::infinity();
       for (int kk = 0; kk < 3 * kWallSlots; ++kk) wxi[std::size_t(s) * 3 * kWallSlots + kk] = 0.0f;
+      wmask[s] = 0;
     }
     rebuild_body(i);
     need_sort = true;
@@ -643,6 +758,7 @@ Result<Simulation> Simulation::create(const SimulationDef& d) {
   s.cell.assign(d.max_particles, 0);
   s.pos_at_sort.assign(std::size_t(d.max_particles) * 4, 0.0f);
   s.wxi.assign(std::size_t(d.max_particles) * 3 * kWallSlots, 0.0f);
+  s.wmask.assign(d.max_particles, 0u);
   s.size_grid();
   return Simulation(std::move(im));
 }
@@ -772,7 +888,7 @@ Status Simulation::step(double dt_frame) {
   for (int k = 0; k < *ns; ++k)
     if (auto st = s.substep(dt); !st) return st;
   // sleep bookkeeping
-  if (s.max_granule_speed() < s.def.sleep_speed) {
+  if (s.granule_vmax < s.def.sleep_speed) {
     s.below_time += dt_frame;
     if (s.below_time >= s.def.sleep_time && s.def.sleep_time > 0) s.asleep = true;
   } else {
@@ -866,10 +982,12 @@ double Simulation::potential_energy() const {
     }
     if (m.shear == ShearLaw::SpringHistory && i < int(s.nstart.size()) - 1) {
       for (int k = s.nstart[i]; k < s.nstart[i + 1]; ++k) {
+        if (!s.owner[k]) continue;  // the pair's spring lives on its owner entry
         const float* x = &s.nxi[3 * std::size_t(k)];
-        e += 0.25 * kt * (double(x[0]) * x[0] + double(x[1]) * x[1] + double(x[2]) * x[2]);  // pair on both
+        e += 0.5 * kt * (double(x[0]) * x[0] + double(x[1]) * x[1] + double(x[2]) * x[2]);
       }
       for (int k = 0; k < kWallSlots; ++k) {
+        if (!(s.wmask[i] & (1u << k))) continue;
         const float* x = &s.wxi[(std::size_t(i) * kWallSlots + k) * 3];
         e += 0.5 * kt * (double(x[0]) * x[0] + double(x[1]) * x[1] + double(x[2]) * x[2]);
       }
@@ -892,6 +1010,58 @@ std::uint64_t Simulation::state_hash() const {
   SANDPATCH_PARTICLE_FIELDS(SP_HASH_P)
 #undef SP_HASH_P
   return h.value();
+}
+
+// ---- control from the terrain manager ----
+
+Status Simulation::reset(const SimulationDef& d) {
+  const SimulationDef& cur = impl_->def;
+  if (d.max_bodies > cur.max_bodies)
+    return Error{"", "reset.max_bodies", std::to_string(d.max_bodies),
+                 "must not exceed the slot's capacity " + std::to_string(cur.max_bodies), ""};
+  if (d.max_particles > cur.max_particles)
+    return Error{"", "reset.max_particles", std::to_string(d.max_particles),
+                 "must not exceed the slot's capacity " + std::to_string(cur.max_particles), ""};
+  auto fresh = create(d);
+  if (!fresh) return fresh.errors();
+  *this = std::move(*fresh);
+  return Ok{};
+}
+
+Status Simulation::set_body_state(BodyId id, Vec3 x, Quat q, Vec3 v, Vec3 w) {
+  Impl& s = *impl_;
+  if (id.index < 0 || id.index >= s.nb)
+    return Error{"", "set_body_state.body", std::to_string(id.index), "must be a body of this simulation", ""};
+  if (s.b.flags[id.index] & kBodyParked)
+    return Error{"", "set_body_state.body", std::to_string(id.index), "is disabled; enable it first", ""};
+  st3(s.b.pos, id.index, x);
+  stq(s.b.quat, id.index, normalized(q));
+  st3(s.b.vel, id.index, v);
+  st3(s.b.omega, id.index, w);
+  wake();
+  return Ok{};
+}
+
+Status Simulation::set_body_enabled(BodyId id, bool enabled) {
+  Impl& s = *impl_;
+  if (id.index < 0 || id.index >= s.nb)
+    return Error{"", "set_body_enabled.body", std::to_string(id.index), "must be a body of this simulation", ""};
+  std::uint32_t& f = s.b.flags[id.index];
+  const std::uint32_t motion = kBodyStatic | kBodyKinematic | kBodyDynamic;
+  const bool parked = f & kBodyParked;
+  if (enabled == !parked) return Ok{};
+  if (!enabled) {
+    f = (f & ~motion) | kBodyStatic | kBodyParked | ((f & motion) << 8);
+    const Vec3 far{0.5f * (s.def.bounds_min.x + s.def.bounds_max.x), s.def.bounds_max.y + 1000.0f,
+                   0.5f * (s.def.bounds_min.z + s.def.bounds_max.z)};
+    st3(s.b.pos, id.index, far);
+    st3(s.b.vel, id.index, Vec3{});
+    st3(s.b.omega, id.index, Vec3{});
+  } else {
+    f = (f & ~(motion | kBodyParked | (motion << 8))) | ((f >> 8) & motion);
+  }
+  wake();
+  return Ok{};
 }
 
 }  // namespace sandpatch

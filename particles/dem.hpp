@@ -43,8 +43,10 @@ struct BodyId {
 
 // Terrain outside the filled region as a small regular height grid (sim units): height
 // h(x, z) is bilinear between samples heights[iz * nx + ix] at (x0 + ix*spacing,
-// z0 + iz*spacing), clamped at the grid edge. Spheres whose (x, z) lie outside the filled
-// rectangle [fill_min, fill_max] rest on the plane through h with the grid's normal.
+// z0 + iz*spacing), clamped at the grid edge. The terrain is solid up to h: spheres whose
+// (x, z) lie outside the filled rectangle [fill_min, fill_max] rest on the plane through h
+// with the grid's normal; inside, the rectangle's sides are walls up to the outside h (when
+// side_walls is off), so a patch is held by the soil around it.
 struct TerrainGrid {
   int nx = 0, nz = 0;
   float x0 = 0, z0 = 0, spacing = 1;
@@ -108,7 +110,8 @@ struct StepStats {
   double substep_dt = 0;                 // s
   std::int64_t contacts = 0;             // sphere-sphere contacts (pairs) at the last substep
   std::int64_t wall_contacts = 0;        // sphere-floor/wall/terrain contacts, last substep
-  int resorts = 0;                       // grid rebuilds this step
+  std::int64_t neighbour_entries = 0;    // entries of the neighbour list (pairs examined x 2)
+  int resorts = 0;                       // grid + neighbour-list rebuilds this step
   bool slept = false;                    // the step did nothing because the sim was asleep
 };
 
@@ -125,6 +128,17 @@ class Simulation {
   Result<BodyId> add_shell(const ShellDef& shell);
   // Kinematic shells: velocity used by the integrator (m/s, rad/s). Wakes the simulation.
   Status set_kinematic_velocity(BodyId b, Vec3 velocity, Vec3 angular_velocity);
+
+  // ---- control from the terrain manager (manager/terrain_manager.cpp) ----
+  // Empties the simulation and takes a new definition (domain, terrain, material, scale)
+  // whose capacities do not exceed this one's: a pool slot is reused for the next patch.
+  // (It reallocates arrays of the same size today; keeping them is an open optimisation.)
+  Status reset(const SimulationDef& def);
+  // Sets a body's state (sim units): a shell that follows its Bullet body. Wakes the sim.
+  Status set_body_state(BodyId b, Vec3 position, Quat orientation, Vec3 velocity, Vec3 angular_velocity);
+  // A disabled body is parked: static, far above the domain, in contact with nothing, until
+  // enabled again (then set its state). For shells of bodies that left the patch.
+  Status set_body_enabled(BodyId b, bool enabled);
 
   // Advances dt_frame seconds in substeps of dt_frame / n, n = substeps_for(dt_frame).
   // Refuses (Error naming the parameter) when n would exceed max_substeps, and stops with an

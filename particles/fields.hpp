@@ -55,6 +55,7 @@ enum BodyFlags : std::uint32_t {
   kBodyStatic = 1u << 1,     // never moves
   kBodyKinematic = 1u << 2,  // moves with an externally set velocity, ignores forces
   kBodyDynamic = 1u << 3,    // integrated from forces (granules are always dynamic)
+  kBodyParked = 1u << 4,     // disabled by the manager: static, parked; its own motion bits << 8
 };
 
 }  // namespace sandpatch

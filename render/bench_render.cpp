@@ -91,6 +91,10 @@ double draw_full_grid(const FullGrid& g, const Eigen::Matrix4f& view_proj, const
   glBindVertexArray(g.vao);
   glDrawArraysInstanced(GL_TRIANGLE_STRIP, 0, 2 * g.nx, g.nz - 1);
   glBindVertexArray(0);
+  // Read the image back as SceneRenderer::render does, so both times cover the same work.
+  std::vector<std::uint8_t> pixels(std::size_t(w) * h * 4);
+  glPixelStorei(GL_PACK_ALIGNMENT, 1);
+  glReadPixels(0, 0, w, h, GL_RGBA, GL_UNSIGNED_BYTE, pixels.data());
   glFinish();
   glBindFramebuffer(GL_FRAMEBUFFER, 0);
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
@@ -139,16 +143,17 @@ int run_bench_render(const BenchRenderArgs& a_in) {
       std::fprintf(stderr, "bench render: %s", hf.message().c_str());
       return 1;
     }
-    // The same camera for every size: near a corner, 30 m above the ground, looking along the
-    // diagonal; the far plane (900 m) keeps the view inside the smallest terrain.
+    // The same camera for every size: 30 m above the ground at (200, 200), looking along the
+    // diagonal; the far plane (500 m; the frustum's corners reach ~780 m) keeps the whole view
+    // inside the smallest terrain, so every size sees the same ground.
     CameraView cam;
-    cam.position = {100.0, double(hf->sample(100, 100)) + 30.0, 100.0};
-    cam.target = {600.0, double(hf->sample(600, 600)), 600.0};
+    cam.position = {200.0, double(hf->sample(200, 200)) + 30.0, 200.0};
+    cam.target = {700.0, double(hf->sample(700, 700)), 700.0};
     cam.fov_deg = 60;
     cam.width = a.width;
     cam.height = a.height;
     cam.near_m = 0.5f;
-    cam.far_m = 900.0f;
+    cam.far_m = 500.0f;
     RendererDef def;
     auto sr = SceneRenderer::create(**ctx, *hf, def);
     if (!sr) {

@@ -93,6 +93,7 @@ void SceneRenderer::ensure_framebuffer(int w, int h) {
 Result<Image> SceneRenderer::render(const CameraView& cam) {
   if (auto st = validate(cam); !st) return st.errors();
   const auto t0 = std::chrono::steady_clock::now();
+  gl::Context::drain_errors();  // errors of earlier stages are theirs to report, not this frame's
   // The precision boundary: world (double) -> heightfield-local (float).
   const Eigen::Vector3d origin(hf_->origin_x(), hf_->origin_y(), hf_->origin_z());
   const Eigen::Vector3f eye = (cam.position - origin).cast<float>();

@@ -82,7 +82,8 @@ class SceneRenderer {
   SceneRenderer(const SceneRenderer&) = delete;
   SceneRenderer& operator=(const SceneRenderer&) = delete;
 
-  // Renders one frame and reads it back (top row first).
+  // Renders one frame and reads it back (top row first). The context given to create() must be
+  // current on the calling thread.
   Result<Image> render(const CameraView& camera);
   // render() and save_png() (atomic: temporary file + rename). Errors name the path.
   Status render_png(const CameraView& camera, const std::string& path);

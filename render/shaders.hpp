@@ -1,5 +1,5 @@
 // The render/ GLSL programs, built from the sources embedded at build time
-// (shaders/render/*, render/embed_shaders.cmake). shaders/render/common.glsl is inserted after
+// (shaders/render/*, embedded by the shaders/ library). shaders/render/common.glsl is inserted after
 // each stage's #version line. Needs a current GL context.
 #pragma once
 

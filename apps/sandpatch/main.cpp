@@ -1,8 +1,10 @@
 // sandpatch: the command-line program (docs/cli.md).
 //   sandpatch run [SCENE] [--out DIR] [--seconds S | --frames N] [--backend cpu|gl] [--threads T]
+//   sandpatch render [SCENE] --at T [--camera NAME] [--image FILE] [--out DIR]
 //   sandpatch check SCENE
 //   sandpatch info
 //   sandpatch bench dem [--granules N] [--steps S] [--backend cpu|gl] [--threads T] [--json]
+//   sandpatch bench render [--terrain N]... [--frames F] [--width W] [--height H] [--json]
 // Exit codes: 0 ok, 1 runtime failure (with the stage that failed), 2 bad input.
 #include <CLI/CLI.hpp>
 #include <Eigen/Core>
@@ -11,6 +13,7 @@
 #include <omp.h>
 #include <png.h>
 
+#include <cmath>
 #include <cstdio>
 #include <iostream>
 #include <nlohmann/json.hpp>
@@ -19,6 +22,7 @@
 #include "bench/bench.hpp"
 #include "gl/context.hpp"
 #include "manager/run.hpp"
+#include "render/render.hpp"
 #include "scene/scene.hpp"
 
 using namespace sandpatch;
@@ -79,6 +83,15 @@ int main(int argc, char** argv) {
   run->add_option("--threads", threads, "Worker threads (0 = all)")->check(CLI::NonNegativeNumber);
   run->add_flag("--quiet", quiet, "No progress output");
 
+  std::string render_scene, render_image, render_camera, render_out;
+  double render_at = 0;
+  auto* rend = app.add_subcommand("render", "Run a scene to time T and write one picture (PNG)");
+  rend->add_option("scene", render_scene, "Scene file; omitted = the embedded default");
+  rend->add_option("--at", render_at, "Simulated time of the picture (s)")->required()->check(CLI::NonNegativeNumber);
+  rend->add_option("--camera", render_camera, "Camera of the scene (default: its first, or a view of the whole terrain)");
+  rend->add_option("--image", render_image, "PNG to write (default: DIR/render_<ms>.png)");
+  rend->add_option("--out", render_out, "Output directory for the report (default: out/<scene name>)");
+
   std::string check_path;
   auto* check = app.add_subcommand("check", "Validate a scene file and exit (0 valid, 2 invalid)");
   check->add_option("scene", check_path, "Scene file")->required();
@@ -94,6 +107,14 @@ int main(int argc, char** argv) {
   bdem->add_option("--backend", dem.backend, "DEM backend")->check(CLI::IsMember({"cpu", "gl"}));
   bdem->add_option("--threads", dem.threads, "Worker threads (0 = all)")->check(CLI::NonNegativeNumber);
   bdem->add_flag("--json", dem.json, "Print one JSON object on the last line");
+  render::BenchRenderArgs brend;
+  auto* bren = bench->add_subcommand("render", "Clipmap vs full-grid triangles and frame time per terrain size");
+  bren->add_option("--terrain", brend.terrains, "Terrain size N (N x N samples); repeat for several (default 1024..8192)")
+      ->check(CLI::Range(64, 16384));
+  bren->add_option("--frames", brend.frames, "Frames timed per case")->check(CLI::PositiveNumber);
+  bren->add_option("--width", brend.width, "Image width (px)")->check(CLI::Range(16, 8192));
+  bren->add_option("--height", brend.height, "Image height (px)")->check(CLI::Range(16, 8192));
+  bren->add_flag("--json", brend.json, "Print one JSON object on the last line");
 
   try {
     app.parse(argc, argv);
@@ -118,9 +139,15 @@ int main(int argc, char** argv) {
 
   if (app.got_subcommand("bench")) {
     if (bench->got_subcommand("dem")) return run_bench_dem(dem);
+    if (bench->got_subcommand("render")) return render::run_bench_render(brend);
   }
 
-  if (app.got_subcommand("run")) {
+  const bool rendering = app.got_subcommand("render");
+  if (rendering) {
+    scene_path = render_scene;
+    out_dir = render_out;
+  }
+  if (app.got_subcommand("run") || rendering) {
     auto scene = load(scene_path);
     if (!scene) {
       print_errors((scene_path.empty() ? std::string("<embedded default>") : scene_path) + ": invalid scene (" +
@@ -135,6 +162,15 @@ int main(int argc, char** argv) {
     opt.backend = backend;
     opt.threads = threads;
     opt.progress = quiet ? ProgressStyle::None : ProgressStyle::Auto;
+    if (rendering) {
+      opt.seconds = render_at;
+      opt.frames = render_at > 0 ? -1 : 1;
+      opt.final_camera = render_camera;
+      char ms[32];
+      std::snprintf(ms, sizeof ms, "%08lld", static_cast<long long>(std::llround(render_at * 1000)));
+      opt.final_image = !render_image.empty() ? render_image
+                        : (out_dir.empty() ? "out/" + scene->name : out_dir) + "/render_" + ms + ".png";
+    }
     for (int i = 0; i < argc; ++i) opt.command_line += (i ? " " : "") + std::string(argv[i]);
     RunResult r = run_scene(*scene, opt);
     if (r.code != ExitCode::Ok) {
@@ -145,7 +181,7 @@ int main(int argc, char** argv) {
     }
     const auto& rep = r.report;
     std::printf("scene '%s': %lld frames, %.2f s simulated in %.2f s (real-time factor %.2fx), final state %s\n",
-                scene->name.c_str(), rep["frames"].get<long long>(), rep["simulated_s"].get<double>(),
+                scene->name.c_str(), rep["frame_count"].get<long long>(), rep["simulated_s"].get<double>(),
                 rep["wall_s"].get<double>(), rep["real_time_factor"].get<double>(),
                 rep["final_state_hash"].get<std::string>().c_str());
     std::printf("stages (total ms):");

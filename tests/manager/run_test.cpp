@@ -54,10 +54,10 @@ TEST(Run, DefaultSceneWritesCompleteReport) {
   ASSERT_TRUE(f.good());
   const auto rep = nlohmann::json::parse(f);
   for (const char* key : {"sandpatch_version", "scene", "stages", "counts", "warnings", "final_state_hash",
-                          "real_time_factor", "frames", "bodies", "frame_ms"})
+                          "real_time_factor", "frame_count", "bodies", "frames", "ledger", "pool", "conversions"})
     EXPECT_TRUE(rep.contains(key)) << key;
   EXPECT_EQ(rep["scene"]["hash"], scene->hash);
-  EXPECT_EQ(rep["frames"].get<long long>(), std::llround(1.0 / scene->simulation.dt));
+  EXPECT_EQ(rep["frame_count"].get<long long>(), std::llround(1.0 / scene->simulation.dt));
   EXPECT_TRUE(rep["stages"].contains("bodies"));
   EXPECT_EQ(rep["final_state_hash"].get<std::string>().size(), 16u);
   EXPECT_FALSE(rep["warnings"].empty());  // the run says what it did not simulate

@@ -1,0 +1,701 @@
+// The terrain manager: see terrain_manager.hpp.
+#include "manager/terrain_manager.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <numbers>
+
+#include "common/hash.hpp"
+#include "gl/context.hpp"
+#include "heightfield/filter.hpp"
+#include "manager/depth_conversion.hpp"
+#include "manager/granule_tile.hpp"
+#include "manager/shell.hpp"
+#include "particles/dem.hpp"
+
+namespace sandpatch {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double ms_since(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
+
+Vec3 v3(const Eigen::Vector3f& v) { return {v.x(), v.y(), v.z()}; }
+Eigen::Vector3f eig(Vec3 v) { return {v.x, v.y, v.z}; }
+Quat quat(const Eigen::Quaternionf& q) { return {q.x(), q.y(), q.z(), q.w()}; }
+
+// Trapezoid weights of a sample in a region (½ on edges, ¼ at corners): Σ w h sp² is the
+// volume under the bilinear surface.
+double trapezoid_weight(int i, int j, const GridRegion& r) {
+  const double wi = (i == r.i0 || i == r.i0 + r.ni - 1) ? 0.5 : 1.0;
+  const double wj = (j == r.j0 || j == r.j0 + r.nj - 1) ? 0.5 : 1.0;
+  return wi * wj;
+}
+
+}  // namespace
+
+const char* to_string(PatchEventKind k) {
+  switch (k) {
+    case PatchEventKind::Requested: return "requested";
+    case PatchEventKind::Queued: return "queued";
+    case PatchEventKind::Promoted: return "promoted";
+    case PatchEventKind::Ready: return "ready";
+    case PatchEventKind::Asleep: return "asleep";
+    case PatchEventKind::Woke: return "woke";
+    case PatchEventKind::Demoted: return "demoted";
+  }
+  return "?";
+}
+
+struct TerrainManager::Impl {
+  TerrainManagerDef def;
+  Heightfield* hf = nullptr;
+  BulletWorld* world = nullptr;
+  GranuleTile tile;
+  double granule_volume = 0;  // m³ (world) of one granule's solid
+
+  enum class State { Free, Filling, Active, Asleep };
+  struct Carried {
+    RigidBodyId body;
+    sandpatch::BodyId shell;
+    bool enabled = true;
+    Eigen::Vector3f v0 = Eigen::Vector3f::Zero(), w0 = Eigen::Vector3f::Zero();  // world velocities at the frame start
+  };
+  struct Ledger {
+    double before = 0, active = 0, after = 0;  // m³
+    bool closed = false;
+  };
+  struct Slot {
+    Simulation sim;
+    State state = State::Free;
+    int patch = -1;            // id of the patch in the slot
+    GridRegion region;         // heightfield samples of the patch
+    GridRegion apron;          // region + the band where spilled granules may rest
+    Eigen::Vector3d origin;    // m, world: sim (0,0,0)
+    double floor_local = 0;    // m, floor height relative to the heightfield origin
+    std::vector<PlacedGranule> pending;
+    std::size_t uploaded = 0;
+    int granules = 0;
+    int fade = 0;
+    double asleep_for = 0;     // s asleep and untouched
+    double fill_ms = 0;
+    std::vector<float> before_heights;  // heights of `apron` at promotion
+    std::vector<Carried> carried;
+    Ledger ledger;
+    explicit Slot(Simulation s) : sim(std::move(s)) {}
+  };
+  std::vector<Slot> slots;
+  std::vector<PatchRequest> queue;
+  std::vector<PatchEvent> events;
+  int next_patch = 0;
+  int peak_slots = 0;
+  int peak_queue = 0;
+  std::vector<nlohmann::ordered_json> ledgers;  // closed ledgers (demoted patches)
+  std::vector<GridRegion> dirty;                // written by demotions, not yet taken
+
+  std::unique_ptr<gl::Context> gl;
+  std::unique_ptr<ParticleDepthRenderer> depth;
+  bool gl_failed = false;
+  std::string gl_note;
+
+  double scale() const { return def.particle_scale; }
+  float radius_world() const { return float(def.material.radius * def.particle_scale); }
+
+  // World <-> heightfield sample index helpers.
+  int sample_i(double x) const { return int(std::floor((x - hf->origin_x()) / hf->spacing())); }
+  int sample_j(double z) const { return int(std::floor((z - hf->origin_z()) / hf->spacing())); }
+
+  SimulationDef sim_def() const {
+    SimulationDef sd;
+    sd.max_bodies = def.granules_per_slot + 64;
+    sd.max_particles = 4 * def.granules_per_slot + def.shell_particles_per_slot;
+    sd.particle_radius = def.material.radius;
+    sd.material.density = def.material.density;
+    sd.material.normal_stiffness = def.material.stiffness;
+    sd.material.restitution = def.material.restitution;
+    sd.material.friction = def.material.friction;
+    sd.material.tangential_stiffness_ratio = def.material.tangential_stiffness_ratio;
+    sd.gravity_world = v3(Eigen::Vector3f(def.gravity.cast<float>()));
+    sd.sleep_speed = float(def.sleep_speed / def.particle_scale);
+    sd.sleep_time = float(def.sleep_time);
+    sd.threads = def.threads;
+    return sd;
+  }
+
+  // ---- activation ----
+  // Region of heightfield samples for a request, within what one slot can hold.
+  Result<GridRegion> region_for(const PatchRequest& r) const {
+    const int i0 = std::max(0, sample_i(r.x0)), j0 = std::max(0, sample_j(r.z0));
+    const int i1 = std::min(hf->samples_x() - 1, sample_i(r.x1) + 1), j1 = std::min(hf->samples_z() - 1, sample_j(r.z1) + 1);
+    if (i1 - i0 < 2 || j1 - j0 < 2) return Error{"", "patch request", "", "off the terrain"};
+    return GridRegion{i0, j0, i1 - i0 + 1, j1 - j0 + 1};
+  }
+
+  bool covered(const PatchRequest& r) const {
+    for (const Slot& s : slots) {
+      if (s.state == State::Free) continue;
+      const double sp = hf->spacing();
+      const double x0 = hf->origin_x() + s.region.i0 * sp, x1 = x0 + (s.region.ni - 1) * sp;
+      const double z0 = hf->origin_z() + s.region.j0 * sp, z1 = z0 + (s.region.nj - 1) * sp;
+      if (r.x0 >= x0 && r.x1 <= x1 && r.z0 >= z0 && r.z1 <= z1) return true;
+    }
+    return false;
+  }
+
+  bool overlaps_patch(const PatchRequest& r) const {
+    for (const Slot& s : slots) {
+      if (s.state == State::Free) continue;
+      const double sp = hf->spacing();
+      PatchRequest p;
+      p.x0 = hf->origin_x() + s.region.i0 * sp;
+      p.x1 = p.x0 + (s.region.ni - 1) * sp;
+      p.z0 = hf->origin_z() + s.region.j0 * sp;
+      p.z1 = p.z0 + (s.region.nj - 1) * sp;
+      if (p.overlaps(r)) return true;
+    }
+    return false;
+  }
+
+  Status promote(Slot& slot, const PatchRequest& req, double time) {
+    const auto t0 = Clock::now();
+    auto reg = region_for(req);
+    if (!reg) return reg.errors();
+    const GridRegion region = *reg;
+    const float sp = hf->spacing();
+    // Floor: patch_depth below the lowest surface point, not below the bedrock.
+    float lo = std::numeric_limits<float>::max(), hi = -lo;
+    for (int j = region.j0; j < region.j0 + region.nj; ++j)
+      for (int i = region.i0; i < region.i0 + region.ni; ++i) {
+        lo = std::min(lo, hf->height(i, j));
+        hi = std::max(hi, hf->height(i, j));
+      }
+    const double floor_local = std::max(double(lo) - def.patch_depth, double(lo) - def.soil_depth);
+    const double s = scale();
+    slot.patch = next_patch++;
+    slot.region = region;
+    const int band = 4;  // samples around the region where spilled granules rest on the terrain
+    slot.apron = {std::max(0, region.i0 - band), std::max(0, region.j0 - band), 0, 0};
+    slot.apron.ni = std::min(hf->samples_x(), region.i0 + region.ni + band) - slot.apron.i0;
+    slot.apron.nj = std::min(hf->samples_z(), region.j0 + region.nj + band) - slot.apron.j0;
+    slot.floor_local = floor_local;
+    slot.origin = {hf->origin_x() + region.i0 * double(sp), hf->origin_y() + floor_local,
+                   hf->origin_z() + region.j0 * double(sp)};
+    slot.before_heights.resize(std::size_t(slot.apron.ni) * slot.apron.nj);
+    hf->read(slot.apron, slot.before_heights.data());
+
+    // The simulation: unit scale, patch-relative; the terrain around the region as a grid.
+    SimulationDef sd = sim_def();
+    const float W = float((region.ni - 1) * double(sp) / s), D = float((region.nj - 1) * double(sp) / s);
+    const float top = float((hi - floor_local) / s);
+    sd.bounds_min = {0, 0, 0};
+    sd.bounds_max = {W, top + 4.0f * float(def.material.radius) * 8.0f, D};
+    sd.floor_height = 0;
+    auto sc = ParticleScale::create(s, {slot.origin.x(), slot.origin.y(), slot.origin.z()});
+    if (!sc) return sc.errors();
+    sd.scale = *sc;
+    TerrainGrid& tg = sd.terrain;
+    tg.nx = slot.apron.ni;
+    tg.nz = slot.apron.nj;
+    tg.x0 = float((slot.apron.i0 - region.i0) * double(sp) / s);
+    tg.z0 = float((slot.apron.j0 - region.j0) * double(sp) / s);
+    tg.spacing = float(sp / s);
+    tg.heights.resize(slot.before_heights.size());
+    for (std::size_t k = 0; k < tg.heights.size(); ++k) tg.heights[k] = float((slot.before_heights[k] - floor_local) / s);
+    tg.fill_min_x = 0;
+    tg.fill_min_z = 0;
+    tg.fill_max_x = W;
+    tg.fill_max_z = D;
+    if (Status st = slot.sim.reset(sd); !st) return st.errors();
+
+    // Granules from the pre-settled tile, cut to the surface.
+    auto surface = [&](float x, float z) {
+      const double xl = region.i0 * double(sp) + x * s, zl = region.j0 * double(sp) + z * s;
+      return float((hf->sample(float(xl), float(zl)) - floor_local) / s);
+    };
+    slot.pending = fill_from_tile(tile, W, D, surface);
+    if (int(slot.pending.size()) > def.granules_per_slot) {
+      return Error{"", "simulation.pool.granules_per_slot", std::to_string(def.granules_per_slot),
+                   "too small: the patch around the contact at (" + std::to_string(0.5 * (req.x0 + req.x1)) + ", " +
+                       std::to_string(0.5 * (req.z0 + req.z1)) + ") needs " + std::to_string(slot.pending.size()) +
+                       " granules; raise it, or lower terrain.soil_depth / coarsen the granules"};
+    }
+    slot.uploaded = 0;
+    slot.granules = 0;
+    slot.fade = 0;
+    slot.asleep_for = 0;
+    slot.carried.clear();
+    slot.state = State::Filling;
+    // Ledger: volume between the floor and the surface over the region.
+    double v = 0;
+    for (int j = region.j0; j < region.j0 + region.nj; ++j)
+      for (int i = region.i0; i < region.i0 + region.ni; ++i)
+        v += trapezoid_weight(i, j, region) * (hf->height(i, j) - floor_local);
+    slot.ledger = Ledger{};
+    slot.ledger.before = v * double(sp) * sp;
+    slot.ledger.active = double(slot.pending.size()) * granule_volume / tile.packing_fraction;
+    slot.fill_ms = ms_since(t0);
+    events.push_back({PatchEventKind::Promoted, slot.patch, time, slot.fill_ms, int(slot.pending.size())});
+    return Ok{};
+  }
+
+  // Uploads up to `budget` pending granules; the patch is Ready when all are in.
+  Status upload(Slot& slot, std::size_t budget, double time) {
+    const auto t0 = Clock::now();
+    const std::size_t end = std::min(slot.pending.size(), slot.uploaded + budget);
+    for (; slot.uploaded < end; ++slot.uploaded) {
+      const PlacedGranule& g = slot.pending[slot.uploaded];
+      auto id = slot.sim.add_granule(g.position, g.orientation);
+      if (!id) return id.errors();
+      ++slot.granules;
+    }
+    slot.fill_ms += ms_since(t0);
+    if (slot.uploaded == slot.pending.size()) {
+      slot.pending.clear();
+      slot.pending.shrink_to_fit();
+      slot.state = State::Active;
+      events.push_back({PatchEventKind::Ready, slot.patch, time, slot.fill_ms, slot.granules});
+    }
+    return Ok{};
+  }
+
+  // ---- coupling ----
+  // Whether a body's bounds reach into a slot's region (and down to its granules).
+  bool engages(const Slot& s, const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, bool* inside) const {
+    const double sp = hf->spacing();
+    const double x0 = hf->origin_x() + s.region.i0 * sp, x1 = x0 + (s.region.ni - 1) * sp;
+    const double z0 = hf->origin_z() + s.region.j0 * sp, z1 = z0 + (s.region.nj - 1) * sp;
+    const bool overlap = lo.x() < x1 && hi.x() > x0 && lo.z() < z1 && hi.z() > z0;
+    const double margin = 2.0 * radius_world();
+    *inside = lo.x() > x0 + margin && hi.x() < x1 - margin && lo.z() > z0 + margin && hi.z() < z1 - margin;
+    return overlap;
+  }
+
+  Status couple_before(Slot& slot, double dt) {
+    const double s = scale();
+    for (RigidBodyId b : world->bodies()) {
+      Eigen::Vector3d lo, hi;
+      world->bounds(b, &lo, &hi);
+      bool inside = false;
+      const bool touch = engages(slot, lo, hi, &inside);
+      auto it = std::find_if(slot.carried.begin(), slot.carried.end(),
+                             [&](const Carried& c) { return c.body.index == b.index && c.body.generation == b.generation; });
+      if (!touch && it == slot.carried.end()) continue;
+      const BodyState st = world->state(b);
+      if (it == slot.carried.end()) {
+        // A shell for the body: its surface sampled at the granule sphere spacing (sim units).
+        RigidShape shape = world->definition(b).shape;
+        const float inv = float(1.0 / s);
+        shape.radius *= inv;
+        shape.height *= inv;
+        shape.half_extents *= inv;
+        for (auto& v : shape.vertices) v *= inv;
+        auto pts = sample_shell(shape, 1.5f * def.material.radius, def.shell_particles_per_slot);
+        if (!pts) return pts.errors();
+        ShellDef sh;
+        for (const auto& p : *pts) sh.offsets.push_back(v3(p));
+        sh.radii = {def.material.radius};
+        sh.motion = MotionType::Dynamic;
+        sh.mass = world->mass(b);  // the body enters with its own mass (mass ratio 1)
+        sh.inertia = v3(Eigen::Vector3f(world->principal_inertia(b) / float(s * s)));
+        sh.position = slot.sim.def().scale.position_to_sim({st.position.x(), st.position.y(), st.position.z()});
+        sh.orientation = quat(st.orientation);
+        auto id = slot.sim.add_shell(sh);
+        if (!id) return id.errors();
+        slot.carried.push_back({b, *id, true, Eigen::Vector3f::Zero(), Eigen::Vector3f::Zero()});
+        it = slot.carried.end() - 1;
+      }
+      Carried& c = *it;
+      if (touch != c.enabled) {
+        if (Status e = slot.sim.set_body_enabled(c.shell, touch); !e) return e.errors();
+        c.enabled = touch;
+      }
+      world->set_terrain_collision(b, !inside);
+      if (!touch) continue;
+      // The shell starts the frame where Bullet has the body.
+      c.v0 = st.linear_velocity;
+      c.w0 = st.angular_velocity;
+      const Vec3 p = slot.sim.def().scale.position_to_sim({st.position.x(), st.position.y(), st.position.z()});
+      if (Status e = slot.sim.set_body_state(c.shell, p, quat(st.orientation), v3(Eigen::Vector3f(st.linear_velocity / float(s))),
+                                             v3(st.angular_velocity));
+          !e)
+        return e.errors();
+      if (st.linear_velocity.norm() > def.sleep_speed) slot.sim.wake();
+    }
+    (void)dt;
+    return Ok{};
+  }
+
+  void couple_after(Slot& slot, double dt) {
+    const double s = scale();
+    for (const Carried& c : slot.carried) {
+      if (!c.enabled || !world->alive(c.body)) continue;
+      // Mean contact force and torque over the frame from the shell's change of momentum.
+      const Eigen::Vector3f v1 = eig(slot.sim.body_velocity(c.shell)) * float(s);
+      const Eigen::Vector3f w1 = eig(slot.sim.body_angular_velocity(c.shell));
+      const float m = world->mass(c.body);
+      const Eigen::Vector3f f = m * ((v1 - c.v0) / float(dt) - def.gravity.cast<float>());
+      const Eigen::Matrix3f R = world->state(c.body).orientation.toRotationMatrix();
+      const Eigen::Matrix3f I = R * world->principal_inertia(c.body).asDiagonal() * R.transpose();
+      const Eigen::Vector3f t = I * (w1 - c.w0) / float(dt);
+      world->apply_force(c.body, f, t);
+    }
+  }
+
+  // ---- demotion ----
+  Status demote(Slot& slot, double time) {
+    const auto t0 = Clock::now();
+    const double sp = hf->spacing();
+    // Granule spheres in heightfield-local coordinates (m).
+    std::vector<float> xyzr;
+    const GranuleShape& g = slot.sim.granule_shape();
+    const float rw = radius_world();
+    float top = float(slot.floor_local) + rw;
+    for (int b = 0; b < slot.granules; ++b) {
+      const Vec3 p = slot.sim.body_position(sandpatch::BodyId{b});
+      const Quat q = slot.sim.body_orientation(sandpatch::BodyId{b});
+      for (const Vec3& o : g.offsets) {
+        const Vec3 c = p + rotate(q, o);
+        const auto w = slot.sim.def().scale.position_to_world(c);
+        xyzr.insert(xyzr.end(), {float(w[0] - hf->origin_x()), float(w[1] - hf->origin_y()),
+                                 float(w[2] - hf->origin_z()), rw});
+        top = std::max(top, float(w[1] - hf->origin_y()) + rw);
+      }
+    }
+    const GridRegion& a = slot.apron;
+    const float x0 = float((a.i0 - 0.5) * sp), z0 = float((a.j0 - 0.5) * sp);
+    const float x1 = float((a.i0 + a.ni - 0.5) * sp), z1 = float((a.j0 + a.nj - 0.5) * sp);
+    const int res = def.depth_resolution;
+    HeightImage img;
+    bool on_gl = false;
+    if (def.use_gl && !gl_failed && !depth) {
+      auto ctx = gl::Context::create();
+      if (ctx) {
+        gl = std::move(*ctx);
+        auto dr = ParticleDepthRenderer::create({res});
+        if (dr) depth = std::move(*dr);
+        else gl_note = dr.message();
+      } else {
+        gl_note = ctx.message();
+      }
+      gl_failed = !depth;
+    }
+    if (depth) {
+      if (Status st = gl->make_current(); !st) return st;
+      auto r = depth->render(xyzr.data(), xyzr.size() / 4, x0, z0, x1, z1, float(slot.floor_local), top + 1.0f);
+      if (!r) return r.errors();
+      img = std::move(*r);
+      on_gl = true;
+    } else {
+      img = render_heights_cpu(xyzr.data(), xyzr.size() / 4, res, x0, z0, x1, z1, float(slot.floor_local));
+    }
+    // Outside the filled region the terrain was there before: particles add to it, an
+    // empty texel keeps it (texels inside the region with no particle read the floor).
+    const float du = (x1 - x0) / float(res), dv = (z1 - z0) / float(res);
+    const double rx0 = slot.region.i0 * sp, rx1 = (slot.region.i0 + slot.region.ni - 1) * sp;
+    const double rz0 = slot.region.j0 * sp, rz1 = (slot.region.j0 + slot.region.nj - 1) * sp;
+    for (int v = 0; v < res; ++v)
+      for (int u = 0; u < res; ++u) {
+        const float x = x0 + (u + 0.5f) * du, z = z0 + (v + 0.5f) * dv;
+        if (x >= rx0 && x <= rx1 && z >= rz0 && z <= rz1) continue;
+        float& h = img.h[std::size_t(v) * res + u];
+        h = std::max(h, hf->sample(x, z));
+      }
+    write_to_heightfield(img, a, *hf, 1);
+    world->terrain_changed();
+    // The border band reaches one sample beyond the apron.
+    GridRegion d{std::max(0, a.i0 - 1), std::max(0, a.j0 - 1), 0, 0};
+    d.ni = std::min(hf->samples_x(), a.i0 + a.ni + 1) - d.i0;
+    d.nj = std::min(hf->samples_z(), a.j0 + a.nj + 1) - d.j0;
+    dirty.push_back(d);
+    // Ledger: region above the floor plus what spilled onto the apron.
+    double after = 0;
+    for (int j = a.j0; j < a.j0 + a.nj; ++j)
+      for (int i = a.i0; i < a.i0 + a.ni; ++i) {
+        const bool in = i >= slot.region.i0 && i < slot.region.i0 + slot.region.ni && j >= slot.region.j0 &&
+                        j < slot.region.j0 + slot.region.nj;
+        const double h0 = slot.before_heights[std::size_t(j - a.j0) * a.ni + (i - a.i0)];
+        after += in ? trapezoid_weight(i, j, slot.region) * (hf->height(i, j) - slot.floor_local)
+                    : (hf->height(i, j) - h0) * (1.0 - 0.0);
+      }
+    slot.ledger.after = after * sp * sp;
+    const double err = slot.ledger.before > 0 ? 100.0 * (slot.ledger.after - slot.ledger.before) / slot.ledger.before : 0;
+    ledgers.push_back({{"patch", slot.patch},
+                       {"granules", slot.granules},
+                       {"volume_before_m3", slot.ledger.before},
+                       {"volume_active_m3", slot.ledger.active},
+                       {"volume_after_m3", slot.ledger.after},
+                       {"error_pct", err},
+                       {"depth_render", on_gl ? "gl" : "cpu"}});
+    for (const Carried& c : slot.carried)
+      if (world->alive(c.body)) world->set_terrain_collision(c.body, true);
+    events.push_back({PatchEventKind::Demoted, slot.patch, time, ms_since(t0), slot.granules});
+    slot.state = State::Free;
+    slot.granules = 0;
+    slot.carried.clear();
+    slot.patch = -1;
+    return Ok{};
+  }
+};
+
+Result<std::unique_ptr<TerrainManager>> TerrainManager::create(const TerrainManagerDef& def, Heightfield& hf,
+                                                               BulletWorld& world) {
+  std::vector<Error> errs;
+  auto bad = [&](const char* field, double v, const char* allowed) {
+    errs.push_back(Error{"", field, std::to_string(v), allowed});
+  };
+  if (!(def.particle_scale > 0) || !std::isfinite(def.particle_scale)) bad("particle_scale", def.particle_scale, "must be > 0");
+  if (def.slots < 1) bad("pool.slots", def.slots, "must be >= 1");
+  if (def.granules_per_slot < 16) bad("pool.granules_per_slot", def.granules_per_slot, "must be >= 16");
+  if (!(def.patch_depth > 0)) bad("patch_depth", def.patch_depth, "must be > 0 (m)");
+  if (def.fill_granules_per_frame < 1) bad("fill_granules_per_frame", def.fill_granules_per_frame, "must be >= 1");
+  if (!errs.empty()) return errs;
+
+  std::unique_ptr<TerrainManager> m(new TerrainManager());
+  m->impl_ = std::make_unique<Impl>();
+  Impl& I = *m->impl_;
+  I.def = def;
+  I.hf = &hf;
+  I.world = &world;
+  // The pre-settled tile, as deep as the deepest patch (granule_tile.hpp).
+  GranuleTileDef td;
+  td.radius = def.material.radius;
+  td.material = I.sim_def().material;
+  td.gravity = v3(Eigen::Vector3f((def.gravity / def.particle_scale).cast<float>()));
+  td.seed = def.seed;
+  td.threads = def.threads;
+  const GranuleShape shape = make_granule_shape(def.material.radius, 1.0f, def.material.density);
+  const double layer = 2.0 * (shape.centre_distance + shape.radius) * 0.8;  // settled layer height, about
+  td.layers = std::max(6, int(std::ceil(std::min(def.patch_depth, def.soil_depth) / def.particle_scale * 1.6 / layer)) + 3);
+  td.columns = 8;
+  auto tile = make_granule_tile(td);
+  if (!tile) return tile.errors();
+  I.tile = std::move(*tile);
+  I.granule_volume = 4.0 * 4.0 / 3.0 * std::numbers::pi * std::pow(double(I.radius_world()), 3);
+  // The pool: every slot allocated now at full capacity.
+  for (int k = 0; k < def.slots; ++k) {
+    auto sim = Simulation::create(I.sim_def());
+    if (!sim) return sim.errors();
+    I.slots.emplace_back(std::move(*sim));
+  }
+  return m;
+}
+
+TerrainManager::~TerrainManager() = default;
+
+Status TerrainManager::before_bodies(double time, double dt, Profile& profile) {
+  Impl& I = *impl_;
+  {
+    auto timer = profile.time(Stage::Lod);
+    std::vector<BodyMotion> motions;
+    for (RigidBodyId b : I.world->bodies()) {
+      BodyMotion m;
+      I.world->bounds(b, &m.lo, &m.hi);
+      m.velocity = I.world->state(b).linear_velocity.cast<double>();
+      motions.push_back(m);
+    }
+    const double max_side = 1e9;
+    auto reqs = merge_requests(predict_contacts(*I.hf, motions, I.def.gravity, I.def.lod), max_side);
+    for (auto& r : reqs) {
+      if (I.covered(r) || I.overlaps_patch(r)) continue;
+      bool queued = false;
+      for (const auto& q : I.queue) queued = queued || q.overlaps(r);
+      if (!queued) {
+        I.queue.push_back(r);
+        I.events.push_back({PatchEventKind::Requested, -1, time, 0, 0});
+      }
+    }
+    std::stable_sort(I.queue.begin(), I.queue.end(), [](const PatchRequest& p, const PatchRequest& q) {
+      if (p.time_to_contact != q.time_to_contact) return p.time_to_contact < q.time_to_contact;
+      return p.speed > q.speed;
+    });
+  }
+  {
+    auto timer = profile.time(Stage::Activation);
+    // Serve the queue while slots are free.
+    for (auto it = I.queue.begin(); it != I.queue.end();) {
+      auto free = std::find_if(I.slots.begin(), I.slots.end(), [](const Impl::Slot& s) { return s.state == Impl::State::Free; });
+      if (free == I.slots.end()) break;
+      if (I.overlaps_patch(*it)) {
+        it = I.queue.erase(it);
+        continue;
+      }
+      if (Status s = I.promote(*free, *it, time); !s) return s;
+      it = I.queue.erase(it);
+    }
+    I.peak_queue = std::max(I.peak_queue, int(I.queue.size()));
+    int used = 0;
+    for (auto& s : I.slots) {
+      used += s.state != Impl::State::Free;
+      if (s.state != Impl::State::Filling) continue;
+      // Never let a body land on a patch that is not ready: upload the rest now if a contact
+      // is due within two frames.
+      std::size_t budget = std::size_t(I.def.fill_granules_per_frame);
+      for (RigidBodyId b : I.world->bodies()) {
+        Eigen::Vector3d lo, hi;
+        I.world->bounds(b, &lo, &hi);
+        bool inside = false;
+        const Eigen::Vector3d v = I.world->state(b).linear_velocity.cast<double>();
+        const Eigen::Vector3d ahead = 2.0 * dt * v;
+        if (I.engages(s, lo + ahead.cwiseMin(0.0), hi + ahead.cwiseMax(0.0), &inside)) budget = s.pending.size();
+      }
+      if (Status st = I.upload(s, budget, time); !st) return st;
+    }
+    I.peak_slots = std::max(I.peak_slots, used);
+  }
+  {
+    auto timer = profile.time(Stage::Dem);
+    for (auto& s : I.slots) {
+      if (s.state != Impl::State::Active && s.state != Impl::State::Asleep) continue;
+      if (Status st = I.couple_before(s, dt); !st) return st;
+      if (s.sim.asleep()) continue;
+      if (s.state == Impl::State::Asleep) {
+        s.state = Impl::State::Active;
+        s.asleep_for = 0;
+        I.events.push_back({PatchEventKind::Woke, s.patch, time, 0, s.granules});
+      }
+      if (Status st = s.sim.step(dt); !st) return st;
+      I.couple_after(s, dt);
+      s.fade = std::min(s.fade + 1, I.def.fade_frames);
+    }
+  }
+  return Ok{};
+}
+
+Status TerrainManager::after_bodies(double time, double dt, Profile& profile) {
+  Impl& I = *impl_;
+  {
+    auto timer = profile.time(Stage::Sleep);
+    for (auto& s : I.slots) {
+      if (s.state == Impl::State::Active && s.sim.asleep()) {
+        s.state = Impl::State::Asleep;
+        I.events.push_back({PatchEventKind::Asleep, s.patch, time + dt, 0, s.granules});
+      }
+      if (s.state == Impl::State::Asleep) s.asleep_for += dt;
+    }
+  }
+  {
+    auto timer = profile.time(Stage::Demotion);
+    for (auto& s : I.slots)
+      if (s.state == Impl::State::Asleep && s.asleep_for >= I.def.idle_timeout)
+        if (Status st = I.demote(s, time + dt); !st) return st;
+  }
+  return Ok{};
+}
+
+void TerrainManager::request_patch(double x0, double z0, double x1, double z1, double time) {
+  PatchRequest r;
+  r.x0 = x0;
+  r.z0 = z0;
+  r.x1 = x1;
+  r.z1 = z1;
+  r.time_to_contact = 0;
+  impl_->queue.push_back(r);
+  impl_->events.push_back({PatchEventKind::Requested, -1, time, 0, 0});
+}
+
+int TerrainManager::ready_patches() const {
+  int n = 0;
+  for (const auto& s : impl_->slots) n += s.state == Impl::State::Active || s.state == Impl::State::Asleep;
+  return n;
+}
+
+Status TerrainManager::demote_all(double time, Profile& profile) {
+  auto timer = profile.time(Stage::Demotion);
+  for (auto& s : impl_->slots) {
+    if (s.state == Impl::State::Filling) {
+      if (Status st = impl_->upload(s, s.pending.size(), time); !st) return st;
+    }
+    if (s.state != Impl::State::Free)
+      if (Status st = impl_->demote(s, time); !st) return st;
+  }
+  return Ok{};
+}
+
+int TerrainManager::active_patches() const {
+  int n = 0;
+  for (const auto& s : impl_->slots) n += s.state != Impl::State::Free;
+  return n;
+}
+
+int TerrainManager::granules() const {
+  int n = 0;
+  for (const auto& s : impl_->slots) n += s.granules;
+  return n;
+}
+
+std::vector<GridRegion> TerrainManager::take_dirty_regions() {
+  std::vector<GridRegion> out;
+  out.swap(impl_->dirty);
+  return out;
+}
+
+int TerrainManager::queued_requests() const { return int(impl_->queue.size()); }
+
+std::uint64_t TerrainManager::state_hash() const {
+  Hasher h;
+  for (const auto& s : impl_->slots) {
+    h.pod(int(s.state));
+    if (s.state != Impl::State::Free) h.pod(s.sim.state_hash());
+  }
+  return h.value();
+}
+
+const std::vector<PatchEvent>& TerrainManager::events() const { return impl_->events; }
+
+void TerrainManager::particles(std::vector<float>& xyzr) const {
+  xyzr.clear();
+  const Impl& I = *impl_;
+  for (const auto& s : I.slots) {
+    if (s.state == Impl::State::Free) continue;
+    const GranuleShape& g = s.sim.granule_shape();
+    for (int b = 0; b < s.granules; ++b) {
+      const Vec3 p = s.sim.body_position(sandpatch::BodyId{b});
+      const Quat q = s.sim.body_orientation(sandpatch::BodyId{b});
+      for (const Vec3& o : g.offsets) {
+        const auto w = s.sim.def().scale.position_to_world(p + rotate(q, o));
+        xyzr.insert(xyzr.end(), {float(w[0] - I.hf->origin_x()), float(w[1] - I.hf->origin_y()),
+                                 float(w[2] - I.hf->origin_z()), I.radius_world()});
+      }
+    }
+  }
+}
+
+nlohmann::ordered_json TerrainManager::report() const {
+  const Impl& I = *impl_;
+  using ojson = nlohmann::ordered_json;
+  ojson r;
+  double before = 0, after = 0;
+  for (const auto& l : I.ledgers) {
+    before += l["volume_before_m3"].get<double>();
+    after += l["volume_after_m3"].get<double>();
+  }
+  r["ledger"] = {{"patches", I.ledgers},
+                 {"total", {{"volume_before_m3", before},
+                            {"volume_after_m3", after},
+                            {"error_pct", before > 0 ? 100.0 * (after - before) / before : 0.0}}}};
+  ojson conv = ojson::array();
+  for (const auto& e : I.events)
+    if (e.kind == PatchEventKind::Promoted || e.kind == PatchEventKind::Ready || e.kind == PatchEventKind::Demoted)
+      conv.push_back({{"kind", to_string(e.kind)}, {"patch", e.patch}, {"time_s", e.time}, {"wall_ms", e.wall_ms},
+                      {"granules", e.granules}});
+  r["conversions"] = conv;
+  int used = 0;
+  for (const auto& s : I.slots) used += s.state != Impl::State::Free;
+  r["pool"] = {{"slots", int(I.slots.size())},
+               {"slots_used", used},
+               {"peak_slots_used", I.peak_slots},
+               {"granules_per_slot", I.def.granules_per_slot},
+               {"shell_particles_per_slot", I.def.shell_particles_per_slot},
+               {"queued_requests", int(I.queue.size())},
+               {"peak_queued_requests", I.peak_queue}};
+  r["tile"] = {{"granules", I.tile.granules.size()},
+               {"period_xz_m", I.tile.period_xz * I.def.particle_scale},
+               {"period_y_m", I.tile.period_y * I.def.particle_scale},
+               {"packing_fraction", I.tile.packing_fraction},
+               {"settle_time_s", I.tile.settle_time},
+               {"settled_speed_m_s", I.tile.settled_speed}};
+  if (!I.gl_note.empty()) r["depth_render_note"] = I.gl_note;
+  return r;
+}
+
+}  // namespace sandpatch

@@ -1,0 +1,118 @@
+// The terrain manager (Leach & Marais §3, §5; ../shared/DESIGN.md "One frame"): granular
+// patches that come and go around bodies that touch the terrain.
+//
+// Per frame, around the Bullet step (manager/run.cpp calls them in this order):
+//   lod         predict contacts of every body within a horizon (manager/lod.hpp); requests
+//               that overlap merge; a request not covered by a patch takes a pool slot, or
+//               waits in a queue ordered by time to contact, then speed
+//   activation  a new patch is filled from the heightfield with a pre-settled granule tile
+//               (manager/granule_tile.hpp), uploaded to its slot in chunks of at most
+//               fill_granules_per_frame (more when a body would land before it is ready)
+//   dem         each body over an active patch has a dynamic shell in the patch; the shell
+//               starts the frame with the body's Bullet state, the DEM substeps, and the mean
+//               contact force and torque over the frame, m Δv/dt − m g and I Δω/dt, go to the
+//               Bullet body; bodies wholly over a patch stop colliding with the heightfield
+//   (bodies)    Bullet steps
+//   sleep       a patch whose granules and bodies are at rest sleeps (its DEM stops)
+//   demotion    a patch asleep for idle_timeout is rendered top-down into the heightfield
+//               (manager/depth_conversion.hpp) and its slot returns to the pool
+//
+// Slots are created at start-up with fixed capacity; memory does not grow with particles.
+// Coordinates: a patch's simulation runs at unit particle scale, relative to the patch
+// origin (its world corner at the floor height): x_world = origin + scale · x_sim.
+#pragma once
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <vector>
+
+#include "common/error.hpp"
+#include "heightfield/heightfield.hpp"
+#include "manager/bullet_world.hpp"
+#include "manager/lod.hpp"
+#include "manager/profile.hpp"
+
+namespace sandpatch {
+
+struct GranularMaterial {
+  float radius = 0.025f;                       // m, sphere radius r of the 4 spheres of a granule (simulated)
+  float density = 2650.0f;                     // kg/m³ of the grain solid
+  float friction = 0.5f;                       // μ
+  float restitution = 0.3f;                    // e
+  float stiffness = 2.0e4f;                    // k_n, N/m
+  float tangential_stiffness_ratio = 2.0f / 7.0f;
+};
+
+struct TerrainManagerDef {
+  GranularMaterial material;
+  double particle_scale = 1.0;                 // world size / simulated size (Leach & Marais §4.3)
+  int slots = 2;                               // simulations in the pool
+  int granules_per_slot = 16384;               // capacity of each slot (granules)
+  int shell_particles_per_slot = 8192;         // capacity of each slot for body-shell spheres
+  double patch_depth = 0.4;                    // m of granules under the lowest surface point of a patch
+  double soil_depth = 2.0;                     // m, bedrock = surface − soil_depth (patches stop there)
+  double sleep_speed = 0.01;                   // m/s, a patch sleeps when everything is slower ...
+  double sleep_time = 0.5;                     // s, ... for this long
+  double idle_timeout = 120.0;                 // s asleep before demotion (Leach & Marais: two minutes)
+  LodDef lod;                                  // contact prediction
+  int fill_granules_per_frame = 4096;          // upload bound per frame
+  int fade_frames = 30;                        // frames over which a new patch fades in
+  int depth_resolution = 1024;                 // texels per side of the demotion depth render
+  bool use_gl = true;                          // depth render on GL (else, or if no context, on the CPU)
+  int threads = 0;                             // DEM threads, 0 = OpenMP default
+  Eigen::Vector3d gravity{0.0, -9.81, 0.0};    // m/s²
+  std::uint64_t seed = 1;
+};
+
+enum class PatchEventKind { Requested, Queued, Promoted, Ready, Asleep, Woke, Demoted };
+const char* to_string(PatchEventKind k);
+
+struct PatchEvent {
+  PatchEventKind kind;
+  int patch = -1;
+  double time = 0;        // s, simulated
+  double wall_ms = 0;     // conversion cost (promotion: fill; demotion: render + write)
+  int granules = 0;
+};
+
+class TerrainManager {
+ public:
+  // `hf` and `world` must outlive the manager. Builds the pre-settled granule tile and the
+  // pool; errors name the TerrainManagerDef field or the capacity.
+  static Result<std::unique_ptr<TerrainManager>> create(const TerrainManagerDef& def, Heightfield& hf,
+                                                        BulletWorld& world);
+  ~TerrainManager();
+
+  // Before the Bullet step: lod, activation, dem (forces handed to the bodies).
+  Status before_bodies(double time, double dt, Profile& profile);
+  // After the Bullet step: sleep, demotion.
+  Status after_bodies(double time, double dt, Profile& profile);
+  // Requests a patch over the world rectangle [x0, x1] × [z0, z1] now, whether or not a body
+  // is coming (e.g. a digging tool about to act); it is queued like a predicted contact.
+  void request_patch(double x0, double z0, double x1, double z1, double time);
+  // Demotes every patch now (end of a run that wants the final terrain).
+  Status demote_all(double time, Profile& profile);
+
+  int active_patches() const;
+  int ready_patches() const;                   // filled and simulating (or asleep)
+  int granules() const;                        // live granules over all patches
+  int queued_requests() const;
+  std::uint64_t state_hash() const;            // over every patch's DEM state
+  const std::vector<PatchEvent>& events() const;
+  // Sphere centres and radii of every live patch (x, y, z, r; m, world relative to the
+  // heightfield origin) with each patch's fade-in factor, for rendering.
+  void particles(std::vector<float>& xyzr) const;
+  // Heightfield regions written by demotions since the last call (for renderers' caches).
+  std::vector<GridRegion> take_dirty_regions();
+  // ledger, conversions, pool, tile: the run report's sections (docs/cli.md).
+  nlohmann::ordered_json report() const;
+
+ private:
+  TerrainManager() = default;
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace sandpatch

@@ -1,0 +1,162 @@
+// bench dem --backend gl; see bench_gl.hpp.
+#include "particles/gpu/bench_gl.hpp"
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+
+#include <nlohmann/json.hpp>
+
+#include "gl/context.hpp"
+#include "particles/bed.hpp"
+#include "particles/dem.hpp"
+#include "particles/gpu/gl_simulation.hpp"
+
+namespace sandpatch::gpu {
+
+int run_bench_dem_gl(int granules, int steps, bool json) {
+  if (granules < 1 || granules > 4000000) {
+    std::fprintf(stderr, "bench dem: --granules = %d: must be in [1, 4000000]\n", granules);
+    return 2;
+  }
+  if (steps < 1) {
+    std::fprintf(stderr, "bench dem: --steps = %d: must be >= 1\n", steps);
+    return 2;
+  }
+  // 1. the bed of bench/bench_dem.cpp, through the public API
+  const float r = 0.005f;
+  const double dt = 5e-5;
+  SimulationDef def;
+  def.max_bodies = granules;
+  def.max_particles = 4 * granules;
+  def.particle_radius = r;
+  def.material.density = 2500;
+  def.material.normal_stiffness = 3292;
+  def.material.restitution = 0.3f;
+  def.material.friction = 0.5f;
+  def.sleep_time = 0;  // never sleep: we time the work
+  const float L = float(peer_footprint(granules, r));
+  def.bounds_min = {0, 0, 0};
+  def.side_walls = true;
+  LatticeBedDef bed;
+  const GranuleShape shape = make_granule_shape(r, def.granule_edge_factor, def.material.density);
+  const float spacing = 2.0f * (shape.centre_distance + shape.radius) * 1.02f;
+  bed.nx = bed.nz = std::max(1, int(std::floor((L - spacing) / spacing)) + 1);
+  bed.layers = (granules + bed.nx * bed.nz - 1) / (bed.nx * bed.nz);
+  bed.count = granules;
+  bed.spacing = spacing;
+  bed.min = {0.5f * (L - (bed.nx - 1) * spacing), shape.centre_distance + r + 1e-4f, 0.5f * (L - (bed.nz - 1) * spacing)};
+  bed.seed = 12345;
+  def.bounds_max = {L, bed.min.y + bed.layers * spacing + 4 * r, L};
+  auto cpu = Simulation::create(def);
+  if (!cpu) {
+    std::fprintf(stderr, "bench dem: %s", cpu.message().c_str());
+    return 2;
+  }
+  if (auto st = add_lattice_bed(*cpu, bed); !st) {
+    std::fprintf(stderr, "bench dem: %s", st.message().c_str());
+    return 1;
+  }
+  // 2. settle on the CPU backend (the GL path would take minutes on llvmpipe)
+  auto t0 = std::chrono::steady_clock::now();
+  int settle = 0;
+  for (const int max_settle = int(1.5 / dt); settle < max_settle; ++settle) {
+    if (auto st = cpu->step(dt); !st) {
+      std::fprintf(stderr, "bench dem: settling: %s", st.message().c_str());
+      return 1;
+    }
+    if (settle % 200 == 199 && settle * dt > 0.3 && cpu->max_granule_speed() < 0.01) break;
+  }
+  const double settle_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+
+  // 3. the same bodies on the GPU (poses and velocities; tangential springs restart at 0)
+  auto ctx = gl::Context::create();
+  if (!ctx) {
+    std::fprintf(stderr, "bench dem: %s", ctx.message().c_str());
+    return 1;
+  }
+  const std::string renderer = (*ctx)->info().gl_renderer;
+  GlOptions opt;
+  opt.profile = std::getenv("SANDPATCH_GL_PROFILE") != nullptr;  // per-kernel times (slower)
+  auto gsim = GlSimulation::create(def, opt);
+  if (!gsim) {
+    std::fprintf(stderr, "bench dem: %s", gsim.message().c_str());
+    return 1;
+  }
+  for (int i = 0; i < cpu->body_count(); ++i) {
+    BodyId b{i};
+    auto id = gsim->add_granule(cpu->body_position(b), cpu->body_orientation(b), cpu->body_velocity(b),
+                                cpu->body_angular_velocity(b));
+    if (!id) {
+      std::fprintf(stderr, "bench dem: %s", id.message().c_str());
+      return 1;
+    }
+  }
+  const int spheres = gsim->particle_count();
+  if (!json)
+    std::printf("bench dem (gl): %d granules (%d spheres), box %.3f m, %d layers, dt %g s\nrenderer: %s\n"
+                "settled on the CPU backend: %d steps (%.3f s simulated) in %.1f s wall\n",
+                granules, spheres, L, bed.layers, dt, renderer.c_str(), settle + 1, (settle + 1) * dt, settle_s);
+  for (int k = 0; k < 20; ++k)  // warm-up: shader caches, springs re-formed
+    if (auto st = gsim->step(dt); !st) {
+      std::fprintf(stderr, "bench dem: warm-up step %d: %s", k, st.message().c_str());
+      return 1;
+    }
+
+  // 4. timed (each step ends with the 32-byte status read-back, so the GPU has finished)
+  std::int64_t contacts = 0, resorts = 0;
+  t0 = std::chrono::steady_clock::now();
+  for (int k = 0; k < steps; ++k) {
+    if (auto st = gsim->step(dt); !st) {
+      std::fprintf(stderr, "bench dem: timed step %d: %s", k, st.message().c_str());
+      return 1;
+    }
+    contacts += gsim->last_step().contacts;
+    resorts += gsim->last_step().resorts;
+  }
+  const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  const double ssps = double(spheres) * steps / wall;
+  const double cps = 2.0 * double(contacts) / steps / spheres;
+  const double vmax = gsim->max_granule_speed();
+
+  // 5. the CPU backend on the same settled bed, same steps, beside it (all OpenMP threads)
+  const auto c0 = std::chrono::steady_clock::now();
+  for (int k = 0; k < steps; ++k)
+    if (auto st = cpu->step(dt); !st) {
+      std::fprintf(stderr, "bench dem: CPU timed step %d: %s", k, st.message().c_str());
+      return 1;
+    }
+  const double cpu_wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - c0).count();
+  const double cpu_ssps = double(cpu->particle_count()) * steps / cpu_wall;
+  if (!json)
+    std::printf("timed: %d steps in %.3f s: %.3g sphere-steps/s (%.2f ms/step), contacts per sphere %.2f, "
+                "grid rebuilds %lld, max granule speed %.4f m/s\n",
+                steps, wall, ssps, 1e3 * wall / steps, cps, (long long)resorts, vmax);
+  if (!json)
+    std::printf("CPU backend, same bed and steps: %.3g sphere-steps/s (%.2f ms/step); GL / CPU = %.3g\n", cpu_ssps,
+                1e3 * cpu_wall / steps, ssps / cpu_ssps);
+  nlohmann::json j = {{"bench", "dem"},
+                      {"backend", "gl"},
+                      {"renderer", renderer},
+                      {"granules", granules},
+                      {"spheres", spheres},
+                      {"steps", steps},
+                      {"dt", dt},
+                      {"wall_seconds", wall},
+                      {"sphere_steps_per_s", ssps},
+                      {"contacts_per_sphere", cps},
+                      {"grid_rebuilds", resorts},
+                      {"settle_steps_cpu", settle + 1},
+                      {"max_granule_speed", vmax},
+                      {"gpu_bytes", gsim->gpu_bytes()},
+                      {"cpu_sphere_steps_per_s", cpu_ssps},
+                      {"contact_model", "linear spring-dashpot + tangential spring with history"}};
+  if (opt.profile && !json)
+    for (const auto& [kernel, sec] : gsim->kernel_seconds())
+      std::printf("  %-26s %8.3f s (%.1f %%)\n", kernel.c_str(), sec, 100.0 * sec / wall);
+  if (json) std::printf("%s\n", j.dump().c_str());
+  return 0;
+}
+
+}  // namespace sandpatch::gpu

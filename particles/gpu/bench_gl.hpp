@@ -1,0 +1,18 @@
+// `sandpatch bench dem --backend gl`: the GL backend's throughput on the CPU benchmark's bed
+// (bench/bench_dem.cpp; docs/dem-gpu.md).
+#pragma once
+
+namespace sandpatch::gpu {
+
+// Builds the bench_dem bed of `granules` granules (same box, lattice, seed and material),
+// settles it with the CPU backend (same stopping rule: max granule speed < 0.01 m/s after
+// at least 0.3 s, at most 1.5 s), copies the settled bodies into a GlSimulation, runs 20
+// warm-up steps, then times `steps` steps of dt = 5e-5 s on whatever renderer EGL finds, and
+// then the same steps of the CPU backend on the same settled bed (cpu_sphere_steps_per_s).
+// Prints sphere-steps/s and the renderer; with json, one JSON object on the last line with
+// sphere_steps_per_s, spheres, dt, renderer (and more). With the environment variable
+// SANDPATCH_GL_PROFILE set, prints the time of each kernel (a glFinish around each dispatch).
+// Exit code 0 ok, 1 runtime failure, 2 bad input.
+int run_bench_dem_gl(int granules, int steps, bool json);
+
+}  // namespace sandpatch::gpu

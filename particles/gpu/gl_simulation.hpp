@@ -1,0 +1,121 @@
+// Granule DEM on the GPU: the CPU backend's physics (particles/dem.hpp, contact.hpp) as
+// OpenGL 4.3 compute shaders (shaders/dem/), run in the headless EGL context (gl/context.hpp),
+// so the same code runs on any GL driver and on Mesa's llvmpipe (docs/dem-gpu.md).
+//
+// The step, per substep (every stage a compute dispatch; no CPU round trip inside a frame):
+//   1. grid      when a sphere has moved more than skin/2 since the last sort (decided on the
+//                GPU; the grid kernels run by indirect dispatch): count spheres per cell
+//                (integer atomics), exclusive prefix sum over the cells, scatter the particle
+//                ids into their cells, sort each cell's ids, then gather every particle field
+//                into cell order (generated from fields.hpp). No per-cell cap.
+//   2. contacts  every sphere searches the 27 cells around it and sums its own forces in a
+//                fixed order (cells z, y, x, then particle id): the same laws as contact.hpp,
+//                including the tangential spring with history (one spring per sphere and
+//                partner, kept in max_contacts_per_sphere slots keyed by partner id)
+//   3. bodies    each body sums its spheres in id order, integrates (symplectic Euler,
+//                normalised quaternion) and rebuilds its spheres
+// After the frame one 32-byte status block is read back (max granule speed, NaN count,
+// contact slots needed, contacts, grid rebuilds), which drives the sleep logic and the error
+// reports. Asleep frames move only kinematic shells and wake on their contact, as dem.cpp.
+//
+// Needs a current GL 4.3+ context on the calling thread for its whole life (create, every
+// call, destruction); the caller owns the gl::Context.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "common/error.hpp"
+#include "particles/dem.hpp"
+
+namespace sandpatch::gpu {
+
+struct GlOptions {
+  // Tangential-spring slots per sphere (partners touching at once). 12 equal spheres can
+  // touch one (kissing number); a granule's own 3 are not contacts. More simultaneous
+  // contacts than this are reported by step() as an Error naming this field.
+  int max_contacts_per_sphere = 16;
+  int workgroup_size = 64;  // invocations per workgroup of the per-sphere/per-body kernels
+  // Bytes of staged bodies step() uploads before simulating (whole bodies; at least one);
+  // 0 = everything. Bodies not uploaded yet are not simulated (their queries return the
+  // values they were added with).
+  std::size_t upload_bytes_per_step = 0;
+  bool upload_in_step = true;  // false: only upload() uploads (GlPool budgets its frames)
+  bool profile = false;        // time every dispatch (glFinish around it; slows the step)
+};
+
+// GPU counterpart of Simulation, created from the same SimulationDef. Capacities
+// (max_bodies, max_particles, the grid cells of bounds / (2 particle_radius + skin)) are
+// fixed at creation; all GPU memory is allocated then.
+class GlSimulation {
+ public:
+  static Result<GlSimulation> create(const SimulationDef& def, const GlOptions& options = {});
+  GlSimulation(GlSimulation&&) noexcept;
+  GlSimulation& operator=(GlSimulation&&) noexcept;
+  ~GlSimulation();  // deletes every GL object it created
+
+  // Bodies, as Simulation (same errors). Uploaded in one batch before the next step/query.
+  Result<BodyId> add_granule(Vec3 position, Quat orientation = {}, Vec3 velocity = {},
+                             Vec3 angular_velocity = {});
+  Result<BodyId> add_shell(const ShellDef& shell);
+  Status set_kinematic_velocity(BodyId b, Vec3 velocity, Vec3 angular_velocity);
+
+  // Staged bodies: bytes still to upload; upload whole bodies in order within max_bytes
+  // (with at_least_one, the first body goes however large); returns the bytes written.
+  // step() uploads by itself (GlOptions::upload_bytes_per_step).
+  std::size_t pending_upload_bytes() const;
+  std::size_t upload(std::size_t max_bytes, bool at_least_one = true);
+  int uploaded_body_count() const;
+
+  // Empties the simulation and takes a new definition that must fit the capacities it was
+  // created with (max_bodies, max_particles, grid cells); errors name the capacity to raise
+  // as capacity_prefix + field (e.g. "GlPoolDef.capacity."). GPU memory is kept.
+  Status reset(const SimulationDef& def, const char* capacity_prefix = "SimulationDef.");
+
+  // Advances dt_frame in substeps_for(dt_frame) equal substeps (the CPU backend's guard).
+  // Errors: the guard's refusal (state untouched); a non-finite body state; more touching
+  // partners than GlOptions::max_contacts_per_sphere (names the option; the frame has run).
+  Status step(double dt_frame);
+  Result<int> substeps_for(double dt_frame) const;
+  double contact_time() const;
+  double max_substep_dt() const;
+
+  bool asleep() const;
+  void wake();
+
+  // Queries (sim units). Each reads back only what it returns.
+  int body_count() const;
+  int particle_count() const;
+  Vec3 body_position(BodyId b) const;
+  Quat body_orientation(BodyId b) const;
+  Vec3 body_velocity(BodyId b) const;
+  Vec3 body_angular_velocity(BodyId b) const;
+  Vec3 body_force(BodyId b) const;   // contact force of the last substep, N (no gravity)
+  Vec3 body_torque(BodyId b) const;  // contact torque about the COM, N m
+  std::vector<Vec3> particle_positions() const;  // by stable particle id
+  std::vector<Vec3> particle_forces() const;     // by stable particle id, last substep, N
+  double max_granule_speed() const;              // m/s, max |v| + |w| (d + r) over granules
+  const StepStats& last_step() const;            // substeps, dt, contacts, wall contacts
+  std::uint64_t state_hash() const;              // hashed body fields + particle ids in id order
+  const SimulationDef& def() const;
+  const GranuleShape& granule_shape() const;
+  double time() const;
+
+  // GL names this simulation created (buffers and programs), for leak checks.
+  std::vector<unsigned> gl_buffers() const;
+  std::vector<unsigned> gl_programs() const;
+  std::size_t gpu_bytes() const;  // bytes of GPU buffer storage held
+  // With GlOptions::profile: wall seconds spent in each kernel so far, in stage order.
+  std::vector<std::pair<std::string, double>> kernel_seconds() const;
+
+  struct Impl;
+
+ private:
+  explicit GlSimulation(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace sandpatch::gpu

@@ -1,0 +1,90 @@
+// Shared helpers of the granule DEM kernels (shaders/dem/*.comp). Prepended after the
+// generated preamble (particles/gpu/gl_simulation.cpp: #version, capacities, the std430
+// blocks generated from particles/fields.hpp, BodyFlags) and before each kernel.
+//
+// Buffer bindings (all std430; every kernel declares all of them, uses a few):
+//   0 P    particles, current (cell-sorted) order        generated from fields.hpp
+//   1 Pn   particles, scratch copy                       (the grid's gather writes it)
+//   2 B    bodies, creation order                        generated from fields.hpp
+//   3 G    status counters, cells, prefix-sum block sums
+//   4 SIn  tangential springs read this substep (by particle id, K slots each)
+//   5 SOut tangential springs written this substep
+//   6 W    boundary-plane springs (by particle id, 6 planes each)
+//   7 S    sort bookkeeping: slot_of (id -> sorted index), cell_of, order; terrain heights
+// Math follows particles/math.hpp and contact.hpp operation by operation.
+
+layout(std430, binding = 3) buffer Grid {
+  // status: [0] max granule speed (float bits; speeds >= 0 order like their bits),
+  // [1] non-finite bodies, [2] most touching partners of one sphere, [3] sphere-sphere
+  // contacts (pairs, owner side as the CPU counts), [4] plane contacts, [5] re-sort needed
+  // (a sphere moved more than skin/2 since the last sort, or spheres were added), [6] grid
+  // rebuilds this frame; [8 + 3k ..] dispatch-indirect arguments of grid kernel k
+  uint status[SP_STATUS_WORDS];
+  uint cell_start[SP_CELLS + 1];
+  uint cell_count[SP_CELLS];
+  uint block_sum[SP_SCAN_BLOCKS];
+} G;
+
+layout(std430, binding = 4) buffer SpringsIn { uint count[SP_PARTICLES]; uvec4 slot[SP_PARTICLES * SP_K]; } SIn;
+layout(std430, binding = 5) buffer SpringsOut { uint count[SP_PARTICLES]; uvec4 slot[SP_PARTICLES * SP_K]; } SOut;
+layout(std430, binding = 6) buffer Walls { uint mask[SP_PARTICLES]; vec4 xi[SP_PARTICLES * 6]; } W;
+// (terrain: the optional TerrainGrid heights, heights[iz * nx + ix], m)
+layout(std430, binding = 7) buffer Sort {
+  int slot_of[SP_PARTICLES];
+  uint cell_of[SP_PARTICLES];
+  int order[SP_PARTICLES];
+  vec4 pos_at_sort[SP_PARTICLES];  // sphere centre at the last sort (sorted order), m
+  float terrain[];
+} S;
+
+uniform uint u_np;          // live particles
+uniform uint u_nb;          // live bodies
+uniform uint u_cells;       // gx * gy * gz (<= SP_CELLS)
+uniform ivec3 u_grid;       // gx, gy, gz
+uniform vec3 u_bmin;        // bounds_min (m)
+uniform vec3 u_bmax;        // bounds_max (m)
+uniform float u_inv_h;      // 1 / cell size (1/m)
+
+// Cell coordinate of one axis, clamped to the grid (dem.cpp cell_coord).
+int cell_coord(float v, float lo, int n) {
+  int c = int(floor((v - lo) * u_inv_h));
+  return c < 0 ? 0 : (c >= n ? n - 1 : c);
+}
+ivec3 cell3(vec3 x) {
+  return ivec3(cell_coord(x.x, u_bmin.x, u_grid.x), cell_coord(x.y, u_bmin.y, u_grid.y),
+               cell_coord(x.z, u_bmin.z, u_grid.z));
+}
+uint cell_index(ivec3 c) { return uint((c.z * u_grid.y + c.y) * u_grid.x + c.x); }
+
+// v rotated by the unit quaternion q = (x, y, z, w): v + 2w (u x v) + 2 u x (u x v).
+vec3 quat_rotate(vec4 q, vec3 v) {
+  vec3 t = 2.0 * cross(q.xyz, v);
+  return v + q.w * t + cross(q.xyz, t);
+}
+vec3 quat_rotate_inv(vec4 q, vec3 v) { return quat_rotate(vec4(-q.xyz, q.w), v); }
+// Quaternion product a * b, (x, y, z, w).
+vec4 quat_mul(vec4 a, vec4 b) {
+  return vec4(a.w * b.x + a.x * b.w + a.y * b.z - a.z * b.y, a.w * b.y - a.x * b.z + a.y * b.w + a.z * b.x,
+              a.w * b.z + a.x * b.y - a.y * b.x + a.z * b.w, a.w * b.w - a.x * b.x - a.y * b.y - a.z * b.z);
+}
+vec4 quat_normalized(vec4 q) {
+  float n = sqrt(q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w);
+  float s = n > 0.0 ? 1.0 / n : 0.0;
+  return n > 0.0 ? q * s : vec4(0.0, 0.0, 0.0, 1.0);
+}
+
+// Inclusive scan of shared uint arr[256] by invocation t (Hillis-Steele), written out so
+// that barrier() is never inside control flow (GLSL 4.30 rule).
+#define SP_SCAN_STEP(arr, t, off)              \
+  {                                            \
+    uint a_ = t >= off ? arr[t - off] : 0u;    \
+    memoryBarrierShared();                     \
+    barrier();                                 \
+    arr[t] += a_;                              \
+    memoryBarrierShared();                     \
+    barrier();                                 \
+  }
+#define SP_SCAN256(arr, t)                                                              \
+  SP_SCAN_STEP(arr, t, 1u) SP_SCAN_STEP(arr, t, 2u) SP_SCAN_STEP(arr, t, 4u)            \
+  SP_SCAN_STEP(arr, t, 8u) SP_SCAN_STEP(arr, t, 16u) SP_SCAN_STEP(arr, t, 32u)          \
+  SP_SCAN_STEP(arr, t, 64u) SP_SCAN_STEP(arr, t, 128u)
