@@ -207,7 +207,7 @@ render::CameraView camera_at(const CameraDef& c, double t) {
 // Images of the run: one GL context and one scene renderer, made on the first image.
 class FrameWriter {
  public:
-  FrameWriter(const Heightfield& hf, TerrainManager& manager) : hf_(hf), manager_(manager) {}
+  FrameWriter(const Heightfield& hf, const TerrainManager* manager) : hf_(hf), manager_(manager) {}
   bool unavailable() const { return !why_.empty(); }
   const std::string& why() const { return why_; }
   void heightfield_changed(const std::vector<GridRegion>& regions) {
@@ -230,7 +230,7 @@ class FrameWriter {
     if (!renderer_) return Ok{};
     if (Status s = ctx_->make_current(); !s) return s;
     std::vector<float> xyzr;
-    manager_.particles(xyzr);
+    if (manager_) manager_->particles(xyzr);
     std::unique_ptr<render::ParticleBuffer> buf;
     if (!xyzr.empty()) {
       std::vector<Eigen::Vector4f> p(xyzr.size() / 4);
@@ -248,7 +248,7 @@ class FrameWriter {
 
  private:
   const Heightfield& hf_;
-  TerrainManager& manager_;
+  const TerrainManager* manager_;
   std::unique_ptr<gl::Context> ctx_;
   std::unique_ptr<render::SceneRenderer> renderer_;
   std::string why_;
@@ -317,9 +317,13 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
   auto world_result = BulletWorld::create(hf, vec3f(sim.gravity));
   if (!world_result) return fail(ExitCode::BadInput, "bodies", world_result.message());
   BulletWorld& world = **world_result;
-  auto manager_result = TerrainManager::create(manager_def(scene, threads), hf, world);
-  if (!manager_result) return fail(ExitCode::BadInput, "activation", manager_result.message());
-  TerrainManager& manager = **manager_result;
+  // The terrain manager (granular patches), unless the scene turns them off.
+  std::unique_ptr<TerrainManager> manager;
+  if (sim.granular_patches) {
+    auto m = TerrainManager::create(manager_def(scene, threads), hf, world);
+    if (!m) return fail(ExitCode::BadInput, "activation", m.message());
+    manager = std::move(*m);
+  }
 
   // ---- the frame loop ----
   Profile profile;
@@ -327,7 +331,7 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
   std::vector<bool> spawned(scene.bodies.size(), false);
   std::vector<std::size_t> next_export(scene.outputs.heightfields.size(), 0);
   std::vector<std::size_t> next_frame(scene.outputs.frames.size(), 0);
-  FrameWriter images(hf, manager);
+  FrameWriter images(hf, manager.get());
   std::size_t images_skipped = 0;
   std::vector<std::string> written;
   std::vector<double> frame_ms;
@@ -362,8 +366,9 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
         spawned[i] = true;
       }
     }
-    if (Status st = manager.before_bodies(t, dt, profile); !st)
-      return fail(ExitCode::RuntimeFailure, "dem", st.message());
+    if (manager)
+      if (Status st = manager->before_bodies(t, dt, profile); !st)
+        return fail(ExitCode::RuntimeFailure, "dem", st.message());
     {
       auto timer = profile.time(Stage::Bodies);
       for (int s = 0; s < sim.substeps; ++s) world.step(sub_dt);
@@ -375,13 +380,14 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
                       "body '" + scene.bodies[i].name + "' has a non-finite state at t = " + std::to_string(t + dt) + " s");
       }
     }
-    if (Status st = manager.after_bodies(t, dt, profile); !st)
-      return fail(ExitCode::RuntimeFailure, "demotion", st.message());
-    peak_granules = std::max(peak_granules, manager.granules());
+    if (manager)
+      if (Status st = manager->after_bodies(t, dt, profile); !st)
+        return fail(ExitCode::RuntimeFailure, "demotion", st.message());
+    if (manager) peak_granules = std::max(peak_granules, manager->granules());
     {
       auto timer = profile.time(Stage::Outputs);
       const double t_end = t + dt;
-      images.heightfield_changed(manager.take_dirty_regions());
+      if (manager) images.heightfield_changed(manager->take_dirty_regions());
       for (std::size_t k = 0; k < scene.outputs.frames.size(); ++k) {
         const FrameOutputDef& o = scene.outputs.frames[k];
         bool due = o.every_k_frames > 0 && (frame + 1) % o.every_k_frames == 0;
@@ -433,12 +439,13 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
     }
   }
   // The run ends by converting every live patch back, so the final terrain holds its changes.
-  const int live_patches = manager.active_patches();
-  if (Status st = manager.demote_all(double(frames) * dt, profile); !st)
-    return fail(ExitCode::RuntimeFailure, "demotion", st.message());
+  const int live_patches = manager ? manager->active_patches() : 0;
+  if (manager)
+    if (Status st = manager->demote_all(double(frames) * dt, profile); !st)
+      return fail(ExitCode::RuntimeFailure, "demotion", st.message());
   {
     auto timer = profile.time(Stage::Outputs);
-    images.heightfield_changed(manager.take_dirty_regions());
+    if (manager) images.heightfield_changed(manager->take_dirty_regions());
     for (const auto& o : scene.outputs.heightfields)
       if (o.at_end)
         if (Status s = export_heightfield(o, frames, double(frames) * dt); !s)
@@ -473,7 +480,7 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
     bodies.push_back(b);
   }
   state_hash.pod(hf.hash());
-  state_hash.pod(manager.state_hash());
+  if (manager) state_hash.pod(manager->state_hash());
 
   const double med = median(frame_ms);
   const double mx = frame_ms.empty() ? 0 : *std::max_element(frame_ms.begin(), frame_ms.end());
@@ -498,8 +505,10 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
                  {"terrain_tiles", world.terrain_tile_count()},
                  {"peak_granules", peak_granules},
                  {"patches_live_at_end", live_patches}};
-  const nlohmann::ordered_json manager_report = manager.report();
-  for (const auto& [key, value] : manager_report.items()) r[key] = value;
+  if (manager) {
+    const nlohmann::ordered_json manager_report = manager->report();
+    for (const auto& [key, value] : manager_report.items()) r[key] = value;
+  }
   r["terrain"] = {{"samples_x", hf.samples_x()},
                   {"samples_z", hf.samples_z()},
                   {"spacing_m", hf.spacing()},

@@ -136,7 +136,6 @@ struct Simulation::Impl {
   double time = 0;
   bool asleep = false;
   double below_time = 0;
-  bool has_moving_kinematic = false;
   float granule_vmax = 0;              // max granule speed after the last substep, m/s
   StepStats stats;
 
@@ -819,25 +818,18 @@ Result<BodyId> Simulation::add_shell(const ShellDef& sh) {
   } else {
     flags = sh.motion == MotionType::Static ? kBodyStatic : kBodyKinematic;
   }
-  // a new dynamic body may shorten the contact time: check the guard still has a substep
-  double min_pm_old = s.min_point_mass;
+  // a new dynamic body may shorten the contact time (the guard uses the lightest body)
   if (sh.motion == MotionType::Dynamic) {
     double imin = std::min({sh.inertia.x, sh.inertia.y, sh.inertia.z});
     s.min_point_mass = std::min(s.min_point_mass, point_effective_mass(sh.mass, imin, arm));
   }
-  (void)min_pm_old;
-  if (rmax > s.r_max) {
-    float h = 2.0f * rmax + s.skin;
-    Vec3 ext = s.def.bounds_max - s.def.bounds_min;
-    double cells = std::ceil(ext.x / h) * std::ceil(ext.y / h) * std::ceil(ext.z / h);
-    (void)cells;
+  if (rmax > s.r_max) {  // bigger spheres: bigger (fewer) grid cells
     s.r_max = rmax;
     s.size_grid();
   }
   int i = s.push_body(flags, sh.position, sh.orientation, sh.velocity, sh.angular_velocity,
                       sh.motion == MotionType::Dynamic ? sh.mass : 0.0f, invm, iI, sh.offsets.data(),
                       sh.radii.data(), count, one);
-  if (sh.motion == MotionType::Kinematic) s.has_moving_kinematic = true;
   return BodyId{i};
 }
 

@@ -921,6 +921,7 @@ SimulationDef parse_simulation(Ctx& c, const json& j) {
     p.finish();
   }
   o.number("idle_timeout", s.idle_timeout, closed(0.0, 1e6, "s"));
+  o.boolean("granular_patches", s.granular_patches);
   o.vec3("gravity", s.gravity, closed(-1e3, 1e3, "m/s^2"));
   o.u64("seed", s.seed);
   o.finish();
@@ -1324,6 +1325,7 @@ nlohmann::json scene_to_json(const SceneDef& s) {
       {"particle_scale", sim.particle_scale},
       {"sleep", {{"speed_threshold", sim.sleep.speed_threshold}, {"hold_time", sim.sleep.hold_time}}},
       {"idle_timeout", sim.idle_timeout},
+      {"granular_patches", sim.granular_patches},
       {"gravity", sim.gravity},
       {"seed", sim.seed},
   };

@@ -163,6 +163,7 @@ struct SimulationDef {
   double particle_scale = 1.0;                 // render size / simulated size (Leach §4.3)
   SleepDef sleep;
   double idle_timeout = 120.0;                 // s asleep and untouched before demotion (Leach & Marais)
+  bool granular_patches = true;                // false: no patches, bodies meet the heightfield only (LOD off the other way)
   Vec3d gravity = {0.0, -9.81, 0.0};           // m/s²
   std::uint64_t seed = 1;                      // all randomness of a run
 };

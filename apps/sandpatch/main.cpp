@@ -22,6 +22,7 @@
 #include "bench/bench.hpp"
 #include "gl/context.hpp"
 #include "manager/run.hpp"
+#include "particles/gpu/bench_gl.hpp"
 #include "render/render.hpp"
 #include "scene/scene.hpp"
 
@@ -138,7 +139,11 @@ int main(int argc, char** argv) {
   }
 
   if (app.got_subcommand("bench")) {
-    if (bench->got_subcommand("dem")) return run_bench_dem(dem);
+    if (bench->got_subcommand("dem")) {
+      // GL: the same bed on the compute-shader backend, timed beside the CPU backend.
+      if (dem.backend == "gl") return gpu::run_bench_dem_gl(dem.granules, dem.steps, dem.json);
+      return run_bench_dem(dem);
+    }
     if (bench->got_subcommand("render")) return render::run_bench_render(brend);
   }
 

@@ -166,6 +166,7 @@ TEST(Scene, EveryFieldOfTheFullSceneIsParsed) {
   EXPECT_EQ(sim.sleep.speed_threshold, 0.02);
   EXPECT_EQ(sim.sleep.hold_time, 2.5);
   EXPECT_EQ(sim.idle_timeout, 60.0);
+  EXPECT_EQ(sim.granular_patches, false);
   EXPECT_EQ(sim.gravity, (Vec3d{0.0, -1.62, 0.0}));
   EXPECT_EQ(sim.seed, 12345678901234u);
 
@@ -225,6 +226,7 @@ TEST(Scene, ProceduralFieldsAndDefaults) {
   EXPECT_EQ(r->terrain.material, "sand");
   EXPECT_EQ(r->terrain.spacing_xz(33, 17)[0], 0.5);
   const SimulationDef d;
+  EXPECT_TRUE(r->simulation.granular_patches);
   EXPECT_EQ(r->simulation.idle_timeout, 120.0);
   EXPECT_EQ(r->simulation.gravity, (Vec3d{0.0, -9.81, 0.0}));
   EXPECT_EQ(r->simulation.dt, d.dt);
