@@ -6,6 +6,7 @@
 #pragma once
 
 #include <cassert>
+#include <cstdio>
 #include <optional>
 #include <string>
 #include <utility>
@@ -13,6 +14,13 @@
 #include <vector>
 
 namespace sandpatch {
+
+// A number as error messages show it: 9 significant digits (reads back as the same float).
+inline std::string format_number(double v) {
+  char buf[40];
+  std::snprintf(buf, sizeof buf, "%.9g", v);
+  return buf;
+}
 
 // Exit codes of the command-line program (README, docs/cli.md).
 enum class ExitCode : int { Ok = 0, RuntimeFailure = 1, BadInput = 2 };

@@ -18,12 +18,6 @@ namespace {
 constexpr int kMaxSamples = (1 << 20) + 1;  // per axis; far beyond any terrain we can hold
 constexpr int kMaxTileCells = 1 << 16;
 
-std::string fmt(double v) {
-  char buf[64];
-  std::snprintf(buf, sizeof buf, "%.9g", v);
-  return buf;
-}
-
 int layer_index(Layer l) {
   const int k = static_cast<int>(l);
   assert(k >= 0 && k < kLayerCount);
@@ -56,18 +50,18 @@ Result<Heightfield> Heightfield::create(const HeightfieldDef& def) {
   if (def.samples_z < 2 || def.samples_z > kMaxSamples)
     bad("samples_z", std::to_string(def.samples_z), "must be in [2, 1048577]");
   if (!std::isfinite(def.spacing) || !(def.spacing > 0))
-    bad("spacing", fmt(def.spacing), "must be finite and > 0 (m)");
-  if (!std::isfinite(def.origin_x)) bad("origin_x", fmt(def.origin_x), "must be finite (m)");
-  if (!std::isfinite(def.origin_y)) bad("origin_y", fmt(def.origin_y), "must be finite (m)");
-  if (!std::isfinite(def.origin_z)) bad("origin_z", fmt(def.origin_z), "must be finite (m)");
+    bad("spacing", format_number(def.spacing), "must be finite and > 0 (m)");
+  if (!std::isfinite(def.origin_x)) bad("origin_x", format_number(def.origin_x), "must be finite (m)");
+  if (!std::isfinite(def.origin_y)) bad("origin_y", format_number(def.origin_y), "must be finite (m)");
+  if (!std::isfinite(def.origin_z)) bad("origin_z", format_number(def.origin_z), "must be finite (m)");
   if (def.tile_cells < 1 || def.tile_cells > kMaxTileCells)
     bad("tile_cells", std::to_string(def.tile_cells), "must be in [1, 65536]");
   if (!std::isfinite(def.initial_height))
-    bad("initial_height", fmt(def.initial_height), "must be finite (m)");
+    bad("initial_height", format_number(def.initial_height), "must be finite (m)");
   if (errs.empty()) {
     const double ex = double(def.samples_x - 1) * def.spacing, ez = double(def.samples_z - 1) * def.spacing;
     if (!(ex < 1e30 && ez < 1e30))
-      bad("spacing", fmt(def.spacing), "(samples - 1) * spacing must fit in a float (m)");
+      bad("spacing", format_number(def.spacing), "(samples - 1) * spacing must fit in a float (m)");
   }
   if (!errs.empty()) return errs;
 

@@ -25,12 +25,6 @@
 namespace sandpatch {
 namespace {
 
-std::string fmt(double v) {
-  char buf[64];
-  std::snprintf(buf, sizeof buf, "%.9g", v);
-  return buf;
-}
-
 Error file_error(const std::string& path, std::string field, std::string value, std::string allowed) {
   return Error{path, std::move(field), std::move(value), std::move(allowed), ""};
 }
@@ -46,9 +40,9 @@ std::vector<Error> in_file(const std::string& path, std::vector<Error> errs) {
 std::vector<Error> check_import(const std::string& path, const HeightmapImport& im) {
   std::vector<Error> errs;
   if (!std::isfinite(im.vertical_scale))
-    errs.push_back(file_error(path, "import.vertical_scale", fmt(im.vertical_scale), "must be finite (m)"));
+    errs.push_back(file_error(path, "import.vertical_scale", format_number(im.vertical_scale), "must be finite (m)"));
   if (!std::isfinite(im.vertical_offset))
-    errs.push_back(file_error(path, "import.vertical_offset", fmt(im.vertical_offset), "must be finite (m)"));
+    errs.push_back(file_error(path, "import.vertical_offset", format_number(im.vertical_offset), "must be finite (m)"));
   return errs;
 }
 
@@ -286,7 +280,7 @@ Status save_png16(const std::string& path, const Heightfield& hf, float* out_off
   // ---- normalise min..max to 0..65535 ----
   const float lo = hf.min_height(), hi = hf.max_height();
   if (!std::isfinite(lo) || !std::isfinite(hi))
-    return file_error(path, "heights", fmt(lo) + " .. " + fmt(hi), "must be finite to be saved");
+    return file_error(path, "heights", format_number(lo) + " .. " + format_number(hi), "must be finite to be saved");
   const double range = double(hi) - double(lo);
   const int nx = hf.samples_x(), nz = hf.samples_z();
   std::vector<png_uint_16> px(std::size_t(nx) * nz);
@@ -351,7 +345,7 @@ Result<Heightfield> load_raw_f32(const std::string& path, int samples_x, int sam
     if (!std::isfinite(v[k]))
       return file_error(path, "sample " + std::to_string(k) + " (i = " + std::to_string(k % samples_x) +
                                   ", j = " + std::to_string(k / samples_x) + ")",
-                        fmt(v[k]), "must be finite");
+                        format_number(v[k]), "must be finite");
   }
   return build(path, def_from(import, samples_x, samples_z), import,
                [&](int i, int j) { return double(v[std::size_t(j) * samples_x + i]); });
@@ -419,14 +413,14 @@ Result<Heightfield> load_esri_ascii(const std::string& path, const HeightmapImpo
   auto need_int = [&](const char* key, double v) {
     if (std::isnan(v)) errs.push_back(file_error(path, key, "", "missing from the header"));
     else if (v != std::floor(v) || v < 2 || v > 1048577)
-      errs.push_back(file_error(path, key, fmt(v), "must be an integer in [2, 1048577]"));
+      errs.push_back(file_error(path, key, format_number(v), "must be an integer in [2, 1048577]"));
   };
   need_int("ncols", ncols);
   need_int("nrows", nrows);
   if (!have_x) errs.push_back(file_error(path, "xllcorner", "", "missing from the header (or xllcenter)"));
   if (!have_y) errs.push_back(file_error(path, "yllcorner", "", "missing from the header (or yllcenter)"));
   if (std::isnan(cellsize)) errs.push_back(file_error(path, "cellsize", "", "missing from the header"));
-  else if (!(cellsize > 0)) errs.push_back(file_error(path, "cellsize", fmt(cellsize), "must be > 0 (m)"));
+  else if (!(cellsize > 0)) errs.push_back(file_error(path, "cellsize", format_number(cellsize), "must be > 0 (m)"));
   if (!errs.empty()) return errs;
 
   // ---- data: nrows x ncols numbers, first row northernmost ----

@@ -9,12 +9,6 @@
 namespace sandpatch {
 namespace {
 
-std::string fmt(double v) {
-  char buf[64];
-  std::snprintf(buf, sizeof buf, "%.9g", v);
-  return buf;
-}
-
 // 32-bit integer hash of a lattice point (xorshift-multiply avalanche).
 std::uint32_t lattice_hash(std::uint32_t seed, std::uint32_t octave, std::int64_t ix, std::int64_t iz) {
   std::uint32_t h = seed * 0x9e3779b9u;
@@ -57,13 +51,13 @@ Result<Heightfield> make_procedural(const HeightfieldDef& grid, const Procedural
   const std::string& k = p.kind;
   if (k != "flat" && k != "plane" && k != "hills" && k != "noise")
     errs.push_back({"", "kind", "\"" + k + "\"", "must be one of flat, plane, hills, noise", ""});
-  if (!std::isfinite(p.height)) errs.push_back({"", "height", fmt(p.height), "must be finite (m)", ""});
-  if (!std::isfinite(p.slope_x)) errs.push_back({"", "slope_x", fmt(p.slope_x), "must be finite", ""});
-  if (!std::isfinite(p.slope_z)) errs.push_back({"", "slope_z", fmt(p.slope_z), "must be finite", ""});
+  if (!std::isfinite(p.height)) errs.push_back({"", "height", format_number(p.height), "must be finite (m)", ""});
+  if (!std::isfinite(p.slope_x)) errs.push_back({"", "slope_x", format_number(p.slope_x), "must be finite", ""});
+  if (!std::isfinite(p.slope_z)) errs.push_back({"", "slope_z", format_number(p.slope_z), "must be finite", ""});
   if (!std::isfinite(p.amplitude) || p.amplitude < 0)
-    errs.push_back({"", "amplitude", fmt(p.amplitude), "must be finite and >= 0 (m)", ""});
+    errs.push_back({"", "amplitude", format_number(p.amplitude), "must be finite and >= 0 (m)", ""});
   if (!std::isfinite(p.wavelength) || !(p.wavelength > 0))
-    errs.push_back({"", "wavelength", fmt(p.wavelength), "must be finite and > 0 (m)", ""});
+    errs.push_back({"", "wavelength", format_number(p.wavelength), "must be finite and > 0 (m)", ""});
   if (p.octaves < 1 || p.octaves > 16)
     errs.push_back({"", "octaves", std::to_string(p.octaves), "must be in [1, 16]", ""});
   if (!errs.empty()) return errs;

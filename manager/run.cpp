@@ -230,14 +230,27 @@ class FrameWriter {
     if (!renderer_) return Ok{};
     if (Status s = ctx_->make_current(); !s) return s;
     std::vector<float> xyzr;
-    if (manager_) manager_->particles(xyzr);
+    std::vector<std::pair<std::size_t, float>> groups;
+    if (manager_) {
+      manager_->particles(xyzr);
+      groups = manager_->particle_groups();
+    }
+    // One buffer; one source per patch so each fades in on its own (Leach & Marais §5.1).
     std::unique_ptr<render::ParticleBuffer> buf;
     if (!xyzr.empty()) {
       std::vector<Eigen::Vector4f> p(xyzr.size() / 4);
       for (std::size_t k = 0; k < p.size(); ++k) p[k] = {xyzr[4 * k], xyzr[4 * k + 1], xyzr[4 * k + 2], xyzr[4 * k + 3]};
       buf = std::make_unique<render::ParticleBuffer>(p);
-      if (Status s = renderer_->set_particles({buf->source({hf_.origin_x(), hf_.origin_y(), hf_.origin_z()})}); !s)
-        return s;
+      std::vector<render::ParticleSource> sources;
+      std::size_t first = 0;
+      for (const auto& [count, fade] : groups) {
+        render::ParticleSource src = buf->source({hf_.origin_x(), hf_.origin_y(), hf_.origin_z()}, 1.0f, fade);
+        src.first = std::int64_t(first);
+        src.count = std::int64_t(count);
+        first += count;
+        if (count > 0) sources.push_back(src);
+      }
+      if (Status s = renderer_->set_particles(sources); !s) return s;
     } else {
       renderer_->clear_particles();
     }

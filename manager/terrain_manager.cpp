@@ -73,6 +73,7 @@ struct TerrainManager::Impl {
     GridRegion apron;          // region + the band where spilled granules may rest
     Eigen::Vector3d origin;    // m, world: sim (0,0,0)
     double floor_local = 0;    // m, floor height relative to the heightfield origin
+    double top_local = 0;      // m, highest surface sample of the region at promotion
     std::vector<PlacedGranule> pending;
     std::size_t uploaded = 0;
     int granules = 0;
@@ -99,6 +100,9 @@ struct TerrainManager::Impl {
   std::string gl_note;
 
   double scale() const { return def.particle_scale; }
+  // m (world): a body's shell joins a patch when the body's lowest point is within half of
+  // this above the patch's highest surface point; the simulation's domain reaches this high.
+  static constexpr double engage_height = 1.0;
   float radius_world() const { return float(def.material.radius * def.particle_scale); }
 
   // World <-> heightfield sample index helpers.
@@ -178,6 +182,7 @@ struct TerrainManager::Impl {
     slot.apron.ni = std::min(hf->samples_x(), region.i0 + region.ni + band) - slot.apron.i0;
     slot.apron.nj = std::min(hf->samples_z(), region.j0 + region.nj + band) - slot.apron.j0;
     slot.floor_local = floor_local;
+    slot.top_local = hi;
     slot.origin = {hf->origin_x() + region.i0 * double(sp), hf->origin_y() + floor_local,
                    hf->origin_z() + region.j0 * double(sp)};
     slot.before_heights.resize(std::size_t(slot.apron.ni) * slot.apron.nj);
@@ -188,7 +193,9 @@ struct TerrainManager::Impl {
     const float W = float((region.ni - 1) * double(sp) / s), D = float((region.nj - 1) * double(sp) / s);
     const float top = float((hi - floor_local) / s);
     sd.bounds_min = {0, 0, 0};
-    sd.bounds_max = {W, top + 4.0f * float(def.material.radius) * 8.0f, D};
+    // Room above the surface for bodies' shells (spheres above the grid would all share its
+    // top layer of cells and slow the search); shells engage only within `engage_height`.
+    sd.bounds_max = {W, top + float(engage_height / s) + 2.0f * float(def.material.radius), D};
     sd.floor_height = 0;
     auto sc = ParticleScale::create(s, {slot.origin.x(), slot.origin.y(), slot.origin.z()});
     if (!sc) return sc.errors();
@@ -264,7 +271,8 @@ struct TerrainManager::Impl {
     const double sp = hf->spacing();
     const double x0 = hf->origin_x() + s.region.i0 * sp, x1 = x0 + (s.region.ni - 1) * sp;
     const double z0 = hf->origin_z() + s.region.j0 * sp, z1 = z0 + (s.region.nj - 1) * sp;
-    const bool overlap = lo.x() < x1 && hi.x() > x0 && lo.z() < z1 && hi.z() > z0;
+    const double surface_top = hf->origin_y() + s.top_local;
+    const bool overlap = lo.x() < x1 && hi.x() > x0 && lo.z() < z1 && hi.z() > z0 && lo.y() < surface_top + 0.5 * engage_height;
     const double margin = 2.0 * radius_world();
     *inside = lo.x() > x0 + margin && hi.x() < x1 - margin && lo.z() > z0 + margin && hi.z() < z1 - margin;
     return overlap;
@@ -658,6 +666,16 @@ void TerrainManager::particles(std::vector<float>& xyzr) const {
       }
     }
   }
+}
+
+std::vector<std::pair<std::size_t, float>> TerrainManager::particle_groups() const {
+  std::vector<std::pair<std::size_t, float>> out;
+  for (const auto& s : impl_->slots) {
+    if (s.state == Impl::State::Free) continue;
+    const float fade = impl_->def.fade_frames > 0 ? float(s.fade) / float(impl_->def.fade_frames) : 1.0f;
+    out.emplace_back(std::size_t(4) * std::size_t(s.granules), std::min(1.0f, fade));
+  }
+  return out;
 }
 
 nlohmann::ordered_json TerrainManager::report() const {

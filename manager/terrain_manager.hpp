@@ -104,6 +104,9 @@ class TerrainManager {
   // Sphere centres and radii of every live patch (x, y, z, r; m, world relative to the
   // heightfield origin) with each patch's fade-in factor, for rendering.
   void particles(std::vector<float>& xyzr) const;
+  // The same spheres grouped by patch, in the order particles() writes them: each group's
+  // sphere count and fade-in factor in [0, 1] (1 after fade_frames frames of simulation).
+  std::vector<std::pair<std::size_t, float>> particle_groups() const;
   // Heightfield regions written by demotions since the last call (for renderers' caches).
   std::vector<GridRegion> take_dirty_regions();
   // ledger, conversions, pool, tile: the run report's sections (docs/cli.md).

@@ -20,12 +20,6 @@ namespace sandpatch {
 
 namespace {
 
-std::string num(double v) {
-  char b[32];
-  std::snprintf(b, sizeof b, "%g", v);
-  return b;
-}
-
 // Tangential springs against the boundaries, per sphere: floor, walls x0, x1, z0, z1, terrain.
 constexpr int kWallSlots = 6;
 
@@ -698,7 +692,7 @@ Simulation::~Simulation() = default;
 Result<Simulation> Simulation::create(const SimulationDef& d) {
   std::vector<Error> es;
   auto bad = [&](const std::string& f, double v, const char* allowed) {
-    es.push_back(Error{"", "SimulationDef." + f, num(v), allowed, ""});
+    es.push_back(Error{"", "SimulationDef." + f, format_number(v), allowed, ""});
   };
   if (d.max_bodies < 1 || d.max_bodies > (1 << 28)) bad("max_bodies", d.max_bodies, "must be in [1, 2^28]");
   if (d.max_particles < 1 || d.max_particles > (1 << 28))
@@ -747,7 +741,7 @@ Result<Simulation> Simulation::create(const SimulationDef& d) {
     Vec3 ext = d.bounds_max - d.bounds_min;
     double cells = std::ceil(ext.x / h) * std::ceil(ext.y / h) * std::ceil(ext.z / h);
     if (cells > double(1 << 26))
-      return Error{"", "SimulationDef.bounds_max", num(cells) + " grid cells",
+      return Error{"", "SimulationDef.bounds_max", format_number(cells) + " grid cells",
                    "the grid (cell = 2 particle_radius + cell_skin) must have <= 2^26 cells",
                    "shrink the bounds or raise particle_radius"};
   }
@@ -765,10 +759,10 @@ Result<Simulation> Simulation::create(const SimulationDef& d) {
 Result<BodyId> Simulation::add_granule(Vec3 x, Quat q, Vec3 v, Vec3 w) {
   Impl& s = *impl_;
   if (s.nb + 1 > s.def.max_bodies)
-    return Error{"", "SimulationDef.max_bodies", num(s.def.max_bodies), "is full: raise max_bodies",
+    return Error{"", "SimulationDef.max_bodies", format_number(s.def.max_bodies), "is full: raise max_bodies",
                  "add_granule needs 1 more body"};
   if (s.np + 4 > s.def.max_particles)
-    return Error{"", "SimulationDef.max_particles", num(s.def.max_particles), "is full: raise max_particles",
+    return Error{"", "SimulationDef.max_particles", format_number(s.def.max_particles), "is full: raise max_particles",
                  "add_granule needs 4 more particles"};
   if (!std::isfinite(x.x + x.y + x.z + q.x + q.y + q.z + q.w + v.x + v.y + v.z + w.x + w.y + w.z))
     return Error{"", "add_granule", "non-finite", "position, orientation and velocities must be finite", ""};
@@ -786,19 +780,19 @@ Result<BodyId> Simulation::add_shell(const ShellDef& sh) {
   if (count < 1) return Error{"", "ShellDef.offsets", "0 spheres", "must hold at least one sphere", ""};
   bool one = sh.radii.size() == 1;
   if (!one && int(sh.radii.size()) != count)
-    return Error{"", "ShellDef.radii", num(double(sh.radii.size())) + " radii",
+    return Error{"", "ShellDef.radii", format_number(double(sh.radii.size())) + " radii",
                  "must hold one radius, or one per offset (" + std::to_string(count) + ")", ""};
   if (s.nb + 1 > s.def.max_bodies)
-    return Error{"", "SimulationDef.max_bodies", num(s.def.max_bodies), "is full: raise max_bodies",
+    return Error{"", "SimulationDef.max_bodies", format_number(s.def.max_bodies), "is full: raise max_bodies",
                  "add_shell needs 1 more body"};
   if (s.np + count > s.def.max_particles)
-    return Error{"", "SimulationDef.max_particles", num(s.def.max_particles), "is full: raise max_particles",
+    return Error{"", "SimulationDef.max_particles", format_number(s.def.max_particles), "is full: raise max_particles",
                  "add_shell needs " + std::to_string(count) + " more particles"};
   float rmax = 0, arm = 0;
   for (int k = 0; k < count; ++k) {
     float r = one ? sh.radii[0] : sh.radii[k];
     if (!(r > 0) || !std::isfinite(r))
-      return Error{"", "ShellDef.radii[" + std::to_string(one ? 0 : k) + "]", num(r), "must be > 0 (m)", ""};
+      return Error{"", "ShellDef.radii[" + std::to_string(one ? 0 : k) + "]", format_number(r), "must be > 0 (m)", ""};
     if (!std::isfinite(sh.offsets[k].x + sh.offsets[k].y + sh.offsets[k].z))
       return Error{"", "ShellDef.offsets[" + std::to_string(k) + "]", "non-finite", "must be finite (m)", ""};
     rmax = std::max(rmax, r);
@@ -808,9 +802,9 @@ Result<BodyId> Simulation::add_shell(const ShellDef& sh) {
   float invm = 0;
   Vec3 iI{};
   if (sh.motion == MotionType::Dynamic) {
-    if (!(sh.mass > 0) || !std::isfinite(sh.mass)) return Error{"", "ShellDef.mass", num(sh.mass), "must be > 0 (kg)", ""};
+    if (!(sh.mass > 0) || !std::isfinite(sh.mass)) return Error{"", "ShellDef.mass", format_number(sh.mass), "must be > 0 (kg)", ""};
     if (!(sh.inertia.x > 0 && sh.inertia.y > 0 && sh.inertia.z > 0))
-      return Error{"", "ShellDef.inertia", num(std::min({sh.inertia.x, sh.inertia.y, sh.inertia.z})),
+      return Error{"", "ShellDef.inertia", format_number(std::min({sh.inertia.x, sh.inertia.y, sh.inertia.z})),
                    "principal moments must be > 0 (kg m^2)", ""};
     flags = kBodyDynamic;
     invm = 1.0f / sh.mass;
@@ -845,13 +839,13 @@ Status Simulation::set_kinematic_velocity(BodyId id, Vec3 v, Vec3 w) {
 Result<int> Simulation::substeps_for(double dt_frame) const {
   const Impl& s = *impl_;
   if (!(dt_frame > 0) || !std::isfinite(dt_frame))
-    return Error{"", "step.dt_frame", num(dt_frame), "must be a finite number > 0 (s)", ""};
+    return Error{"", "step.dt_frame", format_number(dt_frame), "must be a finite number > 0 (s)", ""};
   double mdt = s.max_dt();
   double n = std::ceil(dt_frame / mdt * (1.0 - 1e-9));
   if (n < 1) n = 1;
   if (n > s.def.max_substeps)
-    return Error{"", "step.dt_frame", num(dt_frame),
-                 "needs " + num(n) + " substeps of <= " + num(mdt) + " s (t_c = " + num(s.contact_time_()) +
+    return Error{"", "step.dt_frame", format_number(dt_frame),
+                 "needs " + format_number(n) + " substeps of <= " + format_number(mdt) + " s (t_c = " + format_number(s.contact_time_()) +
                      " s / " + std::to_string(s.def.accuracy_steps_per_contact) + ") but max_substeps = " +
                      std::to_string(s.def.max_substeps),
                  "lower dt_frame, raise SimulationDef.max_substeps, or lower material.normal_stiffness"};

@@ -51,16 +51,10 @@ double clamped_contact_time(const Material& m, double m_eff) {
   return t * std::sqrt(m_eff / m.normal_stiffness);
 }
 
-static std::string num(double v) {
-  char b[32];
-  std::snprintf(b, sizeof b, "%g", v);
-  return b;
-}
-
 Status validate(const Material& m, const std::string& p) {
   std::vector<Error> es;
   auto check = [&](bool ok, const char* f, double v, const char* allowed) {
-    if (!ok || !std::isfinite(v)) es.push_back(Error{"", p + "." + f, num(v), allowed, ""});
+    if (!ok || !std::isfinite(v)) es.push_back(Error{"", p + "." + f, format_number(v), allowed, ""});
   };
   check(m.density > 0, "density", m.density, "must be > 0 (kg/m^3)");
   check(m.normal_stiffness > 0, "normal_stiffness", m.normal_stiffness, "must be > 0 (N/m)");

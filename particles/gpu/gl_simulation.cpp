@@ -22,12 +22,6 @@ namespace sandpatch::gpu {
 
 namespace {
 
-std::string num(double v) {
-  char b[32];
-  std::snprintf(b, sizeof b, "%g", v);
-  return b;
-}
-
 // Buffer bindings (shaders/dem/common.glsl lists the same).
 enum Binding : GLuint { kBindP = 0, kBindPn = 1, kBindB = 2, kBindG = 3, kBindSIn = 4, kBindSOut = 5, kBindW = 6, kBindS = 7 };
 
@@ -470,7 +464,7 @@ namespace {
 Status validate_common(const SimulationDef& d, const GlOptions& o) {
   std::vector<Error> es;
   auto bad = [&](const std::string& f, double v, const std::string& allowed) {
-    es.push_back(Error{"", f, num(v), allowed, ""});
+    es.push_back(Error{"", f, format_number(v), allowed, ""});
   };
   if (d.max_bodies < 1 || d.max_bodies > (1 << 28)) bad("SimulationDef.max_bodies", d.max_bodies, "must be in [1, 2^28]");
   if (d.max_particles < 1 || d.max_particles > (1 << 28))
@@ -509,16 +503,16 @@ Status GlSimulation::Impl::configure(const SimulationDef& d, const char* cap_pre
   if (!g) return g.errors();
   const std::string pre = cap_prefix;
   if (d.max_bodies > cap_b)
-    return Error{"", "SimulationDef.max_bodies", num(d.max_bodies), "exceeds the capacity " + num(cap_b) + ": raise " + pre + "max_bodies", ""};
+    return Error{"", "SimulationDef.max_bodies", format_number(d.max_bodies), "exceeds the capacity " + format_number(cap_b) + ": raise " + pre + "max_bodies", ""};
   if (d.max_particles > cap_p)
-    return Error{"", "SimulationDef.max_particles", num(d.max_particles),
-                 "exceeds the capacity " + num(cap_p) + ": raise " + pre + "max_particles", ""};
+    return Error{"", "SimulationDef.max_particles", format_number(d.max_particles),
+                 "exceeds the capacity " + format_number(cap_p) + ": raise " + pre + "max_particles", ""};
   if (grid_cells(d, d.particle_radius) > cap_cells)
-    return Error{"", "SimulationDef.bounds_max", num(grid_cells(d, d.particle_radius)) + " grid cells",
-                 "exceeds the capacity of " + num(cap_cells) + " cells: enlarge " + pre + "bounds or shrink the patch", ""};
+    return Error{"", "SimulationDef.bounds_max", format_number(grid_cells(d, d.particle_radius)) + " grid cells",
+                 "exceeds the capacity of " + format_number(cap_cells) + " cells: enlarge " + pre + "bounds or shrink the patch", ""};
   if (d.terrain.heights.size() > cap_terrain)
-    return Error{"", "SimulationDef.terrain.heights", num(double(d.terrain.heights.size())) + " samples",
-                 "exceeds the capacity of " + num(double(cap_terrain)) + " samples: raise " + pre + "terrain", ""};
+    return Error{"", "SimulationDef.terrain.heights", format_number(double(d.terrain.heights.size())) + " samples",
+                 "exceeds the capacity of " + format_number(double(cap_terrain)) + " samples: raise " + pre + "terrain", ""};
   def = d;
   guard = std::make_unique<Simulation>(std::move(*g));
   guard_point_mass = std::numeric_limits<double>::infinity();
@@ -585,8 +579,8 @@ Result<GlSimulation> GlSimulation::create(const SimulationDef& d, const GlOption
                                        "wall springs (SimulationDef.max_particles)", "sort (SimulationDef.max_particles)"};
   for (int b = 0; b < Impl::kBufCount; ++b)
     if (s.buf_bytes[b] > std::size_t(max_block))
-      return Error{"", what[b], num(double(s.buf_bytes[b])) + " bytes",
-                   "must fit the driver's GL_MAX_SHADER_STORAGE_BLOCK_SIZE = " + num(double(max_block)) + " bytes",
+      return Error{"", what[b], format_number(double(s.buf_bytes[b])) + " bytes",
+                   "must fit the driver's GL_MAX_SHADER_STORAGE_BLOCK_SIZE = " + format_number(double(max_block)) + " bytes",
                    "lower the capacity named"};
 
   // programs: generated preamble + common.glsl + kernel
@@ -621,10 +615,10 @@ Status GlSimulation::reset(const SimulationDef& def, const char* capacity_prefix
 Result<BodyId> GlSimulation::add_granule(Vec3 x, Quat q, Vec3 v, Vec3 w) {
   Impl& s = *impl_;
   if (s.nb + 1 > s.def.max_bodies)
-    return Error{"", "SimulationDef.max_bodies", num(s.def.max_bodies), "is full: raise max_bodies",
+    return Error{"", "SimulationDef.max_bodies", format_number(s.def.max_bodies), "is full: raise max_bodies",
                  "add_granule needs 1 more body"};
   if (s.np + 4 > s.def.max_particles)
-    return Error{"", "SimulationDef.max_particles", num(s.def.max_particles), "is full: raise max_particles",
+    return Error{"", "SimulationDef.max_particles", format_number(s.def.max_particles), "is full: raise max_particles",
                  "add_granule needs 4 more particles"};
   if (!std::isfinite(x.x + x.y + x.z + q.x + q.y + q.z + q.w + v.x + v.y + v.z + w.x + w.y + w.z))
     return Error{"", "add_granule", "non-finite", "position, orientation and velocities must be finite", ""};
@@ -641,19 +635,19 @@ Result<BodyId> GlSimulation::add_shell(const ShellDef& sh) {
   if (count < 1) return Error{"", "ShellDef.offsets", "0 spheres", "must hold at least one sphere", ""};
   const bool one = sh.radii.size() == 1;
   if (!one && int(sh.radii.size()) != count)
-    return Error{"", "ShellDef.radii", num(double(sh.radii.size())) + " radii",
+    return Error{"", "ShellDef.radii", format_number(double(sh.radii.size())) + " radii",
                  "must hold one radius, or one per offset (" + std::to_string(count) + ")", ""};
   if (s.nb + 1 > s.def.max_bodies)
-    return Error{"", "SimulationDef.max_bodies", num(s.def.max_bodies), "is full: raise max_bodies",
+    return Error{"", "SimulationDef.max_bodies", format_number(s.def.max_bodies), "is full: raise max_bodies",
                  "add_shell needs 1 more body"};
   if (s.np + count > s.def.max_particles)
-    return Error{"", "SimulationDef.max_particles", num(s.def.max_particles), "is full: raise max_particles",
+    return Error{"", "SimulationDef.max_particles", format_number(s.def.max_particles), "is full: raise max_particles",
                  "add_shell needs " + std::to_string(count) + " more particles"};
   float rmax = 0, arm = 0;
   for (int k = 0; k < count; ++k) {
     const float r = one ? sh.radii[0] : sh.radii[k];
     if (!(r > 0) || !std::isfinite(r))
-      return Error{"", "ShellDef.radii[" + std::to_string(one ? 0 : k) + "]", num(r), "must be > 0 (m)", ""};
+      return Error{"", "ShellDef.radii[" + std::to_string(one ? 0 : k) + "]", format_number(r), "must be > 0 (m)", ""};
     if (!std::isfinite(sh.offsets[k].x + sh.offsets[k].y + sh.offsets[k].z))
       return Error{"", "ShellDef.offsets[" + std::to_string(k) + "]", "non-finite", "must be finite (m)", ""};
     rmax = std::max(rmax, r);
@@ -663,9 +657,9 @@ Result<BodyId> GlSimulation::add_shell(const ShellDef& sh) {
   float invm = 0;
   Vec3 iI{};
   if (sh.motion == MotionType::Dynamic) {
-    if (!(sh.mass > 0) || !std::isfinite(sh.mass)) return Error{"", "ShellDef.mass", num(sh.mass), "must be > 0 (kg)", ""};
+    if (!(sh.mass > 0) || !std::isfinite(sh.mass)) return Error{"", "ShellDef.mass", format_number(sh.mass), "must be > 0 (kg)", ""};
     if (!(sh.inertia.x > 0 && sh.inertia.y > 0 && sh.inertia.z > 0))
-      return Error{"", "ShellDef.inertia", num(std::min({sh.inertia.x, sh.inertia.y, sh.inertia.z})),
+      return Error{"", "ShellDef.inertia", format_number(std::min({sh.inertia.x, sh.inertia.y, sh.inertia.z})),
                    "principal moments must be > 0 (kg m^2)", ""};
     flags = kBodyDynamic;
     invm = 1.0f / sh.mass;
