@@ -144,7 +144,7 @@ class ProgressPrinter {
 };
 
 // The terrain manager's definition from the scene (docs/scene-format.md).
-TerrainManagerDef manager_def(const SceneDef& scene, int threads) {
+TerrainManagerDef manager_def(const SceneDef& scene, int threads, const std::string& backend) {
   const SimulationDef& sim = scene.simulation;
   const MaterialDef* mat = scene.terrain.material.empty() ? &scene.materials.front()
                                                          : scene.find_material(scene.terrain.material);
@@ -166,6 +166,7 @@ TerrainManagerDef manager_def(const SceneDef& scene, int threads) {
   d.gravity = {sim.gravity[0], sim.gravity[1], sim.gravity[2]};
   d.threads = threads;
   d.seed = sim.seed;
+  d.backend = backend;
   return d;
 }
 
@@ -228,13 +229,13 @@ class FrameWriter {
       renderer_ = std::move(*r);
     }
     if (!renderer_) return Ok{};
-    if (Status s = ctx_->make_current(); !s) return s;
     std::vector<float> xyzr;
     std::vector<std::pair<std::size_t, float>> groups;
     if (manager_) {
-      manager_->particles(xyzr);
+      manager_->particles(xyzr);  // may make the manager's GL context current
       groups = manager_->particle_groups();
     }
+    if (Status s = ctx_->make_current(); !s) return s;
     // One buffer; one source per patch so each fades in on its own (Leach & Marais §5.1).
     std::unique_ptr<render::ParticleBuffer> buf;
     if (!xyzr.empty()) {
@@ -324,8 +325,6 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
   }
 
   std::vector<std::string> warnings;
-  if (backend == "gl")
-    warnings.push_back("backend gl: the GL DEM backend lands with issue 4; granular patches ran on the CPU backend");
 
   auto world_result = BulletWorld::create(hf, vec3f(sim.gravity));
   if (!world_result) return fail(ExitCode::BadInput, "bodies", world_result.message());
@@ -333,7 +332,7 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
   // The terrain manager (granular patches), unless the scene turns them off.
   std::unique_ptr<TerrainManager> manager;
   if (sim.granular_patches) {
-    auto m = TerrainManager::create(manager_def(scene, threads), hf, world);
+    auto m = TerrainManager::create(manager_def(scene, threads, backend), hf, world);
     if (!m) return fail(ExitCode::BadInput, "activation", m.message());
     manager = std::move(*m);
   }

@@ -12,7 +12,9 @@
 #include "manager/depth_conversion.hpp"
 #include "manager/granule_tile.hpp"
 #include "manager/shell.hpp"
+#include "particles/backend.hpp"
 #include "particles/dem.hpp"
+#include "particles/gpu/gl_backend.hpp"
 
 namespace sandpatch {
 namespace {
@@ -66,7 +68,7 @@ struct TerrainManager::Impl {
     bool closed = false;
   };
   struct Slot {
-    Simulation sim;
+    std::unique_ptr<DemBackend> sim;
     State state = State::Free;
     int patch = -1;            // id of the patch in the slot
     GridRegion region;         // heightfield samples of the patch
@@ -83,8 +85,10 @@ struct TerrainManager::Impl {
     std::vector<float> before_heights;  // heights of `apron` at promotion
     std::vector<Carried> carried;
     Ledger ledger;
-    explicit Slot(Simulation s) : sim(std::move(s)) {}
+    explicit Slot(std::unique_ptr<DemBackend> s) : sim(std::move(s)) {}
   };
+  // The GL context (the GL backend's and the depth render's) outlives the slots: declared first.
+  std::unique_ptr<gl::Context> gl;
   std::vector<Slot> slots;
   std::vector<PatchRequest> queue;
   std::vector<PatchEvent> events;
@@ -94,12 +98,16 @@ struct TerrainManager::Impl {
   std::vector<nlohmann::ordered_json> ledgers;  // closed ledgers (demoted patches)
   std::vector<GridRegion> dirty;                // written by demotions, not yet taken
 
-  std::unique_ptr<gl::Context> gl;
   std::unique_ptr<ParticleDepthRenderer> depth;
   bool gl_failed = false;
   std::string gl_note;
 
   double scale() const { return def.particle_scale; }
+  // The GL backend's context must be current for any slot call (other GL users of the
+  // thread, e.g. the image writer, make their own current in between).
+  void current() const {
+    if (gl) (void)gl->make_current();
+  }
   // m (world): a body's shell joins a patch when the body's lowest point is within half of
   // this above the patch's highest surface point; the simulation's domain reaches this high.
   static constexpr double engage_height = 1.0;
@@ -212,7 +220,7 @@ struct TerrainManager::Impl {
     tg.fill_min_z = 0;
     tg.fill_max_x = W;
     tg.fill_max_z = D;
-    if (Status st = slot.sim.reset(sd); !st) return st.errors();
+    if (Status st = slot.sim->reset(sd); !st) return st.errors();
 
     // Granules from the pre-settled tile, cut to the surface.
     auto surface = [&](float x, float z) {
@@ -251,7 +259,7 @@ struct TerrainManager::Impl {
     const std::size_t end = std::min(slot.pending.size(), slot.uploaded + budget);
     for (; slot.uploaded < end; ++slot.uploaded) {
       const PlacedGranule& g = slot.pending[slot.uploaded];
-      auto id = slot.sim.add_granule(g.position, g.orientation);
+      auto id = slot.sim->add_granule(g.position, g.orientation);
       if (!id) return id.errors();
       ++slot.granules;
     }
@@ -305,16 +313,16 @@ struct TerrainManager::Impl {
         sh.motion = MotionType::Dynamic;
         sh.mass = world->mass(b);  // the body enters with its own mass (mass ratio 1)
         sh.inertia = v3(Eigen::Vector3f(world->principal_inertia(b) / float(s * s)));
-        sh.position = slot.sim.def().scale.position_to_sim({st.position.x(), st.position.y(), st.position.z()});
+        sh.position = slot.sim->def().scale.position_to_sim({st.position.x(), st.position.y(), st.position.z()});
         sh.orientation = quat(st.orientation);
-        auto id = slot.sim.add_shell(sh);
+        auto id = slot.sim->add_shell(sh);
         if (!id) return id.errors();
         slot.carried.push_back({b, *id, true, Eigen::Vector3f::Zero(), Eigen::Vector3f::Zero()});
         it = slot.carried.end() - 1;
       }
       Carried& c = *it;
       if (touch != c.enabled) {
-        if (Status e = slot.sim.set_body_enabled(c.shell, touch); !e) return e.errors();
+        if (Status e = slot.sim->set_body_enabled(c.shell, touch); !e) return e.errors();
         c.enabled = touch;
       }
       world->set_terrain_collision(b, !inside);
@@ -322,12 +330,12 @@ struct TerrainManager::Impl {
       // The shell starts the frame where Bullet has the body.
       c.v0 = st.linear_velocity;
       c.w0 = st.angular_velocity;
-      const Vec3 p = slot.sim.def().scale.position_to_sim({st.position.x(), st.position.y(), st.position.z()});
-      if (Status e = slot.sim.set_body_state(c.shell, p, quat(st.orientation), v3(Eigen::Vector3f(st.linear_velocity / float(s))),
+      const Vec3 p = slot.sim->def().scale.position_to_sim({st.position.x(), st.position.y(), st.position.z()});
+      if (Status e = slot.sim->set_body_state(c.shell, p, quat(st.orientation), v3(Eigen::Vector3f(st.linear_velocity / float(s))),
                                              v3(st.angular_velocity));
           !e)
         return e.errors();
-      if (st.linear_velocity.norm() > def.sleep_speed) slot.sim.wake();
+      if (st.linear_velocity.norm() > def.sleep_speed) slot.sim->wake();
     }
     (void)dt;
     return Ok{};
@@ -338,8 +346,8 @@ struct TerrainManager::Impl {
     for (const Carried& c : slot.carried) {
       if (!c.enabled || !world->alive(c.body)) continue;
       // Mean contact force and torque over the frame from the shell's change of momentum.
-      const Eigen::Vector3f v1 = eig(slot.sim.body_velocity(c.shell)) * float(s);
-      const Eigen::Vector3f w1 = eig(slot.sim.body_angular_velocity(c.shell));
+      const Eigen::Vector3f v1 = eig(slot.sim->body_velocity(c.shell)) * float(s);
+      const Eigen::Vector3f w1 = eig(slot.sim->body_angular_velocity(c.shell));
       const float m = world->mass(c.body);
       const Eigen::Vector3f f = m * ((v1 - c.v0) / float(dt) - def.gravity.cast<float>());
       const Eigen::Matrix3f R = world->state(c.body).orientation.toRotationMatrix();
@@ -349,26 +357,27 @@ struct TerrainManager::Impl {
     }
   }
 
+  // Appends the slot's granule spheres (x, y, z, r; m, heightfield-local). Granules are the
+  // first bodies of a patch, so their spheres have the first 4 × granules particle ids.
+  void granule_spheres(const Slot& slot, std::vector<float>& xyzr) const {
+    const std::vector<Vec3> pos = slot.sim->particle_positions();
+    const std::size_t n = std::min(pos.size(), std::size_t(4) * std::size_t(slot.granules));
+    const float rw = radius_world();
+    for (std::size_t k = 0; k < n; ++k) {
+      const auto w = slot.sim->def().scale.position_to_world(pos[k]);
+      xyzr.insert(xyzr.end(), {float(w[0] - hf->origin_x()), float(w[1] - hf->origin_y()), float(w[2] - hf->origin_z()), rw});
+    }
+  }
+
   // ---- demotion ----
   Status demote(Slot& slot, double time) {
     const auto t0 = Clock::now();
     const double sp = hf->spacing();
     // Granule spheres in heightfield-local coordinates (m).
     std::vector<float> xyzr;
-    const GranuleShape& g = slot.sim.granule_shape();
-    const float rw = radius_world();
-    float top = float(slot.floor_local) + rw;
-    for (int b = 0; b < slot.granules; ++b) {
-      const Vec3 p = slot.sim.body_position(sandpatch::BodyId{b});
-      const Quat q = slot.sim.body_orientation(sandpatch::BodyId{b});
-      for (const Vec3& o : g.offsets) {
-        const Vec3 c = p + rotate(q, o);
-        const auto w = slot.sim.def().scale.position_to_world(c);
-        xyzr.insert(xyzr.end(), {float(w[0] - hf->origin_x()), float(w[1] - hf->origin_y()),
-                                 float(w[2] - hf->origin_z()), rw});
-        top = std::max(top, float(w[1] - hf->origin_y()) + rw);
-      }
-    }
+    granule_spheres(slot, xyzr);
+    float top = float(slot.floor_local) + radius_world();
+    for (std::size_t k = 1; k < xyzr.size(); k += 4) top = std::max(top, xyzr[k] + radius_world());
     const GridRegion& a = slot.apron;
     const float x0 = float((a.i0 - 0.5) * sp), z0 = float((a.j0 - 0.5) * sp);
     const float x1 = float((a.i0 + a.ni - 0.5) * sp), z1 = float((a.j0 + a.nj - 0.5) * sp);
@@ -376,9 +385,10 @@ struct TerrainManager::Impl {
     HeightImage img;
     bool on_gl = false;
     if (def.use_gl && !gl_failed && !depth) {
-      auto ctx = gl::Context::create();
+      auto ctx = gl ? Result<std::unique_ptr<gl::Context>>(std::unique_ptr<gl::Context>()) : gl::Context::create();
       if (ctx) {
-        gl = std::move(*ctx);
+        if (!gl) gl = std::move(*ctx);
+        if (Status st = gl->make_current(); !st) return st;
         auto dr = ParticleDepthRenderer::create({res});
         if (dr) depth = std::move(*dr);
         else gl_note = dr.message();
@@ -479,11 +489,40 @@ Result<std::unique_ptr<TerrainManager>> TerrainManager::create(const TerrainMana
   if (!tile) return tile.errors();
   I.tile = std::move(*tile);
   I.granule_volume = 4.0 * 4.0 / 3.0 * std::numbers::pi * std::pow(double(I.radius_world()), 3);
-  // The pool: every slot allocated now at full capacity.
+  // The pool: every slot allocated now at full capacity, on the chosen backend.
+  if (def.backend == "gl") {
+    auto ctx = gl::Context::create();
+    if (!ctx) return Error{"", "simulation.backend", "gl", "needs an OpenGL 4.3 context", ctx.message()};
+    I.gl = std::move(*ctx);
+  } else if (def.backend != "cpu") {
+    return Error{"", "simulation.backend", def.backend, "must be cpu or gl"};
+  }
+  // A slot's fixed capacity: its domain (grid cells) and terrain grid are sized for the
+  // widest patch it can hold, a single layer of granules 2 bounding radii thick.
+  SimulationDef cap = I.sim_def();
+  {
+    const double bound = shape.centre_distance + shape.radius;  // sim units
+    const double vg = 4.0 * 4.0 / 3.0 * std::numbers::pi * std::pow(double(shape.radius), 3);
+    const float side = float(std::sqrt(def.granules_per_slot * vg / (0.5 * 2.0 * bound)));
+    const float height = float((def.patch_depth + 0.5 + Impl::engage_height) / def.particle_scale);
+    cap.bounds_min = {0, 0, 0};
+    cap.bounds_max = {side, height, side};
+    const int n = int(std::ceil(side * def.particle_scale / hf.spacing())) + 9;
+    cap.terrain.nx = cap.terrain.nz = n;
+    cap.terrain.spacing = float(hf.spacing() / def.particle_scale);
+    cap.terrain.heights.assign(std::size_t(n) * n, 0.0f);
+    cap.terrain.fill_max_x = cap.terrain.fill_max_z = side;
+  }
   for (int k = 0; k < def.slots; ++k) {
-    auto sim = Simulation::create(I.sim_def());
-    if (!sim) return sim.errors();
-    I.slots.emplace_back(std::move(*sim));
+    if (def.backend == "gl") {
+      auto sim = gpu::GlSimulation::create(cap);
+      if (!sim) return sim.errors();
+      I.slots.emplace_back(gpu::make_gl_backend(std::move(*sim)));
+    } else {
+      auto sim = Simulation::create(cap);
+      if (!sim) return sim.errors();
+      I.slots.emplace_back(make_cpu_backend(std::move(*sim)));
+    }
   }
   return m;
 }
@@ -492,6 +531,7 @@ TerrainManager::~TerrainManager() = default;
 
 Status TerrainManager::before_bodies(double time, double dt, Profile& profile) {
   Impl& I = *impl_;
+  I.current();
   {
     auto timer = profile.time(Stage::Lod);
     std::vector<BodyMotion> motions;
@@ -555,13 +595,13 @@ Status TerrainManager::before_bodies(double time, double dt, Profile& profile) {
     for (auto& s : I.slots) {
       if (s.state != Impl::State::Active && s.state != Impl::State::Asleep) continue;
       if (Status st = I.couple_before(s, dt); !st) return st;
-      if (s.sim.asleep()) continue;
+      if (s.sim->asleep()) continue;
       if (s.state == Impl::State::Asleep) {
         s.state = Impl::State::Active;
         s.asleep_for = 0;
         I.events.push_back({PatchEventKind::Woke, s.patch, time, 0, s.granules});
       }
-      if (Status st = s.sim.step(dt); !st) return st;
+      if (Status st = s.sim->step(dt); !st) return st;
       I.couple_after(s, dt);
       s.fade = std::min(s.fade + 1, I.def.fade_frames);
     }
@@ -571,10 +611,11 @@ Status TerrainManager::before_bodies(double time, double dt, Profile& profile) {
 
 Status TerrainManager::after_bodies(double time, double dt, Profile& profile) {
   Impl& I = *impl_;
+  I.current();
   {
     auto timer = profile.time(Stage::Sleep);
     for (auto& s : I.slots) {
-      if (s.state == Impl::State::Active && s.sim.asleep()) {
+      if (s.state == Impl::State::Active && s.sim->asleep()) {
         s.state = Impl::State::Asleep;
         I.events.push_back({PatchEventKind::Asleep, s.patch, time + dt, 0, s.granules});
       }
@@ -609,6 +650,7 @@ int TerrainManager::ready_patches() const {
 
 Status TerrainManager::demote_all(double time, Profile& profile) {
   auto timer = profile.time(Stage::Demotion);
+  impl_->current();
   for (auto& s : impl_->slots) {
     if (s.state == Impl::State::Filling) {
       if (Status st = impl_->upload(s, s.pending.size(), time); !st) return st;
@@ -641,9 +683,10 @@ int TerrainManager::queued_requests() const { return int(impl_->queue.size()); }
 
 std::uint64_t TerrainManager::state_hash() const {
   Hasher h;
+  impl_->current();
   for (const auto& s : impl_->slots) {
     h.pod(int(s.state));
-    if (s.state != Impl::State::Free) h.pod(s.sim.state_hash());
+    if (s.state != Impl::State::Free) h.pod(s.sim->state_hash());
   }
   return h.value();
 }
@@ -653,19 +696,9 @@ const std::vector<PatchEvent>& TerrainManager::events() const { return impl_->ev
 void TerrainManager::particles(std::vector<float>& xyzr) const {
   xyzr.clear();
   const Impl& I = *impl_;
-  for (const auto& s : I.slots) {
-    if (s.state == Impl::State::Free) continue;
-    const GranuleShape& g = s.sim.granule_shape();
-    for (int b = 0; b < s.granules; ++b) {
-      const Vec3 p = s.sim.body_position(sandpatch::BodyId{b});
-      const Quat q = s.sim.body_orientation(sandpatch::BodyId{b});
-      for (const Vec3& o : g.offsets) {
-        const auto w = s.sim.def().scale.position_to_world(p + rotate(q, o));
-        xyzr.insert(xyzr.end(), {float(w[0] - I.hf->origin_x()), float(w[1] - I.hf->origin_y()),
-                                 float(w[2] - I.hf->origin_z()), I.radius_world()});
-      }
-    }
-  }
+  I.current();
+  for (const auto& s : I.slots)
+    if (s.state != Impl::State::Free) I.granule_spheres(s, xyzr);
 }
 
 std::vector<std::pair<std::size_t, float>> TerrainManager::particle_groups() const {

@@ -25,6 +25,7 @@
 #include <Eigen/Core>
 #include <cstdint>
 #include <memory>
+#include <string>
 #include <nlohmann/json.hpp>
 #include <vector>
 
@@ -61,6 +62,7 @@ struct TerrainManagerDef {
   int fade_frames = 30;                        // frames over which a new patch fades in
   int depth_resolution = 1024;                 // texels per side of the demotion depth render
   bool use_gl = true;                          // depth render on GL (else, or if no context, on the CPU)
+  std::string backend = "cpu";                 // DEM backend of the pool: cpu (OpenMP) or gl (compute shaders)
   int threads = 0;                             // DEM threads, 0 = OpenMP default
   Eigen::Vector3d gravity{0.0, -9.81, 0.0};    // m/s²
   std::uint64_t seed = 1;

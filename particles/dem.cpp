@@ -1024,6 +1024,9 @@ Status Simulation::set_body_state(BodyId id, Vec3 x, Quat q, Vec3 v, Vec3 w) {
   stq(s.b.quat, id.index, normalized(q));
   st3(s.b.vel, id.index, v);
   st3(s.b.omega, id.index, w);
+  // Its spheres follow at once, and the neighbour list is rebuilt for the new place.
+  s.rebuild_body(id.index);
+  s.need_sort = true;
   wake();
   return Ok{};
 }
@@ -1046,6 +1049,8 @@ Status Simulation::set_body_enabled(BodyId id, bool enabled) {
   } else {
     f = (f & ~(motion | kBodyParked | (motion << 8))) | ((f >> 8) & motion);
   }
+  s.rebuild_body(id.index);
+  s.need_sort = true;
   wake();
   return Ok{};
 }

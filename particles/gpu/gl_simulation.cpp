@@ -110,6 +110,7 @@ struct GlSimulation::Impl {
   int np = 0, nb = 0, np_gpu = 0, nb_gpu = 0;  // *_gpu: uploaded
   ParticleStage pst;
   BodyStage bst;
+  std::vector<std::uint32_t> host_flags;  // every body's flags (only the host changes them): no read-back
 
   // grid (sized as the CPU's: cell = 2 r_max + skin)
   float r_max = 0, skin = 0, h = 0;
@@ -352,6 +353,40 @@ struct GlSimulation::Impl {
     while (nb_gpu < nb) upload(std::numeric_limits<std::size_t>::max());
   }
 
+  std::uint32_t body_flags(int i) const { return host_flags[std::size_t(i)]; }
+  // Writes xyz of a vec4 body field of body i: the staged copy, or 12 bytes at its index.
+  void set_body_vec(int field, int i, const float* xyzw, std::size_t comps) {
+    if (i >= nb_gpu) {
+      std::vector<float>* a[] = {&bst.pos, &bst.quat, &bst.vel, &bst.omega};
+      const int fields[] = {kBody_pos, kBody_quat, kBody_vel, kBody_omega};
+      for (int k = 0; k < 4; ++k)
+        if (fields[k] == field)
+          for (std::size_t c = 0; c < comps; ++c) (*a[k])[4 * std::size_t(i - nb_gpu) + c] = xyzw[c];
+      return;
+    }
+    glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
+    write(kB, boff(field) + std::size_t(i) * 16, comps * 4, xyzw);
+  }
+  // Rebuilds the spheres of uploaded body i from its (just written) state, as an upload
+  // does (bodies.comp mode 1, limited to body i), and raises the re-sort flag: the spheres
+  // jumped, so the cells and the neighbour search must be rebuilt before the next contacts.
+  void rebuild_body(int i) {
+    if (i >= nb_gpu) return;  // staged: upload() rebuilds it
+    bind_all();
+    glMemoryBarrier(GL_ALL_BARRIER_BITS);
+    const GLuint bp = prog[kBodies].id();
+    glProgramUniform1i(bp, glGetUniformLocation(bp, "u_mode"), 1);
+    glProgramUniform1ui(bp, glGetUniformLocation(bp, "u_first_body"), GLuint(i));
+    glProgramUniform1ui(bp, glGetUniformLocation(bp, "u_nb"), GLuint(i + 1));
+    dispatch(kBodies, 1, wg);
+    glProgramUniform1ui(bp, glGetUniformLocation(bp, "u_nb"), GLuint(nb_gpu));
+    glProgramUniform1i(bp, glGetUniformLocation(bp, "u_mode"), 0);
+    glUseProgram(0);
+    const std::uint32_t one = 1;
+    glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
+    write(kG, 4 * 5, 4, &one);
+  }
+
   void substep(float dt) {
     bind_all();
     // grid: decided on the GPU, then the counting sort by indirect dispatches
@@ -386,6 +421,7 @@ struct GlSimulation::Impl {
     bst.mass[4 * bi + 1] = invm;
     put3(bst.inv_inertia, bi, inv_inertia);
     bst.flags[bi] = flags;
+    host_flags.push_back(flags);
     bst.first[bi] = np;
     bst.count[bi] = count;
     for (int k = 0; k < count; ++k) {
@@ -526,6 +562,7 @@ Status GlSimulation::Impl::configure(const SimulationDef& d, const char* cap_pre
   np = nb = np_gpu = nb_gpu = 0;
   pst.clear();
   bst.clear();
+  host_flags.clear();
   if (buf[kS0] != 0) {
     std::vector<std::uint32_t> zero(std::size_t(cap_p), 0u);
     glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
@@ -707,6 +744,57 @@ Status GlSimulation::set_kinematic_velocity(BodyId id, Vec3 v, Vec3 w) {
   s.write(Impl::kB, s.boff(kBody_vel) + std::size_t(id.index) * 16, 12, vv);
   s.write(Impl::kB, s.boff(kBody_omega) + std::size_t(id.index) * 16, 12, ww);
   return Ok{};  // as the CPU: an asleep simulation wakes when the shell comes into contact
+}
+
+// ---- control from the terrain manager (as dem.cpp) ----
+
+Status GlSimulation::set_body_state(BodyId id, Vec3 x, Quat q, Vec3 v, Vec3 w) {
+  Impl& s = *impl_;
+  if (id.index < 0 || id.index >= s.nb)
+    return Error{"", "set_body_state.body", std::to_string(id.index), "must be a body of this simulation", ""};
+  if (s.body_flags(id.index) & kBodyParked)
+    return Error{"", "set_body_state.body", std::to_string(id.index), "is disabled; enable it first", ""};
+  const Quat qn = normalized(q);
+  const float xx[3] = {x.x, x.y, x.z}, qq[4] = {qn.x, qn.y, qn.z, qn.w}, vv[3] = {v.x, v.y, v.z}, ww[3] = {w.x, w.y, w.z};
+  s.set_body_vec(kBody_pos, id.index, xx, 3);
+  s.set_body_vec(kBody_quat, id.index, qq, 4);
+  s.set_body_vec(kBody_vel, id.index, vv, 3);
+  s.set_body_vec(kBody_omega, id.index, ww, 3);
+  s.rebuild_body(id.index);
+  wake();
+  return Ok{};
+}
+
+Status GlSimulation::set_body_enabled(BodyId id, bool enabled) {
+  Impl& s = *impl_;
+  if (id.index < 0 || id.index >= s.nb)
+    return Error{"", "set_body_enabled.body", std::to_string(id.index), "must be a body of this simulation", ""};
+  std::uint32_t f = s.body_flags(id.index);
+  const std::uint32_t motion = kBodyStatic | kBodyKinematic | kBodyDynamic;
+  const bool parked = f & kBodyParked;
+  if (enabled == !parked) return Ok{};
+  if (!enabled) {
+    f = (f & ~motion) | kBodyStatic | kBodyParked | ((f & motion) << 8);
+    const SimulationDef& d = s.def;
+    const float far[3] = {0.5f * (d.bounds_min.x + d.bounds_max.x), d.bounds_max.y + 1000.0f,
+                          0.5f * (d.bounds_min.z + d.bounds_max.z)};
+    const float zero[3] = {0, 0, 0};
+    s.set_body_vec(kBody_pos, id.index, far, 3);
+    s.set_body_vec(kBody_vel, id.index, zero, 3);
+    s.set_body_vec(kBody_omega, id.index, zero, 3);
+  } else {
+    f = (f & ~(motion | kBodyParked | (motion << 8))) | ((f >> 8) & motion);
+  }
+  s.host_flags[std::size_t(id.index)] = f;
+  if (id.index >= s.nb_gpu) {
+    s.bst.flags[std::size_t(id.index - s.nb_gpu)] = f;
+  } else {
+    glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
+    s.write(Impl::kB, s.boff(kBody_flags) + std::size_t(id.index) * 4, 4, &f);
+  }
+  if (!enabled) s.rebuild_body(id.index);  // its spheres leave with it (and stop moving)
+  wake();
+  return Ok{};
 }
 
 Result<int> GlSimulation::substeps_for(double dt_frame) const { return impl_->guard->substeps_for(dt_frame); }

@@ -118,3 +118,21 @@ TEST(Run, BodyBelowBedrockIsRefusedAndNothingWritten) {
   EXPECT_NE(r.message.find("bodies[0]"), std::string::npos) << r.message;
   EXPECT_FALSE(fs::exists(opt.out_dir));
 }
+
+// `run --backend gl`: the terrain manager's pool runs on the GL compute-shader backend
+// (llvmpipe in CI); a patch is promoted, simulated and demoted, and the report says so.
+TEST(Run, GlBackendDrivesThePatches) {
+  auto scene = load_default_scene();
+  ASSERT_TRUE(scene.ok());
+  RunOptions opt;
+  opt.out_dir = fresh_dir("gl").string();
+  opt.seconds = 0.3;
+  opt.backend = "gl";
+  opt.progress = ProgressStyle::None;
+  RunResult r = run_scene(*scene, opt);
+  ASSERT_EQ(r.code, ExitCode::Ok) << r.stage << ": " << r.message;
+  EXPECT_EQ(r.report["backend"], "gl");
+  EXPECT_GT(r.report["counts"]["peak_granules"].get<int>(), 100);
+  EXPECT_EQ(r.report["ledger"]["patches"].size(), 1u);
+  EXPECT_GT(r.report["stages"]["dem"]["total_ms"].get<double>(), 0.0);
+}

@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <memory>
 
 #include "gl/context.hpp"
@@ -511,6 +512,278 @@ TEST(GlSimulation, SpringSlotOverflowIsReported) {
   for (int s = 0; s < 400 && last.ok(); ++s) last = gpu->step(5e-5);
   ASSERT_FALSE(last.ok());
   EXPECT_NE(last.message().find("GlOptions.max_contacts_per_sphere"), std::string::npos) << last.message();
+}
+
+// ---- control from the terrain manager: set_body_state / set_body_enabled ----
+
+// A dynamic plus-shaped shell of 5 spheres of radius r (arms 2r along x and z).
+ShellDef plus_shell(const SimulationDef& d, Vec3 position) {
+  const float r = d.particle_radius;
+  const float ms = d.material.density * 4.0f / 3.0f * 3.14159265f * r * r * r;
+  ShellDef sh;
+  sh.offsets = {Vec3{0, 0, 0}, Vec3{2 * r, 0, 0}, Vec3{-2 * r, 0, 0}, Vec3{0, 0, 2 * r}, Vec3{0, 0, -2 * r}};
+  sh.radii = {r};
+  sh.motion = MotionType::Dynamic;
+  sh.mass = 5 * ms;
+  const float i0 = 0.4f * ms * r * r, arm2 = ms * 4 * r * r;
+  sh.inertia = {5 * i0 + 2 * arm2, 5 * i0 + 4 * arm2, 5 * i0 + 2 * arm2};
+  sh.position = position;
+  return sh;
+}
+
+Quat about_y(float angle) { return {0, std::sin(0.5f * angle), 0, std::cos(0.5f * angle)}; }
+
+// The manager's sequence on both backends: set_body_state on a dynamic shell (still staged
+// on the GPU: the queued copy changes), step; set_body_enabled(false), step; enable +
+// set_body_state, step until the shell has landed on a granule. Bodies agree within the
+// trajectory test's bound (0.01 particle diameters) after every phase; the parked shell sits
+// at (centre x, bounds_max.y + 1000, centre z) with zero velocities on both. The shell is out
+// of contact whenever its state is set or it is parked: dem.cpp does not rebuild a body's
+// spheres in set_body_state / set_body_enabled (the first substep sees the old spheres, and
+// a parked body's spheres never move), while the GL backend rebuilds them at once; with no
+// contact at those moments both give the same trajectories.
+TEST(GlSimulation, BodyStateAndParkingMatchCpu) {
+  auto ctx = context();
+  ASSERT_TRUE(ctx);
+  SimulationDef d = box_def(ShearLaw::SpringHistory);
+  auto cpu = Simulation::create(d);
+  auto gpu = GlSimulation::create(d);
+  ASSERT_TRUE(cpu.ok() && gpu.ok()) << gpu.message();
+  std::uint64_t seed = 3;
+  const Vec3 gx[4] = {{0.02f, 0.012f, 0.02f}, {0.06f, 0.012f, 0.02f}, {0.02f, 0.012f, 0.06f}, {0.06f, 0.012f, 0.06f}};
+  for (const Vec3& x : gx) {
+    const Quat q = random_quat(seed);
+    ASSERT_TRUE(cpu->add_granule(x, q).ok());
+    ASSERT_TRUE(gpu->add_granule(x, q).ok());
+  }
+  const ShellDef sh = plus_shell(d, {0.04f, 0.06f, 0.04f});
+  auto bc = cpu->add_shell(sh);
+  auto bg = gpu->add_shell(sh);
+  ASSERT_TRUE(bc.ok() && bg.ok());
+  ASSERT_EQ(bc->index, bg->index);
+  const BodyId shell = *bg;
+  const double frame = 1e-3;
+  auto both = [&](auto&& f) {
+    auto a = f(*cpu);
+    auto b = f(*gpu);
+    ASSERT_TRUE(a.ok()) << a.message();
+    ASSERT_TRUE(b.ok()) << b.message();
+  };
+  // sphere positions by id; the parked shell's spheres are left out (the CPU leaves them
+  // where the shell was parked, the GPU moves them with it)
+  bool parked = false;
+  auto sphere_dev = [&] {
+    auto pg = gpu->particle_positions(), pc = cpu->particle_positions();
+    double m = 0;
+    for (std::size_t i = 0; i < pc.size(); ++i)
+      if (!parked || i < 16) m = std::max(m, double(norm(pg[i] - pc[i])));
+    return m;
+  };
+  double worst = 0;
+  auto run = [&](int frames, const char* phase) {
+    for (int f = 0; f < frames; ++f) {
+      both([&](auto& s) { return s.step(frame); });
+      worst = std::max(worst, sphere_dev());
+    }
+    double body_dev = 0;
+    for (int b = 0; b < cpu->body_count(); ++b)
+      body_dev = std::max(body_dev, double(norm(gpu->body_position({b}) - cpu->body_position({b}))));
+    std::printf("%-28s max sphere difference %.3g m, body positions %.3g m\n", phase, sphere_dev(), body_dev);
+    EXPECT_LT(body_dev, 1e-2 * 2 * d.particle_radius) << phase;
+  };
+  // 1. the shell is given a new pose and velocity (GPU: still staged)
+  ASSERT_LT(gpu->uploaded_body_count(), gpu->body_count());
+  const Vec3 x1{0.04f, 0.05f, 0.04f}, v1{0.05f, -0.2f, 0.0f}, w1{0.0f, 3.0f, 0.0f};
+  both([&](auto& s) { return s.set_body_state(shell, x1, about_y(0.5f), v1, w1); });
+  EXPECT_EQ(norm(gpu->body_position(shell) - x1), 0.0f);
+  EXPECT_EQ(norm(gpu->body_velocity(shell) - v1), 0.0f);
+  run(10, "set_body_state, 10 frames:");
+  EXPECT_GT(norm(gpu->body_position(shell) - x1), 1e-3f);  // it moved from there
+  // 2. parked
+  both([&](auto& s) { return s.set_body_enabled(shell, false); });
+  const Vec3 far{0.04f, d.bounds_max.y + 1000.0f, 0.04f};
+  EXPECT_EQ(norm(gpu->body_position(shell) - far), 0.0f);
+  EXPECT_FALSE(gpu->asleep());
+  parked = true;
+  run(20, "parked, 20 frames:");
+  EXPECT_EQ(norm(gpu->body_position(shell) - far), 0.0f);
+  EXPECT_EQ(norm(cpu->body_position(shell) - far), 0.0f);
+  EXPECT_EQ(norm(gpu->body_velocity(shell)), 0.0f);
+  EXPECT_EQ(norm(gpu->body_angular_velocity(shell)), 0.0f);
+  EXPECT_EQ(norm(gpu->body_force(shell)), 0.0f);
+  {
+    auto ps = gpu->particle_positions();  // its spheres went with it
+    const int first = 4 * 4;
+    for (int k = 0; k < 5; ++k) EXPECT_GT(ps[first + k].y, d.bounds_max.y + 990.0f) << "sphere " << k;
+  }
+  // 3. enabled again and placed just above granule 0, falling onto it
+  const Vec3 x3{0.02f, 0.03f, 0.02f}, v3{0.0f, -0.3f, 0.0f};
+  both([&](auto& s) { return s.set_body_enabled(shell, true); });
+  both([&](auto& s) { return s.set_body_state(shell, x3, Quat{}, v3, Vec3{}); });
+  parked = false;  // (the CPU rebuilds the shell's spheres at the end of the next substep)
+  double shell_force = 0;
+  for (int f = 0; f < 6; ++f) {
+    run(10, "enabled + set_body_state:");
+    shell_force = std::max(shell_force, double(norm(cpu->body_force(shell))));
+  }
+  EXPECT_LT(gpu->body_position(shell).y, x3.y - 0.005f);  // it fell (dynamic again), onto granule 0
+  EXPECT_GT(shell_force, 0.0) << "the shell must land on the granule";
+  std::printf("worst particle difference over the run %.3g m\n", worst);
+  EXPECT_LT(worst, 1e-2 * 2 * d.particle_radius);
+  EXPECT_EQ(gl::Context::drain_errors(), "");
+}
+
+// A parked shell exerts no force. (a) Granules in the air, pressed by the shell: their
+// contact forces are non-zero while it is enabled and, once it is parked, equal those of a
+// run without the shell (zero: nothing else touches them). (b) A shell added inside a
+// falling granule bed and parked before the first step (on the GPU while still staged): the
+// bed's forces and positions over 60 substeps equal a run without the shell (same tolerance
+// as the CPU-vs-GL force test). The CPU backend's values are printed for reference.
+TEST(GlSimulation, ParkedShellExertsNoForce) {
+  auto ctx = context();
+  ASSERT_TRUE(ctx);
+  SimulationDef d = box_def(ShearLaw::SpringHistory);
+  const float r = d.particle_radius;
+  const double dt1 = 0.9 * Simulation::create(d)->max_substep_dt();  // one substep per frame
+  auto max_granule_force = [](auto& s, int n) {
+    double m = 0;
+    for (int b = 0; b < n; ++b) m = std::max(m, double(norm(s.body_force({b}))));
+    return m;
+  };
+  {
+    // (a) the shell's centre sphere and 4 granules around it, just touching its arms
+    auto with = GlSimulation::create(d);
+    auto without = GlSimulation::create(d);
+    auto cpu = Simulation::create(d);
+    ASSERT_TRUE(with.ok() && without.ok() && cpu.ok());
+    const Vec3 c{0.04f, 0.04f, 0.04f};
+    const Vec3 gpos[4] = {c + Vec3{4.2f * r, 0, 0}, c + Vec3{-4.2f * r, 0, 0}, c + Vec3{0, 0, 4.2f * r},
+                          c + Vec3{0, 0, -4.2f * r}};
+    for (const Vec3& x : gpos) {
+      ASSERT_TRUE(with->add_granule(x).ok());
+      ASSERT_TRUE(without->add_granule(x).ok());
+      ASSERT_TRUE(cpu->add_granule(x).ok());
+    }
+    auto shell = with->add_shell(plus_shell(d, c));
+    ASSERT_TRUE(shell.ok() && cpu->add_shell(plus_shell(d, c)).ok());
+    ASSERT_TRUE(with->step(dt1).ok() && without->step(dt1).ok() && cpu->step(dt1).ok());
+    ASSERT_EQ(*with->substeps_for(dt1), 1);
+    const double active = max_granule_force(*with, 4);
+    std::printf("(a) shell enabled: max granule contact force %.4g N (without the shell %.4g N)\n", active,
+                max_granule_force(*without, 4));
+    ASSERT_GT(active, 1e-3) << "the granules must touch the shell";
+    EXPECT_EQ(max_granule_force(*without, 4), 0.0);
+    ASSERT_TRUE(with->set_body_enabled(*shell, false).ok());
+    ASSERT_TRUE(cpu->set_body_enabled(*shell, false).ok());
+    for (int k = 0; k < 5; ++k) {
+      ASSERT_TRUE(with->step(dt1).ok() && without->step(dt1).ok() && cpu->step(dt1).ok());
+      Compare cmp;
+      for (int b = 0; b < 4; ++b) cmp.check(with->body_force({b}), without->body_force({b}), "parked: granule force", b);
+      EXPECT_EQ(cmp.failures, 0) << "substep " << k + 1 << " after parking";
+      EXPECT_EQ(with->last_step().contacts, 0);
+    }
+    std::printf("(a) parked: max granule force gl %.4g N; cpu reference %.4g N\n", max_granule_force(*with, 4),
+                max_granule_force(*cpu, 4));
+  }
+  {
+    // (b) parked inside a falling bed before the first step
+    auto with = GlSimulation::create(d);
+    auto without = GlSimulation::create(d);
+    auto cpu = Simulation::create(d);
+    auto cpu_without = Simulation::create(d);
+    ASSERT_TRUE(with.ok() && without.ok() && cpu.ok() && cpu_without.ok());
+    drop_bed(*with, 0.0f);
+    drop_bed(*without, 0.0f);
+    drop_bed(*cpu, 0.0f);
+    drop_bed(*cpu_without, 0.0f);
+    const int n = without->body_count();
+    auto shell = with->add_shell(plus_shell(d, {0.03f, 0.02f, 0.03f}));
+    ASSERT_TRUE(shell.ok() && cpu->add_shell(plus_shell(d, {0.03f, 0.02f, 0.03f})).ok());
+    ASSERT_LT(with->uploaded_body_count(), with->body_count());  // staged: the queued copy is parked
+    ASSERT_TRUE(with->set_body_enabled(*shell, false).ok());
+    ASSERT_TRUE(cpu->set_body_enabled(*shell, false).ok());
+    Compare cmp;
+    std::int64_t contacts = 0;
+    for (int s = 0; s < 60; ++s) {
+      ASSERT_TRUE(with->step(5e-5).ok() && without->step(5e-5).ok());
+      ASSERT_TRUE(cpu->step(5e-5).ok() && cpu_without->step(5e-5).ok());
+      contacts += without->last_step().contacts;
+      for (int b = 0; b < n; ++b) cmp.check(with->body_force({b}), without->body_force({b}), "bed force", b);
+    }
+    EXPECT_GT(contacts, 0);
+    EXPECT_GT(cmp.nonzero, 0);
+    EXPECT_EQ(cmp.failures, 0);
+    const auto pw = with->particle_positions(), po = without->particle_positions();
+    double dev = 0;
+    for (std::size_t i = 0; i < po.size(); ++i) dev = std::max(dev, double(norm(pw[i] - po[i])));
+    double cpu_dev = 0, cpu_force = 0;
+    for (int b = 0; b < n; ++b) {
+      cpu_dev = std::max(cpu_dev, double(norm(cpu->body_position({b}) - cpu_without->body_position({b}))));
+      cpu_force = std::max(cpu_force, double(norm(cpu->body_force({b}) - cpu_without->body_force({b}))));
+    }
+    std::printf("(b) bed of %d granules with a parked shell vs without, 60 substeps: gl worst force difference "
+                "%.3g N (%d of %d non-zero), positions %.3g m; cpu reference: force %.3g N, positions %.3g m\n",
+                n, cmp.worst_abs, cmp.nonzero, cmp.checked, dev, cpu_force, cpu_dev);
+    EXPECT_LT(dev, 1e-6);
+  }
+  EXPECT_EQ(gl::Context::drain_errors(), "");
+}
+
+// Errors as the CPU's (same field and text); a staged body's queued copy takes the state and
+// the parking and is uploaded with it; an uploaded body's spheres follow set_body_state at
+// once (before any step); enabling restores the motion bits (the shell falls again).
+TEST(GlSimulation, BodyStateErrorsAndStagedBodies) {
+  auto ctx = context();
+  ASSERT_TRUE(ctx);
+  SimulationDef d = box_def(ShearLaw::SpringHistory);
+  GlOptions o;
+  o.upload_in_step = false;
+  auto gpu = GlSimulation::create(d, o);
+  auto cpu = Simulation::create(d);
+  ASSERT_TRUE(gpu.ok() && cpu.ok()) << gpu.message();
+  const ShellDef sh = plus_shell(d, {0.04f, 0.04f, 0.04f});
+  const BodyId b = *gpu->add_shell(sh);
+  ASSERT_TRUE(cpu->add_shell(sh).ok());
+  auto same_error = [](const Status& g, const Status& c) {
+    ASSERT_FALSE(g.ok());
+    ASSERT_FALSE(c.ok());
+    EXPECT_EQ(g.message(), c.message());
+  };
+  same_error(gpu->set_body_state({5}, {}, {}, {}, {}), cpu->set_body_state({5}, {}, {}, {}, {}));
+  same_error(gpu->set_body_state({-1}, {}, {}, {}, {}), cpu->set_body_state({-1}, {}, {}, {}, {}));
+  same_error(gpu->set_body_enabled({5}, false), cpu->set_body_enabled({5}, false));
+  EXPECT_NE(gpu->set_body_enabled({5}, false).message().find("set_body_enabled.body"), std::string::npos);
+  // staged: park it, then setting its state is refused as on the CPU
+  ASSERT_EQ(gpu->uploaded_body_count(), 0);
+  ASSERT_TRUE(gpu->set_body_enabled(b, false).ok());
+  ASSERT_TRUE(cpu->set_body_enabled(b, false).ok());
+  ASSERT_TRUE(gpu->set_body_enabled(b, false).ok());  // already parked: nothing to do
+  same_error(gpu->set_body_state(b, {}, {}, {}, {}), cpu->set_body_state(b, {}, {}, {}, {}));
+  EXPECT_NE(gpu->set_body_state(b, {}, {}, {}, {}).message().find("enable it first"), std::string::npos);
+  const Vec3 far{0.04f, d.bounds_max.y + 1000.0f, 0.04f};
+  EXPECT_EQ(norm(gpu->body_position(b) - far), 0.0f);
+  gpu->upload(std::numeric_limits<std::size_t>::max());
+  ASSERT_EQ(gpu->uploaded_body_count(), 1);
+  EXPECT_EQ(norm(gpu->body_position(b) - far), 0.0f);
+  for (const Vec3& p : gpu->particle_positions()) EXPECT_GT(p.y, d.bounds_max.y + 990.0f);
+  // uploaded: enable, set the state; the spheres follow at once
+  ASSERT_TRUE(gpu->set_body_enabled(b, true).ok());
+  const Vec3 x{0.03f, 0.05f, 0.035f};
+  const Quat q = about_y(0.7f);
+  ASSERT_TRUE(gpu->set_body_state(b, x, Quat{2 * q.x, 2 * q.y, 2 * q.z, 2 * q.w}, {0, 0, 0}, {0, 0, 0}).ok());
+  const Quat qg = gpu->body_orientation(b);
+  EXPECT_NEAR(qg.y, q.y, 1e-6f);  // normalised, as the CPU
+  EXPECT_NEAR(qg.w, q.w, 1e-6f);
+  const auto ps = gpu->particle_positions();
+  for (std::size_t k = 0; k < sh.offsets.size(); ++k) {
+    const Vec3 want = x + rotate(q, sh.offsets[k]);
+    EXPECT_LT(norm(ps[k] - want), 1e-6f) << "sphere " << k;
+  }
+  // enabled: dynamic again, it falls
+  ASSERT_TRUE(gpu->step(1e-3).ok());
+  EXPECT_LT(gpu->body_velocity(b).y, -1e-3f);
+  EXPECT_LT(gpu->body_position(b).y, x.y);
+  EXPECT_EQ(gl::Context::drain_errors(), "");
 }
 
 }  // namespace
