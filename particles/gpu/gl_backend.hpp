@@ -9,6 +9,8 @@
 
 namespace sandpatch::gpu {
 
-std::unique_ptr<DemBackend> make_gl_backend(GlSimulation sim);
+inline std::unique_ptr<DemBackend> make_gl_backend(GlSimulation sim) {
+  return std::make_unique<DemBackendOf<GlSimulation>>(std::move(sim), "gl");
+}
 
 }  // namespace sandpatch::gpu
