@@ -209,6 +209,11 @@ render::CameraView camera_at(const CameraDef& c, double t) {
 class FrameWriter {
  public:
   FrameWriter(const Heightfield& hf, const TerrainManager* manager) : hf_(hf), manager_(manager) {}
+  ~FrameWriter() {
+    if (context_) (void)context_->make_current();  // the renderer frees its GL objects in its context
+  }
+  FrameWriter(const FrameWriter&) = delete;
+  FrameWriter& operator=(const FrameWriter&) = delete;
   bool unavailable() const { return !why_.empty(); }
   const std::string& why() const { return why_; }
   void heightfield_changed(const std::vector<GridRegion>& regions) {
@@ -217,25 +222,33 @@ class FrameWriter {
   }
   // Renders `view` (terrain and the live patches' granules) into `path`.
   Status write(const render::CameraView& view, const std::string& path) {
+    // With the GL backend the renderer shares the simulation's context, so it can draw the
+    // particles straight from the simulation's buffers; otherwise it makes its own.
+    gl::Context* shared = manager_ ? manager_->gl_context() : nullptr;
     if (!renderer_ && why_.empty()) {
-      auto ctx = gl::Context::create();
-      if (!ctx) {
-        why_ = ctx.message();
-        return Ok{};
+      if (!shared) {
+        auto ctx = gl::Context::create();
+        if (!ctx) {
+          why_ = ctx.message();
+          return Ok{};
+        }
+        ctx_ = std::move(*ctx);
       }
-      ctx_ = std::move(*ctx);
-      auto r = render::SceneRenderer::create(*ctx_, hf_);
+      context_ = shared ? shared : ctx_.get();
+      if (Status s = context_->make_current(); !s) return s;
+      auto r = render::SceneRenderer::create(*context_, hf_);
       if (!r) return r.errors();
       renderer_ = std::move(*r);
     }
     if (!renderer_) return Ok{};
+    if (shared) return write_gpu(view, path);
     std::vector<float> xyzr;
     std::vector<std::pair<std::size_t, float>> groups;
     if (manager_) {
       manager_->particles(xyzr);  // may make the manager's GL context current
       groups = manager_->particle_groups();
     }
-    if (Status s = ctx_->make_current(); !s) return s;
+    if (Status s = context_->make_current(); !s) return s;
     // One buffer; one source per patch so each fades in on its own (Leach & Marais §5.1).
     std::unique_ptr<render::ParticleBuffer> buf;
     if (!xyzr.empty()) {
@@ -261,9 +274,32 @@ class FrameWriter {
   }
 
  private:
+  // GL backend: every live patch's spheres drawn from its simulation buffer (no CPU copy).
+  Status write_gpu(const render::CameraView& view, const std::string& path) {
+    if (Status s = context_->make_current(); !s) return s;
+    std::vector<render::ParticleSource> sources;
+    for (const auto& g : manager_->gpu_particles()) {
+      render::ParticleSource src;
+      src.buffer = g.buffer;
+      src.count = g.count;
+      src.stride = 16;
+      src.position_offset = 0;
+      src.radius_offset = 12;
+      src.origin = g.origin;
+      src.scale = g.scale;
+      src.fade = g.fade;
+      if (src.count > 0) sources.push_back(src);
+    }
+    if (Status s = renderer_->set_particles(sources); !s) return s;
+    Status s = renderer_->render_png(view, path);
+    renderer_->clear_particles();
+    return s;
+  }
+
   const Heightfield& hf_;
   const TerrainManager* manager_;
-  std::unique_ptr<gl::Context> ctx_;
+  std::unique_ptr<gl::Context> ctx_;    // own context (CPU backend)
+  gl::Context* context_ = nullptr;      // the context in use (own or the manager's)
   std::unique_ptr<render::SceneRenderer> renderer_;
   std::string why_;
 };

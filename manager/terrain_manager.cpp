@@ -527,7 +527,9 @@ Result<std::unique_ptr<TerrainManager>> TerrainManager::create(const TerrainMana
   return m;
 }
 
-TerrainManager::~TerrainManager() = default;
+TerrainManager::~TerrainManager() {
+  if (impl_) impl_->current();  // GL slots free their buffers in their context
+}
 
 Status TerrainManager::before_bodies(double time, double dt, Profile& profile) {
   Impl& I = *impl_;
@@ -699,6 +701,23 @@ void TerrainManager::particles(std::vector<float>& xyzr) const {
   I.current();
   for (const auto& s : I.slots)
     if (s.state != Impl::State::Free) I.granule_spheres(s, xyzr);
+}
+
+gl::Context* TerrainManager::gl_context() const { return impl_->def.backend == "gl" ? impl_->gl.get() : nullptr; }
+
+std::vector<TerrainManager::GpuParticles> TerrainManager::gpu_particles() const {
+  std::vector<GpuParticles> out;
+  for (const auto& s : impl_->slots) {
+    if (s.state == Impl::State::Free || s.sim->gpu_particle_buffer() == 0) continue;
+    GpuParticles g;
+    g.buffer = s.sim->gpu_particle_buffer();
+    g.count = s.sim->particle_count();
+    g.origin = s.origin;
+    g.scale = float(impl_->def.particle_scale);
+    g.fade = impl_->def.fade_frames > 0 ? std::min(1.0f, float(s.fade) / float(impl_->def.fade_frames)) : 1.0f;
+    out.push_back(g);
+  }
+  return out;
 }
 
 std::vector<std::pair<std::size_t, float>> TerrainManager::particle_groups() const {

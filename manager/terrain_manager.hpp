@@ -36,6 +36,9 @@
 #include "manager/profile.hpp"
 
 namespace sandpatch {
+namespace gl {
+class Context;
+}
 
 struct GranularMaterial {
   float radius = 0.025f;                       // m, sphere radius r of the 4 spheres of a granule (simulated)
@@ -109,6 +112,19 @@ class TerrainManager {
   // The same spheres grouped by patch, in the order particles() writes them: each group's
   // sphere count and fade-in factor in [0, 1] (1 after fade_frames frames of simulation).
   std::vector<std::pair<std::size_t, float>> particle_groups() const;
+  // Live patches' spheres as they sit on the GPU (GL backend only; empty on the CPU backend):
+  // buffer (vec4 pos[] = xyz, radius in sim units), sphere count, the patch origin (m, world),
+  // particle scale and fade-in. Drawn straight from the simulation's buffer, no CPU copy.
+  struct GpuParticles {
+    unsigned buffer = 0;
+    std::int64_t count = 0;
+    Eigen::Vector3d origin = Eigen::Vector3d::Zero();
+    float scale = 1, fade = 1;
+  };
+  std::vector<GpuParticles> gpu_particles() const;
+  // The GL context of the GL backend (nullptr on the CPU backend): GPU particle buffers can
+  // only be drawn by a renderer made in this context.
+  gl::Context* gl_context() const;
   // Heightfield regions written by demotions since the last call (for renderers' caches).
   std::vector<GridRegion> take_dirty_regions();
   // ledger, conversions, pool, tile: the run report's sections (docs/cli.md).

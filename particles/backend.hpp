@@ -33,6 +33,10 @@ class DemBackend {
   virtual const SimulationDef& def() const = 0;
   virtual const GranuleShape& granule_shape() const = 0;
   virtual std::uint64_t state_hash() const = 0;
+  virtual int particle_count() const = 0;
+  // GL backend: the buffer whose first member is vec4 pos[] (xyz, radius) of every sphere, for
+  // drawing without a copy to the CPU; 0 on the CPU backend.
+  virtual unsigned gpu_particle_buffer() const { return 0; }
 };
 
 // A DemBackend around any simulation type with the CPU Simulation's methods (the CPU
@@ -56,6 +60,11 @@ class DemBackendOf final : public DemBackend {
   const SimulationDef& def() const override { return sim_.def(); }
   const GranuleShape& granule_shape() const override { return sim_.granule_shape(); }
   std::uint64_t state_hash() const override { return sim_.state_hash(); }
+  int particle_count() const override { return sim_.particle_count(); }
+  unsigned gpu_particle_buffer() const override {
+    if constexpr (requires(const Sim& s) { s.particle_buffer(); }) return sim_.particle_buffer();
+    return 0;
+  }
 
  private:
   Sim sim_;

@@ -969,6 +969,8 @@ const SimulationDef& GlSimulation::def() const { return impl_->def; }
 const GranuleShape& GlSimulation::granule_shape() const { return impl_->shape; }
 double GlSimulation::time() const { return impl_->time; }
 
+unsigned GlSimulation::particle_buffer() const { return impl_->buf[Impl::kP0 + impl_->cur_p]; }
+
 std::vector<unsigned> GlSimulation::gl_buffers() const {
   return std::vector<unsigned>(std::begin(impl_->buf), std::end(impl_->buf));
 }

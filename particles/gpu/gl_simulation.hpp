@@ -114,6 +114,10 @@ class GlSimulation {
 
   // GL names this simulation created (buffers and programs), for leak checks.
   std::vector<unsigned> gl_buffers() const;
+  // The shader storage buffer holding the current particle state; its first member is
+  // `vec4 pos[capacity]` (xyz = sphere centre, w = radius; sim units), so a renderer can draw
+  // the particle_count() spheres straight from it (stride 16, radius at offset 12).
+  unsigned particle_buffer() const;
   std::vector<unsigned> gl_programs() const;
   std::size_t gpu_bytes() const;  // bytes of GPU buffer storage held
   // With GlOptions::profile: wall seconds spent in each kernel so far, in stage order.

@@ -120,7 +120,8 @@ TEST(Run, BodyBelowBedrockIsRefusedAndNothingWritten) {
 }
 
 // `run --backend gl`: the terrain manager's pool runs on the GL compute-shader backend
-// (llvmpipe in CI); a patch is promoted, simulated and demoted, and the report says so.
+// (llvmpipe in CI); a patch is promoted, simulated and demoted, and the report says so; the
+// final picture draws the granules straight from the simulation's buffer (shared context).
 TEST(Run, GlBackendDrivesThePatches) {
   auto scene = load_default_scene();
   ASSERT_TRUE(scene.ok());
@@ -129,9 +130,11 @@ TEST(Run, GlBackendDrivesThePatches) {
   opt.seconds = 0.3;
   opt.backend = "gl";
   opt.progress = ProgressStyle::None;
+  opt.final_image = (fs::path(opt.out_dir) / "final.png").string();
   RunResult r = run_scene(*scene, opt);
   ASSERT_EQ(r.code, ExitCode::Ok) << r.stage << ": " << r.message;
   EXPECT_EQ(r.report["backend"], "gl");
+  EXPECT_GT(fs::file_size(opt.final_image), 1000u);
   EXPECT_GT(r.report["counts"]["peak_granules"].get<int>(), 100);
   EXPECT_EQ(r.report["ledger"]["patches"].size(), 1u);
   EXPECT_GT(r.report["stages"]["dem"]["total_ms"].get<double>(), 0.0);
