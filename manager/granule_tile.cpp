@@ -143,9 +143,12 @@ std::vector<PlacedGranule> fill_from_tile(const GranuleTile& tile, float width, 
     bool clash = false;
     // Inside the patch with at most 10% of r overlap against the floor and the patch's
     // sides (the soil around it holds the granules there).
+    // The bottom copies keep their floor contacts as settled (in equilibrium with the weight
+    // above them: leaving those granules out would let the whole bed sink by a layer).
+    const bool bottom = copy < cx * cz;
     for (const Vec3& sp : sph)
-      clash = clash || sp.y < 0.9f * r || sp.x < 0.9f * r || sp.x > width - 0.9f * r || sp.z < 0.9f * r ||
-              sp.z > depth - 0.9f * r || grid.near(sp, min_dist, copy);
+      clash = clash || (!bottom && sp.y < 0.9f * r) || sp.x < 0.9f * r || sp.x > width - 0.9f * r ||
+              sp.z < 0.9f * r || sp.z > depth - 0.9f * r || grid.near(sp, min_dist, copy);
     if (clash) continue;
     for (const Vec3& sp : sph) grid.insert(sp, copy);
     out.push_back(g);

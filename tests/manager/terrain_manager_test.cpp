@@ -48,9 +48,9 @@ TerrainManagerDef small_def() {
 // The patch also starts at rest: after 1 s simulated its rendered surface moved < 0.1 d (RMS).
 //
 // NOT MET YET, so disabled (run it with --gtest_also_run_disabled_tests). Measured on
-// 2026-11-22: spheres move 0.38 d RMS in the first second (the fill from mirrored tiles still
-// slumps at the patch's sides), height RMSE 1.0 d, max 1.7 d, border step 0.75 d, volume
-// -15.5%. What is left is in the issue note.
+// 2026-11-22: spheres move 0.27 d RMS in the first second (0.12 d in the interior, 0.36 d
+// within 0.2 m of the patch's sides, where the fill leaves gaps), height RMSE 0.88 d, max
+// 1.6 d, border step 0.73 d, volume -13.6%. What is left is in the issue note.
 TEST(TerrainManager, DISABLED_RoundTripWithoutDisturbance) {
   Heightfield hf = hills();
   const Heightfield original = hf;
