@@ -105,6 +105,22 @@ struct ShellDef {
   Vec3 angular_velocity{};               // rad/s, world frame
 };
 
+// What a body of a shell needs, derived from a checked ShellDef: shared by both backends'
+// add_shell, so they accept and refuse exactly the same shells with the same errors.
+struct ShellPlan {
+  int count = 0;                // spheres
+  bool one_radius = false;      // radii holds a single radius for all spheres
+  std::uint32_t flags = 0;      // BodyFlags motion bits
+  float inv_mass = 0;           // 1/kg (dynamic only)
+  Vec3 inv_inertia{};           // 1/(kg m^2), principal, body frame (dynamic only)
+  float max_radius = 0;         // m
+  float arm = 0;                // m, farthest sphere centre from the centre of mass
+};
+// Checks `sh` and the free capacity (bodies_used of max_bodies, particles_used of
+// max_particles); errors name the ShellDef field or the capacity to raise.
+Result<ShellPlan> plan_shell(const ShellDef& sh, int bodies_used, int max_bodies, int particles_used,
+                             int max_particles);
+
 struct StepStats {
   int substeps = 0;
   double substep_dt = 0;                 // s

@@ -668,39 +668,14 @@ Result<BodyId> GlSimulation::add_granule(Vec3 x, Quat q, Vec3 v, Vec3 w) {
 
 Result<BodyId> GlSimulation::add_shell(const ShellDef& sh) {
   Impl& s = *impl_;
-  const int count = int(sh.offsets.size());
-  if (count < 1) return Error{"", "ShellDef.offsets", "0 spheres", "must hold at least one sphere", ""};
-  const bool one = sh.radii.size() == 1;
-  if (!one && int(sh.radii.size()) != count)
-    return Error{"", "ShellDef.radii", format_number(double(sh.radii.size())) + " radii",
-                 "must hold one radius, or one per offset (" + std::to_string(count) + ")", ""};
-  if (s.nb + 1 > s.def.max_bodies)
-    return Error{"", "SimulationDef.max_bodies", format_number(s.def.max_bodies), "is full: raise max_bodies",
-                 "add_shell needs 1 more body"};
-  if (s.np + count > s.def.max_particles)
-    return Error{"", "SimulationDef.max_particles", format_number(s.def.max_particles), "is full: raise max_particles",
-                 "add_shell needs " + std::to_string(count) + " more particles"};
-  float rmax = 0, arm = 0;
-  for (int k = 0; k < count; ++k) {
-    const float r = one ? sh.radii[0] : sh.radii[k];
-    if (!(r > 0) || !std::isfinite(r))
-      return Error{"", "ShellDef.radii[" + std::to_string(one ? 0 : k) + "]", format_number(r), "must be > 0 (m)", ""};
-    if (!std::isfinite(sh.offsets[k].x + sh.offsets[k].y + sh.offsets[k].z))
-      return Error{"", "ShellDef.offsets[" + std::to_string(k) + "]", "non-finite", "must be finite (m)", ""};
-    rmax = std::max(rmax, r);
-    arm = std::max(arm, length(sh.offsets[k]));
-  }
-  std::uint32_t flags = 0;
-  float invm = 0;
-  Vec3 iI{};
+  auto plan = plan_shell(sh, s.nb, s.def.max_bodies, s.np, s.def.max_particles);
+  if (!plan) return plan.errors();
+  const int count = plan->count;
+  const bool one = plan->one_radius;
+  const float rmax = plan->max_radius, arm = plan->arm, invm = plan->inv_mass;
+  const std::uint32_t flags = plan->flags;
+  const Vec3 iI = plan->inv_inertia;
   if (sh.motion == MotionType::Dynamic) {
-    if (!(sh.mass > 0) || !std::isfinite(sh.mass)) return Error{"", "ShellDef.mass", format_number(sh.mass), "must be > 0 (kg)", ""};
-    if (!(sh.inertia.x > 0 && sh.inertia.y > 0 && sh.inertia.z > 0))
-      return Error{"", "ShellDef.inertia", format_number(std::min({sh.inertia.x, sh.inertia.y, sh.inertia.z})),
-                   "principal moments must be > 0 (kg m^2)", ""};
-    flags = kBodyDynamic;
-    invm = 1.0f / sh.mass;
-    iI = {1.0f / sh.inertia.x, 1.0f / sh.inertia.y, 1.0f / sh.inertia.z};
     // the guard: keep the lightest point mass in the capacity-1 CPU simulation
     const float imin = std::min({sh.inertia.x, sh.inertia.y, sh.inertia.z});
     const double pm = point_effective_mass(sh.mass, imin, arm);
@@ -717,8 +692,6 @@ Result<BodyId> GlSimulation::add_shell(const ShellDef& sh) {
       s.guard = std::make_unique<Simulation>(std::move(*g));
       s.guard_point_mass = pm;
     }
-  } else {
-    flags = sh.motion == MotionType::Static ? kBodyStatic : kBodyKinematic;
   }
   if (rmax > s.r_max) {  // bigger cells: fewer of them, the buffers still fit
     s.r_max = rmax;
