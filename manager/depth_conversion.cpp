@@ -145,6 +145,12 @@ HeightImage render_heights_cpu(const float* s, std::size_t n, int res, float x0,
   return img;
 }
 
+void lower_by_probe(HeightImage& image, float floor_y, float probe) {
+  if (probe <= 0) return;
+  for (float& h : image.h)
+    if (h > floor_y) h = std::max(floor_y, h - probe);
+}
+
 void write_to_heightfield(const HeightImage& image, GridRegion r, Heightfield& hf, int border_width) {
   const float sp = hf.spacing();
   std::vector<float> h(std::size_t(r.ni) * r.nj);

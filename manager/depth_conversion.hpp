@@ -66,6 +66,15 @@ class ParticleDepthRenderer {
 HeightImage render_heights_cpu(const float* spheres_xyzr, std::size_t n, int resolution, float x0, float z0, float x1,
                                float z1, float floor_y);
 
+// The surface a probe ball of radius `probe` (m) resting on the spheres would feel, as
+// rendered from spheres drawn with their radius grown by `probe`: lowers every covered
+// texel by `probe` (never below `floor_y`). A plain depth render of a granular bed sees
+// through every vertical slot between rows of spheres — at the tile seams of a patch fill
+// (manager/granule_tile.hpp) down to the floor — while the inflated spheres bridge slots
+// narrower than about 2·probe and leave a smooth bed's mean height unchanged up to a
+// constant that the fill calibrates (docs/manager.md has the measurements).
+void lower_by_probe(HeightImage& image, float floor_y, float probe);
+
 // Writes `image` into `region` of `hf` (footprint means, 3×3 Gaussian over the region,
 // then a Gaussian band of `border_width` samples along the region's border).
 void write_to_heightfield(const HeightImage& image, GridRegion region, Heightfield& hf, int border_width = 1);

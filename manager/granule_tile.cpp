@@ -38,7 +38,6 @@ class SphereGrid {
         }
     return false;
   }
-
  private:
   std::array<std::int64_t, 3> index(Vec3 p) const {
     return {std::int64_t(std::floor(p.x / cell_)), std::int64_t(std::floor(p.y / cell_)),
@@ -58,10 +57,10 @@ class SphereGrid {
 }  // namespace
 
 float mean_top_height(const std::vector<PlacedGranule>& granules, const GranuleShape& shape, float x0, float z0,
-                      float x1, float z1, float step, float floor) {
+                      float x1, float z1, float step, float floor, float probe) {
   const int nx = std::max(1, int((x1 - x0) / step)), nz = std::max(1, int((z1 - z0) / step));
   std::vector<float> top(std::size_t(nx) * nz, floor);
-  const float r = shape.radius;
+  const float r = shape.radius + probe;
   for (const auto& g : granules) {
     for (const Vec3& c : spheres(g, shape)) {
       const int i0 = std::max(0, int(std::floor((c.x - r - x0) / step))), i1 = std::min(nx - 1, int((c.x + r - x0) / step));
@@ -72,13 +71,13 @@ float mean_top_height(const std::vector<PlacedGranule>& granules, const GranuleS
           const float d2 = (x - c.x) * (x - c.x) + (z - c.z) * (z - c.z);
           if (d2 <= r * r) {
             float& t = top[std::size_t(k) * nx + i];
-            t = std::max(t, c.y + std::sqrt(r * r - d2));
+            t = std::max(t, c.y + std::sqrt(r * r - d2) - probe);
           }
         }
     }
   }
   double sum = 0;
-  for (float t : top) sum += t;
+  for (float t : top) sum += std::max(t, floor);
   return float(sum / double(top.size()));
 }
 
@@ -161,11 +160,19 @@ Result<GranuleTile> make_granule_tile(const GranuleTileDef& def) {
   if (def.layers < 4) return Error{"", "granule_tile.layers", std::to_string(def.layers), "must be >= 4"};
   const GranuleShape shape = make_granule_shape(def.radius, 1.0f, def.material.density);
   const float bound = shape.centre_distance + shape.radius;  // bounding radius of a granule
-  const float a = 2.0f * bound * 1.02f;                        // lattice spacing (add_lattice_bed's default)
-  const float L = a * float(def.columns);
+  float a = 2.0f * bound * 1.02f;                              // lattice spacing (add_lattice_bed's default)
+  int columns = def.columns;
+  if (def.box_side > 0) {
+    columns = int(std::floor(def.box_side / a));
+    if (columns < 4)
+      return Error{"", "granule_tile.box_side", std::to_string(def.box_side),
+                   "must hold at least 4 granules per side (>= " + std::to_string(4 * a) + " m)"};
+    a = def.box_side / float(columns);
+  }
+  const float L = a * float(columns);
 
   SimulationDef sd;
-  sd.max_bodies = def.columns * def.columns * def.layers;
+  sd.max_bodies = columns * columns * def.layers;
   sd.max_particles = 4 * sd.max_bodies;
   sd.particle_radius = def.radius;
   sd.material = def.material;
@@ -179,7 +186,8 @@ Result<GranuleTile> make_granule_tile(const GranuleTileDef& def) {
   if (!sim) return sim.errors();
   LatticeBedDef bed;
   bed.min = {0.5f * a, bound * 1.05f, 0.5f * a};
-  bed.nx = bed.nz = def.columns;
+  bed.nx = bed.nz = columns;
+  bed.spacing = a;
   bed.layers = def.layers;
   bed.seed = def.seed;
   bed.jitter = 0.4f;  // a strongly jittered lattice settles without remembering its layers
@@ -196,6 +204,7 @@ Result<GranuleTile> make_granule_tile(const GranuleTileDef& def) {
   tile.settle_time = t;
   tile.settled_speed = float(sim->max_granule_speed());
   tile.shape = shape;
+  tile.surface_probe = def.surface_probe;
 
   // The whole block is the tile (mirrored copies tile it seamlessly); the vertical period
   // stops two bounding radii below the highest granule, under the rough top.
@@ -221,7 +230,7 @@ Result<GranuleTile> make_granule_tile(const GranuleTileDef& def) {
     for (int k = 0; k < phases; ++k) {
       const float H = tile.period_y * (0.25f + 0.5f * float(k) / float(phases - 1));
       auto g = fill_from_tile(tile, W, W, [&](float, float) { return H; });
-      err += mean_top_height(g, shape, 0.1f * W, 0.1f * W, 0.9f * W, 0.9f * W, step, 0.0f) - H;
+      err += mean_top_height(g, shape, 0.1f * W, 0.1f * W, 0.9f * W, 0.9f * W, step, 0.0f, def.surface_probe) - H;
     }
     tile.surface_offset += float(err / phases);
   }

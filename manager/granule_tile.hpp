@@ -32,12 +32,15 @@ struct GranuleTileDef {
   Material material;            // contact parameters of the granules
   float radius = 0.025f;        // m, sphere radius r
   int columns = 8;              // granules per side of the settling box
+  float box_side = 0;           // m, side of the settling box (the tile's horizontal period); 0: columns lattice spacings.
+                                // The manager makes it a whole number of heightfield cells so patch sides fall on tile walls.
   int layers = 10;              // lattice layers before settling
   std::uint64_t seed = 1;
   double settle_max_time = 4.0; // s of simulated settling at most
-  float settle_speed = 0.02f;   // m/s: settled when every granule is slower
+  float settle_speed = 0.003f;  // m/s: settled when every granule is slower
   Vec3 gravity{0.0f, -9.81f, 0.0f};  // m/s², sim units
   int threads = 0;
+  float surface_probe = 0;      // m, probe radius of the surface the cut is calibrated against (depth_conversion.hpp lower_by_probe)
 };
 
 struct PlacedGranule {
@@ -51,6 +54,7 @@ struct GranuleTile {
   std::vector<PlacedGranule> granules;  // centres in [0, P_xz) × [0, P_y) × [0, P_xz)
   float packing_fraction = 0;   // granule solid volume / tile volume (measured)
   float surface_offset = 0;     // m, granule centres are cut this far below the surface (calibrated)
+  float surface_probe = 0;      // m, the probe radius the calibration used
   GranuleShape shape;
   double settle_time = 0;       // s simulated to settle
   float settled_speed = 0;      // m/s, max granule speed when captured
@@ -65,8 +69,10 @@ std::vector<PlacedGranule> fill_from_tile(const GranuleTile& tile, float width, 
                                           const std::function<float(float x, float z)>& surface);
 
 // Mean height of the top of the spheres over [x0, x1] × [z0, z1], sampled on a grid of
-// `step` m (what a top-down depth render averages to); `floor` where no sphere is.
+// `step` m (what a top-down depth render averages to); `floor` where no sphere is. With
+// `probe` > 0 the spheres are grown by `probe` and the tops lowered by it (the surface of
+// depth_conversion.hpp's lower_by_probe).
 float mean_top_height(const std::vector<PlacedGranule>& granules, const GranuleShape& shape, float x0, float z0,
-                      float x1, float z1, float step, float floor);
+                      float x1, float z1, float step, float floor, float probe = 0);
 
 }  // namespace sandpatch

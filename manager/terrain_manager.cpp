@@ -53,7 +53,41 @@ struct TerrainManager::Impl {
   TerrainManagerDef def;
   Heightfield* hf = nullptr;
   BulletWorld* world = nullptr;
-  GranuleTile tile;
+  // Pre-settled tiles (granule_tile.hpp), shallowest first. A fill deeper than a tile's
+  // vertical period would stack copies, and the seam leaves voids (measured: surfaces just
+  // above a seam render 0.75 d low), so a patch takes the shallowest tile that holds its
+  // depth, and a deeper one is settled (and kept) when none does.
+  std::vector<GranuleTile> tiles;
+  GranuleTileDef tile_def;
+  double tiles_settled_ms = 0;
+  int tile_cells = 1;  // heightfield cells per tile period (patch sides fall on tile walls)
+
+  // Lattice layers that settle into a tile of at least `depth` (m, sim units) of period_y.
+  int tile_layers(double depth) const {
+    const GranuleShape shape = make_granule_shape(float(def.material.radius), 1.0f, def.material.density);
+    const double layer = 2.0 * (shape.centre_distance + shape.radius) * 0.8;  // settled layer height, about
+    return std::max(6, int(std::ceil(depth * 1.6 / layer)) + 3);
+  }
+  // The shallowest tile whose period holds a fill `depth` (m, sim units) deep.
+  Result<const GranuleTile*> tile_for(double depth) {
+    auto holds = [&](const GranuleTile& t) { return depth - t.surface_offset <= t.period_y; };
+    for (const GranuleTile& t : tiles)
+      if (holds(t)) return &t;
+    GranuleTileDef td = tile_def;
+    td.layers = tile_layers(1.25 * depth);
+    for (int attempt = 0; attempt < 4; ++attempt, td.layers += 3) {
+      const auto t0 = Clock::now();
+      auto t = make_granule_tile(td);
+      tiles_settled_ms += ms_since(t0);
+      if (!t) return t.errors();
+      const bool ok = holds(*t);
+      tiles.push_back(std::move(*t));
+      std::sort(tiles.begin(), tiles.end(), [](const GranuleTile& a, const GranuleTile& b) { return a.period_y < b.period_y; });
+      if (ok) return tile_for(depth);
+    }
+    return Error{"", "simulation.patch_depth", std::to_string(depth * scale()),
+                 "no pre-settled granule tile this deep could be made; lower terrain.patch_depth"};
+  }
   double granule_volume = 0;  // m³ (world) of one granule's solid
 
   enum class State { Free, Filling, Active, Asleep };
@@ -137,9 +171,21 @@ struct TerrainManager::Impl {
   // ---- activation ----
   // Region of heightfield samples for a request, within what one slot can hold.
   Result<GridRegion> region_for(const PatchRequest& r) const {
-    const int i0 = std::max(0, sample_i(r.x0)), j0 = std::max(0, sample_j(r.z0));
-    const int i1 = std::min(hf->samples_x() - 1, sample_i(r.x1) + 1), j1 = std::min(hf->samples_z() - 1, sample_j(r.z1) + 1);
+    int i0 = std::max(0, sample_i(r.x0)), j0 = std::max(0, sample_j(r.z0));
+    int i1 = std::min(hf->samples_x() - 1, sample_i(r.x1) + 1), j1 = std::min(hf->samples_z() - 1, sample_j(r.z1) + 1);
     if (i1 - i0 < 2 || j1 - j0 < 2) return Error{"", "patch request", "", "off the terrain"};
+    // Whole tile periods: the patch's sides then fall on the walls the tile was settled
+    // against, so the granules along them sit as they settled (granule_tile.hpp).
+    auto align = [&](int& a, int& b, int samples) {
+      const int cells = b - a, whole = ((cells + tile_cells - 1) / tile_cells) * tile_cells;
+      if (whole > samples - 1) return;  // terrain narrower than the rounded patch: keep the cut sides
+      a -= (whole - cells) / 2;
+      b = a + whole;
+      if (a < 0) b -= a, a = 0;
+      if (b > samples - 1) a -= b - (samples - 1), b = samples - 1;
+    };
+    align(i0, i1, hf->samples_x());
+    align(j0, j1, hf->samples_z());
     return GridRegion{i0, j0, i1 - i0 + 1, j1 - j0 + 1};
   }
 
@@ -227,6 +273,9 @@ struct TerrainManager::Impl {
       const double xl = region.i0 * double(sp) + x * s, zl = region.j0 * double(sp) + z * s;
       return float((hf->sample(float(xl), float(zl)) - floor_local) / s);
     };
+    auto tile_r = tile_for(top);
+    if (!tile_r) return tile_r.errors();
+    const GranuleTile& tile = **tile_r;
     slot.pending = fill_from_tile(tile, W, D, surface);
     if (int(slot.pending.size()) > def.granules_per_slot) {
       return Error{"", "simulation.pool.granules_per_slot", std::to_string(def.granules_per_slot),
@@ -376,8 +425,11 @@ struct TerrainManager::Impl {
     // Granule spheres in heightfield-local coordinates (m).
     std::vector<float> xyzr;
     granule_spheres(slot, xyzr);
-    float top = float(slot.floor_local) + radius_world();
-    for (std::size_t k = 1; k < xyzr.size(); k += 4) top = std::max(top, xyzr[k] + radius_world());
+    // Spheres grown by the probe radius, tops lowered by it after the render (lower_by_probe).
+    const float probe = float(def.surface_probe) * radius_world();
+    for (std::size_t k = 3; k < xyzr.size(); k += 4) xyzr[k] += probe;
+    float top = float(slot.floor_local) + radius_world() + probe;
+    for (std::size_t k = 1; k < xyzr.size(); k += 4) top = std::max(top, xyzr[k] + radius_world() + probe);
     const GridRegion& a = slot.apron;
     const float x0 = float((a.i0 - 0.5) * sp), z0 = float((a.j0 - 0.5) * sp);
     const float x1 = float((a.i0 + a.ni - 0.5) * sp), z1 = float((a.j0 + a.nj - 0.5) * sp);
@@ -406,6 +458,7 @@ struct TerrainManager::Impl {
     } else {
       img = render_heights_cpu(xyzr.data(), xyzr.size() / 4, res, x0, z0, x1, z1, float(slot.floor_local));
     }
+    lower_by_probe(img, float(slot.floor_local), probe);
     // Outside the filled region the terrain was there before: particles add to it, an
     // empty texel keeps it (texels inside the region with no particle read the floor).
     const float du = (x1 - x0) / float(res), dv = (z1 - z0) / float(res);
@@ -438,6 +491,7 @@ struct TerrainManager::Impl {
     slot.ledger.after = after * sp * sp;
     const double err = slot.ledger.before > 0 ? 100.0 * (slot.ledger.after - slot.ledger.before) / slot.ledger.before : 0;
     ledgers.push_back({{"patch", slot.patch},
+                       {"region", {slot.region.i0, slot.region.j0, slot.region.ni, slot.region.nj}},
                        {"granules", slot.granules},
                        {"volume_before_m3", slot.ledger.before},
                        {"volume_active_m3", slot.ledger.active},
@@ -465,6 +519,7 @@ Result<std::unique_ptr<TerrainManager>> TerrainManager::create(const TerrainMana
   if (def.slots < 1) bad("pool.slots", def.slots, "must be >= 1");
   if (def.granules_per_slot < 16) bad("pool.granules_per_slot", def.granules_per_slot, "must be >= 16");
   if (!(def.patch_depth > 0)) bad("patch_depth", def.patch_depth, "must be > 0 (m)");
+  if (!(def.surface_probe >= 0 && def.surface_probe <= 4)) bad("surface_probe", def.surface_probe, "must be in [0, 4] sphere radii");
   if (def.fill_granules_per_frame < 1) bad("fill_granules_per_frame", def.fill_granules_per_frame, "must be >= 1");
   if (!errs.empty()) return errs;
 
@@ -474,20 +529,23 @@ Result<std::unique_ptr<TerrainManager>> TerrainManager::create(const TerrainMana
   I.def = def;
   I.hf = &hf;
   I.world = &world;
-  // The pre-settled tile, as deep as the deepest patch (granule_tile.hpp).
-  GranuleTileDef td;
+  // The first pre-settled tile, for patches patch_depth deep plus half as much relief
+  // (granule_tile.hpp); deeper patches settle deeper tiles when they come (tile_for).
+  GranuleTileDef& td = I.tile_def;
   td.radius = def.material.radius;
   td.material = I.sim_def().material;
   td.gravity = v3(Eigen::Vector3f((def.gravity / def.particle_scale).cast<float>()));
   td.seed = def.seed;
   td.threads = def.threads;
-  const GranuleShape shape = make_granule_shape(def.material.radius, 1.0f, def.material.density);
-  const double layer = 2.0 * (shape.centre_distance + shape.radius) * 0.8;  // settled layer height, about
-  td.layers = std::max(6, int(std::ceil(std::min(def.patch_depth, def.soil_depth) / def.particle_scale * 1.6 / layer)) + 3);
-  td.columns = 8;
-  auto tile = make_granule_tile(td);
-  if (!tile) return tile.errors();
-  I.tile = std::move(*tile);
+  {
+    // The tile's period: a whole number of heightfield cells near 6 lattice spacings.
+    const GranuleShape shape = make_granule_shape(def.material.radius, 1.0f, def.material.density);
+    const double a = 2.0 * (shape.centre_distance + shape.radius) * 1.02 * def.particle_scale;  // m, world
+    I.tile_cells = std::max(1, int(std::ceil(6.0 * a / hf.spacing())));
+    td.box_side = float(I.tile_cells * double(hf.spacing()) / def.particle_scale);
+  }
+  td.surface_probe = float(def.surface_probe) * def.material.radius;
+  if (auto t = I.tile_for(1.5 * std::min(def.patch_depth, def.soil_depth) / def.particle_scale); !t) return t.errors();
   I.granule_volume = 4.0 * 4.0 / 3.0 * std::numbers::pi * std::pow(double(I.radius_world()), 3);
   // The pool: every slot allocated now at full capacity, on the chosen backend.
   if (def.backend == "gl") {
@@ -501,6 +559,7 @@ Result<std::unique_ptr<TerrainManager>> TerrainManager::create(const TerrainMana
   // widest patch it can hold, a single layer of granules 2 bounding radii thick.
   SimulationDef cap = I.sim_def();
   {
+    const GranuleShape shape = make_granule_shape(def.material.radius, 1.0f, def.material.density);
     const double bound = shape.centre_distance + shape.radius;  // sim units
     const double vg = 4.0 * 4.0 / 3.0 * std::numbers::pi * std::pow(double(shape.radius), 3);
     const float side = float(std::sqrt(def.granules_per_slot * vg / (0.5 * 2.0 * bound)));
@@ -758,12 +817,17 @@ nlohmann::ordered_json TerrainManager::report() const {
                {"shell_particles_per_slot", I.def.shell_particles_per_slot},
                {"queued_requests", int(I.queue.size())},
                {"peak_queued_requests", I.peak_queue}};
-  r["tile"] = {{"granules", I.tile.granules.size()},
-               {"period_xz_m", I.tile.period_xz * I.def.particle_scale},
-               {"period_y_m", I.tile.period_y * I.def.particle_scale},
-               {"packing_fraction", I.tile.packing_fraction},
-               {"settle_time_s", I.tile.settle_time},
-               {"settled_speed_m_s", I.tile.settled_speed}};
+  nlohmann::ordered_json tiles = nlohmann::ordered_json::array();
+  for (const GranuleTile& t : I.tiles)
+    tiles.push_back({{"granules", t.granules.size()},
+                     {"period_xz_m", t.period_xz * I.def.particle_scale},
+                     {"period_y_m", t.period_y * I.def.particle_scale},
+                     {"packing_fraction", t.packing_fraction},
+                     {"settle_time_s", t.settle_time},
+                     {"settled_speed_m_s", t.settled_speed}});
+  r["tile"] = tiles.front();  // the shallowest (made at start-up)
+  r["tile"]["tiles"] = tiles;
+  r["tile"]["settle_wall_ms_all_tiles"] = I.tiles_settled_ms;
   if (!I.gl_note.empty()) r["depth_render_note"] = I.gl_note;
   return r;
 }

@@ -64,6 +64,7 @@ struct TerrainManagerDef {
   int fill_granules_per_frame = 4096;          // upload bound per frame
   int fade_frames = 30;                        // frames over which a new patch fades in
   int depth_resolution = 1024;                 // texels per side of the demotion depth render
+  double surface_probe = 2.0;                  // probe radius of the rendered surface, × sphere radius (depth_conversion.hpp)
   bool use_gl = true;                          // depth render on GL (else, or if no context, on the CPU)
   std::string backend = "cpu";                 // DEM backend of the pool: cpu (OpenMP) or gl (compute shaders)
   int threads = 0;                             // DEM threads, 0 = OpenMP default
