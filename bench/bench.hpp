@@ -1,9 +1,15 @@
 // `sandpatch bench ...` programs (docs/BENCHMARKS.md).
 #pragma once
 
+#include <nlohmann/json.hpp>
 #include <string>
+#include <vector>
+
+#include "common/error.hpp"
 
 namespace sandpatch {
+
+struct SceneDef;  // scene/scene.hpp (not included here: particles/dem.hpp has its own SimulationDef)
 
 // bench dem: settles a bed of `granules` tetrahedral granules (spheres d = 0.01 m,
 // rho = 2500 kg/m^3, the peer's contact parameters k_n = 3292 N/m, e = 0.3, mu = 0.5,
@@ -20,5 +26,52 @@ struct BenchDemArgs {
 
 // Exit code: 0 ok, 1 runtime failure, 2 bad input. Prints to stdout (errors to stderr).
 int run_bench_dem(const BenchDemArgs& args);
+
+// bench lod (bench/bench_lod.cpp, docs/BENCHMARKS.md "Level of detail"): the same three
+// bodies dropped on the same spot of terrains of `sizes` cells per side (0.5 m cells), wall
+// seconds per simulated second of each and per stage; the ratio largest / smallest; the
+// "LOD off" estimate (the DEM's measured cost per granule-second times the granules the whole
+// terrain would need), checked on a small terrain run fully as particles; idle terrain (no
+// bodies) and a sleeping patch. With json, one JSON object on the last line:
+// {"results": [{"terrain": N, "wall_s_per_sim_s": ...}, ...], "lod_off": {...}, ...}.
+struct BenchLodArgs {
+  std::vector<int> sizes = {512, 1024, 2048, 4096, 8192};  // cells per side, ascending
+  double seconds = 1.0;  // simulated seconds per terrain size
+  int threads = 0;       // 0 = all cores
+  bool json = false;
+};
+
+// "" when the arguments are valid, else the message (names the option, value, what is allowed).
+std::string check_bench_lod_args(const BenchLodArgs& args);
+int run_bench_lod(const BenchLodArgs& args);
+
+// The bench's generated scenes (valid scene JSON, docs/scene-format.md) on a terrain of
+// `cells` × `cells` cells of 0.5 m, origin (0, 0, 0): Drop three bodies at (20, 20), (26, 20),
+// (20, 26) m; Idle no bodies; Asleep one light ball set down at (20, 20) m; Full the drop's
+// ball at the centre of a (small, flat) terrain its patch covers; FullSlab a slab whose patch
+// covers the whole (small, flat) terrain.
+enum class LodBenchScene { Drop, Idle, Asleep, Full, FullSlab };
+nlohmann::json lod_bench_scene(LodBenchScene kind, int cells, int threads);
+
+// sandpatch stress SCENE (bench/stress.cpp, docs/stress.md): `sims` copies of the scene's first
+// body on a grid around it, one arriving every `interval` s, pool.slots = sims; `frames` fixed
+// steps. Frame time against time in `windows` windows (K runs of growing length, differenced:
+// run_scene has no per-frame hook), live simulations per window; writes OUT/stress.json and
+// OUT/stress.csv, then runs `plot_script` (python3 + matplotlib) for OUT/frame_time.png.
+struct StressArgs {
+  std::string scene;
+  int sims = 4;
+  long long frames = 1200;
+  double interval = 2.0;   // s between arrivals
+  int windows = 8;
+  int threads = 0;         // 0 = all cores
+  std::string out_dir;     // "" = out/<scene>_stress_<sims>
+  std::string plot_script; // "" = no plot
+  bool json = false;
+};
+std::string check_stress_args(const StressArgs& args);
+// The stress scene; errors name the scene field or the option (--sims when the grid does not fit).
+Result<SceneDef> make_stress_scene(const SceneDef& base, int sims, double interval, long long frames);
+int run_stress(const StressArgs& args);
 
 }  // namespace sandpatch

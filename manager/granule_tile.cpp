@@ -176,6 +176,8 @@ Result<GranuleTile> make_granule_tile(const GranuleTileDef& def) {
   sd.max_particles = 4 * sd.max_bodies;
   sd.particle_radius = def.radius;
   sd.material = def.material;
+  if (def.settle_friction >= 0) sd.material.friction = def.settle_friction;
+  sd.max_overlap_fraction = 0;  // the lattice falls onto the floor of the box: no body can pass it
   sd.gravity_world = def.gravity;
   sd.bounds_min = {0, 0, 0};
   sd.bounds_max = {L, a * float(def.layers + 2), L};

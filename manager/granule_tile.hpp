@@ -41,6 +41,8 @@ struct GranuleTileDef {
   Vec3 gravity{0.0f, -9.81f, 0.0f};  // m/s², sim units
   int threads = 0;
   float surface_probe = 0;      // m, probe radius of the surface the cut is calibrated against (depth_conversion.hpp lower_by_probe)
+  float settle_friction = -1;   // μ while settling (< 0: the material's). Lower packs denser; the packing then
+                                // also holds with the material's higher μ.
 };
 
 struct PlacedGranule {

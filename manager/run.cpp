@@ -383,6 +383,8 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
   std::size_t images_skipped = 0;
   std::vector<std::string> written;
   std::vector<double> frame_ms;
+  std::vector<char> conversion_frame;  // a promotion, upload or demotion ran in the frame
+  int filling = 0;                     // patches promoted and not yet ready
   int peak_granules = 0;
   frame_ms.reserve(std::size_t(frames));
   ProgressPrinter progress(opt.progress, frames, dt);
@@ -403,6 +405,8 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
 
   for (long long frame = 0; frame < frames; ++frame) {
     const auto f0 = Clock::now();
+    const std::size_t events_before = manager ? manager->events().size() : 0;
+    bool converted = filling > 0;
     const double t = double(frame) * dt;  // s, simulated time at the start of this frame
     {
       auto timer = profile.time(Stage::Spawn);
@@ -460,7 +464,18 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
         }
       }
     }
+    if (manager) {
+      const auto& ev = manager->events();
+      for (std::size_t k = events_before; k < ev.size(); ++k) {
+        const PatchEventKind kind = ev[k].kind;
+        if (kind == PatchEventKind::Promoted) ++filling;
+        if (kind == PatchEventKind::Ready) --filling;
+        converted = converted || kind == PatchEventKind::Promoted || kind == PatchEventKind::Ready ||
+                    kind == PatchEventKind::Demoted;
+      }
+    }
     frame_ms.push_back(std::chrono::duration<double, std::milli>(Clock::now() - f0).count());
+    conversion_frame.push_back(converted);
     progress.update(frame + 1, std::chrono::duration<double>(Clock::now() - t_start).count());
   }
   const double wall_s = std::chrono::duration<double>(Clock::now() - t_start).count();
@@ -545,7 +560,18 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
   r["wall_s"] = wall_s;
   r["real_time_factor"] = wall_s > 0 ? double(frames) * dt / wall_s : 0.0;
   r["stages"] = profile.to_json();
-  r["frames"] = {{"median_ms", med}, {"max_ms", mx}, {"max_over_median", med > 0 ? mx / med : 0.0}};
+  // Stutter (issue 5): the longest frame in which a patch was promoted, uploaded or demoted,
+  // against the median frame of the run.
+  double conv_max = 0;
+  int conv_frames = 0;
+  for (std::size_t k = 0; k < frame_ms.size(); ++k)
+    if (conversion_frame[k]) conv_max = std::max(conv_max, frame_ms[k]), ++conv_frames;
+  r["frames"] = {{"median_ms", med},
+                 {"max_ms", mx},
+                 {"max_over_median", med > 0 ? mx / med : 0.0},
+                 {"conversion_frames", conv_frames},
+                 {"conversion_max_ms", conv_max},
+                 {"conversion_max_over_median", med > 0 ? conv_max / med : 0.0}};
   r["counts"] = {{"bodies", scene.bodies.size()},
                  {"bodies_spawned", std::count(spawned.begin(), spawned.end(), true)},
                  {"bodies_at_rest", resting},

@@ -125,6 +125,9 @@ struct Simulation::Impl {
   // guard
   double min_point_mass = std::numeric_limits<double>::infinity();  // kg, dynamic bodies
   double zeta = 0;
+  // overlap guard, per body (creation order; not state, not hashed): point effective mass
+  // (kg, 0 for static/kinematic), farthest sphere centre from the COM (m), smallest radius (m)
+  std::vector<float> guard_pt_mass, guard_arm, guard_rmin;
 
   // state
   double time = 0;
@@ -328,6 +331,42 @@ struct Simulation::Impl {
     double rad = def.material.normal_stiffness / m - (c / (2 * m)) * (c / (2 * m));
     return rad > 0 ? std::numbers::pi / std::sqrt(rad) : std::numbers::pi * std::sqrt(m / def.material.normal_stiffness);
   }
+  // Lightest dynamic point mass (kg): granules' and dynamic shells'.
+  double lightest_point_mass() const {
+    return std::min(min_point_mass, point_effective_mass(shape.mass, shape.inertia, shape.centre_distance));
+  }
+  double max_impact_speed(double m_pt) const {
+    const double f = def.max_overlap_fraction;
+    if (!(f > 0)) return std::numeric_limits<double>::infinity();
+    if (!(m_pt > 0)) m_pt = lightest_point_mass();
+    return f * def.particle_radius * std::sqrt(double(def.material.normal_stiffness) / m_pt);
+  }
+  // The overlap guard before a step: every moving body's speed against the immovable case.
+  Status check_impacts() const {
+    const double f = def.max_overlap_fraction;
+    if (!(f > 0)) return Ok{};
+    const double kn = def.material.normal_stiffness, m_light = lightest_point_mass();
+    for (int i = 0; i < nb; ++i) {
+      const std::uint32_t fl = b.flags[i];
+      if (fl & kBodyStatic) continue;
+      const double speed = length(ld3(b.vel, i)) + length(ld3(b.omega, i)) * guard_arm[i];
+      const double m = (fl & kBodyDynamic) ? double(guard_pt_mass[i]) : m_light;
+      const double r = std::min(double(guard_rmin[i]), double(def.particle_radius));
+      const double overlap = speed * std::sqrt(m / kn);
+      if (overlap > f * r) {
+        const double k_needed = kn * (overlap / (f * r)) * (overlap / (f * r));
+        return Error{"", "step.body[" + std::to_string(i) + "].speed", format_number(speed) + " m/s",
+                     "must be <= " + format_number(f * r * std::sqrt(kn / m)) +
+                         " m/s: hitting something immovable it would overlap by speed sqrt(m_pt/k_n) = " +
+                         format_number(overlap) + " m > max_overlap_fraction x r = " + format_number(f * r) +
+                         " m and could pass through (m_pt = " + format_number(m) + " kg, k_n = " + format_number(kn) +
+                         " N/m)",
+                     "raise SimulationDef.material.normal_stiffness to >= " + format_number(k_needed) +
+                         " N/m (and max_substeps), slow the body, or set max_overlap_fraction = 0 to accept it"};
+      }
+    }
+    return Ok{};
+  }
   double max_dt() const {
     double m = guard_meff();
     double tc = std::min(contact_time_(), std::numbers::pi * std::sqrt(m / def.material.normal_stiffness));
@@ -494,14 +533,23 @@ struct Simulation::Impl {
               const float dist = (pi.y - hh) * tn.y;
               if (dist < ri) plane(5, tn, dist);
             } else if (!walls) {
-              if (pi.x - tg.fill_min_x < ri && pi.y < tg.height(tg.fill_min_x - ri, pi.z))
-                plane(1, {1, 0, 0}, pi.x - tg.fill_min_x);
-              if (tg.fill_max_x - pi.x < ri && pi.y < tg.height(tg.fill_max_x + ri, pi.z))
-                plane(2, {-1, 0, 0}, tg.fill_max_x - pi.x);
-              if (pi.z - tg.fill_min_z < ri && pi.y < tg.height(pi.x, tg.fill_min_z - ri))
-                plane(3, {0, 0, 1}, pi.z - tg.fill_min_z);
-              if (tg.fill_max_z - pi.z < ri && pi.y < tg.height(pi.x, tg.fill_max_z + ri))
-                plane(4, {0, 0, -1}, tg.fill_max_z - pi.z);
+              // A side of the rectangle: below the outside surface h it is a wall; above h the
+              // closest point of the outside solid is its top edge, so the contact turns
+              // continuously from the wall to the edge as a sphere rises past h. (A wall that
+              // simply ended at h started contacts at full overlap when a sphere sank past h,
+              // and kept surface granules along the sides rattling at 0.02-0.05 m/s: a patch
+              // never fell asleep.) shaders/dem/force.comp does the same.
+              auto side = [&](int slot, Vec3 inward, float gap, float h) __attribute__((always_inline)) {
+                if (!(gap < ri)) return;
+                const float dy = pi.y - h;
+                if (dy <= 0.0f) return plane(slot, inward, gap);
+                const float dist = std::sqrt(gap * gap + dy * dy);
+                if (dist < ri && dist > 0.0f) plane(slot, (inward * gap + Vec3{0.0f, dy, 0.0f}) * (1.0f / dist), dist);
+              };
+              side(1, {1, 0, 0}, pi.x - tg.fill_min_x, tg.height(tg.fill_min_x - ri, pi.z));
+              side(2, {-1, 0, 0}, tg.fill_max_x - pi.x, tg.height(tg.fill_max_x + ri, pi.z));
+              side(3, {0, 0, 1}, pi.z - tg.fill_min_z, tg.height(pi.x, tg.fill_min_z - ri));
+              side(4, {0, 0, -1}, tg.fill_max_z - pi.z, tg.height(pi.x, tg.fill_max_z + ri));
             }
           }
           WM[i] = mask;
@@ -654,6 +702,21 @@ struct Simulation::Impl {
   int push_body(std::uint32_t flags, Vec3 x, Quat q, Vec3 v, Vec3 w, float mass, float invm, Vec3 inv_inertia,
                 const Vec3* offsets, const float* radii, int count, bool one_radius) {
     int i = nb++;
+    {
+      float arm = 0, rmin = std::numeric_limits<float>::infinity();
+      for (int k = 0; k < count; ++k) {
+        arm = std::max(arm, length(offsets[k]));
+        rmin = std::min(rmin, one_radius ? radii[0] : radii[k]);
+      }
+      float mpt = 0;
+      if ((flags & kBodyDynamic) && invm > 0) {
+        const float imin = 1.0f / std::max({inv_inertia.x, inv_inertia.y, inv_inertia.z});
+        mpt = float(point_effective_mass(mass, imin, arm));
+      }
+      guard_pt_mass[i] = mpt;
+      guard_arm[i] = arm;
+      guard_rmin[i] = rmin;
+    }
     st3(b.pos, i, x);
     stq(b.quat, i, normalized(q));
     st3(b.vel, i, v);
@@ -709,6 +772,26 @@ Result<Simulation> Simulation::create(const SimulationDef& d) {
   for (int a = 0; a < 3; ++a)
     if (!(hi[a] > lo[a]) || !std::isfinite(lo[a]) || !std::isfinite(hi[a]))
       bad(std::string("bounds_max.") + axes[a], hi[a], "must be finite and > bounds_min");
+  // Float positions resolve |x| 2^-23 (m): keep that below 1e-3 r, i.e. |x| <= 8389 r (42 m at
+  // r = 5 mm). Farther patches keep their simulation near 0 and put the offset in
+  // scale.origin (a double).
+  if (es.empty()) {
+    const double far = 8388.608 * double(d.particle_radius);
+    for (int a = 0; a < 3; ++a)
+      for (int m = 0; m < 2; ++m) {
+        const double v = m == 0 ? lo[a] : hi[a];
+        if (std::abs(v) > far) {
+          es.push_back(Error{"", std::string(m == 0 ? "SimulationDef.bounds_min." : "SimulationDef.bounds_max.") + axes[a],
+                             format_number(v) + " m",
+                             "must be within 8389 particle_radius = " + format_number(far) +
+                                 " m of the simulation origin (float positions resolve |x| 2^-23 m, 1e-3 r there)",
+                             "simulate patch-relative near 0 and put the patch offset in SimulationDef.scale origin "
+                             "(ParticleScale::create(scale, origin), double)"});
+          a = 3;
+          break;
+        }
+      }
+  }
   if (!std::isfinite(d.floor_height)) bad("floor_height", d.floor_height, "must be finite (m)");
   if (!std::isfinite(d.gravity_world.x + d.gravity_world.y + d.gravity_world.z))
     bad("gravity_world", 0, "must be finite (m/s^2)");
@@ -716,6 +799,8 @@ Result<Simulation> Simulation::create(const SimulationDef& d) {
   if (d.accuracy_steps_per_contact < 2)
     bad("accuracy_steps_per_contact", d.accuracy_steps_per_contact, "must be >= 2 (20 or more for accuracy)");
   if (d.max_substeps < 1) bad("max_substeps", d.max_substeps, "must be >= 1");
+  if (!(d.max_overlap_fraction >= 0) || !std::isfinite(d.max_overlap_fraction))
+    bad("max_overlap_fraction", d.max_overlap_fraction, "must be a finite number >= 0 (0 = guard off)");
   if (!(d.sleep_speed >= 0)) bad("sleep_speed", d.sleep_speed, "must be >= 0 (m/s)");
   if (!(d.sleep_time >= 0)) bad("sleep_time", d.sleep_time, "must be >= 0 (s)");
   if (d.threads < 0) bad("threads", d.threads, "must be >= 0 (0 = OpenMP default)");
@@ -752,6 +837,9 @@ Result<Simulation> Simulation::create(const SimulationDef& d) {
   s.pos_at_sort.assign(std::size_t(d.max_particles) * 4, 0.0f);
   s.wxi.assign(std::size_t(d.max_particles) * 3 * kWallSlots, 0.0f);
   s.wmask.assign(d.max_particles, 0u);
+  s.guard_pt_mass.assign(d.max_bodies, 0.0f);
+  s.guard_arm.assign(d.max_bodies, 0.0f);
+  s.guard_rmin.assign(d.max_bodies, 0.0f);
   s.size_grid();
   return Simulation(std::move(im));
 }
@@ -824,6 +912,22 @@ Result<BodyId> Simulation::add_shell(const ShellDef& sh) {
   const float rmax = plan->max_radius, arm = plan->arm, invm = plan->inv_mass;
   const std::uint32_t flags = plan->flags;
   const Vec3 iI = plan->inv_inertia;
+  // overlap guard: the body's weight shared by all its spheres (the most favourable case)
+  if (sh.motion == MotionType::Dynamic && s.def.max_overlap_fraction > 0) {
+    float rmin = std::numeric_limits<float>::infinity();
+    for (int k = 0; k < count; ++k) rmin = std::min(rmin, one ? sh.radii[0] : sh.radii[k]);
+    const double r = std::min(double(rmin), double(s.def.particle_radius));
+    const double g = length(s.gravity), kn = s.def.material.normal_stiffness, f = s.def.max_overlap_fraction;
+    const double overlap = double(sh.mass) * g / (count * kn);
+    if (overlap > f * r)
+      return Error{"", "ShellDef.mass", format_number(sh.mass) + " kg",
+                   "must be <= " + format_number(f * r * count * kn / g) + " kg: its weight on its " +
+                       std::to_string(count) + " spheres overlaps each contact by >= m |g| / (n k_n) = " +
+                       format_number(overlap) + " m > max_overlap_fraction x r = " + format_number(f * r) +
+                       " m, so it would sink through the bed and the floor",
+                   "raise SimulationDef.material.normal_stiffness to >= " + format_number(kn * overlap / (f * r)) +
+                       " N/m, give the shell more spheres, or lower its mass"};
+  }
   // a new dynamic body may shorten the contact time (the guard uses the lightest body)
   if (sh.motion == MotionType::Dynamic) {
     double imin = std::min({sh.inertia.x, sh.inertia.y, sh.inertia.z});
@@ -868,6 +972,8 @@ Status Simulation::step(double dt_frame) {
   Impl& s = *impl_;
   auto ns = substeps_for(dt_frame);
   if (!ns) return ns.errors();
+  if (!s.asleep)
+    if (auto st = s.check_impacts(); !st) return st;
   s.stats = StepStats{};
   s.stats.substeps = *ns;
   s.stats.substep_dt = dt_frame / *ns;
@@ -896,6 +1002,7 @@ Status Simulation::step(double dt_frame) {
 }
 
 double Simulation::contact_time() const { return impl_->contact_time_(); }
+double Simulation::max_impact_speed(double m_pt) const { return impl_->max_impact_speed(m_pt); }
 double Simulation::max_substep_dt() const { return impl_->max_dt(); }
 bool Simulation::asleep() const { return impl_->asleep; }
 void Simulation::wake() {

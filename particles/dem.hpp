@@ -12,8 +12,8 @@
 //   2. grid      when a sphere moved more than skin/2 since the last rebuild: counting-sort
 //                the spheres by cell (cell = 2 r_max + skin, no cap) and rebuild the Verlet
 //                neighbour list from the 27 cells, carrying each pair's spring over
-//   3. contacts  every sphere walks its own list and sums all its forces, so each pair is
-//                computed twice and every sum has a fixed order (no atomics)
+//   3. contacts  each pair is computed once, by its owner entry (lower stable id), then every
+//                sphere sums its entries in list order: every sum has a fixed order (no atomics)
 //   4. bodies    each body sums its own spheres' forces in sphere-id order
 //   5. integrate symplectic Euler; quaternions normalised; NaN check
 // The same state in, the same state out, for any number of threads (a test).
@@ -85,6 +85,15 @@ struct SimulationDef {
   // stability guard
   int accuracy_steps_per_contact = 20;   // N: substep dt <= t_c / N
   int max_substeps = 64;                 // refuse frames that would need more
+  // Overlap guard (0 = off): refuse what would overlap a contact by more than this fraction
+  // f of the smaller radius r (default 2: beyond 2 r the centres of two equal spheres can
+  // cross and bodies pass through each other):
+  //   step():    a body moving at speed s (|v| + |w| arm) hitting something immovable
+  //              overlaps by s sqrt(m_pt/k_n) (m_pt: its point effective mass; the lightest
+  //              dynamic body's for a kinematic shell): refused when > f r;
+  //   add_shell: a dynamic shell's weight shared by all its spheres overlaps each by at
+  //              least m |g| / (n k_n): refused when > f r.
+  float max_overlap_fraction = 2.0f;
 
   // sleep
   float sleep_speed = 0.005f;            // m/s (sim units): asleep when every granule is slower
@@ -163,6 +172,11 @@ class Simulation {
   Status step(double dt_frame);
   // Substeps a frame of dt_frame needs (>= 1), or an Error if dt_frame is not > 0.
   Result<int> substeps_for(double dt_frame) const;
+
+  // Overlap guard: the largest speed (m/s, sim units) a body of point effective mass m_pt (kg)
+  // may hit something immovable with, f r sqrt(k_n / m_pt) (see max_overlap_fraction);
+  // m_pt <= 0 means the lightest dynamic body's (the granule). Infinite when the guard is off.
+  double max_impact_speed(double m_pt = 0) const;
 
   // Stability: contact time (s) of the stiffest/lightest pair and the largest substep (s).
   double contact_time() const;

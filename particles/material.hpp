@@ -1,10 +1,17 @@
 // Contact material of the granule DEM and the formulas that tie its parameters together
-// (../shared/DESIGN.md "Granule model"; Bell et al. 2005; Cundall & Strack 1979).
+// (../shared/DESIGN.md "Granule model"; Bell et al. 2005; Cundall & Strack 1979;
+// Schwager & Poeschel 2007, "Coefficient of restitution and linear-dashpot model revisited",
+// Granular Matter 9:465).
 //
-// Linear spring-dashpot normal force, one damping ratio for every pair:
-//   zeta = -ln e / sqrt(pi^2 + ln^2 e)          (inverse of e = exp(-pi zeta / sqrt(1 - zeta^2)))
-//   c_n  = 2 zeta sqrt(k_n m_eff)               (N s/m; m_eff = reduced mass of the pair, kg)
-//   t_c  = pi / sqrt(k_n/m_eff - (c_n / (2 m_eff))^2) = pi sqrt(m_eff/k_n) / sqrt(1 - zeta^2)   (s)
+// Linear spring-dashpot normal force, f_n = max(0, k_n delta - c_n v.n) (N, never attractive):
+//   c_n = 2 zeta sqrt(k_n m_eff)         (N s/m; m_eff = reduced mass of the pair, kg)
+//   w0  = sqrt(k_n / m_eff)              (rad/s, undamped angular frequency)
+//
+// Material::restitution is the e a user MEASURES in a head-on collision with this clamped
+// force. zeta is chosen by inverting the clamped relation e_clamped(zeta) over [0, inf)
+// (damping_ratio_from_restitution), not the textbook e = exp(-pi zeta / sqrt(1 - zeta^2)),
+// which assumes a force that turns attractive at the end of the contact and cannot reach
+// e < 0.1353 with the clamp (docs/dem.md has the measurements).
 #pragma once
 
 #include <string>
@@ -27,7 +34,7 @@ enum class ShearLaw {
 struct Material {
   float density = 2500.0f;            // kg/m^3 of the sphere material
   float normal_stiffness = 3292.0f;   // k_n, N/m
-  float restitution = 0.3f;           // e in (0, 1]: normal coefficient of restitution
+  float restitution = 0.3f;           // e in (0, 1]: measured normal coefficient of restitution
   float friction = 0.5f;              // mu >= 0: Coulomb coefficient (sphere-sphere and walls)
   ShearLaw shear = ShearLaw::SpringHistory;
   float tangential_stiffness_ratio = 2.0f / 7.0f;  // k_t / k_n (SpringHistory)
@@ -35,25 +42,37 @@ struct Material {
   float bell_shear_viscosity = 2.0f;               // N s/m, the k_t of Bell's law
 };
 
-// Damping ratio zeta for restitution e (e = 1 -> 0).
+// ---- The clamped law (what the simulation does), zeta in [0, inf) ----
+// A head-on collision at approach speed v0 with f_n = max(0, k_n delta - c_n v.n): in units
+// of w0 and v0, delta'' + 2 zeta delta' + delta = 0, delta(0) = 0, delta'(0) = 1, until the
+// force k_n delta + c_n delta' first vanishes (delta'' = 0) at t*; the bodies then separate
+// freely at the speed |delta'(t*)|.
+//   zeta < 1:  w_d = sqrt(1 - zeta^2),  w_d t* = pi - atan2(2 zeta w_d, 1 - 2 zeta^2)
+//   zeta = 1:  t* = 2, e = exp(-2) = 0.1353, contact time 4
+//   zeta > 1:  l_+- = -zeta +- W, W = sqrt(zeta^2 - 1),  t* = ln(l_-/l_+) / W
+//   e = -delta'(t*) (monotone, 1 at zeta = 0, -> 1/(4 zeta^2) as zeta -> inf)
+//   contact time = t* + delta(t*)/|delta'(t*)| (geometric: until the spheres stop overlapping)
+double clamped_restitution(double zeta);
+// Geometric contact time of the clamped law in units of 1/w0 (pi at zeta = 0, 4 at zeta = 1,
+// -> 2 zeta as zeta -> inf).
+double clamped_contact_time_w0(double zeta);
+// Damping ratio zeta in [0, inf) whose clamped collision has restitution e in (0, 1]: the
+// inverse of clamped_restitution (bracketed bisection; e = 1 -> 0). Relative error of
+// clamped_restitution(zeta) vs e below 1e-12. This is the material's mapping.
 double damping_ratio_from_restitution(double e);
-// Restitution for damping ratio zeta < 1.
-double restitution_from_damping_ratio(double zeta);
 // Normal damping coefficient c_n (N s/m) for a pair of reduced mass m_eff (kg).
 double normal_damping(const Material& m, double m_eff);
-// Contact time t_c (s) of the damped normal spring for reduced mass m_eff (kg).
-double contact_time(const Material& m, double m_eff);
-
-// The "never attractive" clamp f_n >= 0 ends a collision when k_n delta = c_n v.n, before
-// the overlap closes, so the measured restitution and contact time differ from the formulas
-// above (Schwager & Poeschel 2008). For 0 <= zeta < 1, with w_d = sqrt(1 - zeta^2) (in units
-// of w0 = sqrt(k_n/m_eff)), the force vanishes at w_d t* = pi - atan2(2 zeta w_d, 1 - 2 zeta^2);
-// the bodies then fly apart freely:
-//   e_clamped  = -v(t*)/v0,      t_contact = t* + delta(t*)/|v(t*)|   (geometric contact)
-// e_clamped >= 0.1355 for every zeta < 1: a clamped linear dashpot cannot give e = 0.1.
-double clamped_restitution(double zeta);
 // Geometric contact time (s) of the clamped law for reduced mass m_eff (kg).
 double clamped_contact_time(const Material& m, double m_eff);
+
+// ---- The textbook law of DESIGN.md (a force allowed to turn attractive), zeta < 1 ----
+// Kept for the peer comparison only: the LAMMPS peer's gamma_n (../shared/peers/in.lammps_bed)
+// was derived with it, and tests check the clamped law against it where both agree.
+//   e = exp(-pi zeta / sqrt(1 - zeta^2)),  zeta = -ln e / sqrt(pi^2 + ln^2 e),
+//   t_c = pi / (w0 sqrt(1 - zeta^2))  (s; +inf for zeta >= 1)
+double textbook_damping_ratio(double e);
+double textbook_restitution(double zeta);
+double textbook_contact_time(double zeta, double k_n, double m_eff);
 
 // Validates the material; errors name "<prefix>.field".
 Status validate(const Material& m, const std::string& prefix);

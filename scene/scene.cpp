@@ -10,6 +10,8 @@
 // scene is returned only when the list is empty.
 #include "scene/scene.hpp"
 
+#include "particles/material.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -776,8 +778,8 @@ MaterialDef parse_material(Ctx& c, const json& j, const std::string& path) {
   if (!o.both("restitution", "damping_ratio")) {
     const bool given = o.has("restitution") || o.has("damping_ratio");
     m.restitution = o.number_opt("restitution", {0.0, 1.0, true, false, ""});
-    m.damping_ratio = o.number_opt("damping_ratio", {0.0, 1.0, false, true, ""});
-    if (!given && o.valid()) c.missing(o.at("restitution"), "one of 'restitution' (e in (0, 1]) or 'damping_ratio' (ζ in [0, 1))");
+    m.damping_ratio = o.number_opt("damping_ratio", {0.0, 100.0, false, false, ""});
+    if (!given && o.valid()) c.missing(o.at("restitution"), "one of 'restitution' (e in (0, 1]) or 'damping_ratio' (ζ in [0, 100])");
   }
   o.number("stiffness", m.stiffness, closed(1.0, 1e12, "N/m"));
   o.number("tangential_stiffness_ratio", m.tangential_stiffness_ratio, closed(0.0, 1.0, ""));
@@ -1079,16 +1081,16 @@ std::array<double, 2> TerrainDef::spacing_xz(int nx, int nz) const {
   return {spacing, spacing};
 }
 
+// e and ζ are related through the contact law the DEM integrates, the linear dashpot that
+// never pulls (particles/material.hpp; docs/dem.md "Restitution").
 double MaterialDef::damping_ratio_value() const {
   if (damping_ratio) return *damping_ratio;
-  const double l = std::log(restitution.value_or(1.0));
-  return -l / std::sqrt(kPi * kPi + l * l);
+  return damping_ratio_from_restitution(restitution.value_or(1.0));
 }
 
 double MaterialDef::restitution_value() const {
   if (restitution) return *restitution;
-  const double z = damping_ratio.value_or(0.0);
-  return std::exp(-kPi * z / std::sqrt(1.0 - z * z));
+  return clamped_restitution(damping_ratio.value_or(0.0));
 }
 
 double ShapeDef::volume() const {

@@ -19,6 +19,7 @@ PACKAGES=(
   libgtest-dev         # unit and physics tests (GoogleTest + CTest)
   libbenchmark-dev     # micro-benchmarks of hot kernels
   python3              # peer set-up scripts and plots
+  python3-matplotlib   # frame-time plots of `sandpatch stress` (scripts/plot_frames.py)
 )
 # The peer DEM is only needed for `sandpatch bench` comparisons; pass --peers to install it.
 if [[ "${1:-}" == "--peers" ]]; then

@@ -5,6 +5,8 @@
 //   sandpatch info
 //   sandpatch bench dem [--granules N] [--steps S] [--backend cpu|gl] [--threads T] [--json]
 //   sandpatch bench render [--terrain N]... [--frames F] [--width W] [--height H] [--json]
+//   sandpatch bench lod [--sizes N,N,...] [--seconds S] [--threads T] [--json]
+//   sandpatch stress SCENE [--sims N] [--frames F] [--interval S] [--windows K] [--threads T] [--out DIR] [--no-plot] [--json]
 // Exit codes: 0 ok, 1 runtime failure (with the stage that failed), 2 bad input.
 #include <CLI/CLI.hpp>
 #include <Eigen/Core>
@@ -13,6 +15,7 @@
 #include <omp.h>
 #include <png.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <iostream>
@@ -116,6 +119,26 @@ int main(int argc, char** argv) {
   bren->add_option("--width", brend.width, "Image width (px)")->check(CLI::Range(16, 8192));
   bren->add_option("--height", brend.height, "Image height (px)")->check(CLI::Range(16, 8192));
   bren->add_flag("--json", brend.json, "Print one JSON object on the last line");
+  BenchLodArgs blod;
+  std::string lod_sizes;
+  auto* blodc = bench->add_subcommand("lod", "Wall time per simulated second against terrain size; LOD off estimate; idle and sleeping cost");
+  blodc->add_option("--sizes", lod_sizes, "Terrain sizes in cells per side, ascending, comma-separated (default 512,1024,2048,4096,8192)");
+  blodc->add_option("--seconds", blod.seconds, "Simulated seconds per terrain size (default 1)");
+  blodc->add_option("--threads", blod.threads, "Worker threads (0 = all)");
+  blodc->add_flag("--json", blod.json, "Print one JSON object on the last line");
+
+  StressArgs stress;
+  bool stress_no_plot = false;
+  auto* st = app.add_subcommand("stress", "Many simulations sharing the pool: frame time against time, live simulations, plots");
+  st->add_option("scene", stress.scene, "Scene file: its terrain, material and first body (copied --sims times)")->required();
+  st->add_option("--sims", stress.sims, "Simulations (copies of the first body, pool slots) (default 4)");
+  st->add_option("--frames", stress.frames, "Fixed steps of the run (default 1200)");
+  st->add_option("--interval", stress.interval, "Seconds between arrivals (default 2)");
+  st->add_option("--windows", stress.windows, "Windows of the frame-time series: runs of growing length (default 8)");
+  st->add_option("--threads", stress.threads, "Worker threads (0 = all)");
+  st->add_option("--out", stress.out_dir, "Output directory (default: out/<scene>_stress_<sims>)");
+  st->add_flag("--no-plot", stress_no_plot, "Write the data only (no python3/matplotlib plot)");
+  st->add_flag("--json", stress.json, "Print one JSON object on the last line");
 
   try {
     app.parse(argc, argv);
@@ -138,6 +161,11 @@ int main(int argc, char** argv) {
     return code(ExitCode::Ok);
   }
 
+  if (app.got_subcommand("stress")) {
+    if (!stress_no_plot) stress.plot_script = std::string(SANDPATCH_SOURCE_DIR) + "/scripts/plot_frames.py";
+    return run_stress(stress);
+  }
+
   if (app.got_subcommand("bench")) {
     if (bench->got_subcommand("dem")) {
       // GL: the same bed on the compute-shader backend, timed beside the CPU backend.
@@ -145,6 +173,32 @@ int main(int argc, char** argv) {
       return run_bench_dem(dem);
     }
     if (bench->got_subcommand("render")) return render::run_bench_render(brend);
+    if (bench->got_subcommand("lod")) {
+      if (!lod_sizes.empty()) {
+        blod.sizes.clear();
+        std::size_t p = 0;
+        while (p <= lod_sizes.size()) {
+          const std::size_t q = std::min(lod_sizes.find(',', p), lod_sizes.size());
+          const std::string item = lod_sizes.substr(p, q - p);
+          std::size_t used = 0;
+          int n = 0;
+          try {
+            n = std::stoi(item, &used);
+          } catch (const std::exception&) {
+            used = 0;
+          }
+          if (item.empty() || used != item.size()) {
+            std::fprintf(stderr, "bench lod: --sizes = %s: '%s' is not an integer; give cell counts in [64, 16384], "
+                                 "ascending, comma-separated (e.g. 512,1024,2048)\n",
+                         lod_sizes.c_str(), item.c_str());
+            return code(ExitCode::BadInput);
+          }
+          blod.sizes.push_back(n);
+          p = q + 1;
+        }
+      }
+      return run_bench_lod(blod);
+    }
   }
 
   const bool rendering = app.got_subcommand("render");

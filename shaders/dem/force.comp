@@ -175,7 +175,25 @@ void main() {
           nrm = terrain_normal(pi.x, pi.z);
           dist = (pi.y - terrain_height(pi.x, pi.z)) * nrm.y;
         }
-        else if (!u_walls) continue;
+        else if (!u_walls) {
+          // the sides of the filled rectangle (particles/dem.cpp): a wall below the outside
+          // surface h, the outside solid's top edge above it
+          if (!u_terrain || pi.x < u_fill.x || pi.x > u_fill.z || pi.z < u_fill.y || pi.z > u_fill.w) continue;
+          vec3 inward;
+          float gap, h;
+          if (slot == 1) { inward = vec3(1.0, 0.0, 0.0); gap = pi.x - u_fill.x; h = terrain_height(u_fill.x - ri, pi.z); }
+          else if (slot == 2) { inward = vec3(-1.0, 0.0, 0.0); gap = u_fill.z - pi.x; h = terrain_height(u_fill.z + ri, pi.z); }
+          else if (slot == 3) { inward = vec3(0.0, 0.0, 1.0); gap = pi.z - u_fill.y; h = terrain_height(pi.x, u_fill.y - ri); }
+          else { inward = vec3(0.0, 0.0, -1.0); gap = u_fill.w - pi.z; h = terrain_height(pi.x, u_fill.w + ri); }
+          if (!(gap < ri)) continue;
+          const float dy = pi.y - h;
+          if (dy <= 0.0) { nrm = inward; dist = gap; }
+          else {
+            dist = sqrt(gap * gap + dy * dy);
+            if (!(dist > 0.0)) continue;
+            nrm = (inward * gap + vec3(0.0, dy, 0.0)) / dist;
+          }
+        }
         else if (slot == 1) { nrm = vec3(1.0, 0.0, 0.0); dist = pi.x - u_bmin.x; }
         else if (slot == 2) { nrm = vec3(-1.0, 0.0, 0.0); dist = u_bmax.x - pi.x; }
         else if (slot == 3) { nrm = vec3(0.0, 0.0, 1.0); dist = pi.z - u_bmin.z; }

@@ -2,7 +2,9 @@
 // disturbing the patch (Leach & Marais §5), the volume ledger, and a pre-settled patch at rest.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <cstdio>
 
 #include "heightfield/heightfield.hpp"
 #include "heightfield/procedural.hpp"
@@ -47,10 +49,10 @@ TerrainManagerDef small_def() {
 // heightfield. d = 2 r = 5 cm, heightfield spacing 10 cm (2 d).
 // Issue targets: height RMSE < 0.1 d and max < 0.5 d inside the patch, volume within 1 %,
 // largest step across the border < 0.1 d, surface moving < 0.1 d in the first second.
-// Met: the volume. Not met yet (measured 2026-11-22, docs/manager.md "Round trip"): RMSE
-// 0.157 d, max 0.58 d, border step 0.19 d, surface motion 0.20 d (the top layer of the cut
-// relaxes). Those are asserted at bounds just above the measured values so that a
-// regression fails; each message names the issue's target.
+// Met and asserted at the target: surface motion (measured 0.096 d), max (0.285 d), volume
+// (+0.62 %). Not met (docs/manager.md "Round trip"): RMSE 0.114 d and border step 0.126 d,
+// asserted at bounds just above the measured values so that a regression fails; the
+// messages name the issue's target.
 TEST(TerrainManager, RoundTripWithoutDisturbance) {
   Heightfield hf = hills();
   const Heightfield original = hf;
@@ -95,7 +97,7 @@ TEST(TerrainManager, RoundTripWithoutDisturbance) {
   double moved2 = 0, spheres2 = 0;
   for (std::size_t k = 0; k < s0.size(); ++k) moved2 += (s1[k] - s0[k]) * (s1[k] - s0[k]);
   for (std::size_t k = 1; k < start.size(); k += 4) spheres2 += (end[k] - start[k]) * (end[k] - start[k]);
-  EXPECT_LT(std::sqrt(moved2 / double(s0.size())), 0.25 * d)
+  EXPECT_LT(std::sqrt(moved2 / double(s0.size())), 0.1 * d)
       << "surface motion (issue target 0.1 d); spheres moved " << std::sqrt(spheres2 / double(start.size() / 4)) / d << " d RMS";
 
   ASSERT_TRUE((*m)->demote_all(t, prof).ok());
@@ -114,8 +116,8 @@ TEST(TerrainManager, RoundTripWithoutDisturbance) {
       mx = std::max(mx, std::abs(e));
       ++n;
     }
-  EXPECT_LT(std::sqrt(se / n), 0.2 * d) << "height RMSE (issue target 0.1 d); max " << mx / d << " d";
-  EXPECT_LT(mx, 0.75 * d) << "max height error (issue target 0.5 d)";
+  EXPECT_LT(std::sqrt(se / n), 0.15 * d) << "height RMSE (issue target 0.1 d); max " << mx / d << " d";
+  EXPECT_LT(mx, 0.5 * d) << "max height error (issue target 0.5 d)";
   // Border: the largest step between neighbouring samples across the region's edge, beyond
   // the original terrain's own slope there.
   double step = 0;
@@ -126,8 +128,11 @@ TEST(TerrainManager, RoundTripWithoutDisturbance) {
   };
   for (int k = j0; k <= j1; ++k) across(i0 - 1, k, i0, k), across(i1, k, i1 + 1, k);
   for (int k = i0; k <= i1; ++k) across(k, j0 - 1, k, j0), across(k, j1, k, j1 + 1);
-  EXPECT_LT(step, 0.25 * d) << "border step (issue target 0.1 d)";
+  EXPECT_LT(step, 0.2 * d) << "border step (issue target 0.1 d)";
   EXPECT_LT(std::abs(rep["ledger"]["total"]["error_pct"].get<double>()), 1.0) << rep["ledger"].dump(2);
+  std::printf("round trip: surface motion %.3f d, RMSE %.3f d, max %.3f d, border step %.3f d, volume %+.2f %%\n",
+              std::sqrt(moved2 / double(s0.size())) / d, std::sqrt(se / n) / d, mx / d, step / d,
+              rep["ledger"]["total"]["error_pct"].get<double>());
 }
 
 // Pool exhaustion: a second request waits in the queue while the only slot is busy, and is
@@ -167,4 +172,86 @@ TEST(TerrainManager, TooSmallSlotNamesTheCapacity) {
   auto st = (*m)->before_bodies(0, 1.0 / 60, prof);
   ASSERT_FALSE(st.ok());
   EXPECT_NE(st.message().find("granules_per_slot"), std::string::npos) << st.message();
+}
+
+// A patch nothing touches comes to rest and falls asleep (sleep_speed 0.01 m/s held for
+// sleep_time 0.5 s) within 1.5 s: no granule keeps rattling along the patch's sides, where
+// the outside soil's top edge meets the side walls (particles/dem.cpp). Before the edge
+// contact, one surface granule at a side kept moving at 0.02-0.05 m/s for 4 s and the patch
+// never slept. Asleep, the patch's state no longer changes.
+TEST(TerrainManager, UntouchedPatchFallsAsleep) {
+  Heightfield hf = hills();
+  auto world = BulletWorld::create(hf, {0, -9.81f, 0});
+  ASSERT_TRUE(world.ok());
+  auto m = TerrainManager::create(small_def(), hf, **world);
+  ASSERT_TRUE(m.ok()) << m.message();
+  Profile prof;
+  (*m)->request_patch(3.0, 3.0, 3.6, 3.6, 0.0);
+  const double dt = 1.0 / 60.0;
+  double t = 0, asleep_at = -1;
+  for (int f = 0; f < 90 && asleep_at < 0; ++f, t += dt) {
+    ASSERT_TRUE((*m)->before_bodies(t, dt, prof).ok());
+    ASSERT_TRUE((*m)->after_bodies(t, dt, prof).ok());
+    for (const PatchEvent& e : (*m)->events())
+      if (e.kind == PatchEventKind::Asleep) asleep_at = e.time;
+  }
+  ASSERT_GE(asleep_at, 0.0) << "the patch did not fall asleep within 1.5 s";
+  EXPECT_GE(asleep_at, 0.5) << "it cannot sleep before sleep_time";
+  const std::uint64_t h = (*m)->state_hash();
+  for (int f = 0; f < 10; ++f, t += dt) {
+    ASSERT_TRUE((*m)->before_bodies(t, dt, prof).ok());
+    ASSERT_TRUE((*m)->after_bodies(t, dt, prof).ok());
+  }
+  EXPECT_EQ((*m)->state_hash(), h) << "an asleep patch does not change";
+}
+
+// A patch carrying a sphere at rest falls asleep too, and the sphere stays where it came to
+// rest while the patch sleeps (Bullet gets its weight back as the support force). Before,
+// the shell's state was set from Bullet every frame, which woke the patch each time.
+TEST(TerrainManager, PatchWithRestingBodyFallsAsleep) {
+  HeightfieldDef g;
+  g.samples_x = g.samples_z = 81;
+  g.spacing = 0.1f;
+  ProceduralHeightsDef p;
+  p.kind = "flat";
+  p.height = 1.0f;
+  auto hfr = make_procedural(g, p);
+  ASSERT_TRUE(hfr.ok());
+  Heightfield hf = std::move(*hfr);
+  auto world = BulletWorld::create(hf, {0, -9.81f, 0});
+  ASSERT_TRUE(world.ok());
+  RigidBodyDef b;
+  b.shape.kind = RigidShapeKind::Sphere;
+  b.shape.radius = 0.1f;
+  b.mass = 5.0f;
+  b.position = {4.0, 1.4, 4.0};
+  auto id = (*world)->add_body(b);
+  ASSERT_TRUE(id.ok());
+  auto def = small_def();
+  def.granules_per_slot = 4000;
+  def.patch_depth = 0.2;
+  def.lod.apron = 0.2;
+  auto m = TerrainManager::create(def, hf, **world);
+  ASSERT_TRUE(m.ok()) << m.message();
+  Profile prof;
+  const double dt = 1.0 / 60.0;
+  double t = 0, asleep_at = -1;
+  for (int f = 0; f < 150 && asleep_at < 0; ++f, t += dt) {
+    ASSERT_TRUE((*m)->before_bodies(t, dt, prof).ok());
+    (*world)->step(float(dt));
+    ASSERT_TRUE((*m)->after_bodies(t, dt, prof).ok());
+    for (const PatchEvent& e : (*m)->events())
+      if (e.kind == PatchEventKind::Asleep) asleep_at = e.time;
+  }
+  ASSERT_GE(asleep_at, 0.0) << "the patch carrying a resting sphere did not fall asleep within 2.5 s";
+  EXPECT_FALSE((*world)->terrain_collision(*id)) << "the particles carry the sphere";
+  const double y = (*world)->state(*id).position.y();
+  EXPECT_LT(y, 1.0 + 0.1) << "the sphere sank into the sand, it does not rest on the old heightfield";
+  for (int f = 0; f < 60; ++f, t += dt) {
+    ASSERT_TRUE((*m)->before_bodies(t, dt, prof).ok());
+    (*world)->step(float(dt));
+    ASSERT_TRUE((*m)->after_bodies(t, dt, prof).ok());
+  }
+  EXPECT_NEAR((*world)->state(*id).position.y(), y, 1e-4) << "asleep, the sphere stays put (m)";
+  for (const PatchEvent& e : (*m)->events()) EXPECT_NE(e.kind, PatchEventKind::Woke);
 }

@@ -4,7 +4,9 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <numbers>
 
 #include "particles/dem.hpp"
@@ -75,67 +77,90 @@ TEST(ContactLaw, BellVelocityCapped) {
 }
 
 // Head-on collision of two spheres (single-sphere shells, no gravity, no friction) at
-// dt = t_c/100 (<= t_c/50). Restitution and geometric contact time are measured with
-// linear interpolation of the touching instants.
-//   e = 0.9: within 2% of the textbook e(zeta) and t_c (DESIGN.md formulas);
-//   e = 0.5, 0.1: the "never attractive" clamp ends the contact early, so the textbook
-//   values are out of reach (docs/dem.md); measured e and contact time are within 2% of
-//   the clamped law's closed form (clamped_restitution, clamped_contact_time).
-class HeadOn : public ::testing::TestWithParam<double> {};
+// dt = t_clamped / N. Restitution and geometric contact time are measured with linear
+// interpolation of the touching instants, for 8 phases of the first touch within a step.
+//   e: within 2% of the REQUESTED e (Material::restitution is the measured e: zeta is
+//      chosen by inverting the clamped law, material.hpp);
+//   contact time: within 2% of the clamped law's closed form (clamped_contact_time,
+//      Schwager & Poeschel 2007). The textbook t_c = pi/(w0 sqrt(1 - zeta^2)) assumes a force
+//      that turns attractive, so it is too long for the clamped law and undefined for
+//      zeta >= 1 (e = 0.1 needs zeta = 1.243); at e = 0.9 both agree, so the measured time is
+//      also asserted within 2% of it.
+// Step size: the damper force jumps from 0 to c_n v0 at the first touch, and symplectic Euler
+// applies a whole step of it whatever the phase of the touch, a first-order error in dt that
+// grows with zeta. Worst case over the phases (docs/dem.md): e = 0.5 and 0.9 are within 2% at
+// N = 50 (the dt <= t_c/50), e = 0.1 needs N ~ 500. Asserted at N = 100, 100, 1000.
+struct HeadOnCase {
+  double e;
+  int steps_per_contact;
+};
+class HeadOn : public ::testing::TestWithParam<HeadOnCase> {};
 
 TEST_P(HeadOn, RestitutionAndContactTime) {
-  const double e = GetParam();
+  const double e = GetParam().e;
+  const int N = GetParam().steps_per_contact;
   Material mat;
   mat.restitution = float(e);
   mat.friction = 0;
   const double meff = sphere_mass() / 2;
-  const double tc = contact_time(mat, meff);
-  SimulationDef def;
-  def.material = mat;
-  def.gravity_world = {0, 0, 0};
-  def.floor_height = -1;
-  def.bounds_min = {-0.05f, -0.05f, -0.05f};
-  def.bounds_max = {0.05f, 0.05f, 0.05f};
-  def.accuracy_steps_per_contact = 100;
-  def.sleep_time = 0;
-  auto sim = Simulation::create(def);
-  ASSERT_TRUE(sim.ok()) << sim.message();
-  const float v0 = 0.05f;
-  auto a = sim->add_shell(sphere_shell({-float(kR) - 1e-4f, 0, 0}, {v0, 0, 0}));
-  auto b = sim->add_shell(sphere_shell({float(kR) + 1e-4f, 0, 0}, {-v0, 0, 0}));
-  ASSERT_TRUE(a.ok() && b.ok());
-  const double dt = tc / 100;
-  double t_in = -1, t_out = -1;
-  double gap_prev = 2e-4;
-  for (int k = 0; k < 1000 && t_out < 0; ++k) {
-    ASSERT_TRUE(sim->step(dt).ok());
-    double gap = double(sim->body_position(*b).x - sim->body_position(*a).x) - 2 * kR;
-    double t = sim->time();
-    if (t_in < 0 && gap < 0) t_in = t - dt * gap / (gap - gap_prev);
-    if (t_in >= 0 && gap >= 0 && gap_prev < 0) t_out = t - dt * gap / (gap - gap_prev);
-    gap_prev = gap;
+  const double t_clamped = clamped_contact_time(mat, meff);
+  const double zeta = damping_ratio_from_restitution(e);
+  const double tc_textbook = textbook_contact_time(zeta, mat.normal_stiffness, meff);
+  const double dt = t_clamped / N;
+  const float v0 = 0.2f;  // m/s: large enough that float positions resolve v dt at N = 1000
+  double e_lo = 1e9, e_hi = -1e9, t_lo = 1e9, t_hi = -1e9;
+  for (int phase = 0; phase < 8; ++phase) {
+    SimulationDef def;
+    def.material = mat;
+    def.gravity_world = {0, 0, 0};
+    def.floor_height = -1;
+    def.bounds_min = {-0.05f, -0.05f, -0.05f};
+    def.bounds_max = {0.05f, 0.05f, 0.05f};
+    def.accuracy_steps_per_contact = 2;  // the test chooses dt; one substep per step
+    def.sleep_time = 0;
+    auto sim = Simulation::create(def);
+    ASSERT_TRUE(sim.ok()) << sim.message();
+    const float g = float(1e-4 + phase / 8.0 * v0 * dt);  // half the initial gap, m
+    auto a = sim->add_shell(sphere_shell({-float(kR) - g, 0, 0}, {v0, 0, 0}));
+    auto b = sim->add_shell(sphere_shell({float(kR) + g, 0, 0}, {-v0, 0, 0}));
+    ASSERT_TRUE(a.ok() && b.ok());
+    double t_in = -1, t_out = -1;
+    double gap_prev = 2 * g;
+    for (int k = 0; k < 20 * N && t_out < 0; ++k) {
+      ASSERT_TRUE(sim->step(dt).ok());
+      ASSERT_EQ(sim->last_step().substeps, 1);
+      double gap = double(sim->body_position(*b).x - sim->body_position(*a).x) - 2 * kR;
+      double t = sim->time();
+      if (t_in < 0 && gap < 0) t_in = t - dt * gap / (gap - gap_prev);
+      if (t_in >= 0 && gap >= 0 && gap_prev < 0) t_out = t - dt * gap / (gap - gap_prev);
+      gap_prev = gap;
+    }
+    ASSERT_GT(t_out, 0);
+    for (int k = 0; k < 5; ++k) ASSERT_TRUE(sim->step(dt).ok());
+    const double v_rel = double(sim->body_velocity(*b).x - sim->body_velocity(*a).x);
+    const double e_meas = v_rel / (2 * v0), t_meas = t_out - t_in;
+    EXPECT_NEAR(e_meas, e, 0.02 * e) << "e = " << e << ", phase " << phase;
+    EXPECT_NEAR(t_meas, t_clamped, 0.02 * t_clamped) << "e = " << e << ", phase " << phase;
+    if (e >= 0.9) {
+      EXPECT_NEAR(t_meas, tc_textbook, 0.02 * tc_textbook);
+    }
+    e_lo = std::min(e_lo, e_meas), e_hi = std::max(e_hi, e_meas);
+    t_lo = std::min(t_lo, t_meas), t_hi = std::max(t_hi, t_meas);
   }
-  ASSERT_GT(t_out, 0);
-  for (int k = 0; k < 5; ++k) ASSERT_TRUE(sim->step(dt).ok());
-  double v_rel = double(sim->body_velocity(*b).x - sim->body_velocity(*a).x);
-  double e_meas = v_rel / (2 * v0);
-  double t_meas = t_out - t_in;
-  double zeta = damping_ratio_from_restitution(e);
-  double e_clamped = clamped_restitution(zeta);
-  double t_clamped = clamped_contact_time(mat, meff);
-  EXPECT_NEAR(e_meas, e_clamped, 0.02 * e_clamped) << "e = " << e;
-  EXPECT_NEAR(t_meas, t_clamped, 0.02 * t_clamped) << "e = " << e;
-  if (e >= 0.9) {
-    EXPECT_NEAR(e_meas, e, 0.02 * e);
-    EXPECT_NEAR(t_meas, tc, 0.02 * tc);
-  }
-  RecordProperty("e_measured", std::to_string(e_meas));
-  RecordProperty("t_measured_over_tc", std::to_string(t_meas / tc));
-  std::printf("e %.2f: measured e %.4f (clamped theory %.4f), contact %.4g s = %.4f t_c (clamped theory %.4f t_c)\n", e,
-              e_meas, e_clamped, t_meas, t_meas / tc, t_clamped / tc);
+  RecordProperty("e_measured_min", std::to_string(e_lo));
+  RecordProperty("e_measured_max", std::to_string(e_hi));
+  const double t0 = std::sqrt(meff / mat.normal_stiffness);  // 1/w0, s
+  std::printf("e %.2f, dt = t_clamped/%d: zeta %.4f (textbook %.4f); measured e %.4f..%.4f (%+.2f%%..%+.2f%%), "
+              "contact %.4f..%.4f/w0 (clamped theory %.4f/w0, %+.2f%%..%+.2f%%; textbook t_c %.4f/w0)\n",
+              e, N, zeta, textbook_damping_ratio(e), e_lo, e_hi, 100 * (e_lo / e - 1), 100 * (e_hi / e - 1), t_lo / t0,
+              t_hi / t0, t_clamped / t0, 100 * (t_lo / t_clamped - 1), 100 * (t_hi / t_clamped - 1), tc_textbook / t0);
 }
 
-INSTANTIATE_TEST_SUITE_P(Restitutions, HeadOn, ::testing::Values(0.1, 0.5, 0.9));
+INSTANTIATE_TEST_SUITE_P(Restitutions, HeadOn,
+                         ::testing::Values(HeadOnCase{0.1, 1000}, HeadOnCase{0.5, 100}, HeadOnCase{0.9, 100}),
+                         [](const ::testing::TestParamInfo<HeadOnCase>& i) {
+                           return "e0" + std::to_string(int(std::lround(10 * i.param.e)));
+                         });
 
 namespace {
 // A rigid 3 x 3 plate of spheres (spacing 2r) resting on the floor, gravity tilted by theta

@@ -54,6 +54,10 @@ TEST(ParticleScale, ForcesAndFallOut) {
     def.bounds_max = {0.05f, 2.0f, 0.05f};
     def.sleep_time = 0;
     def.max_substeps = 100000;
+    // At s = 0.01 gravity is 981 m/s^2 in the sim: the falling sphere reaches 54 m/s and hits
+    // the floor, which the overlap guard refuses (docs/dem.md); this test is about the mapping
+    // only, so the guard is off here.
+    def.max_overlap_fraction = 0;
     auto sim = Simulation::create(def);
     ASSERT_TRUE(sim.ok()) << sim.message();
     double r = 0.005, m = 2500 * 4.0 / 3.0 * std::numbers::pi * r * r * r;

@@ -7,6 +7,7 @@
 #include <cstdio>
 
 #include "particles/dem.hpp"
+#include "particles/pile.hpp"
 #include "particles/gpu/gl_simulation.hpp"
 #include "tests/particles/gpu/gl_test_util.hpp"
 
@@ -18,7 +19,8 @@ using namespace testutil;
 // Angle of repose, GL vs CPU (issue 4 statistics): a column of 96 granules between walls
 // 2 granules apart (quasi-2D) collapses against the wall x = 0 and comes to rest. The flank
 // angle is the slope of a least-squares line through the surface heights (the highest sphere
-// top in 1 cm columns) where the surface lies between 20 % and 80 % of its peak. Asserted
+// top in 1 cm columns) where the surface lies between 20 % and 80 % of its peak (fit_flank
+// with outer_run = false, particles/pile.hpp). Asserted
 // within 2 degrees of the CPU; a CPU run one ulp away is printed as the chaotic spread.
 TEST(GlSimulation, AngleOfReposeMatchesCpu) {
   auto ctx = context();
@@ -49,24 +51,12 @@ TEST(GlSimulation, AngleOfReposeMatchesCpu) {
     auto st = gpu->step(1e-3);
     ASSERT_TRUE(st.ok()) << st.message();
   }
+  // the reusable flank fit (particles/pile.hpp): 1 cm columns along x, one sector, every
+  // column between 20 % and 80 % of the peak
   auto angle = [&](const std::vector<Vec3>& p) {
-    std::vector<double> top(25, 0.0);
-    for (const Vec3& x : p) {
-      int b = std::clamp(int(x.x / 0.01f), 0, 24);
-      top[b] = std::max(top[b], double(x.y + d.particle_radius));
-    }
-    const double peak = *std::max_element(top.begin(), top.end());
-    double sx = 0, sy = 0, sxx = 0, sxy = 0;
-    int n = 0;
-    for (int b = 0; b < 25; ++b)
-      if (top[b] > 0.2 * peak && top[b] < 0.8 * peak) {
-        const double x = 0.01 * (b + 0.5);
-        sx += x, sy += top[b], sxx += x * x, sxy += x * top[b];
-        ++n;
-      }
-    if (n < 2) return 0.0;
-    const double slope = (n * sxy - sx * sy) / (n * sxx - sx * sx);
-    return std::atan(-slope) * 180.0 / 3.14159265358979;
+    std::vector<SurfacePoint> pts;
+    for (const Vec3& x : p) pts.push_back({std::clamp(double(x.x), 0.0, 0.2499), double(x.y + d.particle_radius), 0});
+    return fit_flank(pts, FlankFitDef{0.01, 1, 0.2, 0.8, false}).angle_deg;
   };
   const double ac = angle(cpu->particle_positions()), a2 = angle(cpu2->particle_positions()),
                ag = angle(gpu->particle_positions());

@@ -1,0 +1,754 @@
+// The library for games (include/sandpatch/sandpatch.hpp, docs/api.md): the public API over
+// the heightfield, the Bullet world and the terrain manager, driven per step in the same
+// order as a scene run (manager/run.cpp): lod, activation, dem, bodies, sleep, demotion.
+//
+// Public types live in sandpatch::api; the internal ones (sandpatch::Error, Result, ...) are
+// reached through the `core` alias. Every public entry point validates its input and
+// returns errors; nothing is thrown across the API.
+#include "sandpatch/sandpatch.hpp"
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <string_view>
+#include <nlohmann/json.hpp>
+
+#include "common/error.hpp"
+#include "common/hash.hpp"
+#include "heightfield/heightfield.hpp"
+#include "heightfield/io.hpp"
+#include "heightfield/procedural.hpp"
+#include "manager/bullet_world.hpp"
+#include "manager/profile.hpp"
+#include "manager/terrain_manager.hpp"
+#include "render/clipmap.hpp"
+#include "scene/mesh.hpp"
+
+namespace sandpatch::api {
+namespace core = ::sandpatch;
+static_assert(std::string_view(kVersion) == SANDPATCH_VERSION, "kVersion in sandpatch.hpp must match project(VERSION)");
+namespace {
+
+using ojson = nlohmann::ordered_json;
+
+std::string num(double v) { return core::format_number(v); }
+
+std::string vec_str(const Vec3& v) { return "[" + num(v[0]) + ", " + num(v[1]) + ", " + num(v[2]) + "]"; }
+
+// Internal errors → public ones, with the field renamed (`rename` maps an internal field name
+// to the public one; unknown names get `prefix` in front).
+std::vector<Error> convert(const std::vector<core::Error>& es, const std::string& prefix,
+                           std::initializer_list<std::pair<const char*, const char*>> rename = {}) {
+  std::vector<Error> out;
+  for (const auto& e : es) {
+    std::string field = e.field;
+    bool renamed = false;
+    for (const auto& [from, to] : rename)
+      if (field == from) {
+        field = to;
+        renamed = true;
+        break;
+      }
+    if (!renamed && !field.empty()) field = prefix + field;
+    out.push_back({e.file, field, e.value, e.allowed, e.detail});
+  }
+  return out;
+}
+
+// Range checks that name the field, its value and the allowed range.
+struct Checker {
+  std::string prefix;  // "TerrainDef." / "BodyDef."
+  std::string detail;  // appended to every error (e.g. the body's name)
+  std::vector<Error> errs;
+
+  void add(const std::string& field, const std::string& value, const std::string& allowed) {
+    errs.push_back({"", prefix + field, value, allowed, detail});
+  }
+  // lo_open / hi_open: the bound itself is excluded. NaN and infinities always fail.
+  void number(const std::string& field, double v, double lo, double hi, bool lo_open, bool hi_open, const char* unit) {
+    const bool ok = std::isfinite(v) && (lo_open ? v > lo : v >= lo) && (hi_open ? v < hi : v <= hi);
+    if (ok) return;
+    std::string allowed = std::string("must be in ") + (lo_open ? "(" : "[") + num(lo) + ", " + num(hi) + (hi_open ? ")" : "]");
+    if (*unit) allowed += std::string(" ") + unit;
+    add(field, num(v), allowed);
+  }
+  void closed(const std::string& f, double v, double lo, double hi, const char* unit = "") { number(f, v, lo, hi, false, false, unit); }
+  void positive(const std::string& f, double v, double hi, const char* unit = "") { number(f, v, 0.0, hi, true, false, unit); }
+  void integer(const std::string& field, long long v, long long lo, long long hi) {
+    if (v < lo || v > hi) add(field, std::to_string(v), "must be in [" + std::to_string(lo) + ", " + std::to_string(hi) + "]");
+  }
+  template <class A>
+  void finite(const std::string& field, const A& v, const char* unit) {
+    for (auto x : v)
+      if (!std::isfinite(double(x))) {
+        std::string s = "[";
+        for (std::size_t k = 0; k < v.size(); ++k) s += (k ? ", " : "") + num(double(v[k]));
+        add(field, s + "]", std::string("must be finite (") + unit + ")");
+        return;
+      }
+  }
+};
+
+std::string lower_extension(const std::string& path) {
+  std::string e = std::filesystem::path(path).extension().string();
+  for (char& c : e) c = char(std::tolower(static_cast<unsigned char>(c)));
+  return e;
+}
+
+// Every TerrainDef field, before anything is built.
+std::vector<Error> validate(const TerrainDef& d) {
+  Checker c{"TerrainDef.", "", {}};
+  const int sources = int(!d.heights.empty()) + int(!d.file.empty()) + int(!d.procedural.empty());
+  if (sources != 1)
+    c.add("heights", sources == 0 ? "(none)" : std::to_string(sources) + " sources",
+          "give exactly one of heights (an array), file (a heightmap) or procedural (a generator)");
+  const std::string ext = lower_extension(d.file);
+  const bool need_grid = !d.heights.empty() || !d.procedural.empty() || (!d.file.empty() && ext == ".raw");
+  if (need_grid) {
+    c.integer("samples_x", d.samples_x, 2, 1048577);
+    c.integer("samples_z", d.samples_z, 2, 1048577);
+  }
+  if (!d.heights.empty()) {
+    const long long n = (long long)(std::max(d.samples_x, 0)) * std::max(d.samples_z, 0);
+    if ((long long)d.heights.size() != n)
+      c.add("heights", std::to_string(d.heights.size()) + " values",
+            "must hold samples_x * samples_z = " + std::to_string(n) + " values (row-major, x fastest)");
+    for (std::size_t k = 0; k < d.heights.size(); ++k)
+      if (!std::isfinite(d.heights[k])) {
+        c.add("heights[" + std::to_string(k) + "]", num(d.heights[k]), "must be finite (m)");
+        break;
+      }
+  }
+  if (!d.file.empty() && ext != ".png" && ext != ".raw" && ext != ".asc")
+    c.add("file", d.file, "the extension must be .png (16-bit greyscale), .raw (float32) or .asc (ESRI ASCII grid)");
+  if (!d.procedural.empty()) {
+    if (d.procedural != "flat" && d.procedural != "plane" && d.procedural != "hills" && d.procedural != "noise")
+      c.add("procedural", "\"" + d.procedural + "\"", "must be one of flat, plane, hills, noise");
+    c.closed("base_height", d.base_height, -1e5, 1e5, "m");
+    c.closed("slope_x", d.slope_x, -1e3, 1e3);
+    c.closed("slope_z", d.slope_z, -1e3, 1e3);
+    c.closed("amplitude", d.amplitude, 0.0, 1e5, "m");
+    c.positive("wavelength", d.wavelength, 1e7, "m");
+    c.integer("octaves", d.octaves, 1, 16);
+  }
+  if (!d.file.empty()) {
+    c.closed("vertical_scale", d.vertical_scale, -1e6, 1e6, "m");
+    c.closed("vertical_offset", d.vertical_offset, -1e6, 1e6, "m");
+  }
+  c.positive("spacing", d.spacing, 1e4, "m");
+  c.finite("origin", d.origin, "m");
+  c.positive("soil_depth", d.soil_depth, 1e4, "m");
+  c.closed("material.granule_radius", d.material.granule_radius, 1e-5, 10.0, "m");
+  c.positive("material.density", d.material.density, 1e5, "kg/m^3");
+  c.closed("material.friction", d.material.friction, 0.0, 10.0);
+  c.positive("material.restitution", d.material.restitution, 1.0);
+  c.closed("material.stiffness", d.material.stiffness, 1.0, 1e12, "N/m");
+  c.closed("material.tangential_stiffness_ratio", d.material.tangential_stiffness_ratio, 0.0, 1.0);
+  c.integer("slots", d.slots, 1, 1024);
+  c.integer("granules_per_slot", d.granules_per_slot, 64, 16777216);
+  if (std::isfinite(d.soil_depth) && d.soil_depth > 0)
+    c.positive("patch_depth", d.patch_depth, d.soil_depth, "m (at most soil_depth)");
+  c.closed("particle_scale", d.particle_scale, 1e-3, 1e3);
+  c.closed("sleep_speed", d.sleep_speed, 0.0, 100.0, "m/s");
+  c.closed("sleep_time", d.sleep_time, 0.0, 1e4, "s");
+  c.closed("idle_timeout", d.idle_timeout, 0.0, 1e6, "s");
+  if (d.backend != "cpu" && d.backend != "gl") c.add("backend", "\"" + d.backend + "\"", "must be cpu or gl");
+  c.integer("threads", d.threads, 0, 1024);
+  c.positive("lod_horizon", d.lod_horizon, 10.0, "s");
+  c.closed("lod_margin", d.lod_margin, 0.0, 100.0, "m");
+  c.closed("lod_apron", d.lod_apron, 0.0, 1000.0, "m");
+  c.finite("gravity", d.gravity, "m/s^2");
+  return c.errs;
+}
+
+Result<core::Heightfield> build_heightfield(const TerrainDef& d) {
+  auto fail = [](const auto& r) { return convert(r.errors(), "TerrainDef.", {{"kind", "TerrainDef.procedural"},
+                                                                              {"height", "TerrainDef.base_height"},
+                                                                              {"seed", "TerrainDef.noise_seed"},
+                                                                              {"import.vertical_scale", "TerrainDef.vertical_scale"},
+                                                                              {"import.vertical_offset", "TerrainDef.vertical_offset"}}); };
+  core::HeightfieldDef g;
+  g.samples_x = d.samples_x;
+  g.samples_z = d.samples_z;
+  g.spacing = float(d.spacing);
+  g.origin_x = d.origin[0];
+  g.origin_y = d.origin[1];
+  g.origin_z = d.origin[2];
+  if (!d.heights.empty()) {
+    auto hf = core::Heightfield::create(g);
+    if (!hf) return fail(hf);
+    hf->write(hf->whole(), d.heights.data());
+    return std::move(*hf);
+  }
+  if (!d.procedural.empty()) {
+    core::ProceduralHeightsDef p;
+    p.kind = d.procedural;
+    p.height = d.base_height;
+    p.slope_x = d.slope_x;
+    p.slope_z = d.slope_z;
+    p.amplitude = d.amplitude;
+    p.wavelength = d.wavelength;
+    p.seed = d.noise_seed;
+    p.octaves = d.octaves;
+    auto hf = core::make_procedural(g, p);
+    if (!hf) return fail(hf);
+    return std::move(*hf);
+  }
+  core::HeightmapImport im;
+  im.origin_x = d.origin[0];
+  im.origin_y = d.origin[1];
+  im.origin_z = d.origin[2];
+  im.spacing = float(d.spacing);
+  im.vertical_scale = float(d.vertical_scale);
+  im.vertical_offset = float(d.vertical_offset);
+  im.override_spacing = d.spacing_overrides_file;
+  const std::string ext = lower_extension(d.file);
+  auto hf = ext == ".png"   ? core::load_png16(d.file, im)
+            : ext == ".raw" ? core::load_raw_f32(d.file, d.samples_x, d.samples_z, im)
+                            : core::load_esri_ascii(d.file, im);
+  if (!hf) return fail(hf);
+  return std::move(*hf);
+}
+
+EventKind kind_of(core::PatchEventKind k) {
+  switch (k) {
+    case core::PatchEventKind::Requested: return EventKind::Requested;
+    case core::PatchEventKind::Queued: return EventKind::Requested;  // not emitted by the manager today
+    case core::PatchEventKind::Promoted: return EventKind::Promoted;
+    case core::PatchEventKind::Ready: return EventKind::Ready;
+    case core::PatchEventKind::Asleep: return EventKind::Asleep;
+    case core::PatchEventKind::Woke: return EventKind::Woke;
+    case core::PatchEventKind::Demoted: return EventKind::Demoted;
+  }
+  return EventKind::Requested;
+}
+
+bool eq_norm_positive(const Quat& q) {
+  return double(q[0]) * q[0] + double(q[1]) * q[1] + double(q[2]) * q[2] + double(q[3]) * q[3] > 1e-12;
+}
+Eigen::Vector3f ev(const Vec3f& v) { return {v[0], v[1], v[2]}; }
+Eigen::Quaternionf eq(const Quat& q) { return Eigen::Quaternionf(q[0], q[1], q[2], q[3]).normalized(); }
+
+}  // namespace
+
+const char* to_string(EventKind k) {
+  switch (k) {
+    case EventKind::Requested: return "requested";
+    case EventKind::Promoted: return "promoted";
+    case EventKind::Ready: return "ready";
+    case EventKind::Asleep: return "asleep";
+    case EventKind::Woke: return "woke";
+    case EventKind::Demoted: return "demoted";
+  }
+  return "unknown";
+}
+
+// Destruction order matters: the manager refers to the world and the heightfield, the world
+// reads the heightfield's tiles in place. Members are destroyed in reverse order.
+struct Terrain::Impl {
+  TerrainDef def;
+  std::unique_ptr<core::Heightfield> hf;
+  std::unique_ptr<core::BulletWorld> world;
+  std::unique_ptr<core::TerrainManager> manager;  // null when granular_patches is false
+  core::Profile profile;
+  double time = 0;                                // s
+  long long frames = 0;
+  std::size_t events_read = 0;                    // manager events already handed out
+  std::vector<core::GridRegion> dirty;            // demoted regions not yet taken
+  // Bodies removed by the game but still in the Bullet world until the next step's dem stage
+  // has let go of them (see remove_body).
+  std::vector<core::RigidBodyId> removing;
+
+  core::RigidBodyId id(BodyHandle h) const { return {h.index, h.generation}; }
+  bool pending_removal(core::RigidBodyId b) const {
+    return std::any_of(removing.begin(), removing.end(),
+                       [&](const core::RigidBodyId& r) { return r.index == b.index && r.generation == b.generation; });
+  }
+  Status check(BodyHandle h) const {
+    if (world->alive(id(h)) && !pending_removal(id(h))) return Ok{};
+    return Error{"", "BodyHandle", "{" + std::to_string(h.index) + ", " + std::to_string(h.generation) + "}",
+                 "must be a live body of this terrain (removed, or never added)"};
+  }
+  void collect_dirty() {
+    if (!manager) return;
+    for (const auto& r : manager->take_dirty_regions()) dirty.push_back(r);
+  }
+};
+
+Terrain::Terrain(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+Terrain::Terrain(Terrain&&) noexcept = default;
+Terrain& Terrain::operator=(Terrain&&) noexcept = default;
+Terrain::~Terrain() = default;
+
+Result<Terrain> Terrain::create(const TerrainDef& def) {
+  if (auto errs = validate(def); !errs.empty()) return errs;
+  auto impl = std::make_unique<Impl>();
+  impl->def = def;
+  auto hf = build_heightfield(def);
+  if (!hf) return hf.errors();
+  impl->hf = std::make_unique<core::Heightfield>(std::move(*hf));
+  const Eigen::Vector3f gravity(float(def.gravity[0]), float(def.gravity[1]), float(def.gravity[2]));
+  auto world = core::BulletWorld::create(*impl->hf, gravity);
+  if (!world) return convert(world.errors(), "TerrainDef.");
+  impl->world = std::move(*world);
+  if (def.granular_patches) {
+    core::TerrainManagerDef m;
+    m.material.radius = float(def.material.granule_radius);
+    m.material.density = float(def.material.density);
+    m.material.friction = float(def.material.friction);
+    m.material.restitution = float(def.material.restitution);
+    m.material.stiffness = float(def.material.stiffness);
+    m.material.tangential_stiffness_ratio = float(def.material.tangential_stiffness_ratio);
+    m.particle_scale = def.particle_scale;
+    m.slots = def.slots;
+    m.granules_per_slot = def.granules_per_slot;
+    m.patch_depth = def.patch_depth;
+    m.soil_depth = def.soil_depth;
+    m.sleep_speed = def.sleep_speed;
+    m.sleep_time = def.sleep_time;
+    m.idle_timeout = def.idle_timeout;
+    m.use_gl = def.gl_depth_render;
+    m.backend = def.backend;
+    m.threads = def.threads;
+    m.lod.horizon = def.lod_horizon;
+    m.lod.margin = def.lod_margin;
+    m.lod.apron = def.lod_apron;
+    m.gravity = {def.gravity[0], def.gravity[1], def.gravity[2]};
+    m.seed = def.seed;
+    auto tm = core::TerrainManager::create(m, *impl->hf, *impl->world);
+    if (!tm) {
+      // Fields the manager names after the scene file's become TerrainDef's; the others (from
+      // settling the granule tile, making the pool's simulations) keep their internal names.
+      std::vector<Error> es = convert(tm.errors(), "",
+                                      {{"pool.slots", "TerrainDef.slots"},
+                                       {"pool.granules_per_slot", "TerrainDef.granules_per_slot"},
+                                       {"simulation.pool.granules_per_slot", "TerrainDef.granules_per_slot"},
+                                       {"simulation.backend", "TerrainDef.backend"},
+                                       {"particle_scale", "TerrainDef.particle_scale"},
+                                       {"patch_depth", "TerrainDef.patch_depth"}});
+      for (auto& e : es)
+        if (!e.field.starts_with("TerrainDef."))
+          e.detail += std::string(e.detail.empty() ? "" : "; ") +
+                      "while building the granule tile and the patch pool from TerrainDef.material";
+      return es;
+    }
+    impl->manager = std::move(*tm);
+  }
+  return Terrain(std::move(impl));
+}
+
+// ---- bodies ----
+
+Result<BodyHandle> Terrain::add_body(const BodyDef& d) {
+  Impl& I = *impl_;
+  Checker c{"BodyDef.", d.name.empty() ? "" : "body '" + d.name + "'", {}};
+  const ShapeDef& s = d.shape;
+  core::RigidBodyDef r;
+  r.name = d.name;
+  switch (s.kind) {
+    case ShapeKind::Sphere:
+      c.positive("shape.radius", s.radius, 1e4, "m");
+      r.shape.kind = core::RigidShapeKind::Sphere;
+      break;
+    case ShapeKind::Box:
+      for (int k = 0; k < 3; ++k) c.positive("shape.half_extents[" + std::to_string(k) + "]", s.half_extents[k], 1e4, "m");
+      r.shape.kind = core::RigidShapeKind::Box;
+      break;
+    case ShapeKind::Cylinder:
+      c.positive("shape.radius", s.radius, 1e4, "m");
+      c.positive("shape.height", s.height, 1e4, "m");
+      r.shape.kind = core::RigidShapeKind::Cylinder;
+      break;
+    case ShapeKind::Capsule:
+      c.positive("shape.radius", s.radius, 1e4, "m");
+      c.closed("shape.height", s.height, 0.0, 1e4, "m");
+      r.shape.kind = core::RigidShapeKind::Capsule;
+      break;
+    case ShapeKind::Mesh: {
+      r.shape.kind = core::RigidShapeKind::Mesh;
+      if (s.mesh_file.empty() == s.vertices.empty()) {
+        c.add("shape.mesh_file", s.mesh_file.empty() ? "(none)" : s.mesh_file,
+              "a mesh needs exactly one of mesh_file (an OBJ) or vertices + triangles");
+        break;
+      }
+      core::TriangleMesh mesh;
+      if (!s.mesh_file.empty()) {
+        c.positive("shape.mesh_scale", s.mesh_scale, 1e4);
+        if (!c.errs.empty()) break;
+        auto m = core::load_obj_mesh(s.mesh_file, s.mesh_scale);
+        if (!m) {
+          for (auto& e : convert(m.errors(), "BodyDef.shape.")) c.errs.push_back(e);
+          break;
+        }
+        mesh = std::move(*m);
+      } else {
+        if (s.vertices.size() % 3 != 0 || s.vertices.size() < 12)
+          c.add("shape.vertices", std::to_string(s.vertices.size()) + " values", "must be x, y, z per vertex, at least 4 vertices");
+        if (s.triangles.size() % 3 != 0 || s.triangles.size() < 12)
+          c.add("shape.triangles", std::to_string(s.triangles.size()) + " values", "must be 3 indices per triangle, at least 4 triangles");
+        const int nv = int(s.vertices.size() / 3);
+        for (std::size_t k = 0; k < s.triangles.size(); ++k)
+          if (s.triangles[k] < 0 || s.triangles[k] >= nv) {
+            c.add("shape.triangles[" + std::to_string(k) + "]", std::to_string(s.triangles[k]),
+                  "must be a vertex index in [0, " + std::to_string(nv - 1) + "]");
+            break;
+          }
+        for (std::size_t k = 0; k < s.vertices.size(); ++k)
+          if (!std::isfinite(s.vertices[k])) {
+            c.add("shape.vertices[" + std::to_string(k) + "]", num(s.vertices[k]), "must be finite (m)");
+            break;
+          }
+        if (!c.errs.empty()) break;
+        for (std::size_t k = 0; k + 2 < s.vertices.size(); k += 3)
+          mesh.vertices.emplace_back(s.vertices[k], s.vertices[k + 1], s.vertices[k + 2]);
+        for (std::size_t k = 0; k + 2 < s.triangles.size(); k += 3)
+          mesh.triangles.push_back({s.triangles[k], s.triangles[k + 1], s.triangles[k + 2]});
+      }
+      for (auto& e : convert(core::check_solid_mesh(mesh, s.mesh_file, "BodyDef.shape"), "")) c.errs.push_back(e);
+      if (!c.errs.empty()) break;
+      const Eigen::Vector3f centre = mesh.centroid().cast<float>();  // bodies are centred on their centre of mass
+      for (const auto& v : mesh.vertices) r.shape.vertices.push_back(v - centre);
+      r.shape.triangles = mesh.triangles;
+      break;
+    }
+  }
+  c.positive("mass", d.mass, 1e9, "kg");
+  c.finite("position", d.position, "m");
+  c.finite("orientation", d.orientation, "");
+  if (c.errs.empty() && !(eq_norm_positive(d.orientation)))
+    c.add("orientation", "[0, 0, 0, 0]", "must be a non-zero quaternion [w, x, y, z]");
+  c.finite("linear_velocity", d.linear_velocity, "m/s");
+  c.finite("angular_velocity", d.angular_velocity, "rad/s");
+  c.closed("friction", d.friction, 0.0, 10.0);
+  c.closed("restitution", d.restitution, 0.0, 1.0);
+  c.closed("rolling_friction", d.rolling_friction, 0.0, 10.0);
+  if (!c.errs.empty()) return c.errs;
+
+  r.shape.radius = float(s.radius);
+  r.shape.height = float(s.height);
+  r.shape.half_extents = {float(s.half_extents[0]), float(s.half_extents[1]), float(s.half_extents[2])};
+  r.mass = float(d.mass);
+  r.position = {d.position[0], d.position[1], d.position[2]};
+  r.orientation = eq(d.orientation);
+  r.linear_velocity = ev(d.linear_velocity);
+  r.angular_velocity = ev(d.angular_velocity);
+  r.friction = float(d.friction);
+  r.restitution = float(d.restitution);
+  r.rolling_friction = float(d.rolling_friction);
+  auto id = I.world->add_body(r);
+  if (!id) return convert(id.errors(), "BodyDef.");
+  // The body's lowest point must start at or above the bedrock (surface − soil_depth): the
+  // patches' granules stop there.
+  Eigen::Vector3d lo, hi;
+  I.world->bounds(*id, &lo, &hi);
+  const double bedrock = height_at(d.position[0], d.position[2]) - I.def.soil_depth;
+  if (lo.y() < bedrock) {
+    I.world->remove_body(*id);
+    return Error{"", "BodyDef.position", vec_str(d.position),
+                 "the body's lowest point must start at or above the bedrock (world y = " + num(bedrock) + " m here)",
+                 "its lowest point is at y = " + num(lo.y()) + " m" + (d.name.empty() ? "" : " (body '" + d.name + "')")};
+  }
+  return BodyHandle{id->index, id->generation};
+}
+
+// A body a patch carries has a shell in the patch's DEM, which the manager disables only when
+// it sees the body leave the patch (TerrainManager has no "body removed" call). So a removed
+// body is first moved 1 km above the terrain, at rest, and leaves the Bullet world in the next
+// step, after the dem stage has disabled its shell; to the game it is gone at once.
+Status Terrain::remove_body(BodyHandle h) {
+  Impl& I = *impl_;
+  if (Status s = I.check(h); !s) return s;
+  const core::RigidBodyId id = I.id(h);
+  if (!I.manager) {
+    I.world->remove_body(id);
+    return Ok{};
+  }
+  core::BodyState st = I.world->state(id);
+  st.position.y() = I.hf->origin_y() + double(I.hf->max_height()) + 1000.0;
+  st.linear_velocity.setZero();
+  st.angular_velocity.setZero();
+  I.world->set_state(id, st);
+  I.removing.push_back(id);
+  return Ok{};
+}
+
+bool Terrain::alive(BodyHandle h) const { return impl_->check(h).ok(); }
+
+Result<BodyState> Terrain::body_state(BodyHandle h) const {
+  if (Status s = impl_->check(h); !s) return s.errors();
+  const core::BodyState st = impl_->world->state(impl_->id(h));
+  BodyState out;
+  out.position = {st.position.x(), st.position.y(), st.position.z()};
+  out.orientation = {st.orientation.w(), st.orientation.x(), st.orientation.y(), st.orientation.z()};
+  out.linear_velocity = {st.linear_velocity.x(), st.linear_velocity.y(), st.linear_velocity.z()};
+  out.angular_velocity = {st.angular_velocity.x(), st.angular_velocity.y(), st.angular_velocity.z()};
+  return out;
+}
+
+Status Terrain::set_body_transform(BodyHandle h, const Vec3& position, const Quat& orientation) {
+  if (Status s = impl_->check(h); !s) return s;
+  Checker c{"set_body_transform.", "", {}};
+  c.finite("position", position, "m");
+  c.finite("orientation", orientation, "");
+  if (c.errs.empty() && !eq_norm_positive(orientation))
+    c.add("orientation", "[0, 0, 0, 0]", "must be a non-zero quaternion [w, x, y, z]");
+  if (!c.errs.empty()) return c.errs;
+  core::BodyState st = impl_->world->state(impl_->id(h));
+  st.position = {position[0], position[1], position[2]};
+  st.orientation = eq(orientation);
+  impl_->world->set_state(impl_->id(h), st);
+  return Ok{};
+}
+
+Status Terrain::set_body_velocity(BodyHandle h, const Vec3f& linear, const Vec3f& angular) {
+  if (Status s = impl_->check(h); !s) return s;
+  Checker c{"set_body_velocity.", "", {}};
+  c.finite("linear", linear, "m/s");
+  c.finite("angular", angular, "rad/s");
+  if (!c.errs.empty()) return c.errs;
+  core::BodyState st = impl_->world->state(impl_->id(h));
+  st.linear_velocity = ev(linear);
+  st.angular_velocity = ev(angular);
+  impl_->world->set_state(impl_->id(h), st);
+  return Ok{};
+}
+
+std::vector<BodyHandle> Terrain::bodies() const {
+  std::vector<BodyHandle> out;
+  for (const auto& id : impl_->world->bodies())
+    if (!impl_->pending_removal(id)) out.push_back({id.index, id.generation});
+  return out;
+}
+
+// ---- the step ----
+
+Status Terrain::step(double dt, int substeps) {
+  Impl& I = *impl_;
+  Checker c{"step.", "", {}};
+  c.number("dt", dt, 0.0, 0.1, true, false, "s");
+  c.integer("substeps", substeps, 1, 1000);
+  if (!c.errs.empty()) return c.errs;
+  const double t = I.time;
+  auto fail = [&](const core::Status& s, const char* stage) {
+    std::vector<Error> out = convert(s.errors(), "");
+    for (auto& e : out) e.detail += std::string(e.detail.empty() ? "" : "; ") + "in the " + stage + " stage at t = " + num(t) + " s";
+    return out;
+  };
+  if (I.manager)
+    if (core::Status s = I.manager->before_bodies(t, dt, I.profile); !s) return fail(s, "dem");
+  for (const auto& id : I.removing) I.world->remove_body(id);  // their shells are disabled now
+  I.removing.clear();
+  {
+    auto timer = I.profile.time(core::Stage::Bodies);
+    const float sub = float(dt / substeps);
+    for (int k = 0; k < substeps; ++k) I.world->step(sub);
+    for (const auto& id : I.world->bodies()) {
+      const core::BodyState st = I.world->state(id);
+      if (!st.position.allFinite() || !st.linear_velocity.allFinite() || !st.angular_velocity.allFinite()) {
+        const std::string& name = I.world->definition(id).name;
+        return Error{"", "body", name.empty() ? "{" + std::to_string(id.index) + ", " + std::to_string(id.generation) + "}" : name,
+                     "has a non-finite state at t = " + num(t + dt) + " s"};
+      }
+    }
+  }
+  if (I.manager)
+    if (core::Status s = I.manager->after_bodies(t, dt, I.profile); !s) return fail(s, "demotion");
+  I.collect_dirty();
+  ++I.frames;
+  I.time = t + dt;
+  return Ok{};
+}
+
+double Terrain::time() const { return impl_->time; }
+
+Status Terrain::request_patch(double x0, double z0, double x1, double z1) {
+  Checker c{"request_patch.", "", {}};
+  c.finite("rectangle", std::array<double, 4>{x0, z0, x1, z1}, "m");
+  if (c.errs.empty() && !(x1 > x0 && z1 > z0))
+    c.add("rectangle", "[" + num(x0) + ", " + num(z0) + ", " + num(x1) + ", " + num(z1) + "]", "must have x1 > x0 and z1 > z0");
+  if (!c.errs.empty()) return c.errs;
+  if (!impl_->manager) return Error{"", "TerrainDef.granular_patches", "false", "patches need granular_patches = true"};
+  impl_->manager->request_patch(x0, z0, x1, z1, impl_->time);
+  return Ok{};
+}
+
+Status Terrain::demote_all() {
+  Impl& I = *impl_;
+  if (!I.manager) return Ok{};
+  if (core::Status s = I.manager->demote_all(I.time, I.profile); !s) return convert(s.errors(), "");
+  I.collect_dirty();
+  return Ok{};
+}
+
+// ---- queries ----
+
+double Terrain::height_at(double x, double z) const {
+  const core::Heightfield& hf = *impl_->hf;
+  return hf.origin_y() + double(hf.sample(float(x - hf.origin_x()), float(z - hf.origin_z())));
+}
+
+Vec3f Terrain::normal_at(double x, double z) const {
+  const core::Heightfield& hf = *impl_->hf;
+  const Eigen::Vector3f n = hf.normal(float(x - hf.origin_x()), float(z - hf.origin_z()));
+  return {n.x(), n.y(), n.z()};
+}
+
+// ---- patches and events ----
+
+std::vector<Event> Terrain::poll_events() {
+  Impl& I = *impl_;
+  std::vector<Event> out;
+  if (!I.manager) return out;
+  const auto& es = I.manager->events();
+  for (; I.events_read < es.size(); ++I.events_read) {
+    const core::PatchEvent& e = es[I.events_read];
+    if (e.kind == core::PatchEventKind::Queued) continue;
+    out.push_back({kind_of(e.kind), e.patch, e.time, e.wall_ms, e.granules});
+  }
+  return out;
+}
+
+int Terrain::active_patches() const { return impl_->manager ? impl_->manager->active_patches() : 0; }
+int Terrain::granules() const { return impl_->manager ? impl_->manager->granules() : 0; }
+
+void Terrain::particles(std::vector<float>& xyzr) const {
+  xyzr.clear();
+  if (impl_->manager) impl_->manager->particles(xyzr);
+}
+
+std::vector<ParticleGroup> Terrain::particle_groups() const {
+  std::vector<ParticleGroup> out;
+  if (!impl_->manager) return out;
+  std::size_t first = 0;
+  for (const auto& [count, fade] : impl_->manager->particle_groups()) {
+    out.push_back({first, count, fade});
+    first += count;
+  }
+  return out;
+}
+
+// ---- heightfield data for renderers ----
+
+HeightfieldInfo Terrain::heightfield() const {
+  const core::Heightfield& hf = *impl_->hf;
+  return {hf.samples_x(), hf.samples_z(), double(hf.spacing()), origin(), double(hf.min_height()), double(hf.max_height())};
+}
+
+Vec3 Terrain::origin() const {
+  const core::Heightfield& hf = *impl_->hf;
+  return {hf.origin_x(), hf.origin_y(), hf.origin_z()};
+}
+
+Status Terrain::read_heights(GridRegion r, std::vector<float>& out) const {
+  const core::Heightfield& hf = *impl_->hf;
+  const core::GridRegion g{r.i0, r.j0, r.ni, r.nj};
+  if (r.empty() || !hf.contains(g))
+    return Error{"", "GridRegion", "{" + std::to_string(r.i0) + ", " + std::to_string(r.j0) + ", " + std::to_string(r.ni) + ", " +
+                                      std::to_string(r.nj) + "}",
+                 "must be non-empty and inside the grid [0, " + std::to_string(hf.samples_x()) + ") x [0, " +
+                     std::to_string(hf.samples_z()) + ")"};
+  out.resize(std::size_t(r.ni) * std::size_t(r.nj));
+  hf.read(g, out.data());
+  return Ok{};
+}
+
+std::vector<GridRegion> Terrain::take_dirty_regions() {
+  std::vector<GridRegion> out;
+  impl_->collect_dirty();
+  for (const auto& r : impl_->dirty) out.push_back({r.i0, r.j0, r.ni, r.nj});
+  impl_->dirty.clear();
+  return out;
+}
+
+Status Terrain::select_clipmap(const ClipmapDef& def, const ClipmapView& view, ClipmapSelection& out) const {
+  core::render::ClipmapDef d;
+  d.n = def.n;
+  d.levels = def.levels;
+  d.base_spacing = def.base_spacing;
+  d.transition = def.transition;
+  d.height_factor = def.height_factor;
+  if (core::Status s = core::render::validate(d); !s) {
+    std::vector<Error> es = convert(s.errors(), "");
+    for (auto& e : es)
+      if (e.field.starts_with("clipmap.")) e.field = "ClipmapDef." + e.field.substr(8);
+    return es;
+  }
+  Checker c{"ClipmapView.", "", {}};
+  c.finite("viewer", view.viewer, "m");
+  c.finite("view_proj", view.view_proj, "");
+  if (!c.errs.empty()) return c.errs;
+  const core::Heightfield& hf = *impl_->hf;
+  core::render::ClipmapView v;
+  const float lx = float(view.viewer[0] - hf.origin_x()), lz = float(view.viewer[2] - hf.origin_z());
+  v.viewer = {lx, float(view.viewer[1] - hf.origin_y()), lz};
+  v.view_proj = Eigen::Map<const Eigen::Matrix4f>(view.view_proj.data());
+  v.cull = view.cull;
+  v.extent_x = hf.extent_x();
+  v.extent_z = hf.extent_z();
+  v.min_height = hf.min_height();
+  v.max_height = hf.max_height();
+  v.ground_height = hf.sample(lx, lz);
+  core::render::ClipmapSelection sel;
+  core::render::select_clipmap(d, v, sel);
+  out.levels.clear();
+  out.pieces.clear();
+  for (const auto& l : sel.levels) out.levels.push_back({l.level, l.spacing, l.origin_x, l.origin_z, l.n, l.active, l.finest});
+  for (const auto& p : sel.pieces) out.pieces.push_back({p.level, int(p.kind), p.gx, p.gz, p.cells_x, p.cells_z});
+  out.triangles = sel.triangles;
+  return Ok{};
+}
+
+// ---- report ----
+
+std::string Terrain::report_json() const {
+  const Impl& I = *impl_;
+  ojson r;
+  r["sandpatch_version"] = kVersion;
+  r["simulated_s"] = I.time;
+  r["steps"] = I.frames;
+  r["stages"] = I.profile.to_json();
+  ojson bodies = ojson::array();
+  for (const auto& id : I.world->bodies()) {
+    if (I.pending_removal(id)) continue;
+    const core::BodyState s = I.world->state(id);
+    bodies.push_back({{"name", I.world->definition(id).name},
+                      {"position_m", {s.position.x(), s.position.y(), s.position.z()}},
+                      {"linear_velocity_m_s", {s.linear_velocity.x(), s.linear_velocity.y(), s.linear_velocity.z()}}});
+  }
+  r["bodies"] = bodies;
+  if (I.manager) {
+    r["patches_live"] = I.manager->active_patches();
+    r["granules_live"] = I.manager->granules();
+    const ojson manager_report = I.manager->report();  // named: iterating a temporary's items() dangles
+    for (const auto& [key, value] : manager_report.items()) r[key] = value;
+  }
+  const core::Heightfield& hf = *I.hf;
+  r["terrain"] = {{"samples_x", hf.samples_x()},
+                  {"samples_z", hf.samples_z()},
+                  {"spacing_m", hf.spacing()},
+                  {"origin_m", {hf.origin_x(), hf.origin_y(), hf.origin_z()}}};
+  return r.dump(2);
+}
+
+std::uint64_t Terrain::state_hash() const {
+  const Impl& I = *impl_;
+  core::Hasher h;
+  h.pod(I.time);
+  for (const auto& id : I.world->bodies()) {
+    if (I.pending_removal(id)) continue;
+    const core::BodyState s = I.world->state(id);
+    h.pod(id.index);
+    h.pod(id.generation);
+    h.pod(s.position);
+    h.pod(s.orientation.coeffs());
+    h.pod(s.linear_velocity);
+    h.pod(s.angular_velocity);
+  }
+  h.pod(I.hf->hash());
+  if (I.manager) h.pod(I.manager->state_hash());
+  return h.value();
+}
+
+}  // namespace sandpatch::api

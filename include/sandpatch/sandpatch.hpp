@@ -1,0 +1,378 @@
+// Sandpatch as a library for games (docs/api.md).
+//
+// A game creates a Terrain from a TerrainDef (heights from an array, a heightmap file or a
+// generator), adds bodies from BodyDefs, and calls step(dt) once per fixed frame. Between
+// steps it reads body states, terrain heights and normals, the granules of live patches and
+// the heightfield regions that changed (for its own renderer), and polls the patch events
+// (promoted, ready, asleep, woke, demoted).
+//
+// Rules of the API:
+//   - Definition, validation, handle: every object comes from a plain definition struct with
+//     defaults; creation validates it and returns a Result holding either the object / handle
+//     or errors that name the field ("TerrainDef.material.granule_radius"), the value given
+//     and what is allowed. Nothing is thrown across the API for bad input.
+//   - Fixed step: step(dt, substeps) advances exactly dt seconds; there is no accumulator.
+//   - Units: SI (m, kg, s, N), y up, the terrain grid in the x–z plane.
+//   - Precision: world positions are double; arrays handed to renderers (particles, heights)
+//     are float and relative to the terrain's origin (Terrain::origin()).
+//   - Threads: a Terrain is used from one thread at a time; it may use OpenMP threads inside
+//     step() (TerrainDef::threads).
+//
+// This header includes only the C++ standard library: no Eigen, Bullet or JSON types.
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <utility>
+#include <variant>
+#include <vector>
+
+#if defined(_WIN32)
+#if defined(SANDPATCH_API_BUILD)
+#define SANDPATCH_API __declspec(dllexport)
+#else
+#define SANDPATCH_API __declspec(dllimport)
+#endif
+#else
+#define SANDPATCH_API __attribute__((visibility("default")))
+#endif
+
+namespace sandpatch::api {
+
+inline constexpr const char* kVersion = "0.1.0";  // the library's version (also SandpatchConfigVersion.cmake)
+
+// ---------------------------------------------------------------------------------------
+// Errors and results
+
+struct Error {
+  std::string file;     // file the bad input came from ("" for a definition struct)
+  std::string field;    // "TerrainDef.material.granule_radius", "BodyDef.mass", "step.dt"
+  std::string value;    // the offending value
+  std::string allowed;  // what would have been accepted
+  std::string detail;   // optional extra sentence
+
+  // "TerrainDef.slots = 0: must be in [1, 1024]"
+  std::string message() const {
+    std::string m;
+    if (!file.empty()) m += file + ": ";
+    if (!field.empty()) m += field;
+    if (!value.empty()) m += (field.empty() ? "" : " = ") + value;
+    if (!allowed.empty()) m += (m.empty() || m.ends_with(": ") ? "" : ": ") + allowed;
+    if (!detail.empty()) m += (m.empty() ? "" : "; ") + detail;
+    return m;
+  }
+};
+
+struct Ok {};
+
+// A value or the errors that prevented it (at least one).
+template <class T>
+class Result {
+ public:
+  Result(T value) : v_(std::move(value)) {}                  // NOLINT: implicit on purpose
+  Result(Error e) : v_(std::vector<Error>{std::move(e)}) {}  // NOLINT
+  Result(std::vector<Error> es) : v_(std::move(es)) {}       // NOLINT (es non-empty)
+
+  bool ok() const { return v_.index() == 0; }
+  explicit operator bool() const { return ok(); }
+  T& value() & { return std::get<0>(v_); }
+  const T& value() const& { return std::get<0>(v_); }
+  T&& value() && { return std::move(std::get<0>(v_)); }
+  T* operator->() { return &value(); }
+  const T* operator->() const { return &value(); }
+  T& operator*() & { return value(); }
+  const T& operator*() const& { return value(); }
+  // Empty when ok().
+  const std::vector<Error>& errors() const {
+    static const std::vector<Error> none;
+    return ok() ? none : std::get<1>(v_);
+  }
+  // All error messages, one a line ("" when ok()).
+  std::string message() const {
+    std::string m;
+    for (const auto& e : errors()) m += e.message() + "\n";
+    return m;
+  }
+
+ private:
+  std::variant<T, std::vector<Error>> v_;
+};
+
+using Status = Result<Ok>;
+
+using Vec3 = std::array<double, 3>;   // m (world positions)
+using Vec3f = std::array<float, 3>;   // m/s, rad/s, unit normals
+using Quat = std::array<float, 4>;    // unit quaternion [w, x, y, z]
+
+// ---------------------------------------------------------------------------------------
+// Terrain definition
+
+// The granular material of the patches (one per terrain). Ranges as in scene files
+// (docs/scene-format.md "materials").
+struct MaterialDef {
+  double granule_radius = 0.025;               // m, radius of each of the 4 spheres of a granule, [1e-5, 10]
+  double density = 2650.0;                     // kg/m³ of the grain solid, (0, 1e5]
+  double friction = 0.5;                       // μ between spheres, [0, 10]
+  double restitution = 0.3;                    // e, (0, 1]
+  double stiffness = 2.0e4;                    // k_n, N/m, [1, 1e12]
+  double tangential_stiffness_ratio = 2.0 / 7.0;  // k_t / k_n, [0, 1]
+};
+
+// Where the heights come from: exactly one of `heights` (non-empty), `file` (non-empty) or
+// `procedural` (non-empty) is used.
+struct TerrainDef {
+  // -- heights from an array: samples_x * samples_z floats, row-major with x fastest
+  //    (sample (i, j) = heights[j * samples_x + i]), m relative to origin[1]
+  std::vector<float> heights;
+  int samples_x = 0;                           // >= 2 (array, raw file, procedural)
+  int samples_z = 0;                           // >= 2
+  // -- or from a heightmap file: .png (16-bit greyscale), .raw (little-endian float32, needs
+  //    samples_x / samples_z), .asc (ESRI ASCII grid; its cellsize is the spacing unless
+  //    spacing_overrides_file). height = vertical_offset + vertical_scale * value
+  //    (png: value = v / 65535).
+  std::string file;
+  double vertical_scale = 1.0;                 // m per unit (finite)
+  double vertical_offset = 0.0;                // m (finite)
+  bool spacing_overrides_file = false;         // .asc: use `spacing` instead of the file's cellsize
+  // -- or generated: "flat" | "plane" | "hills" | "noise" (docs/heightfield.md)
+  std::string procedural;
+  float base_height = 0.0f;                    // m (every kind)
+  float slope_x = 0.0f, slope_z = 0.0f;        // plane: dh/dx, dh/dz
+  float amplitude = 1.0f;                      // m, hills / noise (>= 0)
+  float wavelength = 32.0f;                    // m, hills / noise (> 0)
+  std::uint32_t noise_seed = 1;                // noise
+  int octaves = 4;                             // noise, [1, 16]
+
+  double spacing = 1.0;                        // m between samples in x and z, (0, 1e4]
+  Vec3 origin = {0.0, 0.0, 0.0};               // m, world position of sample (0, 0) at height 0
+  double soil_depth = 2.0;                     // m, bedrock = surface − soil_depth, (0, 1e4]
+
+  // -- granular patches
+  bool granular_patches = true;                // false: bodies meet the heightfield only
+  MaterialDef material;
+  int slots = 2;                               // simulations in the pool (patches at once), [1, 1024]
+  int granules_per_slot = 16384;               // capacity of each slot, [64, 16777216]
+  double patch_depth = 0.4;                    // m of granules under a patch's lowest surface point, (0, soil_depth]
+  double particle_scale = 1.0;                 // world size / simulated size, [1e-3, 1e3]
+  double sleep_speed = 0.01;                   // m/s: a patch sleeps when every granule is slower ... [0, 100]
+  double sleep_time = 0.5;                     // s ... for this long, [0, 1e4]
+  double idle_timeout = 120.0;                 // s asleep before it is turned back into heightfield, [0, 1e6]
+  std::string backend = "cpu";                 // DEM backend: "cpu" (OpenMP) | "gl" (compute shaders)
+  bool gl_depth_render = false;                // demotion renders on GL (true) or ray casts on the CPU (false)
+  int threads = 0;                             // DEM threads, 0 = OpenMP default, [0, 1024]
+  // -- contact prediction (docs/manager.md "The frame", lod): a patch is requested when a
+  //    body's ballistic path reaches the terrain within lod_horizon
+  double lod_horizon = 0.5;                    // s, how far ahead, (0, 10]
+  double lod_margin = 0.05;                    // m, clearance that already counts as contact, [0, 100]
+  double lod_apron = 1.0;                      // m, added around the contact footprint on every side, [0, 1000]
+  Vec3 gravity = {0.0, -9.81, 0.0};            // m/s², finite
+  std::uint64_t seed = 1;                      // all randomness
+};
+
+// ---------------------------------------------------------------------------------------
+// Bodies
+
+enum class ShapeKind { Sphere, Box, Cylinder, Capsule, Mesh };
+
+// Shapes are centred on the body's centre of mass; cylinders and capsules have their axis on
+// the body's y.
+struct ShapeDef {
+  ShapeKind kind = ShapeKind::Sphere;
+  double radius = 0.5;                         // m (sphere, cylinder, capsule), (0, 1e4]
+  double height = 1.0;                         // m, cylinder: total height, (0, 1e4];
+                                               //    capsule: between the cap centres, [0, 1e4]
+  Vec3 half_extents = {0.5, 0.5, 0.5};         // m (box), each (0, 1e4]
+  // Mesh: a closed triangle mesh from an OBJ file, or given here (vertices: x, y, z per
+  // vertex, m; triangles: 3 indices each, counter-clockwise seen from outside). The mesh is
+  // re-centred on its centroid. Bullet collides with its convex hull; patches see the mesh.
+  std::string mesh_file;
+  double mesh_scale = 1.0;                     // OBJ units → m, (0, 1e4]
+  std::vector<float> vertices;
+  std::vector<int> triangles;
+};
+
+struct BodyDef {
+  std::string name;                            // for messages and the report
+  ShapeDef shape;
+  double mass = 1.0;                           // kg, (0, 1e9]
+  Vec3 position = {0.0, 0.0, 0.0};             // m, world (above the bedrock)
+  Quat orientation = {1.0f, 0.0f, 0.0f, 0.0f}; // [w, x, y, z], normalised on creation (norm > 0)
+  Vec3f linear_velocity = {0.0f, 0.0f, 0.0f};  // m/s, world
+  Vec3f angular_velocity = {0.0f, 0.0f, 0.0f}; // rad/s, world
+  double friction = 0.5;                       // μ against the heightfield, [0, 10]
+  double restitution = 0.1;                    // against the heightfield, [0, 1]
+  double rolling_friction = 0.05;              // rolling resistance, [0, 10]
+};
+
+// A body of a Terrain: index + generation, so a removed body's handle is detected as stale.
+struct BodyHandle {
+  int index = -1;
+  int generation = 0;
+  bool valid() const { return index >= 0; }
+  friend bool operator==(const BodyHandle&, const BodyHandle&) = default;
+};
+
+struct BodyState {
+  Vec3 position{};                             // m, world (centre of mass)
+  Quat orientation{1.0f, 0.0f, 0.0f, 0.0f};    // [w, x, y, z]
+  Vec3f linear_velocity{};                     // m/s
+  Vec3f angular_velocity{};                    // rad/s
+};
+
+// ---------------------------------------------------------------------------------------
+// Events, particles, heightfield data for renderers
+
+enum class EventKind {
+  Requested,  // a contact was predicted; a patch was asked for (patch = -1 until promoted)
+  Promoted,   // heightfield → granules began in a pool slot (wall_ms: the fill)
+  Ready,      // every granule of the patch is simulating
+  Asleep,     // the patch came to rest and stopped stepping
+  Woke,       // a moving body woke it
+  Demoted     // granules → heightfield; the slot is free again (wall_ms: render + write)
+};
+SANDPATCH_API const char* to_string(EventKind k);  // "promoted", ...
+
+struct Event {
+  EventKind kind = EventKind::Requested;
+  int patch = -1;         // patch number, unique over the terrain's life (-1: not yet a patch)
+  double time = 0;        // s, simulated time of the step it happened in
+  double wall_ms = 0;     // conversion cost (promoted, demoted)
+  int granules = 0;       // granules of the patch
+};
+
+// A rectangle of heightfield samples [i0, i0 + ni) × [j0, j0 + nj).
+struct GridRegion {
+  int i0 = 0, j0 = 0, ni = 0, nj = 0;
+  bool empty() const { return ni <= 0 || nj <= 0; }
+};
+
+struct HeightfieldInfo {
+  int samples_x = 0, samples_z = 0;
+  double spacing = 0;     // m
+  Vec3 origin{};          // m, world position of sample (0, 0) at height 0
+  double min_height = 0, max_height = 0;  // m, relative to origin[1]
+};
+
+// The spheres of one live patch in the buffer particles() fills: [first, first + count).
+struct ParticleGroup {
+  std::size_t first = 0, count = 0;
+  float fade = 1;         // fade-in in [0, 1] (Leach & Marais §5.1): 1 once the patch has run 30 frames
+};
+
+// Geometry-clipmap level selection for a terrain renderer (render/clipmap.hpp, docs/rendering.md):
+// which nested grids to draw around the viewer. Pure CPU, no GL.
+struct ClipmapDef {
+  int n = 255;              // vertices per ring side, 2^k − 1 with k in [3, 12]
+  int levels = 10;          // nested levels, [1, 24]
+  float base_spacing = 1;   // m, vertex spacing of level 0 (> 0)
+  int transition = 0;       // vertices over which a level morphs into the next (0 = n / 10)
+  float height_factor = 2.5f;  // skip levels finer than height_factor × viewer height (0 = never)
+};
+struct ClipmapView {
+  Vec3 viewer{};            // m, world position of the camera
+  std::array<float, 16> view_proj{1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};  // column-major, local → clip
+                            //   (OpenGL convention; local = world − Terrain::origin()); used when cull is true
+  bool cull = false;        // skip pieces outside the view frustum
+};
+struct ClipmapLevel {
+  int level = 0;
+  float spacing = 0;        // m
+  int origin_x = 0, origin_z = 0;  // level coordinates of the level's min corner vertex
+  int n = 0;                // vertices per side
+  bool active = false, finest = false;
+};
+struct ClipmapPiece {
+  int level = 0;
+  int kind = 0;             // 0 block, 1 fix-up x, 2 fix-up z, 3 trim x, 4 trim z, 5 degenerate x, 6 degenerate z
+  int gx = 0, gz = 0;       // level coordinates of the piece's min corner vertex: local (gx, gz) · spacing
+  int cells_x = 0, cells_z = 0;
+};
+struct ClipmapSelection {
+  std::vector<ClipmapLevel> levels;  // finest first
+  std::vector<ClipmapPiece> pieces;  // to draw, finest level first
+  std::int64_t triangles = 0;
+};
+
+// ---------------------------------------------------------------------------------------
+// The terrain
+
+class SANDPATCH_API Terrain {
+ public:
+  // Validates `def`, builds the heightfield, the rigid-body world and the patch pool (with the
+  // pre-settled granule tile: this can take a second). Errors name TerrainDef fields.
+  static Result<Terrain> create(const TerrainDef& def);
+
+  // Movable, not copyable. A moved-from Terrain may only be destroyed or assigned to.
+  Terrain(Terrain&&) noexcept;
+  Terrain& operator=(Terrain&&) noexcept;
+  ~Terrain();
+
+  // ---- bodies ----
+  Result<BodyHandle> add_body(const BodyDef& def);
+  // The handle is stale at once; with patches the body leaves the simulation in the next step.
+  Status remove_body(BodyHandle h);
+  bool alive(BodyHandle h) const;
+  Result<BodyState> body_state(BodyHandle h) const;
+  // Teleports the body (wakes it). Position m world, orientation [w, x, y, z] (normalised).
+  Status set_body_transform(BodyHandle h, const Vec3& position, const Quat& orientation);
+  Status set_body_velocity(BodyHandle h, const Vec3f& linear, const Vec3f& angular);
+  std::vector<BodyHandle> bodies() const;
+
+  // ---- the step ----
+  // Advances exactly dt seconds: lod, activation, dem, `substeps` rigid-body steps of
+  // dt / substeps, sleep, demotion. dt in (0, 0.1] s, substeps in [1, 1000] (the scene-file
+  // rules); the DEM substeps itself below its critical step. A non-finite body state is an
+  // error naming the body.
+  Status step(double dt, int substeps = 1);
+  double time() const;                         // s, simulated so far
+  // Asks for a patch over the world rectangle [x0, x1] × [z0, z1] now (e.g. a digging tool).
+  Status request_patch(double x0, double z0, double x1, double z1);
+  // Turns every live patch back into heightfield now (e.g. before saving the terrain).
+  Status demote_all();
+
+  // ---- queries ----
+  // Surface height (m, world) at world (x, z): bilinear in the heightfield (docs/heightfield.md),
+  // clamped to the grid's edge outside it. Granules of live patches are not included.
+  double height_at(double x, double z) const;
+  // Unit surface normal at world (x, z) (the exact derivative of the bilinear surface).
+  Vec3f normal_at(double x, double z) const;
+
+  // ---- patches and events ----
+  // Events since the last call, in the order they happened.
+  std::vector<Event> poll_events();
+  int active_patches() const;                  // patches holding a slot
+  int granules() const;                        // live granules over all patches
+  // Sphere centres and radii of every live patch: x, y, z, r per sphere (m, relative to origin()).
+  void particles(std::vector<float>& xyzr) const;
+  // The same spheres grouped by patch, in particles() order.
+  std::vector<ParticleGroup> particle_groups() const;
+
+  // ---- heightfield data for the game's renderer ----
+  HeightfieldInfo heightfield() const;
+  Vec3 origin() const;                         // m, world position of sample (0, 0) at height 0
+  // Heights of `r` (m, relative to origin()[1]), nj rows of ni values, x fastest. Errors if `r`
+  // is not inside the grid.
+  Status read_heights(GridRegion r, std::vector<float>& out) const;
+  // Regions written by demotions since the last call (redraw / re-upload these).
+  std::vector<GridRegion> take_dirty_regions();
+  // Clipmap levels and pieces for a viewer (errors name ClipmapDef fields).
+  Status select_clipmap(const ClipmapDef& def, const ClipmapView& view, ClipmapSelection& out) const;
+
+  // ---- report ----
+  // JSON: time, bodies, patch ledger, conversions, pool, stage profile (docs/api.md).
+  std::string report_json() const;
+  // FNV-1a over the simulated time, every body's state, the heightfield and every patch's
+  // granules: equal for two terrains made and driven the same way (determinism checks,
+  // replays). Not stable across library versions.
+  std::uint64_t state_hash() const;
+
+ private:
+  struct Impl;
+  explicit Terrain(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace sandpatch::api

@@ -1,0 +1,183 @@
+// Poured pile and flank fit; see pile.hpp.
+#include "particles/pile.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <numbers>
+
+#include "particles/dem.hpp"
+
+namespace sandpatch {
+
+namespace {
+std::uint64_t splitmix(std::uint64_t& s) {
+  std::uint64_t z = (s += 0x9e3779b97f4a7c15ull);
+  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
+  z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
+  return z ^ (z >> 31);
+}
+double uniform(std::uint64_t& s) { return double(splitmix(s) >> 11) * (1.0 / 9007199254740992.0); }
+Quat random_orientation(std::uint64_t& s) {  // uniform (Shoemake)
+  double u1 = uniform(s), u2 = uniform(s), u3 = uniform(s);
+  double r1 = std::sqrt(1 - u1), r2 = std::sqrt(u1), t1 = 2 * std::numbers::pi * u2, t2 = 2 * std::numbers::pi * u3;
+  return {float(r1 * std::sin(t1)), float(r1 * std::cos(t1)), float(r2 * std::sin(t2)), float(r2 * std::cos(t2))};
+}
+}  // namespace
+
+FlankFit fit_flank(const std::vector<SurfacePoint>& points, const FlankFitDef& def) {
+  FlankFit out;
+  if (points.empty() || !(def.bin > 0) || def.sectors < 1) return out;
+  double smax = 0;
+  for (const auto& p : points) smax = std::max(smax, p.s);
+  const int nbins = int(smax / def.bin) + 1;
+  const int ns = def.sectors;
+  std::vector<double> cell(std::size_t(nbins) * ns, -1e300);
+  for (const auto& p : points) {
+    if (p.s < 0 || p.sector < 0 || p.sector >= ns) continue;
+    double& c = cell[std::size_t(int(p.s / def.bin)) * ns + p.sector];
+    c = std::max(c, p.h);
+  }
+  std::vector<double> surf(nbins, -1e300);
+  for (int b = 0; b < nbins; ++b) {
+    double sum = 0;
+    int n = 0;
+    for (int k = 0; k < ns; ++k)
+      if (cell[std::size_t(b) * ns + k] > -1e299) sum += cell[std::size_t(b) * ns + k], ++n;
+    if (n > 0) surf[b] = sum / n;
+  }
+  const auto peak_it = std::max_element(surf.begin(), surf.end());
+  out.peak = *peak_it;
+  out.surface.resize(nbins);
+  for (int b = 0; b < nbins; ++b) out.surface[b] = surf[b] > -1e299 ? surf[b] : -1.0;
+  // the outer flank: from the peak bin outwards up to the first bin at or below the toe
+  // level (or empty); bins above the top level are left out
+  double sx = 0, sy = 0, sxx = 0, sxy = 0;
+  std::vector<std::pair<double, double>> used;
+  for (int b = def.outer_run ? int(peak_it - surf.begin()) + 1 : 0; b < nbins; ++b) {
+    if (!(surf[b] > def.lo_frac * out.peak)) {
+      if (def.outer_run) break;
+      continue;
+    }
+    if (surf[b] >= def.hi_frac * out.peak) continue;
+    const double x = def.bin * (b + 0.5);
+    sx += x, sy += surf[b], sxx += x * x, sxy += x * surf[b];
+    used.push_back({x, surf[b]});
+  }
+  const int n = int(used.size());
+  out.points = n;
+  if (n < 2) return out;
+  const double den = n * sxx - sx * sx;
+  if (!(den > 0)) return out;
+  out.slope = (n * sxy - sx * sy) / den;
+  const double icpt = (sy - out.slope * sx) / n;
+  double r2 = 0;
+  for (auto [x, y] : used) r2 += (y - icpt - out.slope * x) * (y - icpt - out.slope * x);
+  out.residual = std::sqrt(r2 / n);
+  out.angle_deg = std::atan(-out.slope) * 180.0 / std::numbers::pi;
+  return out;
+}
+
+Result<ReposeResult> measure_repose(const PileDef& pd) {
+  auto bad = [](const char* f, double v, const char* allowed) {
+    return Error{"", std::string("PileDef.") + f, format_number(v), allowed, ""};
+  };
+  if (pd.granules < 1) return bad("granules", pd.granules, "must be >= 1");
+  if (pd.batch != 1 && pd.batch != 7 && pd.batch != 19 && pd.batch != 37)
+    return bad("batch", pd.batch, "must be 1, 7, 19 or 37 (full hexagonal rings)");
+  if (!(pd.batch_interval > 0)) return bad("batch_interval", pd.batch_interval, "must be > 0 (s)");
+  if (!(pd.frame_dt > 0)) return bad("frame_dt", pd.frame_dt, "must be > 0 (s)");
+  if (!(pd.max_relax >= 0)) return bad("max_relax", pd.max_relax, "must be >= 0 (s)");
+  if (!(pd.floor_radius > 0)) return bad("floor_radius", pd.floor_radius, "must be > 0 (m)");
+  if (!(pd.fit.bin > 0)) return bad("fit.bin", pd.fit.bin, "must be > 0 (m)");
+  if (pd.fit.sectors < 1) return bad("fit.sectors", pd.fit.sectors, "must be >= 1");
+
+  const auto t_start = std::chrono::steady_clock::now();
+  const float r = pd.particle_radius;
+  const float R = pd.floor_radius;
+  // rough floor: spheres of radius r, square lattice of spacing 2 r, centres at y = 0
+  ShellDef floor;
+  floor.motion = MotionType::Static;
+  floor.radii = {r};
+  const int nl = int(R / (2 * r));
+  for (int i = -nl; i <= nl; ++i)
+    for (int k = -nl; k <= nl; ++k) {
+      const float x = 2 * r * i, z = 2 * r * k;
+      if (x * x + z * z <= R * R) floor.offsets.push_back({x, 0, z});
+    }
+  SimulationDef d;
+  d.material = pd.material;
+  d.particle_radius = r;
+  d.max_bodies = pd.granules + 1;
+  d.max_particles = 4 * pd.granules + int(floor.offsets.size());
+  d.bounds_min = {-R - 4 * r, -2 * r, -R - 4 * r};
+  d.bounds_max = {R + 4 * r, 0.5f * R + 0.1f, R + 4 * r};
+  d.floor_height = -r;  // bedrock under the rough layer (granules that roll off the disc)
+  d.sleep_time = 0;
+  d.threads = pd.threads;
+  auto sim = Simulation::create(d);
+  if (!sim) return sim.errors();
+  if (auto f = sim->add_shell(floor); !f) return f.errors();
+  const int floor_spheres = sim->particle_count();
+
+  const GranuleShape& g = sim->granule_shape();
+  const float reach = g.centre_distance + g.radius;  // bounding radius, m
+  const float a = 2.0f * reach * 1.02f;              // cluster spacing, m
+  // hexagonal cluster: rings 0..k, a point (i, j) of the triangular lattice
+  std::vector<Vec3> cluster;
+  const int rings = pd.batch == 1 ? 0 : pd.batch == 7 ? 1 : pd.batch == 19 ? 2 : 3;
+  for (int i = -rings; i <= rings; ++i)
+    for (int j = -rings; j <= rings; ++j) {
+      const int k = -i - j;
+      if (std::abs(k) > rings) continue;
+      cluster.push_back({a * (i + 0.5f * j), 0, a * (0.8660254f * j)});
+    }
+  std::uint64_t seed = pd.seed;
+  ReposeResult out;
+  int added = 0;
+  const int frames_per_batch = std::max(1, int(std::lround(pd.batch_interval / pd.frame_dt)));
+  while (added < pd.granules) {
+    float top = r + reach;  // highest granule centre (or a granule resting on the floor)
+    for (int b = 1; b < sim->body_count(); ++b) top = std::max(top, sim->body_position(BodyId{b}).y);
+    const float y = top + a;
+    for (std::size_t c = 0; c < cluster.size() && added < pd.granules; ++c, ++added) {
+      const float jx = float((uniform(seed) - 0.5) * 0.04 * a), jz = float((uniform(seed) - 0.5) * 0.04 * a);
+      auto id = sim->add_granule({cluster[c].x + jx, y, cluster[c].z + jz}, random_orientation(seed));
+      if (!id) return id.errors();
+    }
+    for (int f = 0; f < frames_per_batch; ++f)
+      if (auto st = sim->step(pd.frame_dt); !st) return st.errors();
+  }
+  const int relax_frames = int(pd.max_relax / pd.frame_dt);
+  for (int f = 0; f < relax_frames; ++f) {
+    if (auto st = sim->step(pd.frame_dt); !st) return st.errors();
+    if (sim->max_granule_speed() < pd.rest_speed) break;
+  }
+  out.final_speed = sim->max_granule_speed();
+  out.at_rest = out.final_speed < pd.rest_speed;
+
+  // surface: granule sphere tops above the top of the rough layer (y = r)
+  std::vector<SurfacePoint> pts;
+  const auto pos = sim->particle_positions();
+  for (int i = floor_spheres; i < int(pos.size()); ++i) {
+    const Vec3 x = pos[i];
+    SurfacePoint sp;
+    sp.s = std::sqrt(double(x.x) * x.x + double(x.z) * x.z);
+    sp.h = double(x.y);  // sphere top y + r, minus the top of the rough layer r
+    double phi = std::atan2(double(x.z), double(x.x)) + std::numbers::pi;  // [0, 2 pi]
+    sp.sector = std::min(pd.fit.sectors - 1, int(phi / (2 * std::numbers::pi) * pd.fit.sectors));
+    pts.push_back(sp);
+  }
+  const FlankFit fit = fit_flank(pts, pd.fit);
+  out.angle_deg = fit.angle_deg;
+  out.residual = fit.residual;
+  out.fit_points = fit.points;
+  out.peak = fit.peak;
+  out.profile = fit.surface;
+  out.granules = sim->body_count() - 1;
+  out.sim_seconds = sim->time();
+  out.wall_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
+  return out;
+}
+
+}  // namespace sandpatch

@@ -1,0 +1,96 @@
+#!/usr/bin/env python3
+"""Writes scenes/leach_*.json: Leach & Marais' three test scenarios (section 6.3), each as a small
+scene for a 2-core machine and a "_paper" variant at the paper's sizes (docs/stress.md says how the
+sizes scale and what was measured). Run from anywhere: python3 scripts/make_leach_scenes.py
+"""
+import json
+import os
+
+SCENES = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "scenes")
+def mat(r, k=2.0e4, e=0.3):
+    return [{"name":"sand","density":2650.0,"friction":0.5,"restitution":e,"stiffness":k,
+             "tangential_stiffness_ratio":0.2857142857142857,"granule_radius":r,"packing_fraction":0.6}]
+def terrain(samples, size, soil=0.6, kind="flat"):
+    src={"type":"procedural","kind":"flat","height":0.0,"samples_x":samples,"samples_z":samples}
+    return {"source":src,"size":[size,size],"origin":[-size/2,0.0,-size/2],"soil_depth":soil,"material":"sand"}
+def write(path, s):
+    open(path,'w').write(json.dumps(s, indent=2)+"\n")
+
+# --- 1: one large particle system, a barrel dropped on it
+def s1(paper):
+    r = 0.0094 if paper else 0.035
+    return {"version":1,
+      "name":"leach_1_barrel" + ("_paper" if paper else ""),
+      "description":("Leach & Marais 6.3, scenario 1 at paper size (GPU machines): one patch of about 114,000 granules "
+                     "(456,000 spheres; the paper: 115,502) under a 100 kg barrel dropped from 2 m. Granule radius 9.4 mm, the only change from the small variant."
+                     if paper else
+                     "Leach & Marais 6.3, scenario 1 sized for a 2-core machine: one patch of 2,214 granules "
+                     "(granule radius 3.5 cm) under a 100 kg barrel (cylinder r 0.3 m, h 0.9 m) dropped from 2 m. The paper variant is leach_1_barrel_paper.json."),
+      "terrain":terrain(129,64.0,0.5),
+      "materials":mat(r, 1.0e4 if paper else 1.0e5, 0.2),
+      "bodies":[{"name":"barrel","shape":{"type":"cylinder","radius":0.3,"height":0.9},"mass":100.0,
+                 "pose":{"position":[0.0,2.45,0.0]},"friction":0.6,"restitution":0.1}],
+      "simulation":{"dt":1/240,"substeps":1,"duration":(10.0 if paper else 2.0),"backend":("gl" if paper else "cpu"),
+                    "pool":{"slots":1,"granules_per_slot":(131072 if paper else 8192)},
+                    "sleep":{"speed_threshold":0.01,"hold_time":1.0},"idle_timeout":120.0},
+      "cameras":[{"name":"side","position":[3.0,1.5,3.0],"target":[0.0,0.3,0.0],"fov_deg":40.0,"width":800,"height":600}],
+      "outputs":{"report":True}}
+
+# --- 2: three simulations at three distances from the camera (one granule size: see description)
+def s2(paper):
+    r = 0.024 if paper else 0.06
+    # patch side = body footprint + 2 m apron: near 7 m, mid 3.7 m, far 2.5 m -> granules 7.8 : 2.2 : 1
+    bodies=[
+      {"name":"near_crate","shape":{"type":"box","half_extents":[2.5,0.3,2.5]},"mass":2000.0,"pose":{"position":[0.0,1.5,8.0]}},
+      {"name":"mid_ball","shape":{"type":"sphere","radius":0.85},"density":600.0,"pose":{"position":[0.0,2.0,-12.0]}},
+      {"name":"far_ball","shape":{"type":"sphere","radius":0.25},"density":1000.0,"pose":{"position":[0.0,1.5,-24.0]}}]
+    return {"version":1,
+      "name":"leach_2_three_scales" + ("_paper" if paper else ""),
+      "description":("Leach & Marais 6.3, scenario 2 at paper size (GPU machines): three simulations at 3, 23 and 35 m from the camera, "
+                     "46,060 / 16,572 / 7,360 granules (the paper: 202,352 / 54,876 / 25,776 particles). "
+                     "A scene has one simulation.particle_scale for all patches, so the three sizes come from three patch areas, not three particle scales."
+                     if paper else
+                     "Leach & Marais 6.3, scenario 2 sized for a 2-core machine: three simulations at 3, 23 and 35 m from the camera, "
+                     "about 4,000 / 1,400 / 640 granules of radius 6 cm (the paper: 7.9 : 2.1 : 1). One particle_scale per scene, so the sizes come from patch areas. "
+                     "The paper variant is leach_2_three_scales_paper.json."),
+      "terrain":terrain(257,64.0,0.6),
+      "materials":mat(r, 2.0e4 if paper else 5.0e4),
+      "bodies":bodies,
+      "simulation":{"dt":1/120,"substeps":1,"duration":(20.0 if paper else 1.5),"backend":("gl" if paper else "cpu"),
+                    "pool":{"slots":3,"granules_per_slot":(65536 if paper else 8192)},
+                    "sleep":{"speed_threshold":0.01,"hold_time":1.0},"idle_timeout":120.0},
+      "cameras":[{"name":"main","position":[0.0,2.5,11.0],"target":[0.0,0.0,-12.0],"fov_deg":50.0,"width":1280,"height":720}],
+      "outputs":{"report":True}}
+
+# --- 3: ten simulations, bodies arriving one after the other, each sleeping at rest
+def s3(paper):
+    interval = 10.0 if paper else 2.0
+    r = 0.0366 if paper else 0.08
+    scale = 0.33 if paper else 1.0
+    bodies=[]
+    for k in range(10):
+        x = -20.0 + (k % 5) * 10.0
+        z = -5.0 if k < 5 else 5.0
+        # sizes vary so patches hold 55,000-75,000 granules at paper size (side 2.5 .. 2.9 m)
+        rad = 0.25 + 0.02 * k
+        bodies.append({"name":"ball_%d" % k,"shape":{"type":"sphere","radius":round(rad,3)},"density":800.0,
+                       "pose":{"position":[x,1.0 + rad,z]},"spawn_time":k*interval})
+    return {"version":1,
+      "name":"leach_3_ten_bodies" + ("_paper" if paper else ""),
+      "description":("Leach & Marais 6.3, scenario 3 at paper size (GPU machines): ten simulations of about 55,000-75,000 granules at particle scale 0.33, "
+                     "a body arriving every 10 s; each patch sleeps when at rest. Does not run yet: the fill fails at particle scale 0.33 (docs/stress.md)." if paper else
+                     "Leach & Marais 6.3, scenario 3 sized for a 2-core machine: ten simulations of 464 granules each (radius 8 cm), a body arriving every 2 s "
+                     "instead of 10 s; each patch sleeps when at rest (0.02 m/s for 0.5 s). The paper variant is leach_3_ten_bodies_paper.json."),
+      "terrain":terrain(129,64.0,0.6),
+      "materials":mat(r, 2.0e4 if paper else 8.0e4),
+      "bodies":bodies,
+      "simulation":{"dt":1/120,"substeps":1,"duration":(10*interval + 10.0),"backend":("gl" if paper else "cpu"),
+                    "particle_scale":scale,
+                    "pool":{"slots":10,"granules_per_slot":(98304 if paper else 4096)},
+                    "sleep":({"speed_threshold":0.01,"hold_time":1.0} if paper else {"speed_threshold":0.02,"hold_time":0.5}),
+                    "idle_timeout":120.0},
+      "cameras":[{"name":"above","position":[0.0,25.0,30.0],"target":[0.0,0.0,0.0],"fov_deg":50.0,"width":1280,"height":720}],
+      "outputs":{"report":True}}
+
+for f,p in ((s1,False),(s1,True),(s2,False),(s2,True),(s3,False),(s3,True)):
+    s=f(p); write(os.path.join(SCENES, "%s.json" % s["name"]), s)

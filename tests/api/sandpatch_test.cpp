@@ -1,0 +1,463 @@
+// tests api/sandpatch.cpp through the public header only (include/sandpatch/sandpatch.hpp):
+// bad definitions give errors naming the field, value and allowed range; heights and normals
+// against the documented formulas; a body falling onto the terrain rests at the right height;
+// patch events arrive in order.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <string>
+#include <sandpatch/sandpatch.hpp>
+
+namespace sp = sandpatch::api;
+
+namespace {
+
+// A small flat terrain without granular patches: creation is instant (no granule tile).
+sp::TerrainDef flat_def() {
+  sp::TerrainDef d;
+  d.procedural = "flat";
+  d.samples_x = d.samples_z = 41;
+  d.spacing = 0.25;
+  d.base_height = 1.0f;
+  d.granular_patches = false;
+  return d;
+}
+
+// The first error of `r` (which must have failed) for messages.
+template <class T>
+sp::Error first_error(const sp::Result<T>& r) {
+  EXPECT_FALSE(r.ok());
+  return r.errors().empty() ? sp::Error{} : r.errors().front();
+}
+
+bool has_field(const std::vector<sp::Error>& es, const std::string& field) {
+  return std::any_of(es.begin(), es.end(), [&](const sp::Error& e) { return e.field == field; });
+}
+
+}  // namespace
+
+// Every bad TerrainDef field is named with its value and the allowed range, and all of them
+// (six here) are reported at once.
+TEST(Api, BadTerrainDefNamesTheField) {
+  sp::TerrainDef d = flat_def();
+  d.slots = 0;
+  d.material.granule_radius = -1;
+  d.spacing = std::nan("");
+  d.backend = "vulkan";
+  d.particle_scale = 0;
+  d.lod_horizon = -1;
+  auto t = sp::Terrain::create(d);
+  ASSERT_FALSE(t.ok());
+  const auto& es = t.errors();
+  EXPECT_EQ(es.size(), 6u) << t.message();
+  for (const char* f : {"TerrainDef.slots", "TerrainDef.material.granule_radius", "TerrainDef.spacing",
+                        "TerrainDef.backend", "TerrainDef.particle_scale", "TerrainDef.lod_horizon"})
+    EXPECT_TRUE(has_field(es, f)) << f << " missing in:\n" << t.message();
+  EXPECT_NE(t.message().find("TerrainDef.slots = 0: must be in [1, 1024]"), std::string::npos) << t.message();
+  EXPECT_NE(t.message().find("TerrainDef.material.granule_radius = -1: must be in [1e-05, 10] m"), std::string::npos)
+      << t.message();
+  EXPECT_NE(t.message().find("TerrainDef.backend = \"vulkan\": must be cpu or gl"), std::string::npos) << t.message();
+}
+
+TEST(Api, BadHeightSourcesAreRefused) {
+  sp::TerrainDef none = flat_def();
+  none.procedural.clear();
+  EXPECT_EQ(first_error(sp::Terrain::create(none)).field, "TerrainDef.heights");
+
+  sp::TerrainDef two = flat_def();
+  two.heights.assign(41 * 41, 0.0f);
+  EXPECT_EQ(first_error(sp::Terrain::create(two)).field, "TerrainDef.heights");
+
+  sp::TerrainDef short_array = flat_def();
+  short_array.procedural.clear();
+  short_array.heights.assign(10, 0.0f);
+  const sp::Error e = first_error(sp::Terrain::create(short_array));
+  EXPECT_EQ(e.field, "TerrainDef.heights");
+  EXPECT_EQ(e.value, "10 values");
+
+  sp::TerrainDef nan_sample = flat_def();
+  nan_sample.procedural.clear();
+  nan_sample.heights.assign(41 * 41, 0.0f);
+  nan_sample.heights[7] = INFINITY;
+  EXPECT_EQ(first_error(sp::Terrain::create(nan_sample)).field, "TerrainDef.heights[7]");
+
+  sp::TerrainDef bad_ext = flat_def();
+  bad_ext.procedural.clear();
+  bad_ext.file = "terrain.tiff";
+  EXPECT_EQ(first_error(sp::Terrain::create(bad_ext)).field, "TerrainDef.file");
+
+  // A missing heightmap file: the error names the file (and nothing crashes).
+  sp::TerrainDef missing = flat_def();
+  missing.procedural.clear();
+  missing.file = "/nonexistent/terrain.png";
+  auto m = sp::Terrain::create(missing);
+  ASSERT_FALSE(m.ok());
+  EXPECT_NE(m.message().find("/nonexistent/terrain.png"), std::string::npos) << m.message();
+
+  sp::TerrainDef kind = flat_def();
+  kind.procedural = "mountains";
+  EXPECT_EQ(first_error(sp::Terrain::create(kind)).field, "TerrainDef.procedural");
+}
+
+// Bodies, handles and steps: bad input is an error naming the field, never a crash.
+TEST(Api, BadBodiesHandlesAndStepsAreRefused) {
+  auto t = sp::Terrain::create(flat_def());
+  ASSERT_TRUE(t.ok()) << t.message();
+
+  sp::BodyDef b;
+  b.name = "crate";
+  b.position = {5.0, 3.0, 5.0};
+  b.mass = 0;
+  sp::Error e = first_error(t->add_body(b));
+  EXPECT_EQ(e.field, "BodyDef.mass");
+  EXPECT_EQ(e.value, "0");
+  EXPECT_EQ(e.allowed, "must be in (0, 1e+09] kg");
+  EXPECT_EQ(e.detail, "body 'crate'");
+
+  b.mass = 1;
+  b.shape.kind = sp::ShapeKind::Box;
+  b.shape.half_extents = {0.5, -0.5, 0.5};
+  EXPECT_EQ(first_error(t->add_body(b)).field, "BodyDef.shape.half_extents[1]");
+
+  b.shape.kind = sp::ShapeKind::Mesh;  // neither a file nor vertices
+  EXPECT_EQ(first_error(t->add_body(b)).field, "BodyDef.shape.mesh_file");
+  b.shape.mesh_file = "/nonexistent/barrel.obj";
+  auto missing_mesh = t->add_body(b);
+  ASSERT_FALSE(missing_mesh.ok());
+  EXPECT_NE(missing_mesh.message().find("/nonexistent/barrel.obj"), std::string::npos) << missing_mesh.message();
+
+  // A tetrahedron with one face missing: open, refused naming the shape.
+  b.shape.mesh_file.clear();
+  b.shape.vertices = {0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1};
+  b.shape.triangles = {0, 2, 1, 0, 1, 3, 0, 3, 2, 1, 2, 3};
+  auto closed = t->add_body(b);
+  EXPECT_TRUE(closed.ok()) << closed.message();
+  b.shape.triangles.resize(9);
+  b.shape.triangles.insert(b.shape.triangles.end(), {0, 1, 2});  // a face repeated, one missing
+  auto open = t->add_body(b);
+  ASSERT_FALSE(open.ok());
+  EXPECT_EQ(open.errors().front().field.rfind("BodyDef.shape", 0), 0u) << open.message();
+  ASSERT_TRUE(t->remove_body(*closed).ok());
+
+  b.shape = {};
+  b.orientation = {0, 0, 0, 0};
+  EXPECT_EQ(first_error(t->add_body(b)).field, "BodyDef.orientation");
+  b.orientation = {1, 0, 0, 0};
+  b.linear_velocity = {0, NAN, 0};
+  EXPECT_EQ(first_error(t->add_body(b)).field, "BodyDef.linear_velocity");
+  b.linear_velocity = {0, 0, 0};
+
+  // Below the bedrock (surface 1 m, soil_depth 2 m: bedrock at y = -1 m).
+  b.position = {5.0, -3.0, 5.0};
+  e = first_error(t->add_body(b));
+  EXPECT_EQ(e.field, "BodyDef.position");
+  EXPECT_EQ(t->bodies().size(), 0u) << "a refused body is not left in the world";
+
+  b.position = {5.0, 3.0, 5.0};
+  auto h = t->add_body(b);
+  ASSERT_TRUE(h.ok()) << h.message();
+  EXPECT_TRUE(t->alive(*h));
+
+  EXPECT_EQ(first_error(t->step(0.0)).field, "step.dt");
+  EXPECT_EQ(first_error(t->step(0.5)).field, "step.dt");
+  EXPECT_EQ(first_error(t->step(NAN)).field, "step.dt");
+  EXPECT_EQ(first_error(t->step(1.0 / 60, 0)).field, "step.substeps");
+  EXPECT_EQ(t->time(), 0.0) << "a refused step does not advance time";
+
+  EXPECT_EQ(first_error(t->set_body_velocity(*h, {INFINITY, 0, 0}, {0, 0, 0})).field, "set_body_velocity.linear");
+  ASSERT_TRUE(t->remove_body(*h).ok());
+  EXPECT_FALSE(t->alive(*h));
+  EXPECT_EQ(first_error(t->body_state(*h)).field, "BodyHandle");
+  EXPECT_EQ(first_error(t->remove_body(*h)).field, "BodyHandle");
+  // A new body reuses the slot with a new generation: the old handle stays stale.
+  auto h2 = t->add_body(b);
+  ASSERT_TRUE(h2.ok());
+  EXPECT_EQ(h2->index, h->index);
+  EXPECT_NE(h2->generation, h->generation);
+  EXPECT_FALSE(t->alive(*h));
+
+  std::vector<float> heights;
+  EXPECT_EQ(first_error(t->read_heights({40, 0, 2, 1}, heights)).field, "GridRegion");
+  sp::ClipmapSelection sel;
+  sp::ClipmapDef cd;
+  cd.n = 100;
+  EXPECT_EQ(first_error(t->select_clipmap(cd, {}, sel)).field, "ClipmapDef.n");
+  EXPECT_EQ(first_error(t->request_patch(0, 0, 1, 1)).field, "TerrainDef.granular_patches");
+}
+
+// Heights from an array and from a raw float32 file land where the layout says: sample (i, j)
+// = heights[j * samples_x + i] at world (origin_x + i spacing, origin_z + j spacing).
+TEST(Api, HeightsFromAnArrayAndAFile) {
+  sp::TerrainDef d = flat_def();
+  d.procedural.clear();
+  d.samples_x = 3;
+  d.samples_z = 2;
+  d.spacing = 2.0;
+  d.origin = {100.0, 10.0, 200.0};
+  d.heights = {0, 1, 2, 3, 4, 5};
+  auto t = sp::Terrain::create(d);
+  ASSERT_TRUE(t.ok()) << t.message();
+  EXPECT_NEAR(t->height_at(102.0, 200.0), 11.0, 1e-6);   // (1, 0)
+  EXPECT_NEAR(t->height_at(100.0, 202.0), 13.0, 1e-6);   // (0, 1)
+  EXPECT_NEAR(t->height_at(103.0, 201.0), 10.0 + 3.0, 1e-6);  // bilinear: mean of 1, 2, 4, 5 at the cell centre
+
+  const std::string path = testing::TempDir() + "/api_heights.raw";
+  {
+    std::FILE* f = std::fopen(path.c_str(), "wb");
+    ASSERT_NE(f, nullptr);
+    ASSERT_EQ(std::fwrite(d.heights.data(), sizeof(float), 6, f), 6u);
+    std::fclose(f);
+  }
+  sp::TerrainDef fd = d;
+  fd.heights.clear();
+  fd.file = path;
+  fd.vertical_scale = 2.0;
+  auto tf = sp::Terrain::create(fd);
+  ASSERT_TRUE(tf.ok()) << tf.message();
+  EXPECT_NEAR(tf->height_at(104.0, 202.0), 10.0 + 2.0 * 5.0, 1e-5);  // (2, 1)
+  fd.samples_x = 4;  // the file holds 6 values, not 8
+  auto bad = sp::Terrain::create(fd);
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.message().find(path), std::string::npos) << bad.message();
+  std::remove(path.c_str());
+}
+
+// Heights and normals follow the documented formulas (docs/heightfield.md) on a plane far
+// from the world origin: h = origin_y + base + sx x + sz z, n = normalize(-sx, 1, -sz).
+TEST(Api, HeightAndNormalOnAPlane) {
+  sp::TerrainDef d = flat_def();
+  d.procedural = "plane";
+  d.slope_x = 0.1f;
+  d.slope_z = -0.05f;
+  d.origin = {10000.0, 50.0, -20000.0};
+  auto t = sp::Terrain::create(d);
+  ASSERT_TRUE(t.ok()) << t.message();
+  for (auto [lx, lz] : {std::pair{0.0, 0.0}, {3.3, 7.1}, {9.99, 0.4}, {5.125, 5.875}}) {
+    const double x = d.origin[0] + lx, z = d.origin[2] + lz;
+    EXPECT_NEAR(t->height_at(x, z), 50.0 + 1.0 + 0.1 * lx - 0.05 * lz, 1e-4) << lx << ", " << lz;
+    const sp::Vec3f n = t->normal_at(x, z);
+    const double len = std::sqrt(0.1 * 0.1 + 1.0 + 0.05 * 0.05);
+    EXPECT_NEAR(n[0], -0.1 / len, 1e-5);
+    EXPECT_NEAR(n[1], 1.0 / len, 1e-5);
+    EXPECT_NEAR(n[2], 0.05 / len, 1e-5);
+  }
+  // read_heights returns the local heights (relative to origin[1]) row by row, x fastest.
+  std::vector<float> h;
+  ASSERT_TRUE(t->read_heights({2, 3, 4, 2}, h).ok());
+  ASSERT_EQ(h.size(), 8u);
+  EXPECT_NEAR(h[1], 1.0 + 0.1 * (3 * 0.25) - 0.05 * (3 * 0.25), 1e-5);
+  EXPECT_NEAR(h[4], 1.0 + 0.1 * (2 * 0.25) - 0.05 * (4 * 0.25), 1e-5);
+  const sp::HeightfieldInfo info = t->heightfield();
+  EXPECT_EQ(info.samples_x, 41);
+  EXPECT_EQ(info.spacing, 0.25);
+  EXPECT_EQ(info.origin[2], -20000.0);
+
+  sp::ClipmapDef cd;
+  cd.n = 31;
+  cd.levels = 3;
+  cd.base_spacing = 0.25f;
+  cd.height_factor = 0;
+  sp::ClipmapView view;
+  view.viewer = {d.origin[0] + 5, 60.0, d.origin[2] + 5};
+  sp::ClipmapSelection sel;
+  ASSERT_TRUE(t->select_clipmap(cd, view, sel).ok());
+  ASSERT_EQ(sel.levels.size(), 3u);
+  EXPECT_TRUE(sel.levels[0].finest);
+  EXPECT_FLOAT_EQ(sel.levels[2].spacing, 1.0f);
+  EXPECT_GT(sel.triangles, 0);
+}
+
+// Without patches a sphere dropped on a flat terrain rests on the heightfield: its centre ends
+// within 1 cm of surface + radius, at rest (< 1 cm/s), after 3 s.
+TEST(Api, SphereRestsOnTheHeightfield) {
+  sp::TerrainDef d = flat_def();
+  d.origin = {500.0, 20.0, -300.0};
+  auto t = sp::Terrain::create(d);
+  ASSERT_TRUE(t.ok()) << t.message();
+  sp::BodyDef b;
+  b.name = "ball";
+  b.shape.radius = 0.4;
+  b.mass = 10;
+  b.position = {505.0, 24.0, -295.0};
+  auto h = t->add_body(b);
+  ASSERT_TRUE(h.ok()) << h.message();
+  for (int k = 0; k < 180; ++k) ASSERT_TRUE(t->step(1.0 / 60.0).ok());
+  EXPECT_NEAR(t->time(), 3.0, 1e-9);
+  auto s = t->body_state(*h);
+  ASSERT_TRUE(s.ok());
+  EXPECT_NEAR(s->position[1], t->height_at(s->position[0], s->position[2]) + 0.4, 0.01);
+  EXPECT_NEAR(t->height_at(505.0, -295.0), 21.0, 1e-6);
+  EXPECT_LT(std::hypot(s->linear_velocity[0], s->linear_velocity[1], s->linear_velocity[2]), 0.01);
+  EXPECT_TRUE(t->poll_events().empty()) << "no patches without granular_patches";
+  // Teleport and set a velocity: the next state starts from them.
+  ASSERT_TRUE(t->set_body_transform(*h, {502.0, 25.0, -298.0}, {1, 0, 0, 0}).ok());
+  ASSERT_TRUE(t->set_body_velocity(*h, {1.0f, 0, 0}, {0, 0, 0}).ok());
+  ASSERT_TRUE(t->step(1.0 / 60.0, 4).ok());
+  s = t->body_state(*h);
+  EXPECT_NEAR(s->position[0], 502.0 + 1.0 / 60.0, 1e-3);
+  EXPECT_NEAR(s->linear_velocity[1], -9.81 / 60.0, 1e-3);
+}
+
+// Granular patches with coarse granules (granule_radius 5 cm, d = 10 cm, so a patch holds a
+// few hundred granules and the test takes seconds), stiff enough for a 20 kg sphere landing at
+// 2.4 m/s (k_n = 1e5 N/m, the scene files' default).
+sp::TerrainDef sand_def() {
+  sp::TerrainDef d;
+  d.procedural = "flat";
+  d.samples_x = d.samples_z = 41;
+  d.spacing = 0.1;
+  d.base_height = 1.0f;
+  d.material.granule_radius = 0.05;
+  d.material.stiffness = 1.0e5;
+  d.slots = 1;
+  d.granules_per_slot = 6000;
+  d.patch_depth = 0.3;
+  return d;
+}
+
+// A sphere dropped onto sand: a patch is requested and promoted before the sphere lands
+// (free fall over 0.3 m takes 0.247 s), then ready; the sphere comes to rest on the granules
+// with its centre within 1 d of surface + radius (measured 2026-11-22: −0.13 d; +0.54 d with
+// k_n = 2e4 before the manager's fill changed: it rests on the granules' tops, which stand up
+// to about d above the cut surface) and within 3 d of where it fell (measured 0.01 m; 0.21 m
+// with k_n = 2e4, when it rolled off the granule it landed on); removing the sphere makes its
+// handle stale at once and the patch steps on; demote_all() turns the patch back into
+// heightfield: a Demoted event comes last and the patch's region is reported dirty, covering
+// where the sphere was.
+TEST(Api, SphereOnSandEventsInOrderAndRestHeight) {
+  auto t = sp::Terrain::create(sand_def());
+  ASSERT_TRUE(t.ok()) << t.message();
+  sp::BodyDef b;
+  b.name = "ball";
+  b.shape.radius = 0.15;
+  b.mass = 20;
+  b.position = {2.0, 1.0 + 0.15 + 0.3, 2.0};
+  auto h = t->add_body(b);
+  ASSERT_TRUE(h.ok()) << h.message();
+
+  std::vector<sp::Event> events;
+  const double dt = 1.0 / 60.0;
+  bool saw_particles = false;
+  for (int k = 0; k < 150; ++k) {  // 2.5 s
+    auto st = t->step(dt);
+    ASSERT_TRUE(st.ok()) << st.message();
+    for (const auto& e : t->poll_events()) events.push_back(e);
+    if (!saw_particles && t->active_patches() > 0) {
+      std::vector<float> xyzr;
+      t->particles(xyzr);
+      const auto groups = t->particle_groups();
+      if (!xyzr.empty()) {
+        saw_particles = true;
+        ASSERT_EQ(groups.size(), 1u);
+        EXPECT_EQ(groups[0].count * 4, xyzr.size());
+        EXPECT_NEAR(xyzr[3], 0.05f, 1e-6f) << "sphere radius = granule_radius at particle_scale 1";
+      }
+    }
+  }
+  EXPECT_TRUE(saw_particles);
+  EXPECT_EQ(t->active_patches(), 1);
+  auto s = t->body_state(*h);
+  ASSERT_TRUE(s.ok());
+  const double d = 0.1;  // granule sphere diameter (m)
+  EXPECT_NEAR(s->position[1], 1.0 + 0.15, 1.0 * d);
+  // It may roll off the granule it lands on, but stays on the patch.
+  EXPECT_LT(std::hypot(s->position[0] - 2.0, s->position[2] - 2.0), 3.0 * d);
+  EXPECT_LT(std::hypot(s->linear_velocity[0], s->linear_velocity[1], s->linear_velocity[2]), 0.05);
+  EXPECT_NE(t->report_json().find("\"ball\""), std::string::npos);
+
+  // Removing a body the patch carries: gone for the game at once, and the patch steps on.
+  ASSERT_TRUE(t->remove_body(*h).ok());
+  EXPECT_FALSE(t->alive(*h));
+  EXPECT_TRUE(t->bodies().empty());
+  EXPECT_EQ(first_error(t->body_state(*h)).field, "BodyHandle");
+  for (int k = 0; k < 6; ++k) ASSERT_TRUE(t->step(dt).ok());
+  for (const auto& e : t->poll_events()) events.push_back(e);
+  EXPECT_EQ(t->report_json().find("\"ball\""), std::string::npos);
+
+  ASSERT_TRUE(t->demote_all().ok());
+  for (const auto& e : t->poll_events()) events.push_back(e);
+  EXPECT_EQ(t->active_patches(), 0);
+  std::string seq;
+  for (const auto& e : events) seq += std::string(sp::to_string(e.kind)) + " @" + std::to_string(e.time) + "\n";
+  auto first = [&](sp::EventKind k) {
+    return std::find_if(events.begin(), events.end(), [&](const sp::Event& e) { return e.kind == k; }) - events.begin();
+  };
+  const long n = long(events.size());
+  ASSERT_GE(n, 4) << seq;
+  EXPECT_EQ(first(sp::EventKind::Requested), 0) << seq;
+  EXPECT_LT(first(sp::EventKind::Promoted), first(sp::EventKind::Ready)) << seq;
+  EXPECT_LT(first(sp::EventKind::Ready), n) << seq;
+  EXPECT_EQ(events.back().kind, sp::EventKind::Demoted) << seq;
+  for (long k = 1; k < n; ++k) EXPECT_GE(events[k].time, events[k - 1].time) << seq;
+  const sp::Event& promoted = events[first(sp::EventKind::Promoted)];
+  EXPECT_LT(promoted.time, 0.247) << seq;
+  EXPECT_GT(promoted.granules, 100) << seq;
+  EXPECT_EQ(promoted.patch, events.back().patch);
+  EXPECT_NEAR(events.back().time, 2.6, 1e-9);
+
+  const auto dirty = t->take_dirty_regions();
+  ASSERT_EQ(dirty.size(), 1u);
+  EXPECT_LE(dirty[0].i0, 20);  // sample (20, 20) is under the sphere (x = z = 2 m)
+  EXPECT_GT(dirty[0].i0 + dirty[0].ni, 20);
+  EXPECT_LE(dirty[0].j0, 20);
+  EXPECT_GT(dirty[0].j0 + dirty[0].nj, 20);
+  EXPECT_TRUE(t->take_dirty_regions().empty()) << "taken once";
+
+  EXPECT_NE(t->report_json().find("\"ledger\""), std::string::npos);
+}
+
+// Two terrains made and driven the same way end in the same state (habit 8: determinism is a
+// test): 0.5 s of a sphere landing on sand, granules included; a different seed differs.
+TEST(Api, SameInputsSameStateHash) {
+  auto run = [](std::uint64_t seed) -> std::uint64_t {
+    sp::TerrainDef d = sand_def();
+    d.seed = seed;
+    auto t = sp::Terrain::create(d);
+    EXPECT_TRUE(t.ok()) << t.message();
+    if (!t) return 0;
+    sp::BodyDef b;
+    b.shape.radius = 0.15;
+    b.mass = 20;
+    b.position = {2.0, 1.0 + 0.15 + 0.3, 2.0};
+    EXPECT_TRUE(t->add_body(b).ok());
+    for (int k = 0; k < 30; ++k) EXPECT_TRUE(t->step(1.0 / 60.0).ok());
+    EXPECT_GT(t->granules(), 0);
+    return t->state_hash();
+  };
+  const std::uint64_t a = run(1), b = run(1);
+  EXPECT_EQ(a, b);
+  EXPECT_NE(a, run(2));
+}
+
+// A patch nothing touches goes requested → promoted → ready → asleep → demoted by itself
+// (idle_timeout after falling asleep). sleep_speed is 3 m/s here because a fresh patch's
+// granules keep moving (measured 2026-11-22: it slept at 0.5 and 1 m/s, not at 0.1 m/s within
+// 1.5 s, and the threshold moved with the manager's changes that day; docs/api.md "Not done
+// yet"); this test checks the event plumbing, not the sleep criterion.
+TEST(Api, UntouchedPatchSleepsAndIsDemoted) {
+  sp::TerrainDef d = sand_def();
+  d.sleep_speed = 3.0;
+  d.sleep_time = 0.2;
+  d.idle_timeout = 0.1;
+  auto t = sp::Terrain::create(d);
+  ASSERT_TRUE(t.ok()) << t.message();
+  ASSERT_TRUE(t->request_patch(1.5, 1.5, 2.5, 2.5).ok());
+  std::vector<sp::Event> events;
+  for (int k = 0; k < 90 && (events.empty() || events.back().kind != sp::EventKind::Demoted); ++k) {
+    ASSERT_TRUE(t->step(1.0 / 60.0).ok());
+    for (const auto& e : t->poll_events()) events.push_back(e);
+  }
+  std::string seq;
+  for (const auto& e : events) seq += std::string(sp::to_string(e.kind)) + " @" + std::to_string(e.time) + "\n";
+  const std::vector<sp::EventKind> want = {sp::EventKind::Requested, sp::EventKind::Promoted, sp::EventKind::Ready,
+                                           sp::EventKind::Asleep, sp::EventKind::Demoted};
+  ASSERT_EQ(events.size(), want.size()) << seq;
+  for (std::size_t k = 0; k < want.size(); ++k) EXPECT_EQ(events[k].kind, want[k]) << seq;
+  // Asleep after at least sleep_time of simulation; demoted idle_timeout (0.1 s) later, within a frame.
+  EXPECT_GE(events[3].time, 0.2 - 1e-9) << seq;
+  EXPECT_NEAR(events[4].time - events[3].time, 0.1, 1.0 / 60.0 + 1e-9) << seq;
+  EXPECT_EQ(t->active_patches(), 0);
+  EXPECT_EQ(t->take_dirty_regions().size(), 1u);
+}

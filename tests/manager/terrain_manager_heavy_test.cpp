@@ -1,0 +1,163 @@
+// tests manager/terrain_manager.cpp, heavy part (ctest -L heavy): a barrel dropped on a
+// granular patch leaves a crater and a rim in the exported heightfield (measured 2026-11-22:
+// bottom 0.38 d into the sand, crater -0.95 d, rim +0.21 d, ledger -1.05 %; 5 min on 2
+// loaded cores), and a pool of one slot serves three landings in turn.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+
+#include "heightfield/heightfield.hpp"
+#include "heightfield/procedural.hpp"
+#include "manager/bullet_world.hpp"
+#include "manager/terrain_manager.hpp"
+
+using namespace sandpatch;
+
+// A barrel dropped on sand (issue 5): it lands on the particles (not on the heightfield),
+// comes to rest in them, and after demotion the exported heightfield has a crater under it
+// and a rim around it; the volume ledger closes within 2 %.
+TEST(TerrainManager, BarrelLeavesCraterAndRim) {
+  HeightfieldDef g;
+  g.samples_x = g.samples_z = 81;
+  g.spacing = 0.1f;
+  ProceduralHeightsDef p;
+  p.kind = "flat";
+  p.height = 1.0f;
+  auto hfr = make_procedural(g, p);
+  ASSERT_TRUE(hfr.ok());
+  Heightfield hf = std::move(*hfr);
+  const Heightfield original = hf;
+  auto world = BulletWorld::create(hf, {0, -9.81f, 0});
+  ASSERT_TRUE(world.ok());
+  RigidBodyDef barrel;
+  barrel.name = "barrel";
+  barrel.shape.kind = RigidShapeKind::Cylinder;
+  barrel.shape.radius = 0.25f;
+  barrel.shape.height = 0.5f;
+  barrel.mass = 200.0f;  // kg: 2040 kg/m³, denser than the bed (~1300): it sinks in
+  barrel.position = {4.0, 1.0 + 0.25 + 2.5, 4.0};  // bottom 2.5 m above the sand: lands at 7 m/s
+  auto body = (*world)->add_body(barrel);
+  ASSERT_TRUE(body.ok());
+  TerrainManagerDef def;
+  def.material.radius = 0.025f;
+  def.material.stiffness = 2.0e4f;
+  def.slots = 1;
+  def.granules_per_slot = 12000;
+  def.patch_depth = 0.3;
+  def.depth_resolution = 512;
+  def.use_gl = false;
+  auto m = TerrainManager::create(def, hf, **world);
+  ASSERT_TRUE(m.ok()) << m.message();
+  Profile prof;
+  const double dt = 1.0 / 60.0;
+  double t = 0;
+  bool carried = false;
+  for (int f = 0; f < 150; ++f, t += dt) {
+    auto st0 = (*m)->before_bodies(t, dt, prof);
+    ASSERT_TRUE(st0.ok()) << st0.message();
+    (*world)->step(float(dt));
+    ASSERT_TRUE((*m)->after_bodies(t, dt, prof).ok());
+    carried = carried || !(*world)->terrain_collision(*body);
+  }
+  const BodyState st = (*world)->state(*body);
+  const double d = 0.05, bottom = st.position.y() - 0.25;
+  EXPECT_TRUE(carried) << "the barrel never left the heightfield for the particles";
+  EXPECT_FALSE((*world)->terrain_collision(*body)) << "at rest, the particles carry the barrel";
+  EXPECT_LT(st.linear_velocity.norm(), 0.05f) << "the barrel comes to rest";
+  // Resting on the old heightfield would put its bottom at 1.0 m exactly.
+  EXPECT_LT(bottom, 1.0 - 0.2 * d) << "the barrel sinks into the sand";
+  EXPECT_GT(bottom, 1.0 - 0.3) << "the barrel stays on the particles (patch floor 0.3 m down)";
+
+  ASSERT_TRUE((*m)->demote_all(t, prof).ok());
+  // Crater: the mean height change under the barrel; rim: the highest mean over rings of
+  // samples around it (radii in m from the axis).
+  auto ring_mean = [&](double r0, double r1) {
+    double s = 0;
+    int n = 0;
+    for (int j = 0; j < hf.samples_z(); ++j)
+      for (int i = 0; i < hf.samples_x(); ++i) {
+        const double dx = i * 0.1 - st.position.x(), dz = j * 0.1 - st.position.z(), r = std::hypot(dx, dz);
+        if (r >= r0 && r < r1) s += hf.height(i, j) - original.height(i, j), ++n;
+      }
+    return n ? s / n : 0.0;
+  };
+  const double crater = ring_mean(0.0, 0.15), rim = std::max({ring_mean(0.25, 0.35), ring_mean(0.35, 0.45), ring_mean(0.45, 0.55)});
+  EXPECT_LT(crater, -0.5 * d) << "crater depth under the barrel";
+  EXPECT_GT(rim, 0.1 * d) << "rim around the barrel";
+  const auto rep = (*m)->report();
+  EXPECT_LT(std::abs(rep["ledger"]["total"]["error_pct"].get<double>()), 2.0) << rep["ledger"].dump(2);
+  std::printf("barrel bottom %.3f m below the surface, crater %.2f d, rim %+.2f d, ledger %.2f %%\n", 1.0 - bottom,
+              crater / d, rim / d, rep["ledger"]["total"]["error_pct"].get<double>());
+}
+
+// Pool exhaustion (issue 5): three spheres land at once in three places with one pool slot.
+// The first lands on particles; the other two wait in the queue and land on the heightfield
+// meanwhile (at rest at surface + radius); every patch sleeps and is demoted after the idle
+// timeout, the queue drains, and no request is dropped.
+TEST(TerrainManager, PoolExhaustionQueueDrains) {
+  HeightfieldDef g;
+  g.samples_x = g.samples_z = 81;
+  g.spacing = 0.1f;
+  ProceduralHeightsDef p;
+  p.kind = "flat";
+  p.height = 1.0f;
+  auto hfr = make_procedural(g, p);
+  ASSERT_TRUE(hfr.ok());
+  Heightfield hf = std::move(*hfr);
+  auto world = BulletWorld::create(hf, {0, -9.81f, 0});
+  ASSERT_TRUE(world.ok());
+  std::vector<RigidBodyId> ids;
+  for (double x : {2.0, 4.0, 6.0}) {
+    RigidBodyDef b;
+    b.shape.kind = RigidShapeKind::Sphere;
+    b.shape.radius = 0.1f;
+    b.mass = 5.0f;
+    b.position = {x, 1.0 + 0.1 + 0.3, 4.0};
+    auto id = (*world)->add_body(b);
+    ASSERT_TRUE(id.ok());
+    ids.push_back(*id);
+  }
+  TerrainManagerDef def;
+  def.material.radius = 0.025f;
+  def.material.stiffness = 2.0e4f;
+  def.slots = 1;
+  def.granules_per_slot = 4000;
+  def.patch_depth = 0.2;
+  def.depth_resolution = 256;
+  def.use_gl = false;
+  def.idle_timeout = 0.25;  // s asleep before demotion
+  def.lod.apron = 0.2;
+  auto m = TerrainManager::create(def, hf, **world);
+  ASSERT_TRUE(m.ok()) << m.message();
+  Profile prof;
+  const double dt = 1.0 / 60.0;
+  double t = 0;
+  int peak_queue = 0;
+  for (int f = 0; f < 900 && t < 15.0; ++f, t += dt) {
+    auto st = (*m)->before_bodies(t, dt, prof);
+    ASSERT_TRUE(st.ok()) << st.message();
+    (*world)->step(float(dt));
+    ASSERT_TRUE((*m)->after_bodies(t, dt, prof).ok());
+    peak_queue = std::max(peak_queue, (*m)->queued_requests());
+    int demoted = 0;
+    for (const PatchEvent& e : (*m)->events()) demoted += e.kind == PatchEventKind::Demoted;
+    if (t > 1.0 && demoted >= 3 && (*m)->queued_requests() == 0) break;
+  }
+  EXPECT_GE(peak_queue, 1) << "the pool of one slot never queued a request";
+  EXPECT_EQ((*m)->queued_requests(), 0) << "the queue drained by t = " << t << " s";
+  int promoted = 0, demoted = 0;
+  for (const PatchEvent& e : (*m)->events()) {
+    promoted += e.kind == PatchEventKind::Promoted;
+    demoted += e.kind == PatchEventKind::Demoted;
+  }
+  EXPECT_GE(promoted, 3) << "every landing place got its patch in turn";
+  EXPECT_EQ(promoted, demoted + (*m)->active_patches());
+  for (RigidBodyId id : ids) {
+    const BodyState st = (*world)->state(id);
+    EXPECT_NEAR(st.position.y(), 1.0 + 0.1, 0.1) << "a sphere rests on the surface (heightfield or particles) within 2 d";
+    EXPECT_LT(st.linear_velocity.norm(), 0.05f);
+  }
+  std::printf("pool of 1: %d promotions, %d demotions, peak queue %d, drained at t = %.2f s\n", promoted, demoted, peak_queue, t);
+}
