@@ -55,15 +55,15 @@ nlohmann::json lod_bench_scene(LodBenchScene kind, int cells, int threads);
 
 // sandpatch stress SCENE (bench/stress.cpp, docs/stress.md): `sims` copies of the scene's first
 // body on a grid around it, one arriving every `interval` s, pool.slots = sims; `frames` fixed
-// steps. Frame time against time in `windows` windows (K runs of growing length, differenced:
-// run_scene has no per-frame hook), live simulations per window; writes OUT/stress.json and
-// OUT/stress.csv, then runs `plot_script` (python3 + matplotlib) for OUT/frame_time.png.
+// steps. One run; every frame's time, DEM time and patch counts through run_scene's per-frame
+// hook; writes OUT/stress.csv (one row a frame) and OUT/stress.json (summary), then runs
+// `plot_script` (python3 + matplotlib) for OUT/frame_time.png.
 struct StressArgs {
   std::string scene;
   int sims = 4;
   long long frames = 1200;
   double interval = 2.0;   // s between arrivals
-  int windows = 8;
+  int windows = 0;         // deprecated, ignored (the old windowed method); != 0 prints a note
   int threads = 0;         // 0 = all cores
   std::string out_dir;     // "" = out/<scene>_stress_<sims>
   std::string plot_script; // "" = no plot

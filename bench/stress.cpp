@@ -5,11 +5,11 @@
 // first body on a grid around that body's position (same height above the ground), the k-th
 // appearing at k × interval; pool.slots = N. Everything runs through run_scene.
 //
-// Frame times: run_scene reports whole runs only (no per-frame hook yet, see docs/stress.md), so
-// the series is made of K windows: K runs of the same deterministic scene, the k-th stopping at
-// k/K of the frames; window k's frame time is the difference of the k-th and (k−1)-th runs' wall
-// time (and of each stage's) over the frames between them. Live simulations come from the
-// longest run's promotions and demotions.
+// Frame times: one run_scene call; its per-frame hook (RunOptions::on_frame) hands over each
+// frame's wall time, DEM stage time and patch counts (filling / active / asleep), written per
+// frame to OUT/stress.csv and summarised in OUT/stress.json (docs/stress.md). The earlier
+// method (K runs of growing length, differenced) is gone: under machine load its windows came
+// out negative; --windows is accepted and ignored.
 #include <omp.h>
 #include <sys/resource.h>
 #include <sys/wait.h>
@@ -20,6 +20,8 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <functional>
+#include <vector>
 
 #include "bench/bench.hpp"
 #include "manager/run.hpp"
@@ -82,9 +84,6 @@ std::string check_stress_args(const StressArgs& a) {
     return "stress: --frames = " + std::to_string(a.frames) + ": must be in [1, 1000000]";
   if (!(a.interval >= 0) || a.interval > 1e4)
     return "stress: --interval = " + format_number(a.interval) + ": must be in [0, 10000] s";
-  if (a.windows < 1 || a.windows > 100) return "stress: --windows = " + std::to_string(a.windows) + ": must be in [1, 100]";
-  if (a.windows > a.frames)
-    return "stress: --windows = " + std::to_string(a.windows) + ": must be at most --frames (" + std::to_string(a.frames) + ")";
   if (a.threads < 0) return "stress: --threads = " + std::to_string(a.threads) + ": must be >= 0 (0 = all cores)";
   return "";
 }
@@ -132,11 +131,35 @@ Result<SceneDef> make_stress_scene(const SceneDef& base, int sims, double interv
   return parse_scene(s.dump(), where + " (stress)", "");
 }
 
+namespace {
+
+double median_of(std::vector<double> v) {
+  if (v.empty()) return 0;
+  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+  return v[v.size() / 2];
+}
+
+// Mean frame and DEM times of the frames `pick` selects.
+ojson class_summary(const std::vector<FrameSample>& s, const std::function<bool(const FrameSample&)>& pick) {
+  double frame = 0, dem = 0;
+  long long n = 0;
+  for (const auto& f : s)
+    if (pick(f)) frame += f.frame_ms, dem += f.dem_ms, ++n;
+  return {{"frames", n},
+          {"frame_ms_mean", n > 0 ? ojson(frame / double(n)) : ojson()},
+          {"dem_ms_mean", n > 0 ? ojson(dem / double(n)) : ojson()}};
+}
+
+}  // namespace
+
 int run_stress(const StressArgs& a) {
   if (std::string e = check_stress_args(a); !e.empty()) {
     std::fprintf(stderr, "%s\n", e.c_str());
     return 2;
   }
+  if (a.windows != 0)
+    std::fprintf(stderr, "stress: --windows is deprecated and ignored: frame times are measured per frame now "
+                         "(docs/stress.md)\n");
   auto base = load_scene_file(a.scene);
   if (!base) {
     std::fprintf(stderr, "stress: %s: invalid scene\n%s", a.scene.c_str(), base.message().c_str());
@@ -158,136 +181,81 @@ int run_stress(const StressArgs& a) {
   const int threads = a.threads > 0 ? a.threads : omp_get_num_procs();
   const double dt = scene->simulation.dt;
   const double load_before = load_average();
-  std::printf("stress: %d simulations ('%s' every %s s), %lld frames of %.4g s, %d windows (%d runs), %d threads, load %.2f\n",
-              a.sims, base->bodies.front().name.c_str(), format_number(a.interval).c_str(), a.frames, dt, a.windows,
-              a.windows, threads, load_before);
+  std::printf("stress: %d simulations ('%s' every %s s), %lld frames of %.4g s, per-frame timing, %d threads, load %.2f\n",
+              a.sims, base->bodies.front().name.c_str(), format_number(a.interval).c_str(), a.frames, dt, threads,
+              load_before);
   std::fflush(stdout);
 
-  // A one-frame run first: the CPU time of the set-up (terrain, pool, pre-settled tile) and the
-  // end, which every run spends and the first window must not count.
-  double cpu_base = 0;
-  {
-    RunOptions o;
-    o.out_dir = (out / "runs").string();
-    o.frames = 1;
-    o.threads = threads;
-    o.progress = ProgressStyle::None;
-    const double c0 = cpu_seconds();
-    RunResult r = run_scene(*scene, o);
-    cpu_base = cpu_seconds() - c0;
-    if (r.code != ExitCode::Ok) {
-      std::fprintf(stderr, "stress: the one-frame run failed in stage '%s'\n%s", r.stage.c_str(), r.message.c_str());
-      return int(r.code);
-    }
-  }
-  // K runs of growing length.
-  std::vector<ojson> reports;
-  std::vector<long long> ends;
-  std::vector<double> cpu;  // CPU s of each whole run_scene call (set-up and end included: they cancel between runs)
-  for (int k = 1; k <= a.windows; ++k) {
-    const long long f = a.frames * k / a.windows;
-    RunOptions o;
-    o.out_dir = (out / "runs").string();
-    o.frames = f;
-    o.threads = threads;
-    o.progress = ProgressStyle::None;
-    o.command_line = "sandpatch stress " + a.scene + " (run " + std::to_string(k) + " of " + std::to_string(a.windows) + ")";
-    const double c0 = cpu_seconds();
-    RunResult r = run_scene(*scene, o);
-    cpu.push_back(cpu_seconds() - c0);
-    if (r.code != ExitCode::Ok) {
-      std::fprintf(stderr, "stress: run %d of %d failed in stage '%s'\n%s", k, a.windows, r.stage.c_str(), r.message.c_str());
-      return int(r.code);
-    }
-    reports.push_back(std::move(r.report));
-    ends.push_back(f);
-    std::printf("  run %d/%d: %lld frames in %.2f s wall (frame loop), %.2f s CPU (whole run)\n", k, a.windows, f,
-                reports.back()["wall_s"].get<double>(), cpu.back());
-    std::fflush(stdout);
-  }
+  // One run; every frame's sample through the per-frame hook.
+  std::vector<FrameSample> samples;
+  samples.reserve(std::size_t(a.frames));
+  RunOptions o;
+  o.out_dir = (out / "run").string();
+  o.frames = a.frames;
+  o.threads = threads;
+  o.progress = ProgressStyle::None;
+  o.command_line = "sandpatch stress " + a.scene;
+  o.on_frame = [&](const FrameSample& f) { samples.push_back(f); };
+  const double c0 = cpu_seconds();
+  RunResult r = run_scene(*scene, o);
+  const double cpu_s = cpu_seconds() - c0;
   std::error_code ignore;
-  fs::remove_all(out / "runs", ignore);
+  fs::remove_all(out / "run", ignore);
+  if (r.code != ExitCode::Ok) {
+    std::fprintf(stderr, "stress: the run failed in stage '%s'\n%s", r.stage.c_str(), r.message.c_str());
+    return int(r.code);
+  }
+  const ojson& rep = r.report;
 
-  // Live simulations from the longest run's events (its end-of-run demotions excluded).
-  const ojson& last = reports.back();
-  const double t_end = double(a.frames) * dt;
-  std::vector<double> ready_t, demoted_t;
-  if (last.contains("conversions"))
-    for (const auto& c : last["conversions"]) {
-      if (c["kind"] == "ready") ready_t.push_back(c["time_s"].get<double>());
-      if (c["kind"] == "demoted" && c["time_s"].get<double>() < t_end - 0.5 * dt) demoted_t.push_back(c["time_s"].get<double>());
-    }
-  auto live_at = [&](double t) {
-    return int(std::count_if(ready_t.begin(), ready_t.end(), [&](double x) { return x <= t; })) -
-           int(std::count_if(demoted_t.begin(), demoted_t.end(), [&](double x) { return x <= t; }));
-  };
-  auto arrived_at = [&](double t) {
+  auto arrived_at = [&](double t) {  // bodies spawned by simulated time t (end of a frame)
     int n = 0;
-    for (const auto& b : scene->bodies) n += b.spawn_time <= t + 1e-9;
+    for (const auto& b : scene->bodies) n += b.spawn_time < t - 1e-9;
     return n;
   };
-  ojson windows = ojson::array();
-  std::string csv = "t0_s,t1_s,frames,frame_ms_mean,frame_cpu_ms_mean,real_time_factor,bodies_arrived,simulations_live,dem_ms_per_frame,"
-                    "activation_ms_per_frame,other_ms_per_frame\n";
-  double prev_wall = 0;
-  long long prev_f = 0;
-  ojson prev_stages = ojson::object();
-  for (std::size_t k = 0; k < reports.size(); ++k) {
-    const ojson& rep = reports[k];
-    const long long nf = ends[k] - prev_f;
-    const double wall = rep["wall_s"].get<double>();
-    const double ms = nf > 0 ? (wall - prev_wall) * 1000.0 / double(nf) : 0.0;
-    // CPU time is less sensitive to other processes on a shared machine than wall time
-    // (it still counts OpenMP threads waiting at barriers while spinning).
-    const long long ncf = k > 0 ? nf : nf - 1;  // the baseline run did the first frame
-    const double cpu_ms = ncf > 0 ? (cpu[k] - (k > 0 ? cpu[k - 1] : cpu_base)) * 1000.0 / double(ncf) : 0.0;
-    const double t0 = double(prev_f) * dt, t1 = double(ends[k]) * dt;
-    ojson st = ojson::object();
-    for (const auto& [name, v] : rep["stages"].items()) {
-      const double before = prev_stages.contains(name) ? prev_stages[name].get<double>() : 0.0;
-      st[name] = nf > 0 ? (v["total_ms"].get<double>() - before) / double(nf) : 0.0;
-    }
-    // The demotion stage also holds each run's end-of-run demotion of every live patch (outside
-    // the frame loop's wall time), so a window's demotion and outputs differences are not the
-    // frames' own; "other" is the frame time minus dem and activation.
-    const double dem = st.contains("dem") ? st["dem"].get<double>() : 0.0;
-    const double act = st.contains("activation") ? st["activation"].get<double>() : 0.0;
-    const double t_last = t1 - 0.5 * dt;  // the window's last frame (a body arriving at t1 belongs to the next)
-    ojson w = {{"t0_s", t0},
-               {"t1_s", t1},
-               {"frames", nf},
-               {"frame_ms_mean", ms},
-               {"frame_cpu_ms_mean", cpu_ms},
-               {"real_time_factor", ms > 0 ? dt * 1000.0 / ms : 0.0},
-               {"bodies_arrived", arrived_at(t_last)},
-               {"simulations_live", live_at(t_last)},
-               {"simulations_asleep", nullptr},
-               {"stage_ms_per_frame", st}};
-    windows.push_back(w);
-    char line[512];
-    std::snprintf(line, sizeof line, "%.4f,%.4f,%lld,%.4f,%.4f,%.5f,%d,%d,%.4f,%.4f,%.4f\n", t0, t1, nf, ms, cpu_ms,
-                  w["real_time_factor"].get<double>(), arrived_at(t_last), live_at(t_last), dem, act, std::max(0.0, ms - dem - act));
+  std::string csv = "frame,time_s,frame_ms,dem_ms,filling,active,asleep,granules,queued,pool_bytes,arrived\n";
+  std::vector<double> ms, dem;
+  double sum_ms = 0, sum_dem = 0, sim_s_live = 0;
+  int peak_live = 0;
+  for (const auto& f : samples) {
+    char line[256];
+    std::snprintf(line, sizeof line, "%lld,%.6f,%.4f,%.4f,%d,%d,%d,%d,%d,%lld,%d\n", f.frame, f.time_s, f.frame_ms,
+                  f.dem_ms, f.patches_filling, f.patches_active, f.patches_asleep, f.granules, f.queued_requests,
+                  static_cast<long long>(f.pool_bytes), arrived_at(f.time_s));
     csv += line;
-    prev_wall = wall;
-    prev_f = ends[k];
-    for (const auto& [name, v] : rep["stages"].items()) prev_stages[name] = v["total_ms"].get<double>();
+    ms.push_back(f.frame_ms);
+    dem.push_back(f.dem_ms);
+    sum_ms += f.frame_ms;
+    sum_dem += f.dem_ms;
+    sim_s_live += double(f.patches_active) * dt;
+    peak_live = std::max(peak_live, f.patches_filling + f.patches_active + f.patches_asleep);
   }
-  // Sleeping simulations: the last window (every body arrived long before) against the busiest.
-  double busiest = 0, busiest_cpu = 0;
-  for (const auto& w : windows) {
-    busiest = std::max(busiest, w["frame_ms_mean"].get<double>());
-    busiest_cpu = std::max(busiest_cpu, w["frame_cpu_ms_mean"].get<double>());
-  }
-  const double last_ms = windows.back()["frame_ms_mean"].get<double>();
-  const double last_cpu = windows.back()["frame_cpu_ms_mean"].get<double>();
-  const int at_rest = last["counts"]["bodies_at_rest"].get<int>();
-  ojson sleep = {{"last_window_frame_ms", last_ms},
-                 {"busiest_window_frame_ms", busiest},
-                 {"last_over_busiest", busiest > 0 ? last_ms / busiest : 0.0},
-                 {"last_window_cpu_ms", last_cpu},
-                 {"busiest_window_cpu_ms", busiest_cpu},
-                 {"bodies_at_rest_at_end", at_rest},
-                 {"simulations_live_at_end", live_at(t_end)}};
+  const double n = double(std::max<std::size_t>(1, samples.size()));
+  const double med = median_of(ms), mx = ms.empty() ? 0 : *std::max_element(ms.begin(), ms.end());
+  // "Sleeping costs nothing": frames with at least one patch simulating against frames whose
+  // live patches are all asleep (none filling or active, at least one asleep).
+  const ojson active = class_summary(samples, [](const FrameSample& f) { return f.patches_active >= 1; });
+  const ojson asleep = class_summary(samples, [](const FrameSample& f) {
+    return f.patches_asleep >= 1 && f.patches_active == 0 && f.patches_filling == 0;
+  });
+  const ojson none = class_summary(samples, [](const FrameSample& f) {
+    return f.patches_asleep == 0 && f.patches_active == 0 && f.patches_filling == 0;
+  });
+  auto ratio = [](const ojson& x, const ojson& y, const char* key) {
+    return x[key].is_number() && y[key].is_number() && y[key].get<double>() > 0
+               ? ojson(x[key].get<double>() / y[key].get<double>())
+               : ojson();
+  };
+  const ojson sleeping = {{"active_frames", active},
+                          {"all_asleep_frames", asleep},
+                          {"no_patch_frames", none},
+                          {"asleep_over_active_frame_ms", ratio(asleep, active, "frame_ms_mean")},
+                          {"asleep_over_active_dem_ms", ratio(asleep, active, "dem_ms_mean")}};
+  const ojson rtf = {{"run", sum_ms > 0 ? ojson(double(samples.size()) * dt * 1000.0 / sum_ms) : ojson()},
+                     {"median_frame", med > 0 ? ojson(dt * 1000.0 / med) : ojson()},
+                     {"worst_frame", mx > 0 ? ojson(dt * 1000.0 / mx) : ojson()},
+                     {"simulation_seconds_per_wall_second", sum_ms > 0 ? ojson(sim_s_live * 1000.0 / sum_ms) : ojson()}};
+  const std::int64_t pool_bytes = samples.empty() ? 0 : samples.back().pool_bytes;
+  const int at_rest = rep["counts"]["bodies_at_rest"].get<int>();
   const double load_after = load_average();
   ojson result = {{"scene", {{"name", scene->name}, {"base", a.scene}, {"hash", scene->hash}}},
                   {"sims", a.sims},
@@ -295,32 +263,53 @@ int run_stress(const StressArgs& a) {
                   {"frames", a.frames},
                   {"dt_s", dt},
                   {"threads", threads},
-                  {"method", "windows: " + std::to_string(a.windows) +
-                                 " runs of the same deterministic scene, window k = run k minus run k-1 in frame-loop "
-                                 "wall time and in process CPU time (a one-frame run takes the set-up off the first); "
-                                 "run_scene has no per-frame hook; per-frame times, asleep counts and pool bytes need one"},
-                  {"windows", windows},
-                  {"sleeping", sleep},
-                  {"pool", last.contains("pool") ? last["pool"] : ojson()},
-                  {"pool_bytes", nullptr},
-                  {"conversions", last.contains("conversions") ? last["conversions"] : ojson::array()},
-                  {"final_state_hash", last["final_state_hash"]},
+                  {"method", "per frame: one run_scene call, RunOptions::on_frame samples every frame's wall time "
+                             "(frame_ms), DEM stage time (dem_ms) and patch counts; per-frame rows in csv"},
+                  {"csv", "stress.csv"},
+                  {"frame_ms", {{"median", med}, {"max", mx}, {"mean", sum_ms / n}}},
+                  {"dem_ms", {{"median", median_of(dem)}, {"max", dem.empty() ? 0.0 : *std::max_element(dem.begin(), dem.end())},
+                              {"mean", sum_dem / n}}},
+                  {"real_time_factor", rtf},
+                  {"sleeping", sleeping},
+                  {"peak_live_patches", peak_live},
+                  {"bodies_at_rest_at_end", at_rest},
+                  {"pool", rep.contains("pool") ? rep["pool"] : ojson()},
+                  {"pool_bytes", pool_bytes},
+                  {"wall_s", rep["wall_s"]},
+                  {"cpu_s", cpu_s},
+                  {"conversions", rep.contains("conversions") ? rep["conversions"] : ojson::array()},
+                  {"final_state_hash", rep["final_state_hash"]},
                   {"load_average", {load_before, load_after}}};
   if (!write_text(out / "stress.json", result.dump(2) + "\n") || !write_text(out / "stress.csv", csv)) {
     std::fprintf(stderr, "stress: cannot write %s/stress.json or stress.csv\n", out.string().c_str());
     return 1;
   }
-  std::printf("window  t (s)          frame ms   CPU ms  live  arrived\n");
-  for (const auto& w : windows)
-    std::printf("        %6.2f-%6.2f  %9.3f  %7.2f  %4d  %4d\n", w["t0_s"].get<double>(), w["t1_s"].get<double>(),
-                w["frame_ms_mean"].get<double>(), w["frame_cpu_ms_mean"].get<double>(), w["simulations_live"].get<int>(),
-                w["bodies_arrived"].get<int>());
-  std::printf("sleeping: last window %.3f ms per frame (%.2f ms CPU), busiest %.3f ms (%.2f ms CPU); %d of %d bodies at "
-              "rest at the end\n",
-              last_ms, last_cpu, busiest, busiest_cpu, at_rest, a.sims);
+  // Ten rows of the series (means over equal runs of frames) for the terminal; every frame is in the CSV.
+  std::printf("t (s)            frame ms  (max)     dem ms  filling active asleep\n");
+  const std::size_t rows = std::min<std::size_t>(10, samples.size());
+  for (std::size_t k = 0; k < rows; ++k) {
+    const std::size_t b = samples.size() * k / rows, e = samples.size() * (k + 1) / rows;
+    double fm = 0, fx = 0, dm = 0;
+    for (std::size_t i = b; i < e; ++i) fm += samples[i].frame_ms, fx = std::max(fx, samples[i].frame_ms), dm += samples[i].dem_ms;
+    const double c = double(std::max<std::size_t>(1, e - b));
+    const FrameSample& l = samples[e - 1];
+    std::printf("%6.2f-%6.2f  %9.3f %8.2f  %9.3f  %6d %6d %6d\n", b * dt, e * dt, fm / c, fx, dm / c, l.patches_filling,
+                l.patches_active, l.patches_asleep);
+  }
+  auto num = [](const ojson& v) { return v.is_number() ? v.get<double>() : std::nan(""); };
+  std::printf("frame ms: median %.3f, max %.3f; real-time factor %.2f (run), %.2f (median frame)\n", med, mx,
+              num(rtf["run"]), num(rtf["median_frame"]));
+  std::printf("sleeping: %lld all-asleep frames %.3f ms (dem %.4f ms) vs %lld active frames %.3f ms (dem %.3f ms): "
+              "ratio %.3f (dem %.4f)\n",
+              asleep["frames"].get<long long>(), num(asleep["frame_ms_mean"]), num(asleep["dem_ms_mean"]),
+              active["frames"].get<long long>(), num(active["frame_ms_mean"]), num(active["dem_ms_mean"]),
+              num(sleeping["asleep_over_active_frame_ms"]), num(sleeping["asleep_over_active_dem_ms"]));
+  std::printf("pool: %lld bytes fixed capacity; %d of %d bodies at rest at the end\n", static_cast<long long>(pool_bytes),
+              at_rest, a.sims);
   std::printf("data: %s, %s\n", (out / "stress.json").string().c_str(), (out / "stress.csv").string().c_str());
   // Plots (python3 + matplotlib, scripts/plot_frames.py); the data stands without them.
   if (!a.plot_script.empty()) {
+    std::fflush(stdout);  // the script's output after ours
     // Debian's python3 (where python3-matplotlib installs) before whatever python3 is first on PATH.
     const std::string python = fs::exists("/usr/bin/python3") ? "/usr/bin/python3" : "python3";
     const std::string cmd = python + " '" + a.plot_script + "' '" + (out / "stress.json").string() + "' '" +

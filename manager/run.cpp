@@ -405,6 +405,7 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
 
   for (long long frame = 0; frame < frames; ++frame) {
     const auto f0 = Clock::now();
+    const double dem_ms_before = profile.timer(Stage::Dem).total_ms;
     const std::size_t events_before = manager ? manager->events().size() : 0;
     bool converted = filling > 0;
     const double t = double(frame) * dt;  // s, simulated time at the start of this frame
@@ -476,6 +477,22 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
     }
     frame_ms.push_back(std::chrono::duration<double, std::milli>(Clock::now() - f0).count());
     conversion_frame.push_back(converted);
+    if (opt.on_frame) {
+      FrameSample fs;
+      fs.frame = frame;
+      fs.time_s = t + dt;
+      fs.frame_ms = frame_ms.back();
+      fs.dem_ms = profile.timer(Stage::Dem).total_ms - dem_ms_before;
+      if (manager) {
+        fs.patches_filling = manager->filling_patches();
+        fs.patches_asleep = manager->asleep_patches();
+        fs.patches_active = manager->ready_patches() - fs.patches_asleep;
+        fs.granules = manager->granules();
+        fs.queued_requests = manager->queued_requests();
+        fs.pool_bytes = manager->pool_bytes();
+      }
+      opt.on_frame(fs);
+    }
     progress.update(frame + 1, std::chrono::duration<double>(Clock::now() - t_start).count());
   }
   const double wall_s = std::chrono::duration<double>(Clock::now() - t_start).count();

@@ -7,6 +7,8 @@
 // warnings and never reports stages that did not run.
 #pragma once
 
+#include <cstdint>
+#include <functional>
 #include <nlohmann/json.hpp>
 #include <string>
 
@@ -16,6 +18,20 @@
 namespace sandpatch {
 
 enum class ProgressStyle { Auto, Bar, Lines, None };
+
+// One frame of a run, handed to RunOptions::on_frame at the end of the frame.
+struct FrameSample {
+  long long frame = 0;        // index of the frame, 0-based
+  double time_s = 0;          // s, simulated time at the END of the frame ((frame + 1) × dt)
+  double frame_ms = 0;        // ms wall, the whole frame (as the run report's frames.median_ms counts it)
+  double dem_ms = 0;          // ms wall, this frame's Dem stage (0 when no patch simulated)
+  int patches_filling = 0;    // slots promoted and still uploading granules
+  int patches_active = 0;     // slots filled and simulating
+  int patches_asleep = 0;     // slots filled and asleep (DEM stopped)
+  int granules = 0;           // live granules over all patches
+  int queued_requests = 0;    // patch requests waiting for a free slot
+  std::int64_t pool_bytes = 0;  // bytes, the pool's fixed DEM capacity (TerrainManager::pool_bytes)
+};
 
 struct RunOptions {
   std::string out_dir;        // "" = out/<scene name> under the current directory
@@ -27,6 +43,9 @@ struct RunOptions {
   std::string command_line;   // recorded in the report
   std::string final_image;    // when set: after the last frame, render this PNG (`sandpatch render`)
   std::string final_camera;   // camera for final_image ("" = the scene's first, or a default view)
+  // Called at the end of every frame of the frame loop (after its frame time is measured,
+  // so the callback's own time is not in frame_ms; it is in the run's wall_s).
+  std::function<void(const FrameSample&)> on_frame;
 };
 
 struct RunResult {

@@ -15,6 +15,7 @@
 #include "manager/shell.hpp"
 #include "particles/backend.hpp"
 #include "particles/dem.hpp"
+#include "particles/fields.hpp"
 #include "particles/gpu/gl_backend.hpp"
 
 namespace sandpatch {
@@ -63,7 +64,8 @@ struct TerrainManager::Impl {
   double tiles_settled_ms = 0;
   int tile_cells = 1;  // heightfield cells per tile period (patch sides fall on tile walls)
   std::unordered_map<std::int64_t, int> still_frames;
-  int lapsed_requests = 0;  // queued requests dropped because no body predicted contact there any more  // frames each body (index, generation) has been at rest
+  int lapsed_requests = 0;
+  int extensions = 0;       // patches grown under a body heading past their edge  // queued requests dropped because no body predicted contact there any more  // frames each body (index, generation) has been at rest
 
   // Lattice layers that settle into a tile of at least `depth` (m, sim units) of period_y.
   int tile_layers(double fill_depth) const {
@@ -214,16 +216,48 @@ struct TerrainManager::Impl {
     return false;
   }
 
+  // The world rectangle of a slot's region.
+  PatchRequest rect(const Slot& s) const {
+    const double sp = hf->spacing();
+    PatchRequest p;
+    p.x0 = hf->origin_x() + s.region.i0 * sp;
+    p.x1 = p.x0 + (s.region.ni - 1) * sp;
+    p.z0 = hf->origin_z() + s.region.j0 * sp;
+    p.z1 = p.z0 + (s.region.nj - 1) * sp;
+    return p;
+  }
+
   bool overlaps_patch(const PatchRequest& r) const {
-    for (const Slot& s : slots) {
-      if (s.state == State::Free) continue;
-      const double sp = hf->spacing();
-      PatchRequest p;
-      p.x0 = hf->origin_x() + s.region.i0 * sp;
-      p.x1 = p.x0 + (s.region.ni - 1) * sp;
-      p.z0 = hf->origin_z() + s.region.j0 * sp;
-      p.z1 = p.z0 + (s.region.nj - 1) * sp;
-      if (p.overlaps(r)) return true;
+    for (const Slot& s : slots)
+      if (s.state != State::Free && rect(s).overlaps(r)) return true;
+    return false;
+  }
+
+  // A body in a patch heading past its edge (its predicted contact reaches beyond the
+  // region): the patch grows to cover both, if the slot holds the grown patch (estimated from
+  // its granules per area, with 20 % to spare). The patch is demoted now (what the body did
+  // is written to the heightfield) and the grown request goes to the front of the queue, so
+  // it is promoted in this frame from the slot just freed: nothing is lost, and the body
+  // stays on particles. Returns whether it did.
+  Result<bool> extend(const PatchRequest& r, double time) {
+    for (Slot& s : slots) {
+      if ((s.state != State::Active && s.state != State::Asleep) || !rect(s).overlaps(r)) continue;
+      const PatchRequest a = rect(s);
+      // Only when the predicted contact itself (the request without its apron) comes within
+      // two granule diameters of the patch's edge: a body settling near the middle whose
+      // apron pokes out by a few mm must not make the patch grow.
+      const double m = 4.0 * radius_world(), ap = def.lod.apron;
+      if (r.x0 + ap >= a.x0 + m && r.x1 - ap <= a.x1 - m && r.z0 + ap >= a.z0 + m && r.z1 - ap <= a.z1 - m) return false;
+      PatchRequest u = r;
+      u.x0 = std::min(a.x0, r.x0), u.z0 = std::min(a.z0, r.z0), u.x1 = std::max(a.x1, r.x1), u.z1 = std::max(a.z1, r.z1);
+      const double grow = (u.x1 - u.x0 + 2 * hf->spacing() * tile_cells) * (u.z1 - u.z0 + 2 * hf->spacing() * tile_cells) /
+                          std::max(1e-9, (a.x1 - a.x0) * (a.z1 - a.z0));
+      if (double(s.granules) * grow * 1.2 > double(def.granules_per_slot)) return false;
+      if (Status st = demote(s, time, false); !st) return st.errors();
+      u.time_to_contact = 0;
+      queue.insert(queue.begin(), u);
+      ++extensions;
+      return true;
     }
     return false;
   }
@@ -458,7 +492,11 @@ struct TerrainManager::Impl {
   }
 
   // ---- demotion ----
-  Status demote(Slot& slot, double time) {
+  // `gl_ok`: the depth render may use GL (false: the CPU depth render, same contract). A
+  // patch grown mid-frame (extend) is demoted on the CPU: demoting on GL there left the
+  // manager's context in a state where the next GL depth render failed with
+  // GL_INVALID_OPERATION (measured on llvmpipe; cause not found yet).
+  Status demote(Slot& slot, double time, bool gl_ok = true) {
     const auto t0 = Clock::now();
     const double sp = hf->spacing();
     // Granule spheres in heightfield-local coordinates (m).
@@ -475,7 +513,7 @@ struct TerrainManager::Impl {
     const int res = def.depth_resolution;
     HeightImage img;
     bool on_gl = false;
-    if (def.use_gl && !gl_failed && !depth) {
+    if (gl_ok && def.use_gl && !gl_failed && !depth) {
       auto ctx = gl ? Result<std::unique_ptr<gl::Context>>(std::unique_ptr<gl::Context>()) : gl::Context::create();
       if (ctx) {
         if (!gl) gl = std::move(*ctx);
@@ -488,7 +526,7 @@ struct TerrainManager::Impl {
       }
       gl_failed = !depth;
     }
-    if (depth) {
+    if (depth && gl_ok) {
       if (Status st = gl->make_current(); !st) return st;
       auto r = depth->render(xyzr.data(), xyzr.size() / 4, x0, z0, x1, z1, float(slot.floor_local), top + 1.0f);
       if (!r) return r.errors();
@@ -721,7 +759,11 @@ Status TerrainManager::before_bodies(double time, double dt, Profile& profile) {
       }
     }
     for (auto& r : reqs) {
-      if (I.covered(r) || I.overlaps_patch(r)) continue;
+      if (I.covered(r)) continue;
+      if (I.overlaps_patch(r)) {
+        if (auto e = I.extend(r, time); !e) return e.errors();
+        continue;
+      }
       bool queued = false;
       for (const auto& q : I.queue) queued = queued || q.overlaps(r);
       if (!queued) {
@@ -869,6 +911,29 @@ std::vector<GridRegion> TerrainManager::take_dirty_regions() {
 
 int TerrainManager::queued_requests() const { return int(impl_->queue.size()); }
 
+int TerrainManager::filling_patches() const {
+  int n = 0;
+  for (const auto& s : impl_->slots) n += s.state == Impl::State::Filling;
+  return n;
+}
+
+int TerrainManager::asleep_patches() const {
+  int n = 0;
+  for (const auto& s : impl_->slots) n += s.state == Impl::State::Asleep;
+  return n;
+}
+
+std::int64_t TerrainManager::pool_bytes() const {
+  // Bytes per particle / per body: components × 4 bytes summed over the field lists.
+#define SANDPATCH_FIELD_BYTES(type, name, n, hashed, unit) +std::int64_t(n) * std::int64_t(sizeof(type))
+  constexpr std::int64_t particle_bytes = 0 SANDPATCH_PARTICLE_FIELDS(SANDPATCH_FIELD_BYTES);
+  constexpr std::int64_t body_bytes = 0 SANDPATCH_BODY_FIELDS(SANDPATCH_FIELD_BYTES);
+#undef SANDPATCH_FIELD_BYTES
+  const SimulationDef sd = impl_->sim_def();
+  return std::int64_t(impl_->slots.size()) *
+         (std::int64_t(sd.max_particles) * particle_bytes + std::int64_t(sd.max_bodies) * body_bytes);
+}
+
 std::uint64_t TerrainManager::state_hash() const {
   Hasher h;
   impl_->current();
@@ -944,7 +1009,8 @@ nlohmann::ordered_json TerrainManager::report() const {
                {"shell_particles_per_slot", I.def.shell_particles_per_slot},
                {"queued_requests", int(I.queue.size())},
                {"peak_queued_requests", I.peak_queue},
-               {"lapsed_requests", I.lapsed_requests}};
+               {"lapsed_requests", I.lapsed_requests},
+               {"extensions", I.extensions}};
   nlohmann::ordered_json tiles = nlohmann::ordered_json::array();
   for (const GranuleTile& t : I.tiles)
     tiles.push_back({{"granules", t.granules.size()},

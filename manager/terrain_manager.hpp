@@ -105,6 +105,15 @@ class TerrainManager {
   int ready_patches() const;                   // filled and simulating (or asleep)
   int granules() const;                        // live granules over all patches
   int queued_requests() const;
+  int filling_patches() const;                 // promoted, granules still uploading
+  int asleep_patches() const;                  // filled and asleep (DEM stopped)
+  // Bytes of the pool's fixed DEM capacity, allocated at start-up and constant for the run:
+  // slots × (max_particles × per-particle bytes + max_bodies × per-body bytes), the per-item
+  // bytes summed over particles/fields.hpp's field lists (4-byte components); with
+  // max_particles = 4 granules_per_slot + shell_particles_per_slot and max_bodies =
+  // granules_per_slot + 64. An estimate of the state arrays only: the neighbour grid, contact
+  // history and backend scratch buffers are not counted.
+  std::int64_t pool_bytes() const;
   std::uint64_t state_hash() const;            // over every patch's DEM state
   const std::vector<PatchEvent>& events() const;
   // Sphere centres and radii of every live patch (x, y, z, r; m, world relative to the

@@ -4,17 +4,10 @@
 #include <cmath>
 #include <numbers>
 
+#include "common/random.hpp"
+
 namespace sandpatch {
 
-namespace {
-std::uint64_t splitmix(std::uint64_t& s) {
-  std::uint64_t z = (s += 0x9e3779b97f4a7c15ull);
-  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
-  z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
-  return z ^ (z >> 31);
-}
-double uniform(std::uint64_t& s) { return double(splitmix(s) >> 11) * (1.0 / 9007199254740992.0); }
-}  // namespace
 
 Status add_lattice_bed(Simulation& sim, const LatticeBedDef& bed) {
   const GranuleShape& g = sim.granule_shape();

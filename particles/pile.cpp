@@ -8,16 +8,11 @@
 
 #include "particles/dem.hpp"
 
+#include "common/random.hpp"
+
 namespace sandpatch {
 
 namespace {
-std::uint64_t splitmix(std::uint64_t& s) {
-  std::uint64_t z = (s += 0x9e3779b97f4a7c15ull);
-  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
-  z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
-  return z ^ (z >> 31);
-}
-double uniform(std::uint64_t& s) { return double(splitmix(s) >> 11) * (1.0 / 9007199254740992.0); }
 Quat random_orientation(std::uint64_t& s) {  // uniform (Shoemake)
   double u1 = uniform(s), u2 = uniform(s), u3 = uniform(s);
   double r1 = std::sqrt(1 - u1), r2 = std::sqrt(u1), t1 = 2 * std::numbers::pi * u2, t2 = 2 * std::numbers::pi * u3;

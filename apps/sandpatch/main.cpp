@@ -6,7 +6,7 @@
 //   sandpatch bench dem [--granules N] [--steps S] [--backend cpu|gl] [--threads T] [--json]
 //   sandpatch bench render [--terrain N]... [--frames F] [--width W] [--height H] [--json]
 //   sandpatch bench lod [--sizes N,N,...] [--seconds S] [--threads T] [--json]
-//   sandpatch stress SCENE [--sims N] [--frames F] [--interval S] [--windows K] [--threads T] [--out DIR] [--no-plot] [--json]
+//   sandpatch stress SCENE [--sims N] [--frames F] [--interval S] [--threads T] [--out DIR] [--no-plot] [--json]
 // Exit codes: 0 ok, 1 runtime failure (with the stage that failed), 2 bad input.
 #include <CLI/CLI.hpp>
 #include <Eigen/Core>
@@ -134,7 +134,7 @@ int main(int argc, char** argv) {
   st->add_option("--sims", stress.sims, "Simulations (copies of the first body, pool slots) (default 4)");
   st->add_option("--frames", stress.frames, "Fixed steps of the run (default 1200)");
   st->add_option("--interval", stress.interval, "Seconds between arrivals (default 2)");
-  st->add_option("--windows", stress.windows, "Windows of the frame-time series: runs of growing length (default 8)");
+  st->add_option("--windows", stress.windows, "Deprecated, ignored: frame times are measured per frame");
   st->add_option("--threads", stress.threads, "Worker threads (0 = all)");
   st->add_option("--out", stress.out_dir, "Output directory (default: out/<scene>_stress_<sims>)");
   st->add_flag("--no-plot", stress_no_plot, "Write the data only (no python3/matplotlib plot)");

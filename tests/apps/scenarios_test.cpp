@@ -104,9 +104,9 @@ TEST(Scenarios, StressRefusesBadOptionsNamingThem) {
   Outcome o = sandpatch("stress " + scene("leach_3_ten_bodies.json") + " --sims 0");
   EXPECT_EQ(o.code, 2) << o.output;
   EXPECT_NE(o.output.find("--sims = 0: must be in [1, 64]"), std::string::npos) << o.output;
-  o = sandpatch("stress " + scene("leach_3_ten_bodies.json") + " --frames 3 --windows 5");
+  o = sandpatch("stress " + scene("leach_3_ten_bodies.json") + " --frames 0");
   EXPECT_EQ(o.code, 2) << o.output;
-  EXPECT_NE(o.output.find("--windows = 5"), std::string::npos) << o.output;
+  EXPECT_NE(o.output.find("--frames = 0"), std::string::npos) << o.output;
   o = sandpatch("stress " + scene("broken/unknown_key.json"));
   EXPECT_EQ(o.code, 2) << o.output;
   EXPECT_NE(o.output.find("frction"), std::string::npos) << o.output;
@@ -116,8 +116,9 @@ TEST(Scenarios, StressRefusesBadOptionsNamingThem) {
 }
 
 TEST(Scenarios, StressWritesItsDataWithoutPlot) {
-  // Two windows of a few frames, rigid bodies only (no granular patches: no tile to settle,
-  // so the test stays fast): the data files and their shape, not their timings.
+  // A few frames, rigid bodies only (no granular patches: no tile to settle, so the test
+  // stays fast): the data files and their shape, not their timings. --windows is a
+  // deprecated no-op (frame times are per frame).
   const fs::path out = fs::temp_directory_path() / "sandpatch_stress_test";
   fs::remove_all(out);
   fs::create_directories(out);
@@ -129,22 +130,32 @@ TEST(Scenarios, StressWritesItsDataWithoutPlot) {
   Outcome o = sandpatch("stress " + sc.string() + " --sims 2 --frames 6 --windows 2 --threads 1 --no-plot --json --out " +
                         out.string());
   ASSERT_EQ(o.code, 0) << o.output;
+  EXPECT_NE(o.output.find("--windows is deprecated and ignored"), std::string::npos) << o.output;
   std::ifstream f(out / "stress.json");
   ASSERT_TRUE(f.good());
   const auto j = nlohmann::json::parse(f);
   EXPECT_EQ(j["sims"], 2);
-  ASSERT_EQ(j["windows"].size(), 2u);
-  EXPECT_EQ(j["windows"][0]["frames"], 3);
-  EXPECT_EQ(j["windows"][1]["frames"], 3);
-  EXPECT_EQ(j["windows"][0]["bodies_arrived"], 1);  // the second arrives after 2 s
-  EXPECT_TRUE(std::isfinite(j["windows"][1]["frame_ms_mean"].get<double>()));
-  EXPECT_EQ(j["windows"][1]["simulations_live"], 0);  // no patches in this scene
-  EXPECT_TRUE(fs::exists(out / "stress.csv"));
+  EXPECT_EQ(j["frames"], 6);
+  EXPECT_EQ(j["csv"], "stress.csv");
+  EXPECT_TRUE(std::isfinite(j["frame_ms"]["median"].get<double>()));
+  EXPECT_GE(j["frame_ms"]["max"].get<double>(), j["frame_ms"]["median"].get<double>());
+  EXPECT_EQ(j["peak_live_patches"], 0);  // no patches in this scene
+  EXPECT_EQ(j["sleeping"]["no_patch_frames"]["frames"], 6);
+  // One CSV row a frame after the header; the first body has arrived, the second comes after 2 s.
+  std::ifstream c(out / "stress.csv");
+  std::string line;
+  std::vector<std::string> lines;
+  while (std::getline(c, line)) lines.push_back(line);
+  ASSERT_EQ(lines.size(), 7u);
+  EXPECT_EQ(lines[0], "frame,time_s,frame_ms,dem_ms,filling,active,asleep,granules,queued,pool_bytes,arrived");
+  EXPECT_EQ(lines[1].substr(0, 2), "0,");
+  EXPECT_EQ(lines[6].substr(lines[6].rfind(',') + 1), "1");
   EXPECT_FALSE(fs::exists(out / "frame_time.png"));
   // The last line of --json output is the same object.
   const auto nl = o.output.find_last_of('\n', o.output.size() - 2);
   const auto last = nlohmann::json::parse(o.output.substr(nl == std::string::npos ? 0 : nl + 1));
-  EXPECT_EQ(last["windows"].size(), 2u);
+  EXPECT_EQ(last["frames"], 6);
+  EXPECT_EQ(last["final_state_hash"], j["final_state_hash"]);
 }
 
 TEST(Scenarios, PlotScriptRefusesWhatIsNotStressData) {

@@ -1,10 +1,15 @@
 // tests bench/stress.cpp: the stress scene (N copies of the first body, arriving one every
-// interval, N pool slots, same height above the ground), and its refusals.
+// interval, N pool slots, same height above the ground), its refusals, and the per-frame
+// samples it is measured with (run_scene's RunOptions::on_frame).
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <filesystem>
 #include <set>
+#include <vector>
 
 #include "bench/bench.hpp"
+#include "manager/run.hpp"
 #include "scene/scene.hpp"
 
 using namespace sandpatch;
@@ -82,7 +87,59 @@ TEST(Stress, BadArgumentsNameOptionValueAndAllowed) {
   a = StressArgs{};
   a.scene = "x.json";
   a.frames = 4;
-  a.windows = 8;
-  EXPECT_NE(check_stress_args(a).find("--windows = 8: must be at most --frames (4)"), std::string::npos)
-      << check_stress_args(a);
+  a.windows = 8;  // deprecated, ignored
+  EXPECT_EQ(check_stress_args(a), "");
+}
+
+namespace {
+
+double median(std::vector<double> v) {
+  if (v.empty()) return 0;
+  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+  return v[v.size() / 2];
+}
+
+}  // namespace
+
+// The per-frame hook: one sample a frame, in order, at the frame's end time; one Leach
+// scenario 3 ball (464 granules a patch) lands, its patch fills, simulates and falls asleep.
+// An all-asleep frame's DEM stage does no work: its dem_ms is a small fraction of an active
+// frame's (sleeping costs nothing, docs/stress.md).
+TEST(Stress, PerFrameSamplesShowSleepingPatchesCostNoDem) {
+  auto base = load_scene_file(scene_path("leach_3_ten_bodies.json"));
+  ASSERT_TRUE(base.ok()) << base.message();
+  const long long frames = 480;  // 4 s at 120 Hz
+  auto s = make_stress_scene(*base, 1, 0.0, frames);
+  ASSERT_TRUE(s.ok()) << s.message();
+  std::vector<FrameSample> samples;
+  RunOptions o;
+  o.out_dir = (std::filesystem::temp_directory_path() / "sandpatch_stress_per_frame").string();
+  o.frames = frames;
+  o.threads = 1;
+  o.progress = ProgressStyle::None;
+  o.on_frame = [&](const FrameSample& f) { samples.push_back(f); };
+  RunResult r = run_scene(*s, o);
+  ASSERT_EQ(r.code, ExitCode::Ok) << r.stage << ": " << r.message;
+  ASSERT_EQ(samples.size(), std::size_t(frames));
+  std::vector<double> active_dem, asleep_dem, active_ms, asleep_ms;
+  for (std::size_t k = 0; k < samples.size(); ++k) {
+    const FrameSample& f = samples[k];
+    EXPECT_EQ(f.frame, (long long)k);
+    EXPECT_NEAR(f.time_s, double(k + 1) * s->simulation.dt, 1e-9);
+    EXPECT_GT(f.frame_ms, 0.0);
+    EXPECT_GE(f.dem_ms, 0.0);
+    EXPECT_LE(f.dem_ms, f.frame_ms);
+    EXPECT_EQ(f.pool_bytes, samples.front().pool_bytes) << "the pool's capacity is fixed";
+    EXPECT_LE(f.patches_filling + f.patches_active + f.patches_asleep, 1);
+    if (f.patches_active >= 1) active_dem.push_back(f.dem_ms), active_ms.push_back(f.frame_ms);
+    if (f.patches_asleep >= 1 && f.patches_active == 0 && f.patches_filling == 0)
+      asleep_dem.push_back(f.dem_ms), asleep_ms.push_back(f.frame_ms);
+  }
+  // 1 slot of 4096 granules: (4 × 4096 + 8192) particles and 4160 bodies of fixed size.
+  EXPECT_GT(samples.front().pool_bytes, std::int64_t(24576) * 64);
+  ASSERT_GE(active_dem.size(), 10u) << "the patch never simulated";
+  ASSERT_GE(asleep_dem.size(), 10u) << "the patch did not fall asleep within " << frames << " frames";
+  EXPECT_GT(median(active_dem), 0.0);
+  EXPECT_LT(median(asleep_dem), 0.1 * median(active_dem))
+      << "asleep " << median(asleep_dem) << " ms vs active " << median(active_dem) << " ms of DEM a frame";
 }

@@ -12,6 +12,7 @@
 #include "heightfield/procedural.hpp"
 #include "manager/bullet_world.hpp"
 #include "manager/terrain_manager.hpp"
+#include "tests/manager/terrain_fixtures.hpp"
 
 using namespace sandpatch;
 
@@ -19,15 +20,7 @@ using namespace sandpatch;
 // comes to rest in them, and after demotion the exported heightfield has a crater under it
 // and a rim around it; the volume ledger closes within 2 %.
 TEST(TerrainManager, BarrelLeavesCraterAndRim) {
-  HeightfieldDef g;
-  g.samples_x = g.samples_z = 81;
-  g.spacing = 0.1f;
-  ProceduralHeightsDef p;
-  p.kind = "flat";
-  p.height = 1.0f;
-  auto hfr = make_procedural(g, p);
-  ASSERT_TRUE(hfr.ok());
-  Heightfield hf = std::move(*hfr);
+  Heightfield hf = test::terrain_8m("flat");
   const Heightfield original = hf;
   auto world = BulletWorld::create(hf, {0, -9.81f, 0});
   ASSERT_TRUE(world.ok());
@@ -97,15 +90,7 @@ TEST(TerrainManager, BarrelLeavesCraterAndRim) {
 // meanwhile (at rest at surface + radius); every patch sleeps and is demoted after the idle
 // timeout, the queue drains, and no request is dropped.
 TEST(TerrainManager, PoolExhaustionQueueDrains) {
-  HeightfieldDef g;
-  g.samples_x = g.samples_z = 81;
-  g.spacing = 0.1f;
-  ProceduralHeightsDef p;
-  p.kind = "flat";
-  p.height = 1.0f;
-  auto hfr = make_procedural(g, p);
-  ASSERT_TRUE(hfr.ok());
-  Heightfield hf = std::move(*hfr);
+  Heightfield hf = test::terrain_8m("flat");
   auto world = BulletWorld::create(hf, {0, -9.81f, 0});
   ASSERT_TRUE(world.ok());
   std::vector<RigidBodyId> ids;
@@ -160,4 +145,59 @@ TEST(TerrainManager, PoolExhaustionQueueDrains) {
     EXPECT_LT(st.linear_velocity.norm(), 0.05f);
   }
   std::printf("pool of 1: %d promotions, %d demotions, peak queue %d, drained at t = %.2f s\n", promoted, demoted, peak_queue, t);
+}
+
+// A body driven across a patch's edge (issue 5; Leach & Marais left it open): a sphere
+// resting in the sand is pushed sideways at 0.4 m/s for 3 s, 1.2 m, past the edge of the
+// patch it landed on. The patch grows under it (demoted and promoted again around both, in
+// the same frame), so the sphere stays on particles in every frame, and the volume ledger
+// of all patches closes.
+TEST(TerrainManager, BodyDrivenAcrossPatchEdgeStaysOnParticles) {
+  Heightfield hf = test::terrain_8m("flat");
+  auto world = BulletWorld::create(hf, {0, -9.81f, 0});
+  ASSERT_TRUE(world.ok());
+  RigidBodyDef b;
+  b.shape.kind = RigidShapeKind::Sphere;
+  b.shape.radius = 0.1f;
+  b.mass = 5.0f;
+  b.position = {3.0, 1.25, 4.0};
+  auto id = (*world)->add_body(b);
+  ASSERT_TRUE(id.ok());
+  TerrainManagerDef def;
+  def.material.radius = 0.025f;
+  def.material.stiffness = 2.0e4f;
+  def.slots = 1;
+  def.granules_per_slot = 12000;
+  def.patch_depth = 0.2;
+  def.depth_resolution = 256;
+  def.use_gl = false;
+  def.lod.apron = 0.2;
+  auto m = TerrainManager::create(def, hf, **world);
+  ASSERT_TRUE(m.ok()) << m.message();
+  Profile prof;
+  const double dt = 1.0 / 60.0;
+  double t = 0;
+  int off_particles = 0, driven = 0;
+  for (int f = 0; f < 240; ++f, t += dt) {
+    if (t >= 1.0) {  // landed and settled: drive it
+      BodyState st = (*world)->state(*id);
+      st.linear_velocity = {0.4f, st.linear_velocity.y(), 0.0f};
+      (*world)->set_state(*id, st);
+      ++driven;
+      off_particles += (*world)->terrain_collision(*id);
+    }
+    auto s = (*m)->before_bodies(t, dt, prof);
+    ASSERT_TRUE(s.ok()) << s.message();
+    (*world)->step(float(dt));
+    ASSERT_TRUE((*m)->after_bodies(t, dt, prof).ok());
+  }
+  const BodyState st = (*world)->state(*id);
+  EXPECT_GT(st.position.x(), 3.0 + 0.8) << "the sphere was driven past the first patch's edge";
+  EXPECT_EQ(off_particles, 0) << "frames the sphere spent on the heightfield instead of particles, of " << driven;
+  ASSERT_TRUE((*m)->demote_all(t, prof).ok());
+  const auto rep = (*m)->report();
+  EXPECT_GE(rep["pool"]["extensions"].get<int>(), 1);
+  EXPECT_LT(std::abs(rep["ledger"]["total"]["error_pct"].get<double>()), 3.0) << rep["ledger"].dump(2);
+  std::printf("driven: x %.2f m, %d extensions, %d of %d frames off particles, ledger %.2f %%\n", st.position.x(),
+              rep["pool"]["extensions"].get<int>(), off_particles, driven, rep["ledger"]["total"]["error_pct"].get<double>());
 }

@@ -11,25 +11,14 @@
 #include "manager/bullet_world.hpp"
 #include "manager/depth_conversion.hpp"
 #include "manager/terrain_manager.hpp"
+#include "tests/manager/terrain_fixtures.hpp"
 
 using namespace sandpatch;
 
 namespace {
 
 // Gentle hills: 8 m x 8 m at 0.1 m spacing, ±5 cm over a 4 m period.
-Heightfield hills() {
-  HeightfieldDef g;
-  g.samples_x = g.samples_z = 81;
-  g.spacing = 0.1f;
-  ProceduralHeightsDef p;
-  p.kind = "hills";
-  p.height = 1.0f;
-  p.amplitude = 0.05f;
-  p.wavelength = 4.0f;
-  auto hf = make_procedural(g, p);
-  EXPECT_TRUE(hf.ok()) << (hf.ok() ? "" : hf.message());
-  return std::move(*hf);
-}
+Heightfield hills() { return test::terrain_8m("hills"); }
 
 TerrainManagerDef small_def() {
   TerrainManagerDef d;
@@ -209,15 +198,7 @@ TEST(TerrainManager, UntouchedPatchFallsAsleep) {
 // rest while the patch sleeps (Bullet gets its weight back as the support force). Before,
 // the shell's state was set from Bullet every frame, which woke the patch each time.
 TEST(TerrainManager, PatchWithRestingBodyFallsAsleep) {
-  HeightfieldDef g;
-  g.samples_x = g.samples_z = 81;
-  g.spacing = 0.1f;
-  ProceduralHeightsDef p;
-  p.kind = "flat";
-  p.height = 1.0f;
-  auto hfr = make_procedural(g, p);
-  ASSERT_TRUE(hfr.ok());
-  Heightfield hf = std::move(*hfr);
+  Heightfield hf = test::terrain_8m("flat");
   auto world = BulletWorld::create(hf, {0, -9.81f, 0});
   ASSERT_TRUE(world.ok());
   RigidBodyDef b;
