@@ -461,7 +461,9 @@ Status Terrain::remove_body(BodyHandle h) {
   Impl& I = *impl_;
   if (Status s = I.check(h); !s) return s;
   const core::RigidBodyId id = I.id(h);
-  if (!I.manager) {
+  // An adopted body goes back to the game now, as it is: the patch that carries it sees it
+  // gone from the world in the next dem stage and disables its shell there.
+  if (!I.manager || I.world->adopted(id)) {
     I.world->remove_body(id);
     return Ok{};
   }
@@ -472,6 +474,33 @@ Status Terrain::remove_body(BodyHandle h) {
   I.world->set_state(id, st);
   I.removing.push_back(id);
   return Ok{};
+}
+
+Result<BodyHandle> Terrain::adopt_bullet_body(void* bt_rigid_body, const std::string& name, const BulletAbi& abi) {
+  Impl& I = *impl_;
+  BulletAbi lib;
+  core::BulletWorld::bullet_abi(&lib.scalar_bytes, &lib.version, &lib.rigid_body_bytes);
+  if (abi.scalar_bytes != lib.scalar_bytes || abi.version != lib.version || abi.rigid_body_bytes != lib.rigid_body_bytes) {
+    auto str = [](const BulletAbi& a) {
+      return "btScalar " + std::to_string(a.scalar_bytes) + " bytes, Bullet " + std::to_string(a.version) + ", btRigidBody " +
+             std::to_string(a.rigid_body_bytes) + " bytes";
+    };
+    return Error{"", "btRigidBody.abi", str(abi), "the Bullet libsandpatch was built with: " + str(lib)};
+  }
+  auto id = I.world->adopt_body(static_cast<btRigidBody*>(bt_rigid_body), name);
+  if (!id) return convert(id.errors(), "");
+  // As add_body: the body's lowest point must start at or above the bedrock.
+  const core::BodyState st = I.world->state(*id);
+  Eigen::Vector3d lo, hi;
+  I.world->bounds(*id, &lo, &hi);
+  const double bedrock = height_at(st.position.x(), st.position.z()) - I.def.soil_depth;
+  if (lo.y() < bedrock) {
+    I.world->remove_body(*id);  // given back unchanged
+    return Error{"", "btRigidBody.position", vec_str({st.position.x(), st.position.y(), st.position.z()}),
+                 "the body's lowest point must start at or above the bedrock (world y = " + num(bedrock) + " m here)",
+                 "its lowest point is at y = " + num(lo.y()) + " m" + (name.empty() ? "" : " (body '" + name + "')")};
+  }
+  return BodyHandle{id->index, id->generation};
 }
 
 bool Terrain::alive(BodyHandle h) const { return impl_->check(h).ok(); }

@@ -10,6 +10,8 @@
 
 #include <omp.h>
 
+#include <time.h>
+
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -19,7 +21,28 @@
 #include "particles/bed.hpp"
 #include "particles/dem.hpp"
 
+// Under `valgrind --tool=callgrind` the timed loop is dumped on its own (instruction counts
+// that do not depend on the machine's load); a no-op otherwise, and absent without the header.
+#if __has_include(<valgrind/callgrind.h>)
+#include <valgrind/callgrind.h>
+#define SP_CALLGRIND_ZERO() CALLGRIND_ZERO_STATS
+#define SP_CALLGRIND_DUMP(name) CALLGRIND_DUMP_STATS_AT(name)
+#else
+#define SP_CALLGRIND_ZERO() ((void)0)
+#define SP_CALLGRIND_DUMP(name) ((void)0)
+#endif
+
 namespace sandpatch {
+
+namespace {
+// CPU seconds used by the whole process (all threads) so far: with the wall time it tells a
+// loaded machine (cpu < threads x wall) from a slow step.
+double process_cpu_seconds() {
+  timespec t{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
+  return double(t.tv_sec) + 1e-9 * double(t.tv_nsec);
+}
+}  // namespace
 
 int run_bench_dem(const BenchDemArgs& a) {
   if (a.granules < 1 || a.granules > 4000000) {
@@ -98,6 +121,8 @@ int run_bench_dem(const BenchDemArgs& a) {
 
   // timed
   std::int64_t contacts = 0, wall_contacts = 0, resorts = 0, entries = 0;
+  SP_CALLGRIND_ZERO();
+  const double cpu0 = process_cpu_seconds();
   t0 = std::chrono::steady_clock::now();
   for (int k = 0; k < a.steps; ++k) {
     if (auto st = sim->step(dt); !st) {
@@ -110,11 +135,18 @@ int run_bench_dem(const BenchDemArgs& a) {
     entries += sim->last_step().neighbour_entries;
   }
   double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  const double cpu = process_cpu_seconds() - cpu0;
+  SP_CALLGRIND_DUMP("bench dem timed loop");
+  // CPU nanoseconds per sphere-step: the cost of the work whatever the load (with 1 thread;
+  // with more it also holds the time threads spin at barriers)
+  const double cpu_ns = 1e9 * cpu / (double(spheres) * a.steps);
   double ssps = double(spheres) * a.steps / wall;
   double cps = 2.0 * double(contacts) / a.steps / spheres;  // sphere-sphere contacts per sphere
   if (!a.json) {
     std::printf("timed: %d steps in %.3f s: %.3g sphere-steps/s (%.2f ms/step)\n", a.steps, wall, ssps,
                 1e3 * wall / a.steps);
+    std::printf("cpu: %.3f s of CPU for %.3f s of wall (%.2f cores busy of %d threads), %.1f CPU ns per sphere-step\n",
+                cpu, wall, cpu / wall, threads, cpu_ns);
     std::printf("contacts per sphere %.2f (sphere-sphere, other bodies), wall contacts per sphere %.3f, "
                 "grid rebuilds %lld, max granule speed %.4f m/s\n",
                 cps, double(wall_contacts) / a.steps / spheres, (long long)resorts, sim->max_granule_speed());
@@ -129,6 +161,8 @@ int run_bench_dem(const BenchDemArgs& a) {
                       {"dt", dt},
                       {"threads", threads},
                       {"wall_seconds", wall},
+                      {"cpu_seconds", cpu},
+                      {"cpu_ns_per_sphere_step", cpu_ns},
                       {"sphere_steps_per_s", ssps},
                       {"contacts_per_sphere", cps},
                       {"list_entries_per_sphere", double(entries) / a.steps / spheres},

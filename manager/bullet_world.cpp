@@ -4,11 +4,13 @@
 #include <BulletCollision/CollisionDispatch/btInternalEdgeUtility.h>
 #include <BulletCollision/CollisionShapes/btHeightfieldTerrainShape.h>
 #include <BulletCollision/CollisionShapes/btTriangleInfoMap.h>
+#include <LinearMath/btConvexHullComputer.h>
 #include <btBulletDynamicsCommon.h>
 
 #include <cmath>
 
 #include "heightfield/heightfield.hpp"
+#include "scene/mesh.hpp"
 
 namespace sandpatch {
 namespace {
@@ -62,10 +64,46 @@ struct BulletWorld::Impl {
     std::unique_ptr<btCollisionShape> shape;
     std::unique_ptr<btTriangleMesh> mesh;  // mesh bodies keep their triangles alive
     std::unique_ptr<btDefaultMotionState> motion;
-    std::unique_ptr<btRigidBody> body;
+    std::unique_ptr<btRigidBody> body;     // null for an adopted body
+    btRigidBody* rb = nullptr;             // the body Bullet steps: body.get(), or the game's
+    // Adopted bodies (adopt_body): what release() gives back to the game.
+    bool adopted = false;
+    btVector3 game_gravity{0, 0, 0};       // m/s², the body's own gravity before it joined
   };
   std::vector<Body> bodies;
   std::vector<int> free_slots;
+
+  // A body into a free slot (generation bumped) or a new one.
+  RigidBodyId insert(Body&& b) {
+    int index;
+    if (!free_slots.empty()) {
+      index = free_slots.back();
+      free_slots.pop_back();
+      b.generation = bodies[index].generation + 1;
+      bodies[index] = std::move(b);
+    } else {
+      index = int(bodies.size());
+      bodies.push_back(std::move(b));
+    }
+    return RigidBodyId{index, bodies[index].generation};
+  }
+
+  // Moves a body's transforms by `d` (m): world transform, interpolation and motion state.
+  static void shift(btRigidBody& rb, const btVector3& d) {
+    btTransform tr = rb.getWorldTransform();
+    tr.setOrigin(tr.getOrigin() + d);
+    rb.setWorldTransform(tr);
+    btTransform it = rb.getInterpolationWorldTransform();
+    it.setOrigin(it.getOrigin() + d);
+    rb.setInterpolationWorldTransform(it);
+    if (rb.getMotionState()) rb.getMotionState()->setWorldTransform(tr);
+  }
+
+  // An adopted body, already out of the world, back in the game's frame with its own gravity.
+  void give_back(Body& b) {
+    shift(*b.rb, btVector3(float(origin.x()), float(origin.y()), float(origin.z())));
+    b.rb->setGravity(b.game_gravity);
+  }
 
   void build_tile(Tile& t) {
     const Heightfield& hf = *terrain;
@@ -134,7 +172,10 @@ Result<std::unique_ptr<BulletWorld>> BulletWorld::create(const Heightfield& terr
 BulletWorld::~BulletWorld() {
   if (!impl_) return;
   for (auto& b : impl_->bodies)
-    if (b.body) impl_->world->removeRigidBody(b.body.get());
+    if (b.rb) {
+      impl_->world->removeRigidBody(b.rb);
+      if (b.adopted) impl_->give_back(b);
+    }
   for (auto& t : impl_->tiles) impl_->world->removeCollisionObject(t.object.get());
 }
 
@@ -165,6 +206,17 @@ Result<RigidBodyId> BulletWorld::add_body(const RigidBodyDef& def) {
   }
   btVector3 inertia(0, 0, 0);
   b.shape->calculateLocalInertia(def.mass, inertia);
+  if (s.kind == RigidShapeKind::Mesh) {
+    // Bullet's hull inertia is its bounding box's (a tessellated sphere would get 2/3 m R²
+    // instead of 2/5 m R²): use the closed mesh's exact tensor (scene/mesh.hpp), whose
+    // diagonal in the mesh axes is the body's principal inertia when those axes are principal
+    // (symmetric meshes; docs/manager.md "Mesh shells").
+    TriangleMesh tm;
+    tm.vertices = s.vertices;
+    tm.triangles = s.triangles;
+    const Eigen::Vector3d d = tm.inertia(def.mass).diagonal();
+    if (d.allFinite() && d.minCoeff() > 0) inertia = btVector3(float(d.x()), float(d.y()), float(d.z()));
+  }
   btTransform tr;
   tr.setIdentity();
   const Eigen::Vector3d local = def.position - m.origin;
@@ -186,31 +238,131 @@ Result<RigidBodyId> BulletWorld::add_body(const RigidBodyDef& def) {
   const float min_extent = (hi - lo).minAxis() >= 0 ? (hi - lo)[(hi - lo).minAxis()] : 0.1f;
   b.body->setCcdMotionThreshold(0.05f * min_extent);
   b.body->setCcdSweptSphereRadius(0.5f * min_extent);
-  m.world->addRigidBody(b.body.get(), Impl::kGroupBody, Impl::kGroupBody | Impl::kGroupTerrain);
+  b.rb = b.body.get();
+  m.world->addRigidBody(b.rb, Impl::kGroupBody, Impl::kGroupBody | Impl::kGroupTerrain);
   b.def = def;
-
-  int index;
-  if (!m.free_slots.empty()) {
-    index = m.free_slots.back();
-    m.free_slots.pop_back();
-    b.generation = m.bodies[index].generation + 1;
-    m.bodies[index] = std::move(b);
-  } else {
-    index = int(m.bodies.size());
-    m.bodies.push_back(std::move(b));
-  }
-  return RigidBodyId{index, m.bodies[index].generation};
+  return m.insert(std::move(b));
 }
 
+namespace {
+
+// The RigidShape of a game's Bullet shape (for shells); the mapping of include/sandpatch/bullet.hpp.
+Result<RigidShape> shape_of(const btCollisionShape* shape) {
+  RigidShape r;
+  if (!shape) return Error{"", "btRigidBody.shape", "null", "the body needs a collision shape"};
+  const btVector3 scale = shape->getLocalScaling();
+  switch (shape->getShapeType()) {
+    case SPHERE_SHAPE_PROXYTYPE:
+      r.kind = RigidShapeKind::Sphere;
+      r.radius = static_cast<const btSphereShape*>(shape)->getRadius();
+      return r;
+    case BOX_SHAPE_PROXYTYPE:
+      r.kind = RigidShapeKind::Box;
+      r.half_extents = eig(static_cast<const btBoxShape*>(shape)->getHalfExtentsWithMargin());
+      return r;
+    case CYLINDER_SHAPE_PROXYTYPE: {
+      const auto* c = static_cast<const btCylinderShape*>(shape);
+      if (c->getUpAxis() != 1) break;
+      r.kind = RigidShapeKind::Cylinder;
+      r.radius = c->getHalfExtentsWithMargin().x();
+      r.height = 2 * c->getHalfExtentsWithMargin().y();
+      return r;
+    }
+    case CAPSULE_SHAPE_PROXYTYPE: {
+      const auto* c = static_cast<const btCapsuleShape*>(shape);
+      if (c->getUpAxis() != 1) break;
+      r.kind = RigidShapeKind::Capsule;
+      r.radius = c->getRadius();
+      r.height = 2 * c->getHalfHeight();
+      return r;
+    }
+    case CONVEX_HULL_SHAPE_PROXYTYPE: {
+      // The hull's faces (btConvexHullComputer: convex polygons, fanned into triangles), in the
+      // body frame as Bullet has it (the game's centre of mass at the origin).
+      const auto* hull = static_cast<const btConvexHullShape*>(shape);
+      btConvexHullComputer ch;
+      const btVector3* pts = hull->getUnscaledPoints();
+      if (ch.compute(&pts[0].getX(), sizeof(btVector3), hull->getNumPoints(), 0, 0) < 0 || ch.faces.size() < 4)
+        return Error{"", "btRigidBody.shape", "convex hull of " + std::to_string(hull->getNumPoints()) + " points",
+                     "the hull must enclose a volume"};
+      r.kind = RigidShapeKind::Mesh;
+      for (int k = 0; k < ch.vertices.size(); ++k) r.vertices.push_back(eig(ch.vertices[k] * scale));
+      for (int f = 0; f < ch.faces.size(); ++f) {
+        const btConvexHullComputer::Edge* first = &ch.edges[ch.faces[f]];
+        const int v0 = first->getSourceVertex();
+        const btConvexHullComputer::Edge* e = first->getNextEdgeOfFace();
+        for (const btConvexHullComputer::Edge* n = e->getNextEdgeOfFace(); n != first; e = n, n = n->getNextEdgeOfFace())
+          r.triangles.push_back({v0, e->getSourceVertex(), n->getSourceVertex()});
+      }
+      return r;
+    }
+    default: break;
+  }
+  return Error{"", "btRigidBody.shape", shape->getName(),
+               "must be a btSphereShape, btBoxShape, btCylinderShape or btCapsuleShape (axis on y) or a btConvexHullShape"};
+}
+
+}  // namespace
+
+Result<RigidBodyId> BulletWorld::adopt_body(btRigidBody* rb, const std::string& name) {
+  auto& m = *impl_;
+  if (!rb) return Error{"", "btRigidBody", "null", "a body to adopt"};
+  if (rb->getBroadphaseHandle())
+    return Error{"", "btRigidBody", name.empty() ? "(unnamed)" : name,
+                 "must not be in a Bullet world (remove it from the game's world before handing it over)"};
+  for (const auto& b : m.bodies)
+    if (b.rb == rb) return Error{"", "btRigidBody", name.empty() ? "(unnamed)" : name, "is already in this terrain"};
+  if (!(rb->getInvMass() > 0))
+    return Error{"", "btRigidBody.mass", "0 (static)", "only dynamic bodies (inverse mass > 0) can be handed over"};
+  auto shape = shape_of(rb->getCollisionShape());
+  if (!shape) return shape.errors();
+  Impl::Body b;
+  b.rb = rb;
+  b.adopted = true;
+  b.game_gravity = rb->getGravity();
+  // The definition the rest of Sandpatch reads (shells, bounds, names); Bullet keeps the
+  // game's own inertia, damping, CCD and flags.
+  RigidBodyDef& d = b.def;
+  d.name = name;
+  d.shape = std::move(*shape);
+  d.mass = 1.0f / rb->getInvMass();
+  d.friction = rb->getFriction();
+  d.restitution = rb->getRestitution();
+  d.rolling_friction = rb->getRollingFriction();
+  const btTransform& tr = rb->getWorldTransform();
+  d.position = eig(tr.getOrigin()).cast<double>();
+  const btQuaternion q = tr.getRotation();
+  d.orientation = Eigen::Quaternionf(q.w(), q.x(), q.y(), q.z());
+  d.linear_velocity = eig(rb->getLinearVelocity());
+  d.angular_velocity = eig(rb->getAngularVelocity());
+  // Bullet runs relative to the terrain origin (the precision boundary): the body moves into
+  // that frame while Sandpatch has it, and back when it is given back.
+  Impl::shift(*rb, -btVector3(float(m.origin.x()), float(m.origin.y()), float(m.origin.z())));
+  m.world->addRigidBody(rb, Impl::kGroupBody, Impl::kGroupBody | Impl::kGroupTerrain);  // sets the world's gravity
+  rb->activate(true);
+  return m.insert(std::move(b));
+}
+
+void BulletWorld::bullet_abi(int* scalar_bytes, int* version, std::size_t* rigid_body_bytes) {
+  *scalar_bytes = int(sizeof(btScalar));
+  *version = BT_BULLET_VERSION;
+  *rigid_body_bytes = sizeof(btRigidBody);
+}
+
+bool BulletWorld::adopted(RigidBodyId id) const { return alive(id) && impl_->bodies[id.index].adopted; }
+
 bool BulletWorld::alive(RigidBodyId id) const {
-  return id.index >= 0 && id.index < int(impl_->bodies.size()) && impl_->bodies[id.index].body &&
+  return id.index >= 0 && id.index < int(impl_->bodies.size()) && impl_->bodies[id.index].rb &&
          impl_->bodies[id.index].generation == id.generation;
 }
 
 void BulletWorld::remove_body(RigidBodyId id) {
   assert(alive(id));
   auto& b = impl_->bodies[id.index];
-  impl_->world->removeRigidBody(b.body.get());
+  impl_->world->removeRigidBody(b.rb);
+  if (b.adopted) impl_->give_back(b);
+  b.rb = nullptr;
+  b.adopted = false;
   b.body.reset();
   b.motion.reset();
   b.shape.reset();
@@ -220,7 +372,7 @@ void BulletWorld::remove_body(RigidBodyId id) {
 
 BodyState BulletWorld::state(RigidBodyId id) const {
   assert(alive(id));
-  const btRigidBody& rb = *impl_->bodies[id.index].body;
+  const btRigidBody& rb = *impl_->bodies[id.index].rb;
   const btTransform& tr = rb.getWorldTransform();
   const btQuaternion q = tr.getRotation();
   BodyState s;
@@ -234,7 +386,7 @@ BodyState BulletWorld::state(RigidBodyId id) const {
 void BulletWorld::bounds(RigidBodyId id, Eigen::Vector3d* lo, Eigen::Vector3d* hi) const {
   assert(alive(id));
   btVector3 a, b;
-  impl_->bodies[id.index].body->getAabb(a, b);
+  impl_->bodies[id.index].rb->getAabb(a, b);
   *lo = impl_->origin + eig(a).cast<double>();
   *hi = impl_->origin + eig(b).cast<double>();
 }
@@ -242,7 +394,7 @@ void BulletWorld::bounds(RigidBodyId id, Eigen::Vector3d* lo, Eigen::Vector3d* h
 std::vector<RigidBodyId> BulletWorld::bodies() const {
   std::vector<RigidBodyId> out;
   for (int i = 0; i < int(impl_->bodies.size()); ++i)
-    if (impl_->bodies[i].body) out.push_back({i, impl_->bodies[i].generation});
+    if (impl_->bodies[i].rb) out.push_back({i, impl_->bodies[i].generation});
   return out;
 }
 
@@ -269,7 +421,7 @@ int BulletWorld::terrain_tile_count() const { return int(impl_->tiles.size()); }
 
 void BulletWorld::apply_force(RigidBodyId id, const Eigen::Vector3f& force, const Eigen::Vector3f& torque) {
   assert(alive(id));
-  btRigidBody& rb = *impl_->bodies[id.index].body;
+  btRigidBody& rb = *impl_->bodies[id.index].rb;
   rb.applyCentralForce(bt(force));
   rb.applyTorque(bt(torque));
   rb.activate(true);
@@ -281,10 +433,10 @@ void BulletWorld::set_terrain_collision(RigidBodyId id, bool enabled) {
   if (b.terrain == enabled) return;
   b.terrain = enabled;
   // Re-adding the body is Bullet's way to change its filter and drop its cached pairs.
-  impl_->world->removeRigidBody(b.body.get());
-  impl_->world->addRigidBody(b.body.get(), Impl::kGroupBody,
+  impl_->world->removeRigidBody(b.rb);
+  impl_->world->addRigidBody(b.rb, Impl::kGroupBody,
                              enabled ? (Impl::kGroupBody | Impl::kGroupTerrain) : Impl::kGroupBody);
-  b.body->activate(true);
+  b.rb->activate(true);
 }
 
 bool BulletWorld::terrain_collision(RigidBodyId id) const {
@@ -294,13 +446,13 @@ bool BulletWorld::terrain_collision(RigidBodyId id) const {
 
 float BulletWorld::mass(RigidBodyId id) const {
   assert(alive(id));
-  const float inv = impl_->bodies[id.index].body->getInvMass();
+  const float inv = impl_->bodies[id.index].rb->getInvMass();
   return inv > 0 ? 1.0f / inv : 0.0f;
 }
 
 Eigen::Vector3f BulletWorld::principal_inertia(RigidBodyId id) const {
   assert(alive(id));
-  const btVector3 inv = impl_->bodies[id.index].body->getInvInertiaDiagLocal();
+  const btVector3 inv = impl_->bodies[id.index].rb->getInvInertiaDiagLocal();
   return {inv.x() > 0 ? 1.0f / inv.x() : 0.0f, inv.y() > 0 ? 1.0f / inv.y() : 0.0f,
           inv.z() > 0 ? 1.0f / inv.z() : 0.0f};
 }
@@ -312,14 +464,14 @@ const RigidBodyDef& BulletWorld::definition(RigidBodyId id) const {
 
 void BulletWorld::set_state(RigidBodyId id, const BodyState& s) {
   assert(alive(id));
-  btRigidBody& rb = *impl_->bodies[id.index].body;
+  btRigidBody& rb = *impl_->bodies[id.index].rb;
   btTransform tr;
   const Eigen::Vector3d local = s.position - impl_->origin;
   tr.setOrigin(btVector3(float(local.x()), float(local.y()), float(local.z())));
   const Eigen::Quaternionf q = s.orientation.normalized();
   tr.setRotation(btQuaternion(q.x(), q.y(), q.z(), q.w()));
   rb.setWorldTransform(tr);
-  rb.getMotionState()->setWorldTransform(tr);
+  if (rb.getMotionState()) rb.getMotionState()->setWorldTransform(tr);
   rb.setLinearVelocity(bt(s.linear_velocity));
   rb.setAngularVelocity(bt(s.angular_velocity));
   rb.activate(true);

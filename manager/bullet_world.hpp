@@ -17,6 +17,8 @@
 
 #include "common/error.hpp"
 
+class btRigidBody;
+
 namespace sandpatch {
 
 class Heightfield;
@@ -70,6 +72,20 @@ class BulletWorld {
   BulletWorld& operator=(const BulletWorld&) = delete;
 
   Result<RigidBodyId> add_body(const RigidBodyDef& def);
+  // Adopts a dynamic btRigidBody the caller owns (with its shape and motion state), in place:
+  // this world steps that very object. It must not be in another Bullet world. Its transform
+  // moves into this world's frame (world − terrain origin) while adopted; gravity becomes this
+  // world's; inertia, damping, CCD, flags and user pointers stay the game's. Shapes: sphere,
+  // box, y-axis cylinder and capsule, convex hull (the shell's RigidShape comes from them).
+  // Errors name btRigidBody, btRigidBody.mass or btRigidBody.shape.
+  Result<RigidBodyId> adopt_body(btRigidBody* body, const std::string& name);
+  bool adopted(RigidBodyId id) const;
+  // The Bullet this library was built with: sizeof(btScalar), BT_BULLET_VERSION,
+  // sizeof(btRigidBody) (a caller handing over its own btRigidBody must match them).
+  static void bullet_abi(int* scalar_bytes, int* version, std::size_t* rigid_body_bytes);
+  // Owned bodies are destroyed; adopted ones are given back: out of this world, transform back
+  // in world coordinates, the game's gravity restored; the object is not touched otherwise.
+  // The destructor gives back every adopted body the same way.
   void remove_body(RigidBodyId id);
   bool alive(RigidBodyId id) const;
   BodyState state(RigidBodyId id) const;

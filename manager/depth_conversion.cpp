@@ -32,6 +32,28 @@ float HeightImage::box_mean(float x, float z, float hx, float hz) const {
   return float(sum / double((u1 - u0 + 1) * (v1 - v0 + 1)));
 }
 
+float HeightImage::hat_mean(float x, float z, float sp) const {
+  const float du = (x1 - x0) / float(width), dv = (z1 - z0) / float(height);
+  // Texels with centres strictly inside (x − sp, x + sp) × (z − sp, z + sp).
+  const int u0 = std::max(0, int(std::floor((x - sp - x0) / du - 0.5f)) + 1);
+  const int u1 = std::min(width - 1, int(std::ceil((x + sp - x0) / du - 0.5f)) - 1);
+  const int v0 = std::max(0, int(std::floor((z - sp - z0) / dv - 0.5f)) + 1);
+  const int v1 = std::min(height - 1, int(std::ceil((z + sp - z0) / dv - 0.5f)) - 1);
+  double sum = 0, wsum = 0;
+  for (int v = v0; v <= v1; ++v) {
+    const double wz = 1.0 - std::abs(double(z0) + (v + 0.5) * dv - z) / sp;
+    if (wz <= 0) continue;
+    for (int u = u0; u <= u1; ++u) {
+      const double w = wz * (1.0 - std::abs(double(x0) + (u + 0.5) * du - x) / sp);
+      if (w <= 0) continue;
+      sum += w * at(u, v);
+      wsum += w;
+    }
+  }
+  if (wsum <= 0) return box_mean(x, z, 0.5f * sp, 0.5f * sp);  // hat narrower than a texel: nearest
+  return float(sum / wsum);
+}
+
 Result<std::unique_ptr<ParticleDepthRenderer>> ParticleDepthRenderer::create(const DepthConversionDef& def) {
   if (def.resolution < 16 || def.resolution > 8192) {
     return Error{"", "depth_conversion.resolution", std::to_string(def.resolution), "must be in [16, 8192] texels"};
@@ -151,14 +173,42 @@ void lower_by_probe(HeightImage& image, float floor_y, float probe) {
     if (h > floor_y) h = std::max(floor_y, h - probe);
 }
 
-void write_to_heightfield(const HeightImage& image, GridRegion r, Heightfield& hf, int border_width) {
+void write_to_heightfield(const HeightImage& image, GridRegion r, Heightfield& hf, int border_width,
+                          const RenderBaseline* base) {
   const float sp = hf.spacing();
-  std::vector<float> h(std::size_t(r.ni) * r.nj);
-  for (int j = 0; j < r.nj; ++j)
-    for (int i = 0; i < r.ni; ++i)
-      h[std::size_t(j) * r.ni + i] = image.box_mean(float(r.i0 + i) * sp, float(r.j0 + j) * sp, 0.5f * sp, 0.5f * sp);
-  hf.write(r, h.data());
-  gaussian3x3(hf, r);
+  const std::size_t n = std::size_t(r.ni) * r.nj;
+  auto samples = [&](const HeightImage& img) {
+    std::vector<float> h(n);
+    for (int j = 0; j < r.nj; ++j)
+      for (int i = 0; i < r.ni; ++i) h[std::size_t(j) * r.ni + i] = img.hat_mean(float(r.i0 + i) * sp, float(r.j0 + j) * sp, sp);
+    return h;
+  };
+  const std::vector<float> p = samples(image);
+  hf.write(r, p.data());
+  if (base && base->image && base->heights && base->heights->size() == n) {
+    std::vector<float> a = gaussian3x3_values(hf, r);
+    const std::vector<float> p0 = samples(*base->image);
+    // G(P − P₀) with the change zero outside the region: [1 2 1]/4 along x, then along z.
+    std::vector<float> d(n), dx(n), gd(n);
+    for (std::size_t k = 0; k < n; ++k) d[k] = p[k] - p0[k] - base->rise;
+    auto at = [&](const std::vector<float>& v, int i, int j) {
+      return i < 0 || j < 0 || i >= r.ni || j >= r.nj ? 0.0f : v[std::size_t(j) * r.ni + i];
+    };
+    for (int j = 0; j < r.nj; ++j)
+      for (int i = 0; i < r.ni; ++i)
+        dx[std::size_t(j) * r.ni + i] = 0.25f * (at(d, i - 1, j) + 2.0f * at(d, i, j) + at(d, i + 1, j));
+    for (int j = 0; j < r.nj; ++j)
+      for (int i = 0; i < r.ni; ++i)
+        gd[std::size_t(j) * r.ni + i] = 0.25f * (at(dx, i, j - 1) + 2.0f * at(dx, i, j) + at(dx, i, j + 1));
+    std::vector<float> h(n);
+    for (std::size_t k = 0; k < n; ++k) {
+      const float w = base->tolerance > 0 ? std::max(0.0f, 1.0f - std::abs(gd[k]) / base->tolerance) : 0.0f;
+      h[k] = w * ((*base->heights)[k] + gd[k]) + (1.0f - w) * a[k];
+    }
+    hf.write(r, h.data());
+  } else {
+    gaussian3x3(hf, r);
+  }
   if (border_width > 0) smooth_border_band(hf, r, border_width);
 }
 

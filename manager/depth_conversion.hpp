@@ -7,7 +7,7 @@
 //    of a camera at height y_c with near n and far f:  height = y_c − n − z (f − n).
 //    The far plane is the patch floor, so a texel no particle covers reads as the floor.
 // 2. write_to_heightfield(): each heightfield sample of the region takes the mean height of
-//    the texels in its cell footprint (spacing × spacing centred on the sample), the region
+//    the texels under its bilinear hat (2 spacings wide, weights falling linearly), the region
 //    is smoothed with the 3×3 Gaussian, and then a 3×3 Gaussian band along its border
 //    stitches it into the untouched terrain around it.
 #pragma once
@@ -31,6 +31,12 @@ struct HeightImage {
   // Mean of the texels whose centres lie in [x − hx, x + hx] × [z − hz, z + hz] (at least the
   // nearest texel).
   float box_mean(float x, float z, float hx, float hz) const;
+  // Mean weighted by the bilinear "hat" of a heightfield sample at (x, z) with spacing sp:
+  // w = (1 − |x' − x|/sp)(1 − |z' − z|/sp) over the texels within sp (clipped to the image).
+  // This is the value of that sample which best fits the image with the heightfield's own
+  // bilinear surface (lumped least squares), and it averages granular roughness over 2.25×
+  // the effective area of a one-cell box.
+  float hat_mean(float x, float z, float sp) const;
 };
 
 struct DepthConversionDef {
@@ -75,8 +81,30 @@ HeightImage render_heights_cpu(const float* spheres_xyzr, std::size_t n, int res
 // constant that the fill calibrates (docs/manager.md has the measurements).
 void lower_by_probe(HeightImage& image, float floor_y, float probe);
 
-// Writes `image` into `region` of `hf` (footprint means, 3×3 Gaussian over the region,
+// What the region looked like when its patch was filled: the fill's own granules rendered
+// the same way (same rectangle, resolution and probe) and the heightfield's values then.
+// A depth render of granules misses the continuous surface they were cut to by a pattern
+// of ±0.26 d at the sample scale (whole granules are wider than a heightfield cell); where
+// the granules have not moved, the same pattern is in both renders and cancels.
+struct RenderBaseline {
+  const HeightImage* image = nullptr;          // the fill, rendered
+  const std::vector<float>* heights = nullptr; // region's heights at promotion (ni × nj, i fastest)
+  float tolerance = 0;                         // m: a smoothed change this large counts as moved
+  float rise = 0;                              // m: how far the fill's top rises at rest with nothing on it
+                                               // (the cut bed's elastic rebound, GranuleTile::rebound)
+};
+
+// Writes `image` into `region` of `hf` (hat-weighted means, 3×3 Gaussian over the region,
 // then a Gaussian band of `border_width` samples along the region's border).
-void write_to_heightfield(const HeightImage& image, GridRegion region, Heightfield& hf, int border_width = 1);
+// With a baseline, each sample blends two estimates by how far the surface moved:
+//   a = G(P)                      Leach & Marais §5.2: the rendered surface, smoothed
+//   b = h₀ + G(P − P₀ − rise)     the old height plus the smoothed change of the render
+//   h = w b + (1 − w) a,  w = max(0, 1 − |G(P − P₀ − rise)| / tolerance)
+// (P, P₀: hat means of the image and of the baseline's image; G: the 3×3 Gaussian, changes
+// taken as zero outside the region). Undisturbed ground comes back as it was, so patches
+// can come and go over the same place without roughening it; where granules moved (a
+// crater, a rim) the rendered surface is taken as Leach takes it.
+void write_to_heightfield(const HeightImage& image, GridRegion region, Heightfield& hf, int border_width = 1,
+                          const RenderBaseline* baseline = nullptr);
 
 }  // namespace sandpatch

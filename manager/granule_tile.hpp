@@ -59,11 +59,17 @@ struct GranuleTile {
   float surface_probe = 0;      // m, the probe radius the calibration used
   GranuleShape shape;
   double settle_time = 0;       // s simulated to settle
+  float rebound = 0;            // m: how far a fill's rendered top rises as the cut bed unloads (measured)
   float settled_speed = 0;      // m/s, max granule speed when captured
 };
 
 // Settles the block and calibrates the cut. Errors name the GranuleTileDef field.
 Result<GranuleTile> make_granule_tile(const GranuleTileDef& def);
+// The same, remembered for the life of the process (up to 8 definitions): terrains made
+// one after another with the same soil (a game's levels, repeated runs, tests) settle their
+// tile once. The result does not depend on `threads` (the DEM's result does not), so it is
+// not part of the key. `reused` (optional) tells whether it came from memory.
+Result<GranuleTile> shared_granule_tile(const GranuleTileDef& def, bool* reused = nullptr);
 
 // Granules filling [0, W] × [0, D] from the floor y = 0 up to surface(x, z) (m), repeated from
 // the tile; no two granules overlap (spheres closer than 1.8 r are rejected).

@@ -343,6 +343,30 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
   auto below = check_bodies_against_terrain(
       scene, [&](double x, double z) { return float(bedrock_world_height(scene, hf, x, z)); });
   if (!below.empty()) return fail(ExitCode::BadInput, "bodies", Result<Ok>(below).message());
+  // A body whose centre starts below the terrain surface is inside the terrain: Bullet's
+  // heightfield contact pushes a body along the triangle's normal from the side its centre is
+  // on, so it would be pushed down and fall for ever. Refused, naming the body and where it is
+  // (docs/extremes.md). A body only partly in the ground (centre above the surface) is pushed
+  // out by the contact. Checked against the terrain at the start, for every body (also those
+  // spawned later).
+  {
+    std::vector<Error> inside;
+    const double w = (hf.samples_x() - 1) * double(hf.spacing()), d = (hf.samples_z() - 1) * double(hf.spacing());
+    for (std::size_t i = 0; i < scene.bodies.size(); ++i) {
+      const BodyDef& b = scene.bodies[i];
+      const double x = b.pose.position[0] - hf.origin_x(), z = b.pose.position[2] - hf.origin_z();
+      if (x < 0 || z < 0 || x > w || z > d) continue;  // no terrain under it
+      const double surface = hf.origin_y() + hf.sample(float(x), float(z));
+      if (b.pose.position[1] >= surface) continue;
+      inside.push_back(Error{scene.source_path, "bodies[" + std::to_string(i) + "].pose.position",
+                             "[" + format_number(b.pose.position[0]) + ", " + format_number(b.pose.position[1]) + ", " +
+                                 format_number(b.pose.position[2]) + "]",
+                             "body '" + b.name + "' starts inside the terrain: its centre is below the surface (world y = " +
+                                 format_number(surface) + " m there); it must start at or above it",
+                             "its lowest point may touch or enter the ground, its centre may not"});
+    }
+    if (!inside.empty()) return fail(ExitCode::BadInput, "bodies", Result<Ok>(inside).message());
+  }
 
   std::vector<RigidBodyDef> body_defs;
   for (std::size_t i = 0; i < scene.bodies.size(); ++i) {
@@ -368,7 +392,10 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
   // The terrain manager (granular patches), unless the scene turns them off.
   std::unique_ptr<TerrainManager> manager;
   if (sim.granular_patches) {
-    auto m = TerrainManager::create(manager_def(scene, threads, backend), hf, world);
+    TerrainManagerDef md = manager_def(scene, threads, backend);
+    // A flat bedrock (terrain.bedrock_height) bounds the patches too (heightfield-local m).
+    if (scene.terrain.bedrock_height) md.bedrock_height = bedrock_world_height(scene, hf, 0, 0) - hf.origin_y();
+    auto m = TerrainManager::create(md, hf, world);
     if (!m) return fail(ExitCode::BadInput, "activation", m.message());
     manager = std::move(*m);
   }

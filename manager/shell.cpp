@@ -1,10 +1,14 @@
 // Body shells: see shell.hpp.
 #include "manager/shell.hpp"
 
+#include "common/hash.hpp"
+#include "manager/mesh_sdf.hpp"
+
 #include <algorithm>
 #include <cmath>
+#include <map>
+#include <mutex>
 #include <numbers>
-#include <unordered_map>
 
 namespace sandpatch {
 namespace {
@@ -66,54 +70,10 @@ void box(const Eigen::Vector3f& h, float spacing, std::vector<Eigen::Vector3f>& 
       }
 }
 
-struct CellHash {
-  std::size_t operator()(const Eigen::Vector3i& c) const {
-    return std::size_t(c.x()) * 73856093u ^ std::size_t(c.y()) * 19349663u ^ std::size_t(c.z()) * 83492791u;
-  }
-};
-struct CellEq {
-  bool operator()(const Eigen::Vector3i& a, const Eigen::Vector3i& b) const { return a == b; }
-};
-
-// Triangle surfaces on barycentric grids, then points closer than spacing/2 to an earlier
-// one are dropped (shared edges and vertices are sampled by both triangles).
-void mesh(const RigidShape& s, float spacing, std::vector<Eigen::Vector3f>& out) {
-  std::vector<Eigen::Vector3f> raw;
-  for (const auto& t : s.triangles) {
-    const Eigen::Vector3f a = s.vertices[t[0]], b = s.vertices[t[1]], c = s.vertices[t[2]];
-    const float longest = std::max({(b - a).norm(), (c - b).norm(), (a - c).norm()});
-    const int n = std::max(1, int(std::ceil(longest / spacing)));
-    for (int i = 0; i <= n; ++i)
-      for (int j = 0; i + j <= n; ++j) {
-        const float u = float(i) / float(n), v = float(j) / float(n);
-        raw.push_back(a + u * (b - a) + v * (c - a));
-      }
-  }
-  const float cell = 0.5f * spacing;
-  std::unordered_map<Eigen::Vector3i, std::vector<int>, CellHash, CellEq> grid;
-  for (const auto& p : raw) {
-    const Eigen::Vector3i c = (p / cell).array().floor().cast<int>();
-    bool near = false;
-    for (int dx = -1; dx <= 1 && !near; ++dx)
-      for (int dy = -1; dy <= 1 && !near; ++dy)
-        for (int dz = -1; dz <= 1 && !near; ++dz) {
-          auto it = grid.find(c + Eigen::Vector3i(dx, dy, dz));
-          if (it == grid.end()) continue;
-          for (int q : it->second)
-            if ((out[q] - p).squaredNorm() < cell * cell) {
-              near = true;
-              break;
-            }
-        }
-    if (near) continue;
-    grid[c].push_back(int(out.size()));
-    out.push_back(p);
-  }
-}
-
 }  // namespace
 
-Result<std::vector<Eigen::Vector3f>> sample_shell(const RigidShape& s, float spacing, int max_points) {
+Result<std::vector<Eigen::Vector3f>> sample_shell(const RigidShape& s, float spacing, float sphere_radius,
+                                                  int max_points) {
   if (!(spacing > 0) || !std::isfinite(spacing)) {
     return Error{"", "shell spacing", std::to_string(spacing), "must be finite and > 0 (m)"};
   }
@@ -131,7 +91,36 @@ Result<std::vector<Eigen::Vector3f>> sample_shell(const RigidShape& s, float spa
       fibonacci(s.radius, spacing, +1, {0, 0.5f * s.height, 0}, out);
       fibonacci(s.radius, spacing, -1, {0, -0.5f * s.height, 0}, out);
       break;
-    case RigidShapeKind::Mesh: mesh(s, spacing, out); break;
+    case RigidShapeKind::Mesh: {
+      // The SDF is the expensive part (Leach: "a pre-processing step"): a mesh body re-entering
+      // patches, or many bodies of one mesh, reuse the shell of the same mesh, spacing and radius.
+      Hasher key;
+      key.bytes(s.vertices.data(), s.vertices.size() * sizeof(Eigen::Vector3f));
+      key.bytes(s.triangles.data(), s.triangles.size() * sizeof(std::array<int, 3>));
+      key.pod(spacing);
+      key.pod(sphere_radius);
+      static std::mutex mutex;
+      static std::map<std::uint64_t, std::vector<Eigen::Vector3f>> cache;  // at most kCached shells
+      constexpr std::size_t kCached = 32;
+      {
+        std::lock_guard<std::mutex> lock(mutex);
+        auto it = cache.find(key.value());
+        if (it != cache.end()) {
+          if (int(it->second.size()) <= max_points) return it->second;
+          out = it->second;  // over this capacity: the error below
+        }
+      }
+      if (!out.empty()) break;
+      auto sdf = MeshSdf::create(s.vertices, s.triangles);
+      if (!sdf) return sdf.errors();
+      auto pts = sample_mesh_shell(*sdf, spacing, sphere_radius, max_points);
+      if (pts) {
+        std::lock_guard<std::mutex> lock(mutex);
+        if (cache.size() >= kCached) cache.erase(cache.begin());
+        cache[key.value()] = *pts;
+      }
+      return pts;
+    }
   }
   if (int(out.size()) > max_points) {
     return Error{"", "pool.shell_particles_per_slot", std::to_string(max_points),

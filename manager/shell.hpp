@@ -9,9 +9,12 @@
 //   box      a regular grid on each face, edges and corners included once
 //   cylinder rings on the side (Δy ≈ spacing, Δθ ≈ spacing/R) + concentric rings on both caps
 //   capsule  rings on the side + Fibonacci hemispheres on the caps
-//   mesh     every triangle sampled on a barycentric grid with edge length ≈ spacing, points
-//            closer than spacing/2 to an earlier point dropped (a uniform hash grid)
-// Every point lies on the surface (to float round-off): tests/manager/shell_test.cpp.
+//   mesh     from the mesh's signed distance field (FCL distance queries, manager/mesh_sdf.hpp):
+//            centres on the offset surface sdf = −sphere_radius, so the shell spheres touch the
+//            mesh from inside (Leach §2.2 puts them on the SDF grid nodes just inside the
+//            surface), about `spacing` apart
+// Primitive points lie on the surface (to float round-off): tests/manager/shell_test.cpp;
+// mesh points at sphere_radius below it: tests/manager/mesh_sdf_test.cpp.
 #pragma once
 
 #include <Eigen/Core>
@@ -22,8 +25,11 @@
 
 namespace sandpatch {
 
-// Points on the surface of `shape` about `spacing` m apart (body frame, m). Errors when
-// spacing is not > 0 or the shell would exceed max_points (the capacity to raise is named).
-Result<std::vector<Eigen::Vector3f>> sample_shell(const RigidShape& shape, float spacing, int max_points);
+// Points on the surface of `shape` about `spacing` m apart (body frame, m); for meshes, at
+// `sphere_radius` (m, the shell spheres' radius) inside it. Errors when spacing is not > 0, the
+// shell would exceed max_points (the capacity to raise is named), or a mesh is not a closed,
+// outward-wound surface without degenerate triangles (field "shape.mesh").
+Result<std::vector<Eigen::Vector3f>> sample_shell(const RigidShape& shape, float spacing, float sphere_radius,
+                                                  int max_points);
 
 }  // namespace sandpatch

@@ -2,6 +2,7 @@
 #include "manager/terrain_manager.hpp"
 
 #include <algorithm>
+#include <unordered_set>
 #include <unordered_map>
 #include <chrono>
 #include <cmath>
@@ -82,7 +83,7 @@ struct TerrainManager::Impl {
     td.layers = tile_layers(1.1 * fill_depth);
     for (int attempt = 0; attempt < 3; ++attempt) {
       const auto t0 = Clock::now();
-      auto t = make_granule_tile(td);
+      auto t = shared_granule_tile(td);
       tiles_settled_ms += ms_since(t0);
       if (!t) return t.errors();
       if (holds(*t)) {
@@ -127,6 +128,9 @@ struct TerrainManager::Impl {
     double asleep_for = 0;     // s asleep and untouched
     double fill_ms = 0;
     std::vector<float> before_heights;  // heights of `apron` at promotion
+    std::vector<float> fill_spheres;    // the granule spheres as filled (x, y, z, r; m, heightfield-local): the
+                                        // demotion renders them too, so its render error cancels where nothing moved
+    float fill_rise = 0;                // m, the tile's elastic rebound (GranuleTile::rebound), world
     std::vector<Carried> carried;
     Ledger ledger;
     explicit Slot(std::unique_ptr<DemBackend> s) : sim(std::move(s)) {}
@@ -185,6 +189,58 @@ struct TerrainManager::Impl {
   }
 
   // ---- activation ----
+  // Floor of a patch over `region` (m, heightfield-local): patch_depth below the lowest
+  // surface sample, and never below the bedrock under any sample of the region (the DEM's
+  // floor is one plane, so it sits at the highest bedrock point: no granule below the
+  // bedrock anywhere; where the surface dips below that plane the patch has no granules and
+  // its floor holds bodies up to that much above the surface, docs/extremes.md). `lo`, `hi`:
+  // the lowest and highest surface samples. A floor at or above `hi`: no soil, no patch.
+  double floor_of(const GridRegion& region, float* lo, float* hi) const {
+    *lo = std::numeric_limits<float>::max(), *hi = -*lo;
+    double bedrock = -std::numeric_limits<double>::infinity();
+    for (int j = region.j0; j < region.j0 + region.nj; ++j)
+      for (int i = region.i0; i < region.i0 + region.ni; ++i) {
+        const float h = hf->height(i, j);
+        *lo = std::min(*lo, h);
+        *hi = std::max(*hi, h);
+        bedrock = std::max({bedrock, double(h) - def.soil_depth, std::min(double(h), def.bedrock_height)});
+      }
+    return std::max(double(*lo) - def.patch_depth, bedrock);
+  }
+  // The terrain's world rectangle.
+  PatchRequest terrain_rect() const {
+    PatchRequest t;
+    t.x0 = hf->origin_x();
+    t.z0 = hf->origin_z();
+    t.x1 = t.x0 + (hf->samples_x() - 1) * double(hf->spacing());
+    t.z1 = t.z0 + (hf->samples_z() - 1) * double(hf->spacing());
+    return t;
+  }
+  void clip_to_terrain(PatchRequest& r) const {
+    const PatchRequest t = terrain_rect();
+    r.x0 = std::max(r.x0, t.x0), r.z0 = std::max(r.z0, t.z0);
+    r.x1 = std::min(r.x1, t.x1), r.z1 = std::min(r.z1, t.z1);
+  }
+  // m: the widest square request that merging may make, so that one slot holds its patch: the
+  // side of a patch_depth-deep square of granules_per_slot granules at the first tile's
+  // packing, with 20 % to spare, less the rounding out to whole tile periods (region_for:
+  // up to one period and a sample on each axis). Requests wider than that are not merged
+  // (each single request is still checked against the capacity in promote()).
+  double max_merged_side() const {
+    const double fill = std::min(def.patch_depth, def.soil_depth);  // m
+    const double pf = tiles.empty() ? 0.5 : tiles.front().packing_fraction;
+    const double area = def.granules_per_slot * granule_volume / (pf * std::max(fill, 1e-6)) / 1.2;  // m²
+    return std::sqrt(area) - (tile_cells + 1) * double(hf->spacing());
+  }
+  // Whether a request can become a patch: its region is on the terrain and has soil above the
+  // bedrock. (A body falling just past the terrain's edge, or onto bare rock, asks for a
+  // patch that cannot exist; before, promote() failed the whole frame with an error.)
+  bool has_soil(const PatchRequest& r) const {
+    auto reg = region_for(r);
+    if (!reg) return false;
+    float lo = 0, hi = 0;
+    return floor_of(*reg, &lo, &hi) < hi;
+  }
   // Region of heightfield samples for a request, within what one slot can hold.
   Result<GridRegion> region_for(const PatchRequest& r) const {
     int i0 = std::max(0, sample_i(r.x0)), j0 = std::max(0, sample_j(r.z0));
@@ -246,8 +302,12 @@ struct TerrainManager::Impl {
       // Only when the predicted contact itself (the request without its apron) comes within
       // two granule diameters of the patch's edge: a body settling near the middle whose
       // apron pokes out by a few mm must not make the patch grow.
-      const double m = 4.0 * radius_world(), ap = def.lod.apron;
-      if (r.x0 + ap >= a.x0 + m && r.x1 - ap <= a.x1 - m && r.z0 + ap >= a.z0 + m && r.z1 - ap <= a.z1 - m) return false;
+      // A side of the patch on the terrain's edge cannot be crossed (requests are clipped there).
+      const double m = 4.0 * radius_world(), ap = def.lod.apron, e = 1e-6;
+      const PatchRequest t = terrain_rect();
+      const bool in_x0 = a.x0 <= t.x0 + e || r.x0 + ap >= a.x0 + m, in_x1 = a.x1 >= t.x1 - e || r.x1 - ap <= a.x1 - m;
+      const bool in_z0 = a.z0 <= t.z0 + e || r.z0 + ap >= a.z0 + m, in_z1 = a.z1 >= t.z1 - e || r.z1 - ap <= a.z1 - m;
+      if (in_x0 && in_x1 && in_z0 && in_z1) return false;
       PatchRequest u = r;
       u.x0 = std::min(a.x0, r.x0), u.z0 = std::min(a.z0, r.z0), u.x1 = std::max(a.x1, r.x1), u.z1 = std::max(a.z1, r.z1);
       const double grow = (u.x1 - u.x0 + 2 * hf->spacing() * tile_cells) * (u.z1 - u.z0 + 2 * hf->spacing() * tile_cells) /
@@ -268,14 +328,9 @@ struct TerrainManager::Impl {
     if (!reg) return reg.errors();
     const GridRegion region = *reg;
     const float sp = hf->spacing();
-    // Floor: patch_depth below the lowest surface point, not below the bedrock.
-    float lo = std::numeric_limits<float>::max(), hi = -lo;
-    for (int j = region.j0; j < region.j0 + region.nj; ++j)
-      for (int i = region.i0; i < region.i0 + region.ni; ++i) {
-        lo = std::min(lo, hf->height(i, j));
-        hi = std::max(hi, hf->height(i, j));
-      }
-    const double floor_local = std::max(double(lo) - def.patch_depth, double(lo) - def.soil_depth);
+    float lo = 0, hi = 0;
+    const double floor_local = floor_of(region, &lo, &hi);
+    if (!(floor_local < hi)) return Error{"", "patch request", "", "no soil above the bedrock there"};
     const double s = scale();
     slot.patch = next_patch++;
     slot.region = region;
@@ -331,6 +386,16 @@ struct TerrainManager::Impl {
                        std::to_string(0.5 * (req.z0 + req.z1)) + ") needs " + std::to_string(slot.pending.size()) +
                        " granules; raise it, or lower terrain.soil_depth / coarsen the granules"};
     }
+    // The fill's spheres, heightfield-local (m), for the demotion's render baseline.
+    slot.fill_rise = float(tile.rebound * s);
+    slot.fill_spheres.clear();
+    slot.fill_spheres.reserve(16 * slot.pending.size());
+    for (const PlacedGranule& g : slot.pending)
+      for (const Vec3& o : tile.shape.offsets) {
+        const auto w = sc->position_to_world(g.position + rotate(g.orientation, o));
+        slot.fill_spheres.insert(slot.fill_spheres.end(), {float(w[0] - hf->origin_x()), float(w[1] - hf->origin_y()),
+                                                           float(w[2] - hf->origin_z()), radius_world()});
+      }
     slot.uploaded = 0;
     slot.granules = 0;
     slot.fade = 0;
@@ -405,14 +470,7 @@ struct TerrainManager::Impl {
       const BodyState st = world->state(b);
       const bool fresh = it == slot.carried.end();
       if (fresh) {
-        // A shell for the body: its surface sampled at the granule sphere spacing (sim units).
-        RigidShape shape = world->definition(b).shape;
-        const float inv = float(1.0 / s);
-        shape.radius *= inv;
-        shape.height *= inv;
-        shape.half_extents *= inv;
-        for (auto& v : shape.vertices) v *= inv;
-        auto pts = sample_shell(shape, 1.5f * def.material.radius, def.shell_particles_per_slot);
+        auto pts = shell_points(b);
         if (!pts) return pts.errors();
         ShellDef sh;
         for (const auto& p : *pts) sh.offsets.push_back(v3(p));
@@ -491,6 +549,21 @@ struct TerrainManager::Impl {
     }
   }
 
+  // A body's shell: its surface sampled at the granule sphere spacing (sim units). Meshes go
+  // through their signed distance field (0.2–0.9 s for a few thousand triangles), cached by
+  // sample_shell per mesh; before_bodies asks once for every new body, so the cost falls in
+  // the frame the body appears, not in the frame it first touches a patch.
+  Result<std::vector<Eigen::Vector3f>> shell_points(RigidBodyId b) const {
+    RigidShape shape = world->definition(b).shape;
+    const float inv = float(1.0 / scale());
+    shape.radius *= inv;
+    shape.height *= inv;
+    shape.half_extents *= inv;
+    for (auto& v : shape.vertices) v *= inv;
+    return sample_shell(shape, 1.5f * def.material.radius, def.material.radius, def.shell_particles_per_slot);
+  }
+  std::unordered_set<std::int64_t> shells_sampled;  // bodies whose shell was sampled ahead (index << 32 | generation)
+
   // ---- demotion ----
   // `gl_ok`: the depth render may use GL (false: the CPU depth render, same contract). A
   // patch grown mid-frame (extend) is demoted on the CPU: demoting on GL there left the
@@ -499,19 +572,21 @@ struct TerrainManager::Impl {
   Status demote(Slot& slot, double time, bool gl_ok = true) {
     const auto t0 = Clock::now();
     const double sp = hf->spacing();
-    // Granule spheres in heightfield-local coordinates (m).
+    // Granule spheres in heightfield-local coordinates (m), now and as filled.
     std::vector<float> xyzr;
     granule_spheres(slot, xyzr);
+    std::vector<float> filled = slot.fill_spheres;
     // Spheres grown by the probe radius, tops lowered by it after the render (lower_by_probe).
     const float probe = float(def.surface_probe) * radius_world();
     for (std::size_t k = 3; k < xyzr.size(); k += 4) xyzr[k] += probe;
+    for (std::size_t k = 3; k < filled.size(); k += 4) filled[k] += probe;
     float top = float(slot.floor_local) + radius_world() + probe;
     for (std::size_t k = 1; k < xyzr.size(); k += 4) top = std::max(top, xyzr[k] + radius_world() + probe);
+    for (std::size_t k = 1; k < filled.size(); k += 4) top = std::max(top, filled[k] + radius_world() + probe);
     const GridRegion& a = slot.apron;
     const float x0 = float((a.i0 - 0.5) * sp), z0 = float((a.j0 - 0.5) * sp);
     const float x1 = float((a.i0 + a.ni - 0.5) * sp), z1 = float((a.j0 + a.nj - 0.5) * sp);
     const int res = def.depth_resolution;
-    HeightImage img;
     bool on_gl = false;
     if (gl_ok && def.use_gl && !gl_failed && !depth) {
       auto ctx = gl ? Result<std::unique_ptr<gl::Context>>(std::unique_ptr<gl::Context>()) : gl::Context::create();
@@ -526,29 +601,48 @@ struct TerrainManager::Impl {
       }
       gl_failed = !depth;
     }
-    if (depth && gl_ok) {
-      if (Status st = gl->make_current(); !st) return st;
-      auto r = depth->render(xyzr.data(), xyzr.size() / 4, x0, z0, x1, z1, float(slot.floor_local), top + 1.0f);
-      if (!r) return r.errors();
-      img = std::move(*r);
-      on_gl = true;
-    } else {
-      img = render_heights_cpu(xyzr.data(), xyzr.size() / 4, res, x0, z0, x1, z1, float(slot.floor_local));
-    }
-    lower_by_probe(img, float(slot.floor_local), probe);
-    // Outside the filled region the terrain was there before: particles add to it, an
-    // empty texel keeps it (texels inside the region with no particle read the floor).
     const float du = (x1 - x0) / float(res), dv = (z1 - z0) / float(res);
     const double rx0 = slot.region.i0 * sp, rx1 = (slot.region.i0 + slot.region.ni - 1) * sp;
     const double rz0 = slot.region.j0 * sp, rz1 = (slot.region.j0 + slot.region.nj - 1) * sp;
-    for (int v = 0; v < res; ++v)
-      for (int u = 0; u < res; ++u) {
-        const float x = x0 + (u + 0.5f) * du, z = z0 + (v + 0.5f) * dv;
-        if (x >= rx0 && x <= rx1 && z >= rz0 && z <= rz1) continue;
-        float& h = img.h[std::size_t(v) * res + u];
-        h = std::max(h, hf->sample(x, z));
+    // The surface of a set of (grown) spheres over the apron, as the heightfield will take it.
+    auto render = [&](const std::vector<float>& spheres) -> Result<HeightImage> {
+      HeightImage img;
+      if (depth && gl_ok) {
+        if (Status st = gl->make_current(); !st) return st.errors();
+        auto r = depth->render(spheres.data(), spheres.size() / 4, x0, z0, x1, z1, float(slot.floor_local), top + 1.0f);
+        if (!r) return r.errors();
+        img = std::move(*r);
+        on_gl = true;
+      } else {
+        img = render_heights_cpu(spheres.data(), spheres.size() / 4, res, x0, z0, x1, z1, float(slot.floor_local));
       }
-    write_to_heightfield(img, a, *hf, 1);
+      lower_by_probe(img, float(slot.floor_local), probe);
+      // Outside the filled region the terrain was there before: particles add to it, an
+      // empty texel keeps it (texels inside the region with no particle read the floor).
+      for (int v = 0; v < res; ++v)
+        for (int u = 0; u < res; ++u) {
+          const float x = x0 + (u + 0.5f) * du, z = z0 + (v + 0.5f) * dv;
+          float& h = img.h[std::size_t(v) * res + u];
+          // An empty texel reads the floor. Where the old surface lies below it (bare rock under
+          // the bedrock plane, floor_of), the rock stays: it is not raised to the floor.
+          const bool empty = h <= float(slot.floor_local);
+          if (x >= rx0 && x <= rx1 && z >= rz0 && z <= rz1) {
+            if (empty) h = std::min(h, hf->sample(x, z));
+            continue;
+          }
+          h = empty ? hf->sample(x, z) : std::max(h, hf->sample(x, z));
+        }
+      return img;
+    };
+    auto img = render(xyzr);
+    if (!img) return img.errors();
+    auto was = slot.fill_spheres.empty() ? Result<HeightImage>(HeightImage{}) : render(filled);
+    if (!was) return was.errors();
+    // Where the surface did not move, the heights of before the promotion come back exactly
+    // (write_to_heightfield's RenderBaseline; docs/manager.md "Round trip").
+    const RenderBaseline base{&*was, &slot.before_heights, radius_world(), slot.fill_rise};
+    const bool have_base = !slot.fill_spheres.empty() && slot.before_heights.size() == std::size_t(a.ni) * a.nj;
+    write_to_heightfield(*img, a, *hf, 1, have_base ? &base : nullptr);
     // The patch's own edge inside the apron: particles on one side, old terrain (or what
     // spilled onto it) on the other; the same Gaussian band stitches it.
     smooth_border_band(*hf, slot.region, 1);
@@ -730,6 +824,10 @@ Status TerrainManager::before_bodies(double time, double dt, Profile& profile) {
     auto timer = profile.time(Stage::Lod);
     std::vector<BodyMotion> motions;
     for (RigidBodyId b : I.world->bodies()) {
+      if (I.shells_sampled.insert((std::int64_t(b.index) << 32) | std::uint32_t(b.generation)).second) {
+        auto pts = I.shell_points(b);  // warms sample_shell's cache (meshes)
+        if (!pts) return pts.errors();
+      }
       BodyMotion m;
       I.world->bounds(b, &m.lo, &m.hi);
       const BodyState st = I.world->state(b);
@@ -744,8 +842,14 @@ Status TerrainManager::before_bodies(double time, double dt, Profile& profile) {
       if (frames_still >= 2) continue;
       motions.push_back(m);
     }
-    const double max_side = 1e9;
-    auto reqs = merge_requests(predict_contacts(*I.hf, motions, I.def.gravity, I.def.lod), max_side);
+    // Requests are clipped to the terrain: a body landing at its edge asks for what exists
+    // (before, a request reaching past the edge was never `covered` by the clipped patch and
+    // made it `extend` - demote and promote again - every frame). Merged requests stay within
+    // what one slot holds (before: unbounded, and bodies landing side by side merged into one
+    // patch no slot could hold, an error mid-run).
+    auto predicted = predict_contacts(*I.hf, motions, I.def.gravity, I.def.lod);
+    for (auto& r : predicted) I.clip_to_terrain(r);
+    auto reqs = merge_requests(std::move(predicted), I.max_merged_side());
     // A queued request lapses when no body predicts a contact there any more (its body came
     // to rest on the heightfield meanwhile); requests made with request_patch() stay.
     for (auto it = I.queue.begin(); it != I.queue.end();) {
@@ -759,7 +863,7 @@ Status TerrainManager::before_bodies(double time, double dt, Profile& profile) {
       }
     }
     for (auto& r : reqs) {
-      if (I.covered(r)) continue;
+      if (I.covered(r) || !I.has_soil(r)) continue;
       if (I.overlaps_patch(r)) {
         if (auto e = I.extend(r, time); !e) return e.errors();
         continue;
@@ -782,7 +886,7 @@ Status TerrainManager::before_bodies(double time, double dt, Profile& profile) {
     for (auto it = I.queue.begin(); it != I.queue.end();) {
       auto free = std::find_if(I.slots.begin(), I.slots.end(), [](const Impl::Slot& s) { return s.state == Impl::State::Free; });
       if (free == I.slots.end()) break;
-      if (I.overlaps_patch(*it)) {
+      if (I.overlaps_patch(*it) || !I.has_soil(*it)) {
         it = I.queue.erase(it);
         continue;
       }
@@ -930,8 +1034,11 @@ std::int64_t TerrainManager::pool_bytes() const {
   constexpr std::int64_t body_bytes = 0 SANDPATCH_BODY_FIELDS(SANDPATCH_FIELD_BYTES);
 #undef SANDPATCH_FIELD_BYTES
   const SimulationDef sd = impl_->sim_def();
+  std::int64_t fills = 0;  // the fills' spheres kept for the demotion's render baseline
+  for (const auto& s : impl_->slots) fills += std::int64_t(s.fill_spheres.capacity() * sizeof(float));
   return std::int64_t(impl_->slots.size()) *
-         (std::int64_t(sd.max_particles) * particle_bytes + std::int64_t(sd.max_bodies) * body_bytes);
+             (std::int64_t(sd.max_particles) * particle_bytes + std::int64_t(sd.max_bodies) * body_bytes) +
+         fills;
 }
 
 std::uint64_t TerrainManager::state_hash() const {

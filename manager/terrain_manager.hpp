@@ -24,6 +24,7 @@
 
 #include <Eigen/Core>
 #include <cstdint>
+#include <limits>
 #include <memory>
 #include <string>
 #include <nlohmann/json.hpp>
@@ -57,6 +58,11 @@ struct TerrainManagerDef {
   int shell_particles_per_slot = 8192;         // capacity of each slot for body-shell spheres
   double patch_depth = 0.4;                    // m of granules under the lowest surface point of a patch
   double soil_depth = 2.0;                     // m, bedrock = surface − soil_depth (patches stop there)
+  // m, heightfield-local: a flat bedrock (scene terrain.bedrock_height; -inf = none). The
+  // bedrock under a sample is the higher of surface − soil_depth and min(surface, this): a
+  // surface below it is bare rock. A patch's floor is at or above the bedrock everywhere in
+  // its region, and a region with no soil above it gets no patch (docs/extremes.md).
+  double bedrock_height = -std::numeric_limits<double>::infinity();
   double sleep_speed = 0.01;                   // m/s, a patch sleeps when everything is slower ...
   double sleep_time = 0.5;                     // s, ... for this long
   double idle_timeout = 120.0;                 // s asleep before demotion (Leach & Marais: two minutes)

@@ -12,24 +12,19 @@
 
 namespace sandpatch {
 
-namespace {
-Quat random_orientation(std::uint64_t& s) {  // uniform (Shoemake)
-  double u1 = uniform(s), u2 = uniform(s), u3 = uniform(s);
-  double r1 = std::sqrt(1 - u1), r2 = std::sqrt(u1), t1 = 2 * std::numbers::pi * u2, t2 = 2 * std::numbers::pi * u3;
-  return {float(r1 * std::sin(t1)), float(r1 * std::cos(t1)), float(r2 * std::sin(t2)), float(r2 * std::cos(t2))};
-}
-}  // namespace
 
 FlankFit fit_flank(const std::vector<SurfacePoint>& points, const FlankFitDef& def) {
   FlankFit out;
   if (points.empty() || !(def.bin > 0) || def.sectors < 1) return out;
   double smax = 0;
-  for (const auto& p : points) smax = std::max(smax, p.s);
+  for (const auto& p : points)
+    if (std::isfinite(p.s)) smax = std::max(smax, p.s);
+  if (smax / def.bin > 1e6) return out;  // a caller's stray point far away: refuse, do not allocate
   const int nbins = int(smax / def.bin) + 1;
   const int ns = def.sectors;
   std::vector<double> cell(std::size_t(nbins) * ns, -1e300);
   for (const auto& p : points) {
-    if (p.s < 0 || p.sector < 0 || p.sector >= ns) continue;
+    if (!(p.s >= 0) || !std::isfinite(p.s) || p.sector < 0 || p.sector >= ns) continue;
     double& c = cell[std::size_t(int(p.s / def.bin)) * ns + p.sector];
     c = std::max(c, p.h);
   }
@@ -73,7 +68,7 @@ FlankFit fit_flank(const std::vector<SurfacePoint>& points, const FlankFitDef& d
   return out;
 }
 
-Result<ReposeResult> measure_repose(const PileDef& pd) {
+Status validate(const PileDef& pd) {
   auto bad = [](const char* f, double v, const char* allowed) {
     return Error{"", std::string("PileDef.") + f, format_number(v), allowed, ""};
   };
@@ -86,8 +81,10 @@ Result<ReposeResult> measure_repose(const PileDef& pd) {
   if (!(pd.floor_radius > 0)) return bad("floor_radius", pd.floor_radius, "must be > 0 (m)");
   if (!(pd.fit.bin > 0)) return bad("fit.bin", pd.fit.bin, "must be > 0 (m)");
   if (pd.fit.sectors < 1) return bad("fit.sectors", pd.fit.sectors, "must be >= 1");
+  return Ok{};
+}
 
-  const auto t_start = std::chrono::steady_clock::now();
+ShellDef pile_floor(const PileDef& pd) {
   const float r = pd.particle_radius;
   const float R = pd.floor_radius;
   // rough floor: spheres of radius r, square lattice of spacing 2 r, centres at y = 0
@@ -100,66 +97,54 @@ Result<ReposeResult> measure_repose(const PileDef& pd) {
       const float x = 2 * r * i, z = 2 * r * k;
       if (x * x + z * z <= R * R) floor.offsets.push_back({x, 0, z});
     }
+  return floor;
+}
+
+SimulationDef pile_simulation_def(const PileDef& pd) {
+  const float r = pd.particle_radius;
+  const float R = pd.floor_radius;
   SimulationDef d;
   d.material = pd.material;
   d.particle_radius = r;
   d.max_bodies = pd.granules + 1;
-  d.max_particles = 4 * pd.granules + int(floor.offsets.size());
+  d.max_particles = 4 * pd.granules + int(pile_floor(pd).offsets.size());
   d.bounds_min = {-R - 4 * r, -2 * r, -R - 4 * r};
   d.bounds_max = {R + 4 * r, 0.5f * R + 0.1f, R + 4 * r};
   d.floor_height = -r;  // bedrock under the rough layer (granules that roll off the disc)
   d.sleep_time = 0;
   d.threads = pd.threads;
-  auto sim = Simulation::create(d);
-  if (!sim) return sim.errors();
-  if (auto f = sim->add_shell(floor); !f) return f.errors();
-  const int floor_spheres = sim->particle_count();
+  return d;
+}
 
-  const GranuleShape& g = sim->granule_shape();
-  const float reach = g.centre_distance + g.radius;  // bounding radius, m
-  const float a = 2.0f * reach * 1.02f;              // cluster spacing, m
-  // hexagonal cluster: rings 0..k, a point (i, j) of the triangular lattice
-  std::vector<Vec3> cluster;
-  const int rings = pd.batch == 1 ? 0 : pd.batch == 7 ? 1 : pd.batch == 19 ? 2 : 3;
-  for (int i = -rings; i <= rings; ++i)
-    for (int j = -rings; j <= rings; ++j) {
-      const int k = -i - j;
-      if (std::abs(k) > rings) continue;
-      cluster.push_back({a * (i + 0.5f * j), 0, a * (0.8660254f * j)});
-    }
-  std::uint64_t seed = pd.seed;
-  ReposeResult out;
-  int added = 0;
-  const int frames_per_batch = std::max(1, int(std::lround(pd.batch_interval / pd.frame_dt)));
-  while (added < pd.granules) {
-    float top = r + reach;  // highest granule centre (or a granule resting on the floor)
-    for (int b = 1; b < sim->body_count(); ++b) top = std::max(top, sim->body_position(BodyId{b}).y);
-    const float y = top + a;
-    for (std::size_t c = 0; c < cluster.size() && added < pd.granules; ++c, ++added) {
-      const float jx = float((uniform(seed) - 0.5) * 0.04 * a), jz = float((uniform(seed) - 0.5) * 0.04 * a);
-      auto id = sim->add_granule({cluster[c].x + jx, y, cluster[c].z + jz}, random_orientation(seed));
-      if (!id) return id.errors();
-    }
-    for (int f = 0; f < frames_per_batch; ++f)
-      if (auto st = sim->step(pd.frame_dt); !st) return st.errors();
-  }
-  const int relax_frames = int(pd.max_relax / pd.frame_dt);
-  for (int f = 0; f < relax_frames; ++f) {
-    if (auto st = sim->step(pd.frame_dt); !st) return st.errors();
-    if (sim->max_granule_speed() < pd.rest_speed) break;
-  }
-  out.final_speed = sim->max_granule_speed();
-  out.at_rest = out.final_speed < pd.rest_speed;
+namespace pile_detail {
+Quat random_orientation(std::uint64_t& s) {  // uniform (Shoemake)
+  double u1 = uniform(s), u2 = uniform(s), u3 = uniform(s);
+  double r1 = std::sqrt(1 - u1), r2 = std::sqrt(u1), t1 = 2 * std::numbers::pi * u2, t2 = 2 * std::numbers::pi * u3;
+  return {float(r1 * std::sin(t1)), float(r1 * std::cos(t1)), float(r2 * std::sin(t2)), float(r2 * std::cos(t2))};
+}
+double uniform01(std::uint64_t& s) { return uniform(s); }
 
-  // surface: granule sphere tops above the top of the rough layer (y = r)
+void fit_pile(const PileDef& pd, const std::vector<Vec3>& pos, int floor_spheres, ReposeResult& out) {
+  const float R = pd.floor_radius;
+  // surface: granule sphere tops above the top of the rough layer (y = r), s measured from
+  // the pile's axis: the vertical through the centroid of the granules on the disc (the pour
+  // is centred on x = z = 0, but a pile can lean by a few mm; spheres off the disc are left
+  // out of the centroid and of the fit)
   std::vector<SurfacePoint> pts;
-  const auto pos = sim->particle_positions();
+  double cx = 0, cz = 0;
+  int nc = 0;
+  for (int i = floor_spheres; i < int(pos.size()); ++i)
+    if (double(pos[i].x) * pos[i].x + double(pos[i].z) * pos[i].z <= double(R) * R) cx += pos[i].x, cz += pos[i].z, ++nc;
+  if (nc > 0) cx /= nc, cz /= nc;
+  out.axis_x = cx, out.axis_z = cz;
   for (int i = floor_spheres; i < int(pos.size()); ++i) {
     const Vec3 x = pos[i];
+    if (double(x.x) * x.x + double(x.z) * x.z > double(R) * R) continue;  // rolled off the disc
+    const double dx = x.x - cx, dz = x.z - cz;
     SurfacePoint sp;
-    sp.s = std::sqrt(double(x.x) * x.x + double(x.z) * x.z);
+    sp.s = std::sqrt(dx * dx + dz * dz);
     sp.h = double(x.y);  // sphere top y + r, minus the top of the rough layer r
-    double phi = std::atan2(double(x.z), double(x.x)) + std::numbers::pi;  // [0, 2 pi]
+    double phi = std::atan2(dz, dx) + std::numbers::pi;  // [0, 2 pi]
     sp.sector = std::min(pd.fit.sectors - 1, int(phi / (2 * std::numbers::pi) * pd.fit.sectors));
     pts.push_back(sp);
   }
@@ -169,10 +154,15 @@ Result<ReposeResult> measure_repose(const PileDef& pd) {
   out.fit_points = fit.points;
   out.peak = fit.peak;
   out.profile = fit.surface;
-  out.granules = sim->body_count() - 1;
-  out.sim_seconds = sim->time();
-  out.wall_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
-  return out;
+  out.spheres.assign(pos.begin() + floor_spheres, pos.end());
+}
+}  // namespace pile_detail
+
+Result<ReposeResult> measure_repose(const PileDef& pd) {
+  if (auto v = validate(pd); !v) return v.errors();
+  auto sim = Simulation::create(pile_simulation_def(pd));
+  if (!sim) return sim.errors();
+  return pour_pile(*sim, pd);
 }
 
 }  // namespace sandpatch

@@ -46,6 +46,32 @@ Eigen::Vector3d TriangleMesh::centroid() const {
   return vertices.empty() ? mean : Eigen::Vector3d(mean / static_cast<double>(vertices.size()));
 }
 
+Eigen::Matrix3d TriangleMesh::inertia(double mass) const {
+  // Second moments about the origin, C = Σ det(A) A K Aᵀ with A = [a b c] (columns) and
+  // K = (1 + δ_ij) / 120 the canonical tetrahedron's (Tonon 2004), volume Σ det(A) / 6.
+  Eigen::Matrix3d K = Eigen::Matrix3d::Constant(1.0 / 120.0);
+  K.diagonal().setConstant(2.0 / 120.0);
+  Eigen::Matrix3d C = Eigen::Matrix3d::Zero();
+  double v6 = 0.0;
+  Eigen::Vector3d m = Eigen::Vector3d::Zero();
+  for (const auto& t : triangles) {
+    Eigen::Matrix3d A;
+    A.col(0) = vertices[t[0]].cast<double>();
+    A.col(1) = vertices[t[1]].cast<double>();
+    A.col(2) = vertices[t[2]].cast<double>();
+    const double det = A.determinant();
+    C += det * A * K * A.transpose();
+    v6 += det;
+    m += det * A.rowwise().sum() / 4.0;
+  }
+  if (!(std::abs(v6) > 0.0)) return Eigen::Matrix3d::Zero();
+  const double volume = v6 / 6.0;
+  const Eigen::Vector3d c = m / v6;
+  C -= volume * c * c.transpose();  // parallel axis: about the centroid
+  const Eigen::Matrix3d I = C.trace() * Eigen::Matrix3d::Identity() - C;
+  return (mass / volume) * I;
+}
+
 Eigen::Vector3f TriangleMesh::bounds_min() const {
   if (vertices.empty()) return Eigen::Vector3f::Zero();
   Eigen::Vector3f lo = vertices.front();
@@ -148,6 +174,44 @@ Result<TriangleMesh> load_obj_mesh(const std::string& path, double scale) {
 std::vector<Error> check_solid_mesh(const TriangleMesh& mesh, const std::string& file,
                                     const std::string& field) {
   std::vector<Error> errors;
+  if (mesh.triangles.empty()) {
+    errors.push_back({file, field, "0 triangles", "at least one triangle"});
+    return errors;
+  }
+  for (std::size_t i = 0; i < mesh.vertices.size(); ++i) {
+    if (!mesh.vertices[i].allFinite()) {
+      errors.push_back({file, field, "vertex " + std::to_string(i + 1), "finite vertex coordinates",
+                        "vertex " + std::to_string(i + 1) + " is NaN or infinite"});
+      return errors;
+    }
+  }
+  for (std::size_t k = 0; k < mesh.triangles.size(); ++k) {
+    for (int i : mesh.triangles[k]) {
+      if (i < 0 || std::size_t(i) >= mesh.vertices.size()) {
+        errors.push_back({file, field, "triangle " + std::to_string(k + 1) + " index " + std::to_string(i),
+                          "vertex indices in [0, " + std::to_string(mesh.vertices.size()) + ")"});
+        return errors;
+      }
+    }
+  }
+  // Degenerate triangles (collinear or coincident corners) have no normal: inside and outside
+  // are undefined next to them.
+  const double diag2 = (mesh.bounds_max() - mesh.bounds_min()).cast<double>().squaredNorm();
+  std::size_t degenerate = 0, first = 0;
+  for (std::size_t k = 0; k < mesh.triangles.size(); ++k) {
+    const auto& t = mesh.triangles[k];
+    const Eigen::Vector3d a = mesh.vertices[t[0]].cast<double>(), b = mesh.vertices[t[1]].cast<double>(),
+                          c = mesh.vertices[t[2]].cast<double>();
+    if (!(0.5 * (b - a).cross(c - a).norm() > 1e-12 * diag2)) {
+      if (degenerate++ == 0) first = k;
+    }
+  }
+  if (degenerate > 0) {
+    errors.push_back({file, field, "triangle " + std::to_string(first + 1),
+                      "triangles with a non-zero area (three distinct, non-collinear corners)",
+                      std::to_string(degenerate) + " degenerate triangle(s); the first is triangle " +
+                          std::to_string(first + 1) + " (1-based, in file order after dropping repeated indices)"});
+  }
   const MeshTopology topo = mesh_topology(mesh);
   const std::string rule = "a closed mesh (every edge shared by exactly two triangles, consistently oriented)";
   if (topo.open_edges > 0) {

@@ -28,6 +28,11 @@ struct TriangleMesh {
   // Centroid of the enclosed solid (m, mesh frame), assuming uniform density.
   // Falls back to the vertex mean when the volume is zero.
   Eigen::Vector3d centroid() const;
+  // Inertia tensor about the centroid (kg m², mesh axes) of the enclosed solid with uniform
+  // density and total mass `mass` (kg): from the second moments ∫ x xᵀ dV of the signed
+  // tetrahedra (0, a, b, c) (Tonon 2004: each is det[a b c] · A C Aᵀ with C = (1 + δ_ij)/120),
+  // moved to the centroid, then I = tr(C) Id − C. Exact for a closed outward-wound surface.
+  Eigen::Matrix3d inertia(double mass) const;
   // Axis-aligned bounds of the vertices (m, mesh frame). Both zero for an empty mesh.
   Eigen::Vector3f bounds_min() const;
   Eigen::Vector3f bounds_max() const;
@@ -50,8 +55,10 @@ MeshTopology mesh_topology(const TriangleMesh& mesh);
 // Does not require the mesh to be closed; use check_solid_mesh for that.
 Result<TriangleMesh> load_obj_mesh(const std::string& path, double scale = 1.0);
 
-// Errors when `mesh` cannot bound a solid: open, non-manifold or misoriented edges
-// (each reported with its count), or a non-positive signed volume (inside-out winding).
+// Errors when `mesh` cannot bound a solid: no triangles, a non-finite vertex, an index out of
+// range, a degenerate triangle (area below 1e-12 of the squared bounding-box diagonal: first
+// one named, with the count), open, non-manifold or misoriented edges (each reported with its
+// count), or a non-positive signed volume (inside-out winding).
 // `file` and `field` go into the errors as they are.
 std::vector<Error> check_solid_mesh(const TriangleMesh& mesh, const std::string& file,
                                     const std::string& field);

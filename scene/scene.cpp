@@ -904,6 +904,17 @@ BodyDef parse_body(Ctx& c, const json& j, const std::string& path, std::optional
 SimulationDef parse_simulation(Ctx& c, const json& j) {
   SimulationDef s;
   Obj o(c, j, "simulation");
+  // A preset first: the fields below override it.
+  if (const json* pj = o.get("preset")) {
+    std::vector<std::string> names;
+    for (const auto& p : simulation_presets()) names.push_back(p.name);
+    if (auto x = read_enum(c, *pj, o.at("preset"), names)) {
+      const SimulationPreset& p = simulation_presets()[std::size_t(*x)];
+      s.preset = p.name;
+      s.particle_scale = p.particle_scale;
+      s.pool.granules_per_slot = p.granules_per_slot;
+    }
+  }
   o.number("dt", s.dt, {0.0, 0.1, true, false, "s"});
   o.integer("substeps", s.substeps, 1, 1000);
   o.number("duration", s.duration, positive(1e6, "s"));
@@ -1123,6 +1134,26 @@ const CameraDef* SceneDef::find_camera(const std::string& n) const {
 const char* to_string(TerrainSourceKind k) { return kSourceTypes[static_cast<int>(k)].c_str(); }
 const char* to_string(ProceduralKind k) { return kProceduralKinds[static_cast<int>(k)].c_str(); }
 const char* to_string(ShapeKind k) { return kShapeKinds[static_cast<int>(k)].c_str(); }
+const std::vector<SimulationPreset>& simulation_presets() {
+  // Chosen from the Pareto front of `sandpatch bench tradeoff` (docs/tradeoff.md has the table).
+  static const std::vector<SimulationPreset> presets = {
+      // crater_s2_n20_p6: depth within 1 % of the reference at 1/12 of the cost of scale 1;
+      // piles of <= 100 granules flatten (angle 50-77 % low)
+      {"game", 2.0, 4096, "crater_s2_n20_p6_cpu"},
+      // crater_s1.5_n20_p6: depth within 5 % at 1/4 of the cost; pile angle ~28 % low (s = 1.26)
+      {"balanced", 1.5, 10240, "crater_s1.5_n20_p6_cpu"},
+      // crater_s1_n20_p6: depth within 0.5 % of t_c/50; pile within its seed-to-seed scatter
+      {"engineering", 1.0, 32768, "crater_s1_n20_p6_cpu, pile_s1_n20"},
+  };
+  return presets;
+}
+
+const SimulationPreset* find_simulation_preset(const std::string& name) {
+  for (const auto& p : simulation_presets())
+    if (name == p.name) return &p;
+  return nullptr;
+}
+
 const char* to_string(Backend b) { return kBackends[static_cast<int>(b)].c_str(); }
 const char* to_string(HeightfieldFormat f) { return kHeightfieldFormats[static_cast<int>(f)].c_str(); }
 
@@ -1331,6 +1362,9 @@ nlohmann::json scene_to_json(const SceneDef& s) {
       {"gravity", sim.gravity},
       {"seed", sim.seed},
   };
+  // Only when one was applied (every field above already holds its values), so scenes without
+  // a preset keep their canonical JSON and hash.
+  if (!sim.preset.empty()) j["simulation"]["preset"] = sim.preset;
 
   j["cameras"] = json::array();
   for (const auto& cam : s.cameras) {

@@ -166,7 +166,25 @@ struct SimulationDef {
   bool granular_patches = true;                // false: no patches, bodies meet the heightfield only (LOD off the other way)
   Vec3d gravity = {0.0, -9.81, 0.0};           // m/s²
   std::uint64_t seed = 1;                      // all randomness of a run
+  std::string preset;                          // "" or the preset applied first (simulation_presets())
 };
+
+// ---- presets (docs/tradeoff.md) ----
+
+// A named set of simulation knobs chosen from the Pareto front that `sandpatch bench tradeoff`
+// measured (error against cost on a poured pile and a sphere's crater). "preset": NAME in the
+// simulation section applies it before the section's other fields, so fields given beside it
+// override it.
+struct SimulationPreset {
+  const char* name;
+  double particle_scale;        // simulation.particle_scale: world granule size / the material's
+  int granules_per_slot;        // simulation.pool.granules_per_slot: 32768 / particle_scale³
+                                //   rounded up to a multiple of 1024 (a slot holds the same world volume)
+  const char* measured;         // the sweep's setting behind it, its cost and error (docs/tradeoff.md)
+};
+const std::vector<SimulationPreset>& simulation_presets();
+// nullptr when `name` is not a preset.
+const SimulationPreset* find_simulation_preset(const std::string& name);
 
 // ---- cameras ----
 

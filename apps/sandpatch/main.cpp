@@ -6,6 +6,7 @@
 //   sandpatch bench dem [--granules N] [--steps S] [--backend cpu|gl] [--threads T] [--json]
 //   sandpatch bench render [--terrain N]... [--frames F] [--width W] [--height H] [--json]
 //   sandpatch bench lod [--sizes N,N,...] [--seconds S] [--threads T] [--json]
+//   sandpatch bench tradeoff [--quick | --full] [--threads T] [--out DIR] [--no-gl] [--no-plot] [--json]
 //   sandpatch stress SCENE [--sims N] [--frames F] [--interval S] [--threads T] [--out DIR] [--no-plot] [--json]
 // Exit codes: 0 ok, 1 runtime failure (with the stage that failed), 2 bad input.
 #include <CLI/CLI.hpp>
@@ -23,6 +24,7 @@
 #include <string>
 
 #include "bench/bench.hpp"
+#include "bench/bench_tradeoff.hpp"
 #include "gl/context.hpp"
 #include "manager/run.hpp"
 #include "particles/gpu/bench_gl.hpp"
@@ -127,6 +129,19 @@ int main(int argc, char** argv) {
   blodc->add_option("--threads", blod.threads, "Worker threads (0 = all)");
   blodc->add_flag("--json", blod.json, "Print one JSON object on the last line");
 
+  BenchTradeoffArgs btrade;
+  bool trade_quick = false, trade_full = false, trade_no_gl = false, trade_no_plot = false;
+  auto* btradec = bench->add_subcommand("tradeoff", "Cost and error of the knobs (particle scale, dt / t_c, patch size, "
+                                                    "backend) on a poured pile and a crater; Pareto front; CSV + PNG");
+  auto* o_quick = btradec->add_flag("--quick", trade_quick, "Small sweep (seconds; used by the tests)");
+  auto* o_full = btradec->add_flag("--full", trade_full, "Finer sweep (finer scales, t_c/100; long: see docs/tradeoff.md)");
+  o_quick->excludes(o_full);
+  btradec->add_option("--threads", btrade.threads, "Worker threads (0 = all)")->check(CLI::NonNegativeNumber);
+  btradec->add_option("--out", btrade.out_dir, "Output directory (default: out/bench_tradeoff_<sweep>)");
+  btradec->add_flag("--no-gl", trade_no_gl, "Skip the gl backend settings");
+  btradec->add_flag("--no-plot", trade_no_plot, "Write the data only (no python3/matplotlib plot)");
+  btradec->add_flag("--json", btrade.json, "Print one JSON object on the last line");
+
   StressArgs stress;
   bool stress_no_plot = false;
   auto* st = app.add_subcommand("stress", "Many simulations sharing the pool: frame time against time, live simulations, plots");
@@ -173,6 +188,12 @@ int main(int argc, char** argv) {
       return run_bench_dem(dem);
     }
     if (bench->got_subcommand("render")) return render::run_bench_render(brend);
+    if (bench->got_subcommand("tradeoff")) {
+      btrade.sweep = trade_quick ? TradeoffSweep::Quick : trade_full ? TradeoffSweep::Full : TradeoffSweep::Default;
+      btrade.gl = !trade_no_gl;
+      if (!trade_no_plot) btrade.plot_script = std::string(SANDPATCH_SOURCE_DIR) + "/scripts/plot_tradeoff.py";
+      return run_bench_tradeoff(btrade);
+    }
     if (bench->got_subcommand("lod")) {
       if (!lod_sizes.empty()) {
         blod.sizes.clear();

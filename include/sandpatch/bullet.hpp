@@ -1,10 +1,28 @@
 // Optional: hand over a Bullet body the game already owns (docs/api.md "Bullet bodies").
 //
-// libsandpatch keeps its own Bullet world inside the library; it cannot step a btRigidBody
-// that lives in the game's world. What a game can do instead is hand the body over by copy:
+// In place (adopt): Sandpatch's Bullet world steps the game's own btRigidBody object; the game
+// keeps owning it (and its shape and motion state) and reads it as usual:
+//
+//   game_world->removeRigidBody(rb);                                 // not in two worlds
+//   auto h = sandpatch::api::bullet::adopt(terrain, *rb, "barrel");  // Sandpatch steps *rb now
+//   ... each frame: terrain.step(dt); draw from rb->getWorldTransform() or its motion state
+//   terrain.remove_body(*h);                                         // *rb is the game's again
+//   game_world->addRigidBody(rb);
+//
+// Lifetime: the body, its collision shape and its motion state must outlive the adoption (until
+// remove_body, or the Terrain's destruction, which gives every adopted body back the same way).
+// While adopted, the body's gravity is the terrain's and its transform is relative to
+// Terrain::origin() (world − origin; the same as world with the default origin 0, 0, 0);
+// giving it back restores the game's gravity and world coordinates and changes nothing else.
+// Shapes: sphere, box, y-axis cylinder and capsule, convex hull; static bodies and other
+// shapes are refused naming btRigidBody.shape / btRigidBody.mass. The game must use the same
+// Bullet as libsandpatch (Debian's libbullet-dev, float): adopt() checks sizeof(btScalar),
+// BT_BULLET_VERSION and sizeof(btRigidBody) and refuses a mismatch (btRigidBody.abi).
+//
+// By copy (body_def / pull / push), for a game that keeps stepping its own world:
 //
 //   auto def = sandpatch::api::bullet::body_def(*rb, "barrel");   // shape, mass, pose, velocity
-//   auto h = terrain.add_body(*def);                                // Sandpatch simulates it now
+//   auto h = terrain.add_body(*def);                                // Sandpatch simulates a copy
 //   ... each frame: terrain.step(dt); sandpatch::api::bullet::pull(terrain, *h, *rb);
 //
 // pull() writes Sandpatch's pose and velocities into the game's body, so the game keeps
@@ -133,6 +151,16 @@ inline Status push(Terrain& terrain, BodyHandle h, const btRigidBody& rb) {
   if (!s) return s;
   const btVector3 v = rb.getLinearVelocity(), w = rb.getAngularVelocity();
   return terrain.set_body_velocity(h, {float(v.x()), float(v.y()), float(v.z())}, {float(w.x()), float(w.y()), float(w.z())});
+}
+
+// Hands the game's body over in place (see the top of this file). The handle works with every
+// Terrain body call; terrain.remove_body(handle) gives the body back.
+inline Result<BodyHandle> adopt(Terrain& terrain, btRigidBody& rb, const std::string& name = "") {
+  Terrain::BulletAbi abi;
+  abi.scalar_bytes = int(sizeof(btScalar));
+  abi.version = BT_BULLET_VERSION;
+  abi.rigid_body_bytes = sizeof(btRigidBody);
+  return terrain.adopt_bullet_body(&rb, name, abi);
 }
 
 }  // namespace sandpatch::api::bullet

@@ -187,7 +187,9 @@ struct ShapeDef {
   Vec3 half_extents = {0.5, 0.5, 0.5};         // m (box), each (0, 1e4]
   // Mesh: a closed triangle mesh from an OBJ file, or given here (vertices: x, y, z per
   // vertex, m; triangles: 3 indices each, counter-clockwise seen from outside). The mesh is
-  // re-centred on its centroid. Bullet collides with its convex hull; patches see the mesh.
+  // re-centred on its centroid. Bullet collides with its convex hull, with the mesh's exact
+  // inertia about its own axes; patches see the mesh (a shell from its signed distance field).
+  // No degenerate (zero-area) triangles.
   std::string mesh_file;
   double mesh_scale = 1.0;                     // OBJ units → m, (0, 1e4]
   std::vector<float> vertices;
@@ -313,6 +315,7 @@ class SANDPATCH_API Terrain {
   // ---- bodies ----
   Result<BodyHandle> add_body(const BodyDef& def);
   // The handle is stale at once; with patches the body leaves the simulation in the next step.
+  // An adopted body (adopt_bullet_body) leaves at once and is given back to the game.
   Status remove_body(BodyHandle h);
   bool alive(BodyHandle h) const;
   Result<BodyState> body_state(BodyHandle h) const;
@@ -320,6 +323,16 @@ class SANDPATCH_API Terrain {
   Status set_body_transform(BodyHandle h, const Vec3& position, const Quat& orientation);
   Status set_body_velocity(BodyHandle h, const Vec3f& linear, const Vec3f& angular);
   std::vector<BodyHandle> bodies() const;
+
+  // Low-level entry of sandpatch::api::bullet::adopt (include/sandpatch/bullet.hpp): use that.
+  // `bt_rigid_body` is a btRigidBody*; `abi` describes the Bullet the caller was compiled
+  // against and must match the library's (else an error naming btRigidBody.abi).
+  struct BulletAbi {
+    int scalar_bytes = 0;           // sizeof(btScalar)
+    int version = 0;                // BT_BULLET_VERSION
+    std::size_t rigid_body_bytes = 0;  // sizeof(btRigidBody)
+  };
+  Result<BodyHandle> adopt_bullet_body(void* bt_rigid_body, const std::string& name, const BulletAbi& abi);
 
   // ---- the step ----
   // Advances exactly dt seconds: lod, activation, dem, `substeps` rigid-body steps of

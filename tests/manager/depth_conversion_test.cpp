@@ -132,3 +132,50 @@ TEST(DepthConversion, RefusesBadResolutionAndRectangle) {
   ASSERT_TRUE(r.ok());
   EXPECT_FALSE((*r)->render(nullptr, 0, 1, 0, 0, 1, 0, 1).ok());
 }
+
+// write_to_heightfield with a RenderBaseline (the fill rendered the same way): where the
+// render did not change beyond the fill's rise, the heights of before come back exactly,
+// however rough the render; where it changed by more than the tolerance, the sample is
+// Leach's smoothed render.
+TEST(DepthConversion, BaselineKeepsUnmovedGroundAndTakesMovedGround) {
+  HeightfieldDef d;
+  d.samples_x = d.samples_z = 41;
+  d.spacing = 0.1f;
+  auto hf = Heightfield::create(d);
+  ASSERT_TRUE(hf.ok());
+  for (int j = 0; j < 41; ++j)
+    for (int i = 0; i < 41; ++i) hf->set_height(i, j, 0.5f + 0.02f * std::sin(0.7f * float(i)) * std::cos(0.5f * float(j)));
+  const Heightfield original = *hf;
+  const GridRegion region{10, 10, 21, 21};
+  std::vector<float> h0(std::size_t(region.ni) * region.nj);
+  hf->read(region, h0.data());
+  // A rough render of the fill: the surface plus a granular pattern of ±1 cm.
+  HeightImage fill;
+  fill.width = fill.height = 256;
+  fill.x0 = fill.z0 = 0.95f;
+  fill.x1 = fill.z1 = 3.05f;
+  fill.h.resize(256 * 256);
+  for (int v = 0; v < 256; ++v)
+    for (int u = 0; u < 256; ++u) {
+      const float x = fill.x0 + (u + 0.5f) * (fill.x1 - fill.x0) / 256, z = fill.z0 + (v + 0.5f) * (fill.z1 - fill.z0) / 256;
+      fill.h[std::size_t(v) * 256 + u] = hf->sample(x, z) + 0.01f * std::sin(97.0f * x) * std::sin(89.0f * z);
+    }
+  // Later: risen by 2 mm everywhere (the rebound) and dug 5 cm deep in x, z in [1.8, 2.2].
+  const float rise = 0.002f;
+  HeightImage now = fill;
+  for (int v = 0; v < 256; ++v)
+    for (int u = 0; u < 256; ++u) {
+      const float x = now.x0 + (u + 0.5f) * (now.x1 - now.x0) / 256, z = now.z0 + (v + 0.5f) * (now.z1 - now.z0) / 256;
+      now.h[std::size_t(v) * 256 + u] += rise - ((x > 1.8f && x < 2.2f && z > 1.8f && z < 2.2f) ? 0.05f : 0.0f);
+    }
+  const RenderBaseline base{&fill, &h0, 0.025f, rise};
+  write_to_heightfield(now, region, *hf, 1, &base);
+  // Unmoved: at least 3 samples from the dug square and 2 from the border band: exact.
+  for (int j = 12; j <= 28; ++j)
+    for (int i = 12; i <= 28; ++i) {
+      const bool near_dig = i >= 15 && i <= 25 && j >= 15 && j <= 25;
+      if (!near_dig) EXPECT_NEAR(hf->height(i, j), original.height(i, j), 1e-5f) << i << "," << j;
+    }
+  // Moved: the dug square's centre is Leach's rendered surface, about 5 cm down.
+  EXPECT_LT(hf->height(20, 20), original.height(20, 20) - 0.03f);
+}

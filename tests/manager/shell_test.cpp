@@ -67,7 +67,7 @@ TEST(Shell, PrimitivesOnSurfaceAndEvenlySpaced) {
   const float areas[4] = {4 * pi * 0.09f, 8 * (0.02f + 0.06f + 0.03f), 2 * pi * 0.3f * 0.9f + 2 * pi * 0.09f,
                           2 * pi * 0.2f * 0.5f + 4 * pi * 0.04f};
   for (int k = 0; k < 4; ++k) {
-    auto pts = sample_shell(shapes[k], sp, 100000);
+    auto pts = sample_shell(shapes[k], sp, sp / 1.5f, 100000);
     ASSERT_TRUE(pts.ok()) << pts.message();
     for (const auto& p : *pts) ASSERT_LT(surface_distance(shapes[k], p), 1e-5f) << "shape " << k;
     auto [lo, hi] = nn_range(*pts);
@@ -79,28 +79,39 @@ TEST(Shell, PrimitivesOnSurfaceAndEvenlySpaced) {
   }
 }
 
-// A closed mesh (a cube of 12 triangles): every point on a face, shared edges not doubled.
-TEST(Shell, MeshSurfaceWithoutDuplicates) {
+// A closed mesh (a cube of 12 triangles): every centre sphere_radius inside a face (on the
+// inner box), none closer than 0.75 spacing to another (tests/manager/mesh_sdf_test.cpp has the
+// rest: coverage, spheres, bad meshes).
+TEST(Shell, MeshCentresOnTheInsetSurface) {
   RigidShape s;
   s.kind = RigidShapeKind::Mesh;
   for (int i = 0; i < 8; ++i) s.vertices.push_back({i & 1 ? 0.25f : -0.25f, i & 2 ? 0.25f : -0.25f, i & 4 ? 0.25f : -0.25f});
   s.triangles = {{0, 2, 1}, {1, 2, 3}, {4, 5, 6}, {5, 7, 6}, {0, 1, 4}, {1, 5, 4},
                  {2, 6, 3}, {3, 6, 7}, {0, 4, 2}, {2, 4, 6}, {1, 3, 5}, {3, 7, 5}};
-  auto pts = sample_shell(s, 0.05f, 100000);
-  ASSERT_TRUE(pts.ok());
-  RigidShape cube;
-  cube.kind = RigidShapeKind::Box;
-  cube.half_extents = {0.25f, 0.25f, 0.25f};
-  for (const auto& p : *pts) ASSERT_LT(surface_distance(cube, p), 1e-5f);
-  EXPECT_GT(nn_range(*pts).first, 0.49f * 0.05f);
+  auto pts = sample_shell(s, 0.05f, 0.02f, 100000);
+  ASSERT_TRUE(pts.ok()) << pts.message();
+  RigidShape inner;
+  inner.kind = RigidShapeKind::Box;
+  inner.half_extents = {0.23f, 0.23f, 0.23f};
+  for (const auto& p : *pts) ASSERT_LT(surface_distance(inner, p), 1e-5f);
+  EXPECT_GT(pts->size(), 6 * 0.46f * 0.46f / (0.05f * 0.05f) * 0.7f);
+  EXPECT_GT(nn_range(*pts).first, 0.75f * 0.05f - 1e-6f);
+  // The second request for the same mesh, spacing and radius is the cached shell; a smaller
+  // capacity still gets the capacity error.
+  auto again = sample_shell(s, 0.05f, 0.02f, 100000);
+  ASSERT_TRUE(again.ok());
+  EXPECT_EQ(*again, *pts);
+  auto small = sample_shell(s, 0.05f, 0.02f, 10);
+  ASSERT_FALSE(small.ok());
+  EXPECT_EQ(small.error().field, "pool.shell_particles_per_slot");
 }
 
 TEST(Shell, CapacityAndSpacingErrorsNameTheField) {
   RigidShape s;
   s.radius = 1.0f;
-  auto big = sample_shell(s, 0.01f, 1000);
+  auto big = sample_shell(s, 0.01f, 0.005f, 1000);
   ASSERT_FALSE(big.ok());
   EXPECT_NE(big.message().find("shell_particles_per_slot"), std::string::npos) << big.message();
-  EXPECT_FALSE(sample_shell(s, 0.0f, 1000).ok());
-  EXPECT_FALSE(sample_shell(s, std::nanf(""), 1000).ok());
+  EXPECT_FALSE(sample_shell(s, 0.0f, 0.005f, 1000).ok());
+  EXPECT_FALSE(sample_shell(s, std::nanf(""), 0.005f, 1000).ok());
 }

@@ -38,10 +38,10 @@ TerrainManagerDef small_def() {
 // heightfield. d = 2 r = 5 cm, heightfield spacing 10 cm (2 d).
 // Issue targets: height RMSE < 0.1 d and max < 0.5 d inside the patch, volume within 1 %,
 // largest step across the border < 0.1 d, surface moving < 0.1 d in the first second.
-// Met and asserted at the target: surface motion (measured 0.096 d), max (0.285 d), volume
-// (+0.62 %). Not met (docs/manager.md "Round trip"): RMSE 0.114 d and border step 0.126 d,
-// asserted at bounds just above the measured values so that a regression fails; the
-// messages name the issue's target.
+// All asserted at the target. Measured (commit of this comment, CPU DEM): surface motion
+// 0.096 d, RMSE 0.050 d, max 0.165 d, border step 0.066 d, volume -0.61 %. The demotion
+// renders the fill too and keeps the old heights where the surface did not move
+// (depth_conversion.hpp RenderBaseline; docs/manager.md "Round trip").
 TEST(TerrainManager, RoundTripWithoutDisturbance) {
   Heightfield hf = hills();
   const Heightfield original = hf;
@@ -105,7 +105,7 @@ TEST(TerrainManager, RoundTripWithoutDisturbance) {
       mx = std::max(mx, std::abs(e));
       ++n;
     }
-  EXPECT_LT(std::sqrt(se / n), 0.15 * d) << "height RMSE (issue target 0.1 d); max " << mx / d << " d";
+  EXPECT_LT(std::sqrt(se / n), 0.1 * d) << "height RMSE (issue target 0.1 d); max " << mx / d << " d";
   EXPECT_LT(mx, 0.5 * d) << "max height error (issue target 0.5 d)";
   // Border: the largest step between neighbouring samples across the region's edge, beyond
   // the original terrain's own slope there.
@@ -117,7 +117,7 @@ TEST(TerrainManager, RoundTripWithoutDisturbance) {
   };
   for (int k = j0; k <= j1; ++k) across(i0 - 1, k, i0, k), across(i1, k, i1 + 1, k);
   for (int k = i0; k <= i1; ++k) across(k, j0 - 1, k, j0), across(k, j1, k, j1 + 1);
-  EXPECT_LT(step, 0.2 * d) << "border step (issue target 0.1 d)";
+  EXPECT_LT(step, 0.1 * d) << "border step (issue target 0.1 d)";
   EXPECT_LT(std::abs(rep["ledger"]["total"]["error_pct"].get<double>()), 1.0) << rep["ledger"].dump(2);
   std::printf("round trip: surface motion %.3f d, RMSE %.3f d, max %.3f d, border step %.3f d, volume %+.2f %%\n",
               std::sqrt(moved2 / double(s0.size())) / d, std::sqrt(se / n) / d, mx / d, step / d,

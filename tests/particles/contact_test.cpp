@@ -45,6 +45,31 @@ TEST(ContactLaw, NeverAttractive) {
   EXPECT_NEAR(f.f.y, 1.1f, 1e-6f);
 }
 
+// Dashpot cap |c_n v.n| <= c_n delta/dt in the first substep of a contact (new_contact): the
+// dashpot gives the impulse c_n delta it delivers over that overlap change, not c_n |v.n| dt;
+// deeper contacts and ongoing ones are unchanged; the cap never makes the force attractive.
+TEST(ContactLaw, DashpotCappedInFirstSubstep) {
+  ContactParams p{1000, 10, 300, 5, 0.5f, 2, 1e-4f, false};
+  p.new_contact = true;
+  Vec3 xi{};
+  // approaching at 1 m/s, delta = 2.5e-5 m < |v| dt = 1e-4 m: f_n = 1000*2.5e-5 + 10*2.5e-5/1e-4 = 2.525 N
+  ContactForce f = contact_force(p, {0, 1, 0}, 2.5e-5f, {0, -1.0f, 0}, xi);
+  EXPECT_NEAR(f.f.y, 2.525f, 1e-5f);
+  // delta = 2e-4 m > |v| dt: the full dashpot, 0.2 + 10 = 10.2 N
+  xi = {};
+  f = contact_force(p, {0, 1, 0}, 2e-4f, {0, -1.0f, 0}, xi);
+  EXPECT_NEAR(f.f.y, 10.2f, 1e-5f);
+  // separating at 1 m/s: 0.025 - 2.5 < 0, clamped to 0, never attractive
+  xi = {};
+  f = contact_force(p, {0, 1, 0}, 2.5e-5f, {0, 1.0f, 0}, xi);
+  EXPECT_EQ(f.f.y, 0.0f);
+  // an ongoing contact (flag off) keeps the full dashpot even when delta < |v| dt: 0.025 + 10
+  p.new_contact = false;
+  xi = {};
+  f = contact_force(p, {0, 1, 0}, 2.5e-5f, {0, -1.0f, 0}, xi);
+  EXPECT_NEAR(f.f.y, 10.025f, 1e-5f);
+}
+
 // Spring law: xi grows by v_t dt while it sticks, then is capped at mu f_n (slip).
 TEST(ContactLaw, SpringStickThenSlip) {
   ContactParams p{1000, 0, 300, 0, 0.5f, 0, 1e-3f, false};
@@ -78,18 +103,22 @@ TEST(ContactLaw, BellVelocityCapped) {
 
 // Head-on collision of two spheres (single-sphere shells, no gravity, no friction) at
 // dt = t_clamped / N. Restitution and geometric contact time are measured with linear
-// interpolation of the touching instants, for 8 phases of the first touch within a step.
-//   e: within 2% of the REQUESTED e (Material::restitution is the measured e: zeta is
-//      chosen by inverting the clamped law, material.hpp);
-//   contact time: within 2% of the clamped law's closed form (clamped_contact_time,
-//      Schwager & Poeschel 2007). The textbook t_c = pi/(w0 sqrt(1 - zeta^2)) assumes a force
-//      that turns attractive, so it is too long for the clamped law and undefined for
-//      zeta >= 1 (e = 0.1 needs zeta = 1.243); at e = 0.9 both agree, so the measured time is
-//      also asserted within 2% of it.
-// Step size: the damper force jumps from 0 to c_n v0 at the first touch, and symplectic Euler
-// applies a whole step of it whatever the phase of the touch, a first-order error in dt that
-// grows with zeta. Worst case over the phases (docs/dem.md): e = 0.5 and 0.9 are within 2% at
-// N = 50 (the dt <= t_c/50), e = 0.1 needs N ~ 500. Asserted at N = 100, 100, 1000.
+// interpolation of the touching instants (symplectic Euler moves a body in a straight line
+// within a step, so the interpolation is exact for the discrete path), for 8 phases of the
+// first touch within a step.
+//   e: against the REQUESTED e (Material::restitution is the measured e: zeta is chosen by
+//      inverting the clamped law, material.hpp);
+//   contact time: against the clamped law's closed form t_clamped = clamped_contact_time
+//      (Schwager & Poeschel 2007; material.hpp), the time from touch until the spheres stop
+//      overlapping. The textbook t_c = pi/(w0 sqrt(1 - zeta^2)) assumes a force that turns
+//      attractive, so it is too long for the clamped law and undefined for zeta >= 1 (e = 0.1
+//      needs zeta = 1.243); at e = 0.9 both agree, so there it is asserted too.
+// Step size (docs/dem.md "Step size"): the Simulation does not yet tell contact_force which
+// substep is a contact's first (ContactParams::new_contact), so the dashpot force c_n v0
+// appears in full in that substep whatever the phase of the touch: a first-order error that
+// grows with zeta. The 2 % at dt <= t_c/50 holds for e = 0.5 and 0.9; e = 0.1 needs
+// N ~ 500 (-17 % at N = 50). Asserted at N = 50 (0.5, 0.9) and N = 1000 (0.1).
+// HeadOnLaw below runs the same collision through contact_force with the first-substep flag.
 struct HeadOnCase {
   double e;
   int steps_per_contact;
@@ -99,6 +128,7 @@ class HeadOn : public ::testing::TestWithParam<HeadOnCase> {};
 TEST_P(HeadOn, RestitutionAndContactTime) {
   const double e = GetParam().e;
   const int N = GetParam().steps_per_contact;
+  const double tol = 0.02;
   Material mat;
   mat.restitution = float(e);
   mat.friction = 0;
@@ -139,8 +169,8 @@ TEST_P(HeadOn, RestitutionAndContactTime) {
     for (int k = 0; k < 5; ++k) ASSERT_TRUE(sim->step(dt).ok());
     const double v_rel = double(sim->body_velocity(*b).x - sim->body_velocity(*a).x);
     const double e_meas = v_rel / (2 * v0), t_meas = t_out - t_in;
-    EXPECT_NEAR(e_meas, e, 0.02 * e) << "e = " << e << ", phase " << phase;
-    EXPECT_NEAR(t_meas, t_clamped, 0.02 * t_clamped) << "e = " << e << ", phase " << phase;
+    EXPECT_NEAR(e_meas, e, tol * e) << "e = " << e << ", phase " << phase;
+    EXPECT_NEAR(t_meas, t_clamped, tol * t_clamped) << "e = " << e << ", phase " << phase;
     if (e >= 0.9) {
       EXPECT_NEAR(t_meas, tc_textbook, 0.02 * tc_textbook);
     }
@@ -157,10 +187,78 @@ TEST_P(HeadOn, RestitutionAndContactTime) {
 }
 
 INSTANTIATE_TEST_SUITE_P(Restitutions, HeadOn,
-                         ::testing::Values(HeadOnCase{0.1, 1000}, HeadOnCase{0.5, 100}, HeadOnCase{0.9, 100}),
+                         ::testing::Values(HeadOnCase{0.1, 1000}, HeadOnCase{0.5, 50}, HeadOnCase{0.5, 100},
+                                           HeadOnCase{0.9, 50}, HeadOnCase{0.9, 100}),
                          [](const ::testing::TestParamInfo<HeadOnCase>& i) {
-                           return "e0" + std::to_string(int(std::lround(10 * i.param.e)));
+                           return "e0" + std::to_string(int(std::lround(10 * i.param.e))) + "_N" + std::to_string(i.param.steps_per_contact);
                          });
+
+// The same head-on collision integrated here with symplectic Euler (as the Simulation does:
+// v += F/m dt, then x += v dt) through contact_force, with ContactParams::new_contact set in
+// the first substep of the contact, as particles/dem.cpp would set it. 32 phases of the touch.
+// With the flag the dashpot's first-substep impulse is c_n delta (its impulse over that
+// overlap change), and the phase spread of e falls from 19 % of e to below 0.5 % at
+// dt = t_clamped/50 (e = 0.1). What is left is first order in dt (the dashpot sees the
+// velocity half a step old): e high and the contact short, by 3.3 % at e = 0.1, 1.2 % and
+// 0.8 % at e = 0.5, 0.2 % and 0.1 % at e = 0.9 (docs/dem.md "Step size"). Asserted: spread
+// < 0.5 % of e with the flag, > 10 % without (e = 0.1); e and time within 2 % for e = 0.5,
+// 0.9 and within 4 % for e = 0.1 (the 2 % is not met there at N = 50).
+namespace {
+struct LawRun {
+  double e_lo = 1e9, e_hi = -1e9, t_lo = 1e9, t_hi = -1e9;
+};
+LawRun head_on_law(double e, int N, bool flag) {
+  Material mat;
+  mat.restitution = float(e);
+  const double m = sphere_mass(), meff = m / 2;
+  const double cn = normal_damping(mat, meff);
+  const double t_cl = clamped_contact_time(mat, meff);
+  const float dt = float(t_cl / N);
+  const float v0 = 0.2f;
+  LawRun out;
+  for (int phase = 0; phase < 32; ++phase) {
+    ContactParams p{mat.normal_stiffness, float(cn), 0, 0, 0, 0, dt, false};
+    float xa = 0, xb = float(2 * kR) + 1e-5f + phase / 32.0f * 2 * v0 * dt, va = v0, vb = -v0;
+    double gap_prev = xb - xa - 2 * kR, t = 0, t_in = -1, t_out = -1;
+    bool touching = false;
+    for (int k = 0; k < 40 * N && t_out < 0; ++k) {
+      const float delta = float(2 * kR) - (xb - xa);
+      float fb = 0;  // force on b along +x (n from a to b)
+      if (delta > 0) {
+        p.new_contact = flag && !touching;
+        Vec3 xi{};
+        fb = contact_force(p, {1, 0, 0}, delta, {vb - va, 0, 0}, xi).f.x;
+      }
+      touching = delta > 0;
+      vb += float(fb / m) * dt, va -= float(fb / m) * dt;
+      xb += vb * dt, xa += va * dt;
+      t += dt;
+      const double gap = double(xb) - double(xa) - 2 * kR;
+      if (t_in < 0 && gap < 0) t_in = t - dt * gap / (gap - gap_prev);
+      if (t_in >= 0 && gap >= 0 && gap_prev < 0) t_out = t - dt * gap / (gap - gap_prev);
+      gap_prev = gap;
+    }
+    const double em = (vb - va) / (2.0 * v0), tm = (t_out - t_in) / t_cl;
+    out.e_lo = std::min(out.e_lo, em / e - 1), out.e_hi = std::max(out.e_hi, em / e - 1);
+    out.t_lo = std::min(out.t_lo, tm - 1), out.t_hi = std::max(out.t_hi, tm - 1);
+  }
+  std::printf("law, e %.1f, dt = t_clamped/%d, first-substep cap %s: e %+.2f%%..%+.2f%%, contact %+.2f%%..%+.2f%%\n", e, N,
+              flag ? "on " : "off", 100 * out.e_lo, 100 * out.e_hi, 100 * out.t_lo, 100 * out.t_hi);
+  return out;
+}
+}  // namespace
+
+TEST(HeadOnLaw, FirstSubstepCapRemovesPhaseSpread) {
+  const LawRun off = head_on_law(0.1, 50, false);
+  EXPECT_GT(off.e_hi - off.e_lo, 0.10);
+  for (double e : {0.1, 0.5, 0.9}) {
+    const LawRun on = head_on_law(e, 50, true);
+    const double tol = e < 0.2 ? 0.04 : 0.02;
+    EXPECT_LT(on.e_hi - on.e_lo, 0.005) << "e " << e;
+    EXPECT_LT(std::max(std::abs(on.e_lo), std::abs(on.e_hi)), tol) << "e " << e;
+    EXPECT_LT(std::max(std::abs(on.t_lo), std::abs(on.t_hi)), tol) << "e " << e;
+  }
+}
 
 namespace {
 // A rigid 3 x 3 plate of spheres (spacing 2r) resting on the floor, gravity tilted by theta

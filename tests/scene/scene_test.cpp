@@ -542,3 +542,71 @@ TEST(SceneFuzz, MutatedScenesNeverCrashAndAlwaysExplain) {
 
 }  // namespace
 }  // namespace sandpatch
+
+// ---- presets (docs/tradeoff.md) ----
+namespace sandpatch {
+namespace {
+
+TEST(ScenePreset, EveryPresetSetsItsKnobs) {
+  ASSERT_EQ(simulation_presets().size(), 3u);
+  for (const char* name : {"game", "balanced", "engineering"}) {
+    const SimulationPreset* p = find_simulation_preset(name);
+    ASSERT_NE(p, nullptr) << name;
+    const auto r = parse(scene_with({{"simulation", {{"preset", name}}}}));
+    ASSERT_TRUE(r.ok()) << all(r);
+    EXPECT_EQ(r->simulation.preset, name);
+    EXPECT_DOUBLE_EQ(r->simulation.particle_scale, p->particle_scale);
+    EXPECT_EQ(r->simulation.pool.granules_per_slot, p->granules_per_slot);
+    // A slot holds the same world volume: capacity x scale^3 stays within one 1024-block of 32768.
+    EXPECT_GE(p->granules_per_slot * std::pow(p->particle_scale, 3), 32768.0 - 1e-9);
+    EXPECT_LT((p->granules_per_slot - 1024) * std::pow(p->particle_scale, 3), 32768.0);
+    EXPECT_EQ(p->granules_per_slot % 1024, 0);
+  }
+  EXPECT_EQ(find_simulation_preset("fast"), nullptr);
+  // coarser granules from engineering to game
+  EXPECT_LT(find_simulation_preset("engineering")->particle_scale, find_simulation_preset("balanced")->particle_scale);
+  EXPECT_LT(find_simulation_preset("balanced")->particle_scale, find_simulation_preset("game")->particle_scale);
+}
+
+TEST(ScenePreset, ExplicitFieldsOverrideThePreset) {
+  const auto r = parse(scene_with(
+      {{"simulation", {{"particle_scale", 1.25}, {"preset", "game"}, {"pool", {{"slots", 2}}}}}}));
+  ASSERT_TRUE(r.ok()) << all(r);
+  EXPECT_EQ(r->simulation.preset, "game");
+  EXPECT_DOUBLE_EQ(r->simulation.particle_scale, 1.25);  // given: wins, whatever the key order
+  EXPECT_EQ(r->simulation.pool.slots, 2);
+  EXPECT_EQ(r->simulation.pool.granules_per_slot, find_simulation_preset("game")->granules_per_slot);  // not given
+  const auto r2 = parse(scene_with({{"simulation", {{"preset", "game"}, {"pool", {{"granules_per_slot", 2048}}}}}}));
+  ASSERT_TRUE(r2.ok()) << all(r2);
+  EXPECT_EQ(r2->simulation.pool.granules_per_slot, 2048);
+}
+
+TEST(ScenePreset, BadNameNamesFileFieldValueAndTheAllowedNames) {
+  const auto r = parse(scene_with({{"simulation", {{"preset", "gmae"}}}}));
+  ASSERT_FALSE(r.ok());
+  ASSERT_EQ(r.errors().size(), 1u) << all(r);
+  const Error& e = r.error();
+  EXPECT_EQ(e.file, "test.json");
+  EXPECT_EQ(e.field, "simulation.preset");
+  EXPECT_NE(e.value.find("gmae"), std::string::npos);
+  for (const char* name : {"game", "balanced", "engineering"}) EXPECT_NE(e.allowed.find(name), std::string::npos);
+  EXPECT_NE(e.message().find("did you mean 'game'"), std::string::npos) << e.message();
+  const auto wrong_type = parse(scene_with({{"simulation", {{"preset", 3}}}}));
+  EXPECT_TRUE(has_error(wrong_type, "simulation.preset", "3", "game")) << all(wrong_type);
+}
+
+TEST(ScenePreset, CanonicalJsonKeepsThePresetAndScenesWithoutOneKeepTheirHash) {
+  const auto r = parse(scene_with({{"simulation", {{"preset", "balanced"}}}}));
+  ASSERT_TRUE(r.ok()) << all(r);
+  const nlohmann::json j = scene_to_json(*r);
+  EXPECT_EQ(j["simulation"]["preset"], "balanced");
+  const auto again = parse_scene(j.dump(), "again.json", kData);
+  ASSERT_TRUE(again.ok()) << all(again);
+  EXPECT_EQ(scene_to_json(*again), j);
+  const auto plain = parse(scene_with(nlohmann::json::object()));
+  ASSERT_TRUE(plain.ok()) << all(plain);
+  EXPECT_FALSE(scene_to_json(*plain)["simulation"].contains("preset"));
+}
+
+}  // namespace
+}  // namespace sandpatch

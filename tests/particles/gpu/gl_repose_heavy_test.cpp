@@ -1,10 +1,11 @@
-// Angle of repose of the GL DEM against the CPU backend (issue 4 statistics). HEAVY: three
-// 1.2 s simulations of 96 granules, about 20 s on llvmpipe.
+// Angle of repose of the GL DEM against the CPU backend (issue 4 statistics). HEAVY: six
+// poured piles of 400 granules (three seeds on each backend), a few minutes on llvmpipe.
 #include <gtest/gtest.h>
 
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <vector>
 
 #include "particles/dem.hpp"
 #include "particles/pile.hpp"
@@ -16,57 +17,55 @@ namespace {
 
 using namespace testutil;
 
-// Angle of repose, GL vs CPU (issue 4 statistics): a column of 96 granules between walls
-// 2 granules apart (quasi-2D) collapses against the wall x = 0 and comes to rest. The flank
-// angle is the slope of a least-squares line through the surface heights (the highest sphere
-// top in 1 cm columns) where the surface lies between 20 % and 80 % of its peak (fit_flank
-// with outer_run = false, particles/pile.hpp). Asserted
-// within 2 degrees of the CPU; a CPU run one ulp away is printed as the chaotic spread.
+// The poured pile of particles/pile.hpp (the fast CPU test's 400 granules, mu = 0.5) on both
+// backends, seeds 1-3. A pile is chaotic: one ulp changes which granule avalanches where,
+// so a single GL pile cannot be compared with a single CPU pile (the old quasi-2D collapse
+// test did, with a 2 degree tolerance, and a CPU run one ulp away moved by 17 degrees).
+// Compared instead: the mean flank angle over the seeds, within 3 standard errors of a
+// difference of two means, s sqrt(2/n), with s the seeds' standard deviation pooled over
+// both backends (measured in the same run), and at least 1.5 degrees (about what one granule
+// more or less at the toe does to the fitted slope); both means lie in the issue's 25-40 degrees.
 TEST(GlSimulation, AngleOfReposeMatchesCpu) {
   auto ctx = context();
   ASSERT_TRUE(ctx);
-  SimulationDef d = box_def(ShearLaw::SpringHistory);
-  d.bounds_max = {0.25f, 0.3f, 0.046f};
-  auto cpu = Simulation::create(d);
-  auto cpu2 = Simulation::create(d);
-  auto gpu = GlSimulation::create(d);
-  ASSERT_TRUE(cpu.ok() && cpu2.ok() && gpu.ok()) << gpu.message();
-  auto column = [&](auto& sim, bool nudge) {
-    std::uint64_t seed = 3;
-    const float a = 0.0228f;
-    for (int l = 0; l < 12; ++l)
-      for (int k = 0; k < 2; ++k)
-        for (int i = 0; i < 4; ++i) {
-          Vec3 x{0.0118f + i * a, 0.0118f + l * a, 0.0116f + k * a};
-          if (nudge) x.x = std::nextafter(x.x, 1.0f);
-          ASSERT_TRUE(sim.add_granule(x, random_quat(seed)).ok());
-        }
-  };
-  column(*cpu, false);
-  column(*cpu2, true);
-  column(*gpu, false);
-  for (int f = 0; f < 1200; ++f) {
-    ASSERT_TRUE(cpu->step(1e-3).ok());
-    ASSERT_TRUE(cpu2->step(1e-3).ok());
-    auto st = gpu->step(1e-3);
-    ASSERT_TRUE(st.ok()) << st.message();
+  const std::vector<std::uint64_t> seeds{1, 2, 3};
+  std::vector<double> cpu, gl;
+  for (std::uint64_t seed : seeds) {
+    PileDef pd;
+    pd.material.friction = 0.5f;
+    pd.seed = seed;
+    pd.threads = 1;
+    SimulationDef d = pile_simulation_def(pd);
+    d.max_overlap_fraction = 0;  // as the GL backend (gl_test_util.hpp box_def)
+    auto c = Simulation::create(d);
+    auto g = GlSimulation::create(d);
+    ASSERT_TRUE(c.ok() && g.ok()) << c.message() << g.message();
+    auto rc = pour_pile(*c, pd);
+    auto rg = pour_pile(*g, pd);
+    ASSERT_TRUE(rc.ok() && rg.ok()) << rc.message() << rg.message();
+    std::printf("seed %llu: cpu %.2f deg (%d bins, at rest %d, %.1f s wall), gl %.2f deg (%d bins, at rest %d, %.1f s wall)\n",
+                (unsigned long long)seed, rc->angle_deg, rc->fit_points, int(rc->at_rest), rc->wall_seconds,
+                rg->angle_deg, rg->fit_points, int(rg->at_rest), rg->wall_seconds);
+    std::fflush(stdout);
+    EXPECT_TRUE(rc->at_rest);
+    EXPECT_TRUE(rg->at_rest);
+    cpu.push_back(rc->angle_deg);
+    gl.push_back(rg->angle_deg);
   }
-  // the reusable flank fit (particles/pile.hpp): 1 cm columns along x, one sector, every
-  // column between 20 % and 80 % of the peak
-  auto angle = [&](const std::vector<Vec3>& p) {
-    std::vector<SurfacePoint> pts;
-    for (const Vec3& x : p) pts.push_back({std::clamp(double(x.x), 0.0, 0.2499), double(x.y + d.particle_radius), 0});
-    return fit_flank(pts, FlankFitDef{0.01, 1, 0.2, 0.8, false}).angle_deg;
-  };
-  const double ac = angle(cpu->particle_positions()), a2 = angle(cpu2->particle_positions()),
-               ag = angle(gpu->particle_positions());
-  std::printf("angle of repose: cpu %.2f deg, gl %.2f deg (%+.2f), cpu one ulp away %.2f deg (%+.2f); max speed "
-              "cpu %.4f gl %.4f m/s\n",
-              ac, ag, ag - ac, a2, a2 - ac, cpu->max_granule_speed(), gpu->max_granule_speed());
-  EXPECT_GT(ac, 10.0);
-  EXPECT_LT(cpu->max_granule_speed(), 0.01);
-  EXPECT_LT(gpu->max_granule_speed(), 0.01);
-  EXPECT_NEAR(ag, ac, 2.0);
+  const double n = double(seeds.size());
+  double mc = 0, mg = 0;
+  for (std::size_t k = 0; k < seeds.size(); ++k) mc += cpu[k] / n, mg += gl[k] / n;
+  double ss = 0;
+  for (std::size_t k = 0; k < seeds.size(); ++k) ss += (cpu[k] - mc) * (cpu[k] - mc) + (gl[k] - mg) * (gl[k] - mg);
+  const double s = std::sqrt(ss / (2 * (n - 1)));
+  const double tol = std::max(1.5, 3 * s * std::sqrt(2 / n));
+  std::printf("mean flank angle: cpu %.2f deg, gl %.2f deg (%+.2f); pooled seed sd %.2f deg, tolerance %.2f deg\n", mc,
+              mg, mg - mc, s, tol);
+  EXPECT_NEAR(mg, mc, tol);
+  EXPECT_GE(mc, 25.0);
+  EXPECT_LE(mc, 40.0);
+  EXPECT_GE(mg, 25.0);
+  EXPECT_LE(mg, 40.0);
 }
 
 }  // namespace
