@@ -7,6 +7,7 @@
 //            granules at the floor of large beds keep spinning; docs/dem.md)
 // 3. time    `steps` steps of the settled bed with the same parameters and count contacts
 #include "bench/bench.hpp"
+#include "bench/bench_util.hpp"
 
 #include <omp.h>
 
@@ -34,15 +35,7 @@
 
 namespace sandpatch {
 
-namespace {
-// CPU seconds used by the whole process (all threads) so far: with the wall time it tells a
-// loaded machine (cpu < threads x wall) from a slow step.
-double process_cpu_seconds() {
-  timespec t{};
-  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
-  return double(t.tv_sec) + 1e-9 * double(t.tv_nsec);
-}
-}  // namespace
+using bench::process_cpu_seconds;
 
 int run_bench_dem(const BenchDemArgs& a) {
   if (a.granules < 1 || a.granules > 4000000) {

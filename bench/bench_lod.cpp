@@ -24,6 +24,7 @@
 #include <numbers>
 
 #include "bench/bench.hpp"
+#include "bench/bench_util.hpp"
 #include "manager/run.hpp"
 #include "manager/terrain_manager.hpp"
 #include "scene/scene.hpp"
@@ -43,12 +44,7 @@ constexpr double kHillsHeight = 0.0;  // m, base height
 constexpr double kHillsAmplitude = 0.25;
 constexpr double kDt = 1.0 / 120.0;
 
-double load_average() {
-  double l[3] = {0, 0, 0};
-  std::ifstream f("/proc/loadavg");
-  f >> l[0] >> l[1] >> l[2];
-  return l[0];
-}
+using bench::load_average;
 
 struct Run {
   ojson report;

@@ -38,6 +38,7 @@
 #include <numbers>
 #include <set>
 
+#include "bench/bench_util.hpp"
 #include "gl/context.hpp"
 #include "particles/bed.hpp"
 #include "particles/dem.hpp"
@@ -60,24 +61,9 @@ constexpr int kSectors = 8;
 
 double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
-double load_average() {
-  double l = 0;
-  std::ifstream f("/proc/loadavg");
-  f >> l;
-  return l;
-}
+using bench::load_average;
+using bench::write_text;
 
-bool write_text(const fs::path& p, const std::string& text) {
-  const fs::path tmp = p.string() + ".tmp";
-  {
-    std::ofstream f(tmp, std::ios::binary);
-    f << text;
-    if (!f.flush()) return false;
-  }
-  std::error_code ec;
-  fs::rename(tmp, p, ec);
-  return !ec;
-}
 
 std::string num_id(double v) {
   char b[32];
@@ -630,9 +616,9 @@ int run_bench_tradeoff(const BenchTradeoffArgs& a) {
     for (auto& row : rows) {
       if (row.set.kind != c || !row.ran || !row.set.noise) continue;
       for (const auto& twin : rows) {
-        const auto &a = row.set.knobs, &b = twin.set.knobs;
-        if (twin.set.kind != c || !twin.ran || twin.set.noise || a.particle_scale != b.particle_scale ||
-            a.steps_per_contact != b.steps_per_contact || a.patch_radii != b.patch_radii || a.backend != b.backend)
+        const auto &ka = row.set.knobs, &kb = twin.set.knobs;
+        if (twin.set.kind != c || !twin.ran || twin.set.noise || ka.particle_scale != kb.particle_scale ||
+            ka.steps_per_contact != kb.steps_per_contact || ka.patch_radii != kb.patch_radii || ka.backend != kb.backend)
           continue;
         if (c == TradeoffCase::Pile) {
           row.scatter = std::abs(row.angle - twin.angle) / std::abs(ref->angle);

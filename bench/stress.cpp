@@ -24,6 +24,7 @@
 #include <vector>
 
 #include "bench/bench.hpp"
+#include "bench/bench_util.hpp"
 #include "manager/run.hpp"
 #include "manager/terrain.hpp"
 #include "scene/scene.hpp"
@@ -49,31 +50,9 @@ double bounding_radius(const BodyDef& b) {
   return 1.0;
 }
 
-double load_average() {
-  double l = 0;
-  std::ifstream f("/proc/loadavg");
-  f >> l;
-  return l;
-}
+using bench::load_average;
+using bench::write_text;
 
-// CPU seconds (user + system, all threads) of this process so far.
-double cpu_seconds() {
-  rusage u{};
-  getrusage(RUSAGE_SELF, &u);
-  return double(u.ru_utime.tv_sec + u.ru_stime.tv_sec) + 1e-6 * double(u.ru_utime.tv_usec + u.ru_stime.tv_usec);
-}
-
-bool write_text(const fs::path& p, const std::string& text) {
-  const fs::path tmp = p.string() + ".tmp";
-  {
-    std::ofstream f(tmp, std::ios::binary);
-    f << text;
-    if (!f.flush()) return false;
-  }
-  std::error_code ec;
-  fs::rename(tmp, p, ec);
-  return !ec;
-}
 
 }  // namespace
 
@@ -196,9 +175,9 @@ int run_stress(const StressArgs& a) {
   o.progress = ProgressStyle::None;
   o.command_line = "sandpatch stress " + a.scene;
   o.on_frame = [&](const FrameSample& f) { samples.push_back(f); };
-  const double c0 = cpu_seconds();
+  const double c0 = bench::process_cpu_seconds();
   RunResult r = run_scene(*scene, o);
-  const double cpu_s = cpu_seconds() - c0;
+  const double cpu_s = bench::process_cpu_seconds() - c0;
   std::error_code ignore;
   fs::remove_all(out / "run", ignore);
   if (r.code != ExitCode::Ok) {
