@@ -29,15 +29,19 @@ int run_bench_dem(const BenchDemArgs& args);
 
 // bench lod (bench/bench_lod.cpp, docs/BENCHMARKS.md "Level of detail"): the same three
 // bodies dropped on the same spot of terrains of `sizes` cells per side (0.5 m cells), wall
-// seconds per simulated second of each and per stage; the ratio largest / smallest; the
+// and CPU seconds per simulated second of each (interleaved, below) and per stage; the ratio largest / smallest; the
 // "LOD off" estimate (the DEM's measured cost per granule-second times the granules the whole
 // terrain would need), checked on a small terrain run fully as particles; idle terrain (no
 // bodies) and a sleeping patch. With json, one JSON object on the last line:
 // {"results": [{"terrain": N, "wall_s_per_sim_s": ...}, ...], "lod_off": {...}, ...}.
+// Every size is set up first in one process, then all are advanced in turn, `window`
+// simulated seconds each, round robin, so that all see the same machine load.
 struct BenchLodArgs {
   std::vector<int> sizes = {512, 1024, 2048, 4096, 8192};  // cells per side, ascending
   double seconds = 1.0;  // simulated seconds per terrain size
+  double window = 0.025; // simulated seconds per size per turn (3 frames of 1/120 s)
   int threads = 0;       // 0 = all cores
+  bool quick = false;    // leave out the full-terrain checks and the sleeping patch (tests)
   bool json = false;
 };
 

@@ -20,6 +20,7 @@
 #include <nlohmann/json.hpp>
 
 #include "particles/bed.hpp"
+#include "particles/contact_simd.hpp"
 #include "particles/dem.hpp"
 
 // Under `valgrind --tool=callgrind` the timed loop is dumped on its own (instruction counts
@@ -91,9 +92,11 @@ int run_bench_dem(const BenchDemArgs& a) {
   }
   const int threads = a.threads > 0 ? a.threads : omp_get_max_threads();
   const int spheres = sim->particle_count();
+  // the pair kernel Simulation::create chose (SANDPATCH_DEM_KERNEL=scalar forces the scalar one)
+  const char* kernel = simd::use_avx2_pair_kernel() ? "avx2" : "scalar";
   if (!a.json)
-    std::printf("bench dem: %d granules (%d spheres), box %.3f m x %.3f m, %d layers, dt %g s, %d threads\n",
-                a.granules, spheres, L, L, bed.layers, dt, threads);
+    std::printf("bench dem: %d granules (%d spheres), box %.3f m x %.3f m, %d layers, dt %g s, %d threads, %s pair kernel\n",
+                a.granules, spheres, L, L, bed.layers, dt, threads, kernel);
 
   // settle
   auto t0 = std::chrono::steady_clock::now();
@@ -153,6 +156,7 @@ int run_bench_dem(const BenchDemArgs& a) {
                       {"steps", a.steps},
                       {"dt", dt},
                       {"threads", threads},
+                      {"pair_kernel", kernel},
                       {"wall_seconds", wall},
                       {"cpu_seconds", cpu},
                       {"cpu_ns_per_sphere_step", cpu_ns},

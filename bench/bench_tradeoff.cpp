@@ -3,7 +3,7 @@
 //
 // Two reference cases, each run at every setting of the sweep:
 //   pile    the angle of repose of a poured pile (particles/pile.hpp pour_pile, the pour and
-//           flank fit of measure_repose on a simulation whose guard substeps at t_c / N): the
+//           cone fit of measure_repose on a simulation whose guard substeps at t_c / N): the
 //           pile's world volume is fixed, so particle scale s pours 1/s^3 as many granules
 //   crater  a sphere dropped into a settled granular bed (measure_crater below, straight on the
 //           DEM): crater depth and rim volume from the particle surface before and after

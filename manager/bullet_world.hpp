@@ -1,7 +1,10 @@
 // The one place Sandpatch wraps Bullet (../shared/STYLE.md counter-examples: Bullet's global
 // state and its hidden time accumulator). Bodies outside active patches collide with the
 // heightfield through one btHeightfieldTerrainShape per heightfield tile, reading Sandpatch's
-// own tile arrays (no copy). step(dt) advances exactly dt: stepSimulation(dt, 0) makes Bullet
+// own tile arrays (no copy). Tiles are static, asleep collision objects and Bullet updates
+// only active objects' bounds, so an idle tile costs a step nothing; a tile's internal-edge
+// info (btTriangleInfoMap) is built the first time a body comes within ~1 m of it, so set-up
+// is O(tiles), not O(samples). step(dt) advances exactly dt: stepSimulation(dt, 0) makes Bullet
 // take one step of dt with no accumulator and no interpolation.
 //
 // Precision boundary (../shared/STYLE.md 11): Bullet runs in float, relative to the terrain's
@@ -103,6 +106,19 @@ class BulletWorld {
   void terrain_changed();
 
   int terrain_tile_count() const;
+
+  // What a step costs Bullet, as counts (tests and `bench lod`): none of them grows with the
+  // terrain's size while nothing touches the terrain.
+  struct Stats {
+    int tiles = 0;                  // heightfield tiles (one btHeightfieldTerrainShape each)
+    int aabb_updates_per_step = 0;  // objects whose bounds Bullet recomputes each step (active ones)
+    int dynamic_proxies = 0;        // proxies in the broadphase's dynamic tree (moved in the last few steps)
+    int fixed_proxies = 0;          // proxies in its fixed tree (not moved lately: idle tiles, sleeping bodies)
+    int pairs = 0;                  // overlapping pairs in the broadphase
+    int edge_maps = 0;              // tiles with internal-edge info now (built when a body first comes near)
+    int edge_maps_built = 0;        // internal-edge infos built over the world's life (rebuilds included)
+  };
+  Stats stats() const;
 
   // ---- coupling with granular patches ----
   // Adds a force (N, world, through the centre of mass) and a torque (N m, world) for the next

@@ -187,6 +187,7 @@ Result<GranuleTile> make_granule_tile(const GranuleTileDef& def) {
   sd.floor_height = 0;
   sd.side_walls = true;
   sd.threads = def.threads;
+  sd.accuracy_steps_per_contact = def.steps_per_contact;
   auto sim = Simulation::create(sd);
   if (!sim) return sim.errors();
   LatticeBedDef bed;
@@ -265,19 +266,24 @@ Result<GranuleTile> make_granule_tile(const GranuleTileDef& def) {
   return tile;
 }
 
-Result<GranuleTile> shared_granule_tile(const GranuleTileDef& def, bool* reused) {
+std::uint64_t granule_tile_def_hash(const GranuleTileDef& def) {
   Hasher h;
   const Material& m = def.material;
   h.pod(m.density), h.pod(m.normal_stiffness), h.pod(m.restitution), h.pod(m.friction), h.pod(m.shear);
   h.pod(m.tangential_stiffness_ratio), h.pod(m.tangential_damping_ratio), h.pod(m.bell_shear_viscosity);
   h.pod(def.radius), h.pod(def.columns), h.pod(def.box_side), h.pod(def.layers), h.pod(def.seed);
   h.pod(def.settle_max_time), h.pod(def.settle_speed), h.pod(def.gravity.x), h.pod(def.gravity.y), h.pod(def.gravity.z);
-  h.pod(def.surface_probe), h.pod(def.settle_friction);
+  h.pod(def.surface_probe), h.pod(def.settle_friction), h.pod(def.steps_per_contact);
+  return h.value();
+}
+
+Result<GranuleTile> shared_granule_tile(const GranuleTileDef& def, bool* reused) {
+  const std::uint64_t key = granule_tile_def_hash(def);
   static std::mutex mutex;
   static std::map<std::uint64_t, GranuleTile> memo;
   {
     std::lock_guard<std::mutex> lock(mutex);
-    if (auto it = memo.find(h.value()); it != memo.end()) {
+    if (auto it = memo.find(key); it != memo.end()) {
       if (reused) *reused = true;
       return it->second;
     }
@@ -287,7 +293,7 @@ Result<GranuleTile> shared_granule_tile(const GranuleTileDef& def, bool* reused)
   if (!t) return t;
   std::lock_guard<std::mutex> lock(mutex);
   if (memo.size() >= 8) memo.erase(memo.begin());
-  memo.emplace(h.value(), *t);
+  memo.emplace(key, *t);
   return t;
 }
 

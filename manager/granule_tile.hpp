@@ -40,6 +40,11 @@ struct GranuleTileDef {
   float settle_speed = 0.003f;  // m/s: settled when every granule is slower
   Vec3 gravity{0.0f, -9.81f, 0.0f};  // m/s², sim units
   int threads = 0;
+  // N of the settling runs (dt <= t_c / N). Part of the tile's key. The manager keeps the
+  // DEM's default 20 whatever N its patches run at: the tile is a bed at rest, whose contacts
+  // balance the weight at any N, so patches at N = 10 and N = 50 share one tile rather than
+  // each settling their own at start-up (seconds to minutes).
+  int steps_per_contact = 20;
   float surface_probe = 0;      // m, probe radius of the surface the cut is calibrated against (depth_conversion.hpp lower_by_probe)
   float settle_friction = -1;   // μ while settling (< 0: the material's). Lower packs denser; the packing then
                                 // also holds with the material's higher μ.
@@ -70,6 +75,9 @@ Result<GranuleTile> make_granule_tile(const GranuleTileDef& def);
 // tile once. The result does not depend on `threads` (the DEM's result does not), so it is
 // not part of the key. `reused` (optional) tells whether it came from memory.
 Result<GranuleTile> shared_granule_tile(const GranuleTileDef& def, bool* reused = nullptr);
+// Hash of every field of `def` that changes the settled tile (all but `threads`): the key of
+// shared_granule_tile's memory and part of the disk cache's key (manager/tile_cache.hpp).
+std::uint64_t granule_tile_def_hash(const GranuleTileDef& def);
 
 // Granules filling [0, W] × [0, D] from the floor y = 0 up to surface(x, z) (m), repeated from
 // the tile; no two granules overlap (spheres closer than 1.8 r are rejected).

@@ -38,6 +38,10 @@ struct PatchRequest {
   double time_to_contact = 0;             // s from now (0 = touching already)
   double speed = 0;                       // m/s of the fastest body in it (a priority key)
   std::vector<int> bodies;                // indices into the BodyMotion list
+  // World size / simulated size the patch is promoted at; 0: chosen by the terrain manager at
+  // promotion (by distance from the camera, TerrainManagerDef::scale_bands). A patch that grows
+  // under a body keeps its own.
+  double particle_scale = 0;
   double width() const { return x1 - x0; }
   double depth() const { return z1 - z0; }
   bool overlaps(const PatchRequest& o) const { return x0 < o.x1 && o.x0 < x1 && z0 < o.z1 && o.z0 < z1; }

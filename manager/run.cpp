@@ -156,6 +156,7 @@ TerrainManagerDef manager_def(const SceneDef& scene, int threads, const std::str
   d.material.stiffness = float(mat->stiffness);
   d.material.tangential_stiffness_ratio = float(mat->tangential_stiffness_ratio);
   d.particle_scale = sim.particle_scale;
+  d.steps_per_contact = sim.steps_per_contact;
   d.slots = sim.pool.slots;
   d.granules_per_slot = sim.pool.granules_per_slot;
   d.soil_depth = scene.terrain.soil_depth.value_or(2.0);
@@ -393,6 +394,12 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
   std::unique_ptr<TerrainManager> manager;
   if (sim.granular_patches) {
     TerrainManagerDef md = manager_def(scene, threads, backend);
+    // Particle scale by distance from a camera (scenario 2 of Leach & Marais §6.3): the bands,
+    // and the camera where it is at the start; the frame loop moves it (set_camera).
+    if (const auto& sd = sim.scale_by_distance) {
+      for (const auto& b : sd->bands) md.scale_bands.push_back({b.max_distance, b.particle_scale});
+      md.camera = camera_at(*scene.find_camera(sd->camera), 0.0).position.cast<double>();
+    }
     // A flat bedrock (terrain.bedrock_height) bounds the patches too (heightfield-local m).
     if (scene.terrain.bedrock_height) md.bedrock_height = bedrock_world_height(scene, hf, 0, 0) - hf.origin_y();
     auto m = TerrainManager::create(md, hf, world);
@@ -446,6 +453,8 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
         spawned[i] = true;
       }
     }
+    if (manager && sim.scale_by_distance)
+      manager->set_camera(camera_at(*scene.find_camera(sim.scale_by_distance->camera), t).position.cast<double>());
     if (manager)
       if (Status st = manager->before_bodies(t, dt, profile); !st)
         return fail(ExitCode::RuntimeFailure, "dem", st.message());

@@ -5,6 +5,7 @@
 #include <unordered_set>
 #include <unordered_map>
 #include <chrono>
+#include <deque>
 #include <cmath>
 #include <numbers>
 
@@ -13,6 +14,7 @@
 #include "heightfield/filter.hpp"
 #include "manager/depth_conversion.hpp"
 #include "manager/granule_tile.hpp"
+#include "manager/tile_cache.hpp"
 #include "manager/shell.hpp"
 #include "particles/backend.hpp"
 #include "particles/dem.hpp"
@@ -60,10 +62,20 @@ struct TerrainManager::Impl {
   // vertical period would stack copies, and the seam leaves voids (measured: surfaces just
   // above a seam render 0.75 d low), so a patch takes the shallowest tile that holds its
   // depth, and a deeper one is settled (and kept) when none does.
-  std::vector<GranuleTile> tiles;
-  GranuleTileDef tile_def;
+  // One set of tiles per particle scale in use (scale_bands): a tile is settled in simulation
+  // units, its period a whole number of heightfield cells at its scale, under gravity g / s.
+  struct TileSet {
+    double scale = 1;                 // world size / simulated size
+    int cells = 1;                    // heightfield cells per tile period (patch sides fall on tile walls)
+    GranuleTileDef def;
+    std::vector<GranuleTile> tiles;   // shallowest first
+  };
+  std::deque<TileSet> tile_sets;      // made at start-up, one per scale (references stay valid)
   double tiles_settled_ms = 0;
-  int tile_cells = 1;  // heightfield cells per tile period (patch sides fall on tile walls)
+  std::string tile_cache;             // resolved directory ("" = no disk cache)
+  std::vector<std::string> tile_cache_notes;  // why a stored tile was not used or not written
+  int tiles_from[3] = {};             // tiles by TileCacheOutcome::Source: disk, memory, settled
+  Eigen::Vector3d camera = Eigen::Vector3d::Zero();  // m, world: the scale bands' centre
   std::unordered_map<std::int64_t, int> still_frames;
   int lapsed_requests = 0;
   int extensions = 0;       // patches grown under a body heading past their edge  // queued requests dropped because no body predicted contact there any more  // frames each body (index, generation) has been at rest
@@ -74,32 +86,72 @@ struct TerrainManager::Impl {
     const double layer = 2.0 * (shape.centre_distance + shape.radius) * 0.8;  // settled layer height, about
     return std::max(6, int(std::ceil(fill_depth * 1.6 / layer)) + 3);
   }
-  // The shallowest tile whose period holds a fill `depth` (m, sim units) deep.
-  Result<const GranuleTile*> tile_for(double fill_depth) {
+  // The shallowest tile of a set whose period holds a fill `depth` (m, sim units) deep.
+  Result<const GranuleTile*> tile_for(TileSet& set, double fill_depth) {
+    std::vector<GranuleTile>& tiles = set.tiles;
     auto holds = [&](const GranuleTile& t) { return fill_depth - t.surface_offset <= t.period_y; };
     for (const GranuleTile& t : tiles)
       if (holds(t)) return &t;
-    GranuleTileDef td = tile_def;
+    GranuleTileDef td = set.def;
     td.layers = tile_layers(1.1 * fill_depth);
     for (int attempt = 0; attempt < 3; ++attempt) {
       const auto t0 = Clock::now();
-      auto t = shared_granule_tile(td);
+      TileCacheOutcome from;
+      auto t = cached_granule_tile(td, tile_cache, &from);
+      if (!from.note.empty()) tile_cache_notes.push_back(from.note);
+      ++tiles_from[int(from.source)];
       tiles_settled_ms += ms_since(t0);
       if (!t) return t.errors();
       if (holds(*t)) {
         tiles.push_back(std::move(*t));
         std::sort(tiles.begin(), tiles.end(), [](const GranuleTile& a, const GranuleTile& b) { return a.period_y < b.period_y; });
-        return tile_for(fill_depth);
+        return tile_for(set, fill_depth);
       }
       // Too shallow: scale the lattice layers by what this one settled to (a block settles
       // to a depth roughly proportional to its layers, less the rough top) and try again.
       const double got = std::max(1e-6, double(t->period_y) + t->surface_offset);
       td.layers = int(std::ceil(td.layers * 1.05 * (fill_depth + 2.0 * double(t->shape.centre_distance + t->shape.radius)) / got));
     }
-    return Error{"", "simulation.patch_depth", std::to_string(fill_depth * scale()),
+    return Error{"", "simulation.patch_depth", std::to_string(fill_depth * set.scale),
                  "no pre-settled granule tile this deep could be made; lower terrain.patch_depth"};
   }
-  double granule_volume = 0;  // m³ (world) of one granule's solid
+  // m³ (world) of one granule's solid at particle scale s.
+  double granule_volume(double s) const {
+    return 4.0 * 4.0 / 3.0 * std::numbers::pi * std::pow(double(def.material.radius) * s, 3);
+  }
+  // The scales patches can take: the bands', or the one particle_scale.
+  std::vector<double> scales() const {
+    std::vector<double> v;
+    for (const auto& b : def.scale_bands)
+      if (std::find(v.begin(), v.end(), b.particle_scale) == v.end()) v.push_back(b.particle_scale);
+    if (v.empty()) v.push_back(def.particle_scale);
+    return v;
+  }
+  // The scale a request is promoted at (Leach & Marais §4.3, §6.3 scenario 2): its own (a
+  // patch growing under a body keeps its scale), else the first band whose max_distance reaches
+  // the 3-D distance from the camera to the request's centre on the surface (the last band's
+  // beyond), else particle_scale.
+  double scale_for(const PatchRequest& r) const {
+    if (r.particle_scale > 0) return r.particle_scale;
+    if (def.scale_bands.empty()) return def.particle_scale;
+    const double x = 0.5 * (r.x0 + r.x1), z = 0.5 * (r.z0 + r.z1);
+    const double y = hf->origin_y() + hf->sample(float(x - hf->origin_x()), float(z - hf->origin_z()));
+    const double d = (Eigen::Vector3d(x, y, z) - camera).norm();
+    for (const auto& b : def.scale_bands)
+      if (d <= b.max_distance) return b.particle_scale;
+    return def.scale_bands.back().particle_scale;
+  }
+  TileSet& set_for(double s) {
+    for (TileSet& t : tile_sets)
+      if (t.scale == s) return t;
+    return tile_sets.front();  // not reached: every scale a request can take has a set from create()
+  }
+  const TileSet& set_for(double s) const { return const_cast<Impl*>(this)->set_for(s); }
+  int max_cells() const {
+    int c = 1;
+    for (const TileSet& t : tile_sets) c = std::max(c, t.cells);
+    return c;
+  }
 
   enum class State { Free, Filling, Active, Asleep };
   struct Carried {
@@ -128,6 +180,7 @@ struct TerrainManager::Impl {
     double asleep_for = 0;     // s asleep and untouched
     double fill_ms = 0;
     std::vector<float> before_heights;  // heights of `apron` at promotion
+    double scale = 1;          // world size / simulated size of this patch, fixed while it lives
     std::vector<float> fill_spheres;    // the granule spheres as filled (x, y, z, r; m, heightfield-local): the
                                         // demotion renders them too, so its render error cancels where nothing moved
     float fill_rise = 0;                // m, the tile's elastic rebound (GranuleTile::rebound), world
@@ -150,7 +203,6 @@ struct TerrainManager::Impl {
   bool gl_failed = false;
   std::string gl_note;
 
-  double scale() const { return def.particle_scale; }
   // The GL backend's context must be current for any slot call (other GL users of the
   // thread, e.g. the image writer, make their own current in between).
   void current() const {
@@ -159,13 +211,14 @@ struct TerrainManager::Impl {
   // m (world): a body's shell joins a patch when the body's lowest point is within half of
   // this above the patch's highest surface point; the simulation's domain reaches this high.
   static constexpr double engage_height = 1.0;
-  float radius_world() const { return float(def.material.radius * def.particle_scale); }
+  float radius_world(double s) const { return float(def.material.radius * s); }
+  float radius_world(const Slot& slot) const { return radius_world(slot.scale); }
 
   // World <-> heightfield sample index helpers.
   int sample_i(double x) const { return int(std::floor((x - hf->origin_x()) / hf->spacing())); }
   int sample_j(double z) const { return int(std::floor((z - hf->origin_z()) / hf->spacing())); }
 
-  SimulationDef sim_def() const {
+  SimulationDef sim_def(double scale) const {
     SimulationDef sd;
     sd.max_bodies = def.granules_per_slot + 64;
     sd.max_particles = 4 * def.granules_per_slot + def.shell_particles_per_slot;
@@ -176,9 +229,13 @@ struct TerrainManager::Impl {
     sd.material.friction = def.material.friction;
     sd.material.tangential_stiffness_ratio = def.material.tangential_stiffness_ratio;
     sd.gravity_world = v3(Eigen::Vector3f(def.gravity.cast<float>()));
-    sd.sleep_speed = float(def.sleep_speed / def.particle_scale);
+    sd.sleep_speed = float(def.sleep_speed / scale);
     sd.sleep_time = float(def.sleep_time);
     sd.threads = def.threads;
+    // dt <= t_c / N; a frame may take as many substeps as 64 at N = 20 allowed (the same
+    // frame length in contact times), so a finer N never refuses a frame a coarser one runs.
+    sd.accuracy_steps_per_contact = def.steps_per_contact;
+    sd.max_substeps = std::max(64, (64 * def.steps_per_contact + 19) / 20);
     // The DEM's overlap guard refuses a step when a body could overlap something immovable by
     // more than a fraction of r. In a patch a body lands on granules that give way (a 30 kg
     // barrel at 3 m/s on k_n = 2e4 N/m trips it while the bed stops it within 0.2 m:
@@ -228,21 +285,26 @@ struct TerrainManager::Impl {
   // (each single request is still checked against the capacity in promote()).
   double max_merged_side() const {
     const double fill = std::min(def.patch_depth, def.soil_depth);  // m
-    const double pf = tiles.empty() ? 0.5 : tiles.front().packing_fraction;
-    const double area = def.granules_per_slot * granule_volume / (pf * std::max(fill, 1e-6)) / 1.2;  // m²
-    return std::sqrt(area) - (tile_cells + 1) * double(hf->spacing());
+    // (With scale bands, at the finest scale: the most granules per area.)
+    double side = std::numeric_limits<double>::max();
+    for (const TileSet& t : tile_sets) {
+      const double pf = t.tiles.empty() ? 0.5 : t.tiles.front().packing_fraction;
+      const double area = def.granules_per_slot * granule_volume(t.scale) / (pf * std::max(fill, 1e-6)) / 1.2;  // m²
+      side = std::min(side, std::sqrt(area) - (max_cells() + 1) * double(hf->spacing()));
+    }
+    return side;
   }
   // Whether a request can become a patch: its region is on the terrain and has soil above the
   // bedrock. (A body falling just past the terrain's edge, or onto bare rock, asks for a
   // patch that cannot exist; before, promote() failed the whole frame with an error.)
   bool has_soil(const PatchRequest& r) const {
-    auto reg = region_for(r);
+    auto reg = region_for(r, set_for(scale_for(r)).cells);
     if (!reg) return false;
     float lo = 0, hi = 0;
     return floor_of(*reg, &lo, &hi) < hi;
   }
   // Region of heightfield samples for a request, within what one slot can hold.
-  Result<GridRegion> region_for(const PatchRequest& r) const {
+  Result<GridRegion> region_for(const PatchRequest& r, int tile_cells) const {
     int i0 = std::max(0, sample_i(r.x0)), j0 = std::max(0, sample_j(r.z0));
     int i1 = std::min(hf->samples_x() - 1, sample_i(r.x1) + 1), j1 = std::min(hf->samples_z() - 1, sample_j(r.z1) + 1);
     if (i1 - i0 < 2 || j1 - j0 < 2) return Error{"", "patch request", "", "off the terrain"};
@@ -303,7 +365,8 @@ struct TerrainManager::Impl {
       // two granule diameters of the patch's edge: a body settling near the middle whose
       // apron pokes out by a few mm must not make the patch grow.
       // A side of the patch on the terrain's edge cannot be crossed (requests are clipped there).
-      const double m = 4.0 * radius_world(), ap = def.lod.apron, e = 1e-6;
+      const double m = 4.0 * radius_world(s), ap = def.lod.apron, e = 1e-6;
+      const int tile_cells = set_for(s.scale).cells;
       const PatchRequest t = terrain_rect();
       const bool in_x0 = a.x0 <= t.x0 + e || r.x0 + ap >= a.x0 + m, in_x1 = a.x1 >= t.x1 - e || r.x1 - ap <= a.x1 - m;
       const bool in_z0 = a.z0 <= t.z0 + e || r.z0 + ap >= a.z0 + m, in_z1 = a.z1 >= t.z1 - e || r.z1 - ap <= a.z1 - m;
@@ -315,6 +378,7 @@ struct TerrainManager::Impl {
       if (double(s.granules) * grow * 1.2 > double(def.granules_per_slot)) return false;
       if (Status st = demote(s, time, false); !st) return st.errors();
       u.time_to_contact = 0;
+      u.particle_scale = s.scale;  // the grown patch keeps its scale
       queue.insert(queue.begin(), u);
       ++extensions;
       return true;
@@ -324,15 +388,17 @@ struct TerrainManager::Impl {
 
   Status promote(Slot& slot, const PatchRequest& req, double time) {
     const auto t0 = Clock::now();
-    auto reg = region_for(req);
+    const double s = scale_for(req);
+    TileSet& tset = set_for(s);
+    auto reg = region_for(req, tset.cells);
     if (!reg) return reg.errors();
     const GridRegion region = *reg;
     const float sp = hf->spacing();
     float lo = 0, hi = 0;
     const double floor_local = floor_of(region, &lo, &hi);
     if (!(floor_local < hi)) return Error{"", "patch request", "", "no soil above the bedrock there"};
-    const double s = scale();
     slot.patch = next_patch++;
+    slot.scale = s;
     slot.region = region;
     const int band = 4;  // samples around the region where spilled granules rest on the terrain
     slot.apron = {std::max(0, region.i0 - band), std::max(0, region.j0 - band), 0, 0};
@@ -346,7 +412,7 @@ struct TerrainManager::Impl {
     hf->read(slot.apron, slot.before_heights.data());
 
     // The simulation: unit scale, patch-relative; the terrain around the region as a grid.
-    SimulationDef sd = sim_def();
+    SimulationDef sd = sim_def(s);
     const float W = float((region.ni - 1) * double(sp) / s), D = float((region.nj - 1) * double(sp) / s);
     const float top = float((hi - floor_local) / s);
     sd.bounds_min = {0, 0, 0};
@@ -376,7 +442,7 @@ struct TerrainManager::Impl {
       const double xl = region.i0 * double(sp) + x * s, zl = region.j0 * double(sp) + z * s;
       return float((hf->sample(float(xl), float(zl)) - floor_local) / s);
     };
-    auto tile_r = tile_for(top);
+    auto tile_r = tile_for(tset, top);
     if (!tile_r) return tile_r.errors();
     const GranuleTile& tile = **tile_r;
     slot.pending = fill_from_tile(tile, W, D, surface);
@@ -394,7 +460,7 @@ struct TerrainManager::Impl {
       for (const Vec3& o : tile.shape.offsets) {
         const auto w = sc->position_to_world(g.position + rotate(g.orientation, o));
         slot.fill_spheres.insert(slot.fill_spheres.end(), {float(w[0] - hf->origin_x()), float(w[1] - hf->origin_y()),
-                                                           float(w[2] - hf->origin_z()), radius_world()});
+                                                           float(w[2] - hf->origin_z()), radius_world(s)});
       }
     slot.uploaded = 0;
     slot.granules = 0;
@@ -409,7 +475,7 @@ struct TerrainManager::Impl {
         v += trapezoid_weight(i, j, region) * (hf->height(i, j) - floor_local);
     slot.ledger = Ledger{};
     slot.ledger.before = v * double(sp) * sp;
-    slot.ledger.active = double(slot.pending.size()) * granule_volume / tile.packing_fraction;
+    slot.ledger.active = double(slot.pending.size()) * granule_volume(s) / tile.packing_fraction;
     slot.fill_ms = ms_since(t0);
     events.push_back({PatchEventKind::Promoted, slot.patch, time, slot.fill_ms, int(slot.pending.size())});
     return Ok{};
@@ -437,19 +503,125 @@ struct TerrainManager::Impl {
 
   // ---- coupling ----
   // Whether a body's bounds reach into a slot's region (and down to its granules).
+  // `inside`: the footprint lies within the patch's DEM terrain, the filled region and the
+  // apron around it, where the simulation's terrain grid is solid up to the surface.
   bool engages(const Slot& s, const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, bool* inside) const {
     const double sp = hf->spacing();
     const double x0 = hf->origin_x() + s.region.i0 * sp, x1 = x0 + (s.region.ni - 1) * sp;
     const double z0 = hf->origin_z() + s.region.j0 * sp, z1 = z0 + (s.region.nj - 1) * sp;
     const double surface_top = hf->origin_y() + s.top_local;
     const bool overlap = lo.x() < x1 && hi.x() > x0 && lo.z() < z1 && hi.z() > z0 && lo.y() < surface_top + 0.5 * engage_height;
-    const double margin = 2.0 * radius_world();
+    // Within the filled region the granules carry the body; a body across the region's edge
+    // rests partly on the terrain grid outside it. Both are in the DEM, so a body anywhere over
+    // the DEM's terrain (region + apron) is carried by the DEM alone: with the heightfield too,
+    // a body at rest across the edge was held by Bullet at the heightfield's surface while its
+    // shell (which keeps its own state while the body rests) settled lower into the granules,
+    // so the DEM's force pulled the body down by up to its weight and the heightfield pushed
+    // back twice it (measured, ExtremesManager.HundredBodiesAtOnceOnTwoSlots: -19.6 N and
+    // +39.2 N on a 2 kg sphere), and the patch never slept.
+    const double ax0 = hf->origin_x() + s.apron.i0 * sp, ax1 = hf->origin_x() + (s.apron.i0 + s.apron.ni - 1) * sp;
+    const double az0 = hf->origin_z() + s.apron.j0 * sp, az1 = hf->origin_z() + (s.apron.j0 + s.apron.nj - 1) * sp;
+    // Outside the region the DEM's ground is the higher of its floor plane and the terrain
+    // grid, so it is the heightfield only where the surface is above the floor (not over bare
+    // rock below a flat bedrock's floor, docs/extremes.md): there the heightfield stays on
+    // (ExtremesManager.FlatBedrockMeetingTheSurface: a body held up on the floor plane over the
+    // rock pushed granules onto it, which raised the rock by 11 cm).
+    const double margin = 2.0 * radius_world(s);
     *inside = lo.x() > x0 + margin && hi.x() < x1 - margin && lo.z() > z0 + margin && hi.z() < z1 - margin;
+    if (!*inside && lo.x() > ax0 + margin && hi.x() < ax1 - margin && lo.z() > az0 + margin && hi.z() < az1 - margin) {
+      bool faithful = true;
+      const int i0 = std::max(0, int(std::floor((lo.x() - hf->origin_x()) / sp)));
+      const int i1 = std::min(hf->samples_x() - 1, int(std::ceil((hi.x() - hf->origin_x()) / sp)));
+      const int j0 = std::max(0, int(std::floor((lo.z() - hf->origin_z()) / sp)));
+      const int j1 = std::min(hf->samples_z() - 1, int(std::ceil((hi.z() - hf->origin_z()) / sp)));
+      for (int j = j0; j <= j1 && faithful; ++j)
+        for (int i = i0; i <= i1 && faithful; ++i) faithful = hf->height(i, j) > s.floor_local;
+      *inside = faithful;
+    }
     return overlap;
   }
 
+  // One carrier per body. A body over two patches at once (resting across the seam of
+  // adjacent patches) had a shell in both, and each DEM, supporting it on its granules and on
+  // its terrain grid outside its region, gave Bullet the full support force: measured in
+  // ExtremesManager.HundredBodiesAtOnceOnTwoSlots, 30.6 N + 18.3 N upwards on a 2 kg sphere
+  // (weight 19.6 N), which bounced at 0.24-0.34 m/s and kept both patches awake. Now a
+  // body is carried by the ready patch that holds most of its footprint (the one carrying it
+  // keeps it while it holds at least half as much as another: no flip-flop), and only that
+  // patch sets its heightfield collision. Key: (index << 32 | generation) -> slot index.
+  std::unordered_map<std::int64_t, int> carrier;
+  // Bodies a demotion set down on the new heights, until this simulated time (s): their first
+  // Bullet step on the changed heightfield falls g dt (0.16 m/s) before the contact holds them,
+  // which asked for a new patch at once; promoted under bodies sunk into the old one's crater,
+  // it threw them out of its fill at 1-3 m/s (measured in the hundred-bodies case). Until then
+  // they ask for no patch and no patch takes them up.
+  std::unordered_map<std::int64_t, double> set_down_until;
+  double now = 0;  // s, simulated time of the frame being run
+  bool settling(RigidBodyId b) const {
+    const auto it = set_down_until.find(body_key(b));
+    return it != set_down_until.end() && now < it->second;
+  }
+  static std::int64_t body_key(RigidBodyId b) { return (std::int64_t(b.index) << 32) | std::uint32_t(b.generation); }
+  void choose_carriers() {
+    std::unordered_map<std::int64_t, int> next;
+    for (RigidBodyId b : world->bodies()) {
+      Eigen::Vector3d lo, hi;
+      world->bounds(b, &lo, &hi);
+      const auto prev = carrier.find(body_key(b));
+      int best = -1;
+      double best_area = -1, prev_area = -1;
+      for (int k = 0; k < int(slots.size()); ++k) {
+        const Slot& sl = slots[std::size_t(k)];
+        if (sl.state != State::Active && sl.state != State::Asleep) continue;
+        bool inside = false;
+        if (!engages(sl, lo, hi, &inside)) continue;
+        const PatchRequest r = rect(sl);
+        const double area = std::max(0.0, std::min(hi.x(), r.x1) - std::max(lo.x(), r.x0)) *
+                            std::max(0.0, std::min(hi.z(), r.z1) - std::max(lo.z(), r.z0));
+        if (area > best_area) best = k, best_area = area;
+        if (prev != carrier.end() && prev->second == k) prev_area = area;
+      }
+      if (best < 0) continue;
+      if (prev_area >= 0 && prev_area >= 0.5 * best_area) {
+        next[body_key(b)] = prev->second;
+        continue;
+      }
+      // A body lying on the terrain is not taken up by a patch it is not in yet: it lies where
+      // its last patch or the heightfield left it, at or below the surface the new patch's fill
+      // was cut to (sunk into the granules of a patch just demoted), and the top granules of a
+      // fill reach about a granule radius above that surface; a shell started there was thrown
+      // out at 1-3 m/s (measured in the hundred-bodies case). It is taken when it moves.
+      if (lying(b, lo, hi) || settling(b)) {
+        if (prev_area >= 0) next[body_key(b)] = prev->second;  // nor handed to another one
+        continue;
+      }
+      next[body_key(b)] = best;
+    }
+    carrier.swap(next);
+  }
+  // A body lying on the terrain: its lowest point within one granule diameter (at the coarsest
+  // scale) of the surface under its centre, slower than 10 sleep_speed (m/s; Bullet's contacts
+  // on the heightfield jitter resting bodies at about sleep_speed).
+  bool lying(RigidBodyId b, const Eigen::Vector3d& lo, const Eigen::Vector3d& hi) const {
+    const BodyState st = world->state(b);
+    const double reach = 0.5 * (hi - lo).norm(), slow = 10.0 * def.sleep_speed;
+    if (st.linear_velocity.norm() >= slow || st.angular_velocity.norm() * reach >= slow) return false;
+    double s_max = 0;
+    for (double sc : scales()) s_max = std::max(s_max, sc);
+    const double cx = 0.5 * (lo.x() + hi.x()) - hf->origin_x(), cz = 0.5 * (lo.z() + hi.z()) - hf->origin_z();
+    const double surface = hf->origin_y() + hf->sample(float(cx), float(cz));
+    return lo.y() < surface + 2.0 * def.material.radius * s_max;
+  }
+  // Whether slot `k` carries body b (see `carrier`).
+  bool carries(int k, RigidBodyId b) const {
+    const auto it = carrier.find(body_key(b));
+    return it != carrier.end() && it->second == k;
+  }
+  bool carried_anywhere(RigidBodyId b) const { return carrier.count(body_key(b)) > 0; }
+
   Status couple_before(Slot& slot, double dt) {
-    const double s = scale();
+    const double s = slot.scale;
+    const int self = int(&slot - slots.data());
     // Bodies removed from the world since the last frame: their shells leave the patch.
     for (auto it = slot.carried.begin(); it != slot.carried.end();) {
       if (world->alive(it->body)) {
@@ -463,14 +635,14 @@ struct TerrainManager::Impl {
       Eigen::Vector3d lo, hi;
       world->bounds(b, &lo, &hi);
       bool inside = false;
-      const bool touch = engages(slot, lo, hi, &inside);
+      const bool touch = engages(slot, lo, hi, &inside) && carries(self, b);
       auto it = std::find_if(slot.carried.begin(), slot.carried.end(),
                              [&](const Carried& c) { return c.body.index == b.index && c.body.generation == b.generation; });
       if (!touch && it == slot.carried.end()) continue;
       const BodyState st = world->state(b);
       const bool fresh = it == slot.carried.end();
       if (fresh) {
-        auto pts = shell_points(b);
+        auto pts = shell_points(b, s);
         if (!pts) return pts.errors();
         ShellDef sh;
         for (const auto& p : *pts) sh.offsets.push_back(v3(p));
@@ -486,11 +658,14 @@ struct TerrainManager::Impl {
         it = slot.carried.end() - 1;
       }
       Carried& c = *it;
+      const bool reenabled = touch && !c.enabled;  // parked until now: its state must be set
       if (touch != c.enabled) {
         if (Status e = slot.sim->set_body_enabled(c.shell, touch); !e) return e.errors();
         c.enabled = touch;
       }
-      world->set_terrain_collision(b, !inside);
+      // Only the carrier decides the heightfield collision; a body no patch carries meets it.
+      if (touch) world->set_terrain_collision(b, !inside);
+      else if (!carried_anywhere(b)) world->set_terrain_collision(b, true);
       if (!touch) continue;
       // The shell starts the frame where Bullet has the body.
       c.v0 = st.linear_velocity;
@@ -501,7 +676,7 @@ struct TerrainManager::Impl {
       world->bounds(b, &blo, &bhi);
       const double reach = 0.5 * (bhi - blo).norm();
       const bool at_rest = st.linear_velocity.norm() <= def.sleep_speed && st.angular_velocity.norm() * reach <= def.sleep_speed;
-      if (at_rest && !fresh) continue;
+      if (at_rest && !fresh && !reenabled) continue;
       const Vec3 p = slot.sim->def().scale.position_to_sim({st.position.x(), st.position.y(), st.position.z()});
       if (Status e = slot.sim->set_body_state(c.shell, p, quat(st.orientation), v3(Eigen::Vector3f(st.linear_velocity / float(s))),
                                              v3(st.angular_velocity));
@@ -522,7 +697,7 @@ struct TerrainManager::Impl {
   }
 
   void couple_after(Slot& slot, double dt) {
-    const double s = scale();
+    const double s = slot.scale;
     for (const Carried& c : slot.carried) {
       if (!c.enabled || !world->alive(c.body)) continue;
       // Mean contact force and torque over the frame from the shell's change of momentum.
@@ -542,7 +717,7 @@ struct TerrainManager::Impl {
   void granule_spheres(const Slot& slot, std::vector<float>& xyzr) const {
     const std::vector<Vec3> pos = slot.sim->particle_positions();
     const std::size_t n = std::min(pos.size(), std::size_t(4) * std::size_t(slot.granules));
-    const float rw = radius_world();
+    const float rw = radius_world(slot);
     for (std::size_t k = 0; k < n; ++k) {
       const auto w = slot.sim->def().scale.position_to_world(pos[k]);
       xyzr.insert(xyzr.end(), {float(w[0] - hf->origin_x()), float(w[1] - hf->origin_y()), float(w[2] - hf->origin_z()), rw});
@@ -553,9 +728,9 @@ struct TerrainManager::Impl {
   // through their signed distance field (0.2–0.9 s for a few thousand triangles), cached by
   // sample_shell per mesh; before_bodies asks once for every new body, so the cost falls in
   // the frame the body appears, not in the frame it first touches a patch.
-  Result<std::vector<Eigen::Vector3f>> shell_points(RigidBodyId b) const {
+  Result<std::vector<Eigen::Vector3f>> shell_points(RigidBodyId b, double scale) const {
     RigidShape shape = world->definition(b).shape;
-    const float inv = float(1.0 / scale());
+    const float inv = float(1.0 / scale);
     shape.radius *= inv;
     shape.height *= inv;
     shape.half_extents *= inv;
@@ -577,12 +752,13 @@ struct TerrainManager::Impl {
     granule_spheres(slot, xyzr);
     std::vector<float> filled = slot.fill_spheres;
     // Spheres grown by the probe radius, tops lowered by it after the render (lower_by_probe).
-    const float probe = float(def.surface_probe) * radius_world();
+    const float rw = radius_world(slot);
+    const float probe = float(def.surface_probe) * rw;
     for (std::size_t k = 3; k < xyzr.size(); k += 4) xyzr[k] += probe;
     for (std::size_t k = 3; k < filled.size(); k += 4) filled[k] += probe;
-    float top = float(slot.floor_local) + radius_world() + probe;
-    for (std::size_t k = 1; k < xyzr.size(); k += 4) top = std::max(top, xyzr[k] + radius_world() + probe);
-    for (std::size_t k = 1; k < filled.size(); k += 4) top = std::max(top, filled[k] + radius_world() + probe);
+    float top = float(slot.floor_local) + rw + probe;
+    for (std::size_t k = 1; k < xyzr.size(); k += 4) top = std::max(top, xyzr[k] + rw + probe);
+    for (std::size_t k = 1; k < filled.size(); k += 4) top = std::max(top, filled[k] + rw + probe);
     const GridRegion& a = slot.apron;
     const float x0 = float((a.i0 - 0.5) * sp), z0 = float((a.j0 - 0.5) * sp);
     const float x1 = float((a.i0 + a.ni - 0.5) * sp), z1 = float((a.j0 + a.nj - 0.5) * sp);
@@ -640,7 +816,7 @@ struct TerrainManager::Impl {
     if (!was) return was.errors();
     // Where the surface did not move, the heights of before the promotion come back exactly
     // (write_to_heightfield's RenderBaseline; docs/manager.md "Round trip").
-    const RenderBaseline base{&*was, &slot.before_heights, radius_world(), slot.fill_rise};
+    const RenderBaseline base{&*was, &slot.before_heights, rw, slot.fill_rise};
     const bool have_base = !slot.fill_spheres.empty() && slot.before_heights.size() == std::size_t(a.ni) * a.nj;
     write_to_heightfield(*img, a, *hf, 1, have_base ? &base : nullptr);
     // The patch's own edge inside the apron: particles on one side, old terrain (or what
@@ -650,7 +826,7 @@ struct TerrainManager::Impl {
     // heights are kept below its lowest point (the Gaussian lifts a narrow crater's floor,
     // and Bullet would push the body out with a kick that asked for a new patch).
     for (const Carried& c : slot.carried) {
-      if (!world->alive(c.body)) continue;
+      if (!c.enabled || !world->alive(c.body)) continue;  // (a disabled shell: another patch carries it)
       Eigen::Vector3d lo, hi;
       world->bounds(c.body, &lo, &hi);
       const float floor_at = float(lo.y() - hf->origin_y());
@@ -667,6 +843,18 @@ struct TerrainManager::Impl {
       world->set_state(c.body, st);
     }
     world->terrain_changed();
+    // Every body over the written heights (those it carried, and those resting on the
+    // heightfield there: Bullet's contacts with the changed tiles are made again, and such a
+    // body first falls g dt) is given 0.1 s (6 frames) to settle before it may ask for a patch.
+    {
+      const double wx0 = hf->origin_x() + (a.i0 - 1) * sp, wx1 = hf->origin_x() + (a.i0 + a.ni) * sp;
+      const double wz0 = hf->origin_z() + (a.j0 - 1) * sp, wz1 = hf->origin_z() + (a.j0 + a.nj) * sp;
+      for (RigidBodyId b : world->bodies()) {
+        Eigen::Vector3d lo, hi;
+        world->bounds(b, &lo, &hi);
+        if (lo.x() < wx1 && hi.x() > wx0 && lo.z() < wz1 && hi.z() > wz0) set_down_until[body_key(b)] = time + 0.1;
+      }
+    }
     // The border band reaches one sample beyond the apron.
     GridRegion d{std::max(0, a.i0 - 1), std::max(0, a.j0 - 1), 0, 0};
     d.ni = std::min(hf->samples_x(), a.i0 + a.ni + 1) - d.i0;
@@ -685,6 +873,7 @@ struct TerrainManager::Impl {
     slot.ledger.after = after * sp * sp;
     const double err = slot.ledger.before > 0 ? 100.0 * (slot.ledger.after - slot.ledger.before) / slot.ledger.before : 0;
     ledgers.push_back({{"patch", slot.patch},
+                       {"particle_scale", slot.scale},
                        {"region", {slot.region.i0, slot.region.j0, slot.region.ni, slot.region.nj}},
                        {"granules", slot.granules},
                        {"volume_before_m3", slot.ledger.before},
@@ -693,7 +882,7 @@ struct TerrainManager::Impl {
                        {"error_pct", err},
                        {"depth_render", on_gl ? "gl" : "cpu"}});
     for (const Carried& c : slot.carried)
-      if (world->alive(c.body)) world->set_terrain_collision(c.body, true);
+      if (c.enabled && world->alive(c.body)) world->set_terrain_collision(c.body, true);
     events.push_back({PatchEventKind::Demoted, slot.patch, time, ms_since(t0), slot.granules});
     slot.state = State::Free;
     slot.granules = 0;
@@ -710,7 +899,20 @@ Result<std::unique_ptr<TerrainManager>> TerrainManager::create(const TerrainMana
     errs.push_back(Error{"", field, std::to_string(v), allowed});
   };
   if (!(def.particle_scale > 0) || !std::isfinite(def.particle_scale)) bad("particle_scale", def.particle_scale, "must be > 0");
+  for (std::size_t k = 0; k < def.scale_bands.size(); ++k) {
+    const auto& b = def.scale_bands[k];
+    const std::string f = "scale_bands[" + std::to_string(k) + "]";
+    if (!(b.particle_scale > 0) || !std::isfinite(b.particle_scale))
+      errs.push_back(Error{"", f + ".particle_scale", std::to_string(b.particle_scale), "must be > 0 and finite"});
+    const double prev = k == 0 ? 0.0 : def.scale_bands[k - 1].max_distance;
+    if (!(b.max_distance > prev) || !std::isfinite(b.max_distance))
+      errs.push_back(Error{"", f + ".max_distance", std::to_string(b.max_distance),
+                           "must be finite and greater than " + std::string(k == 0 ? "0 m" : "the previous band's (" + std::to_string(prev) + " m)")});
+  }
+  if (!def.camera.allFinite()) errs.push_back(Error{"", "camera", "", "must be finite (m, world)"});
   if (def.slots < 1) bad("pool.slots", def.slots, "must be >= 1");
+  if (def.steps_per_contact < 2 || def.steps_per_contact > 1000)
+    bad("steps_per_contact", def.steps_per_contact, "must be in [2, 1000] (the DEM substep is t_c / N)");
   if (def.granules_per_slot < 16) bad("pool.granules_per_slot", def.granules_per_slot, "must be >= 16");
   if (!(def.patch_depth > 0)) bad("patch_depth", def.patch_depth, "must be > 0 (m)");
   if (!(def.surface_probe >= 0 && def.surface_probe <= 4)) bad("surface_probe", def.surface_probe, "must be in [0, 4] sphere radii");
@@ -721,59 +923,64 @@ Result<std::unique_ptr<TerrainManager>> TerrainManager::create(const TerrainMana
   m->impl_ = std::make_unique<Impl>();
   Impl& I = *m->impl_;
   I.def = def;
+  I.tile_cache = def.tile_cache == "off" ? std::string() : def.tile_cache.empty() ? tile_cache_dir() : def.tile_cache;
   I.hf = &hf;
   I.world = &world;
-  // The first pre-settled tile, for patches patch_depth deep plus half as much relief
-  // (granule_tile.hpp); deeper patches settle deeper tiles when they come (tile_for).
-  GranuleTileDef& td = I.tile_def;
-  td.radius = def.material.radius;
-  td.material = I.sim_def().material;
-  td.gravity = v3(Eigen::Vector3f((def.gravity / def.particle_scale).cast<float>()));
-  td.seed = def.seed;
-  td.threads = def.threads;
-  {
-    // The tile's period: a whole number of heightfield cells near 6 lattice spacings.
-    const GranuleShape shape = make_granule_shape(def.material.radius, 1.0f, def.material.density);
-    const double a = 2.0 * (shape.centre_distance + shape.radius) * 1.02 * def.particle_scale;  // m, world
-    I.tile_cells = std::max(1, int(std::ceil(6.0 * a / hf.spacing())));
-    td.box_side = float(I.tile_cells * double(hf.spacing()) / def.particle_scale);
+  I.camera = def.camera;
+  // The first pre-settled tile of every scale, for patches patch_depth deep plus half as much
+  // relief (granule_tile.hpp); deeper patches settle deeper tiles when they come (tile_for).
+  for (double scale : I.scales()) {
+    Impl::TileSet& set = I.tile_sets.emplace_back();
+    set.scale = scale;
+    GranuleTileDef& td = set.def;
+    td.radius = def.material.radius;
+    td.material = I.sim_def(scale).material;
+    td.gravity = v3(Eigen::Vector3f((def.gravity / scale).cast<float>()));
+    td.seed = def.seed;
+    td.threads = def.threads;
+    {
+      // The tile's period: a whole number of heightfield cells near 6 lattice spacings.
+      const GranuleShape shape = make_granule_shape(def.material.radius, 1.0f, def.material.density);
+      const double a = 2.0 * (shape.centre_distance + shape.radius) * 1.02 * scale;  // m, world
+      set.cells = std::max(1, int(std::ceil(6.0 * a / hf.spacing())));
+      td.box_side = float(set.cells * double(hf.spacing()) / scale);
+    }
+    td.surface_probe = float(def.surface_probe) * def.material.radius;
+    // Settled with μ ≤ 0.2 the block packs denser (solid fraction of the spheres 0.527 against
+    // 0.472 at μ = 0.5, same settling time; μ = 0 did not come to rest in 4 s), closer to sand
+    // at rest, which a body then displaces (a crater with a rim) rather than compacts.
+    td.settle_friction = std::min(0.2f, def.material.friction);
+    // The first tile holds a patch of up to 2 tile periods anywhere on this terrain: its fill
+    // depth is the patch depth plus the terrain's relief over such a window (bounded from the
+    // min/max of blocks of one period; 3 × 3 blocks cover any window of 2 periods). Settling
+    // a deeper tile when a patch comes costs seconds in that frame (measured: 24.8 s on the
+    // default scene under load), so start-up pays it.
+    double relief = 0;
+    {
+      const int B = set.cells, bx = (hf.samples_x() + B - 1) / B, bz = (hf.samples_z() + B - 1) / B;
+      std::vector<float> lo(std::size_t(bx) * bz, std::numeric_limits<float>::max()), hi(lo.size(), -std::numeric_limits<float>::max());
+      for (int j = 0; j < hf.samples_z(); ++j)
+        for (int i = 0; i < hf.samples_x(); ++i) {
+          const std::size_t k = std::size_t(j / B) * bx + std::size_t(i / B);
+          lo[k] = std::min(lo[k], hf.height(i, j));
+          hi[k] = std::max(hi[k], hf.height(i, j));
+        }
+      for (int cj = 0; cj < bz; ++cj)
+        for (int ci = 0; ci < bx; ++ci) {
+          float a = std::numeric_limits<float>::max(), b = -a;
+          for (int j = cj; j < std::min(bz, cj + 3); ++j)
+            for (int i = ci; i < std::min(bx, ci + 3); ++i) {
+              a = std::min(a, lo[std::size_t(j) * bx + i]);
+              b = std::max(b, hi[std::size_t(j) * bx + i]);
+            }
+          relief = std::max(relief, double(b - a));
+        }
+    }
+    // (At most the patch depth again of relief: steeper terrain settles deeper tiles when a
+    // patch there needs one, rather than making every start-up slow.)
+    const double depth0 = std::min(def.patch_depth, def.soil_depth);
+    if (auto t = I.tile_for(set, (depth0 + std::min(relief, depth0)) / scale); !t) return t.errors();
   }
-  td.surface_probe = float(def.surface_probe) * def.material.radius;
-  // Settled with μ ≤ 0.2 the block packs denser (solid fraction of the spheres 0.527 against
-  // 0.472 at μ = 0.5, same settling time; μ = 0 did not come to rest in 4 s), closer to sand
-  // at rest, which a body then displaces (a crater with a rim) rather than compacts.
-  td.settle_friction = std::min(0.2f, def.material.friction);
-  // The first tile holds a patch of up to 2 tile periods anywhere on this terrain: its fill
-  // depth is the patch depth plus the terrain's relief over such a window (bounded from the
-  // min/max of blocks of one period; 3 × 3 blocks cover any window of 2 periods). Settling
-  // a deeper tile when a patch comes costs seconds in that frame (measured: 24.8 s on the
-  // default scene under load), so start-up pays it.
-  double relief = 0;
-  {
-    const int B = I.tile_cells, bx = (hf.samples_x() + B - 1) / B, bz = (hf.samples_z() + B - 1) / B;
-    std::vector<float> lo(std::size_t(bx) * bz, std::numeric_limits<float>::max()), hi(lo.size(), -std::numeric_limits<float>::max());
-    for (int j = 0; j < hf.samples_z(); ++j)
-      for (int i = 0; i < hf.samples_x(); ++i) {
-        const std::size_t k = std::size_t(j / B) * bx + std::size_t(i / B);
-        lo[k] = std::min(lo[k], hf.height(i, j));
-        hi[k] = std::max(hi[k], hf.height(i, j));
-      }
-    for (int cj = 0; cj < bz; ++cj)
-      for (int ci = 0; ci < bx; ++ci) {
-        float a = std::numeric_limits<float>::max(), b = -a;
-        for (int j = cj; j < std::min(bz, cj + 3); ++j)
-          for (int i = ci; i < std::min(bx, ci + 3); ++i) {
-            a = std::min(a, lo[std::size_t(j) * bx + i]);
-            b = std::max(b, hi[std::size_t(j) * bx + i]);
-          }
-        relief = std::max(relief, double(b - a));
-      }
-  }
-  // (At most the patch depth again of relief: steeper terrain settles deeper tiles when a
-  // patch there needs one, rather than making every start-up slow.)
-  const double depth0 = std::min(def.patch_depth, def.soil_depth);
-  if (auto t = I.tile_for((depth0 + std::min(relief, depth0)) / def.particle_scale); !t) return t.errors();
-  I.granule_volume = 4.0 * 4.0 / 3.0 * std::numbers::pi * std::pow(double(I.radius_world()), 3);
   // The pool: every slot allocated now at full capacity, on the chosen backend.
   if (def.backend == "gl") {
     auto ctx = gl::Context::create();
@@ -784,18 +991,23 @@ Result<std::unique_ptr<TerrainManager>> TerrainManager::create(const TerrainMana
   }
   // A slot's fixed capacity: its domain (grid cells) and terrain grid are sized for the
   // widest patch it can hold, a single layer of granules 2 bounding radii thick.
-  SimulationDef cap = I.sim_def();
+  // With scale bands: the finest scale's domain is the tallest (sim units), the coarsest's
+  // terrain grid the widest (samples).
+  const std::vector<double> all_scales = I.scales();
+  const double s_min = *std::min_element(all_scales.begin(), all_scales.end());
+  const double s_max = *std::max_element(all_scales.begin(), all_scales.end());
+  SimulationDef cap = I.sim_def(s_min);
   {
     const GranuleShape shape = make_granule_shape(def.material.radius, 1.0f, def.material.density);
     const double bound = shape.centre_distance + shape.radius;  // sim units
     const double vg = 4.0 * 4.0 / 3.0 * std::numbers::pi * std::pow(double(shape.radius), 3);
     const float side = float(std::sqrt(def.granules_per_slot * vg / (0.5 * 2.0 * bound)));
-    const float height = float((def.patch_depth + 0.5 + Impl::engage_height) / def.particle_scale);
+    const float height = float((def.patch_depth + 0.5 + Impl::engage_height) / s_min);
     cap.bounds_min = {0, 0, 0};
     cap.bounds_max = {side, height, side};
-    const int n = int(std::ceil(side * def.particle_scale / hf.spacing())) + 9;
+    const int n = int(std::ceil(side * s_max / hf.spacing())) + 9;
     cap.terrain.nx = cap.terrain.nz = n;
-    cap.terrain.spacing = float(hf.spacing() / def.particle_scale);
+    cap.terrain.spacing = float(hf.spacing() / s_max);
     cap.terrain.heights.assign(std::size_t(n) * n, 0.0f);
     cap.terrain.fill_max_x = cap.terrain.fill_max_z = side;
   }
@@ -820,13 +1032,18 @@ TerrainManager::~TerrainManager() {
 Status TerrainManager::before_bodies(double time, double dt, Profile& profile) {
   Impl& I = *impl_;
   I.current();
+  I.now = time;
+  for (auto it = I.set_down_until.begin(); it != I.set_down_until.end();)
+    it = it->second <= time ? I.set_down_until.erase(it) : std::next(it);
   {
     auto timer = profile.time(Stage::Lod);
     std::vector<BodyMotion> motions;
     for (RigidBodyId b : I.world->bodies()) {
       if (I.shells_sampled.insert((std::int64_t(b.index) << 32) | std::uint32_t(b.generation)).second) {
-        auto pts = I.shell_points(b);  // warms sample_shell's cache (meshes)
-        if (!pts) return pts.errors();
+        for (const Impl::TileSet& set : I.tile_sets) {
+          auto pts = I.shell_points(b, set.scale);  // warms sample_shell's cache (meshes), per scale
+          if (!pts) return pts.errors();
+        }
       }
       BodyMotion m;
       I.world->bounds(b, &m.lo, &m.hi);
@@ -839,7 +1056,11 @@ Status TerrainManager::before_bodies(double time, double dt, Profile& profile) {
       const bool still = st.linear_velocity.norm() <= I.def.sleep_speed && st.angular_velocity.norm() * reach <= I.def.sleep_speed;
       int& frames_still = I.still_frames[(std::int64_t(b.index) << 32) | std::uint32_t(b.generation)];
       frames_still = still ? frames_still + 1 : 0;
-      if (frames_still >= 2) continue;
+      if (frames_still >= 2 || I.settling(b)) continue;
+      // A body lying on the heightfield (slow, at the surface) that no patch carries asks for
+      // none either: a patch would not take it up (Impl::lying), and its requests made patches
+      // come and go under it.
+      if (!I.carried_anywhere(b) && I.lying(b, m.lo, m.hi)) continue;
       motions.push_back(m);
     }
     // Requests are clipped to the terrain: a body landing at its edge asks for what exists
@@ -915,6 +1136,7 @@ Status TerrainManager::before_bodies(double time, double dt, Profile& profile) {
   }
   {
     auto timer = profile.time(Stage::Dem);
+    I.choose_carriers();
     for (auto& s : I.slots) {
       if (s.state != Impl::State::Active && s.state != Impl::State::Asleep) continue;
       if (Status st = I.couple_before(s, dt); !st) return st;
@@ -964,6 +1186,8 @@ Status TerrainManager::after_bodies(double time, double dt, Profile& profile) {
   }
   return Ok{};
 }
+
+void TerrainManager::set_camera(const Eigen::Vector3d& position) { impl_->camera = position; }
 
 void TerrainManager::request_patch(double x0, double z0, double x1, double z1, double time) {
   PatchRequest r;
@@ -1033,7 +1257,7 @@ std::int64_t TerrainManager::pool_bytes() const {
   constexpr std::int64_t particle_bytes = 0 SANDPATCH_PARTICLE_FIELDS(SANDPATCH_FIELD_BYTES);
   constexpr std::int64_t body_bytes = 0 SANDPATCH_BODY_FIELDS(SANDPATCH_FIELD_BYTES);
 #undef SANDPATCH_FIELD_BYTES
-  const SimulationDef sd = impl_->sim_def();
+  const SimulationDef sd = impl_->sim_def(impl_->def.particle_scale);
   std::int64_t fills = 0;  // the fills' spheres kept for the demotion's render baseline
   for (const auto& s : impl_->slots) fills += std::int64_t(s.fill_spheres.capacity() * sizeof(float));
   return std::int64_t(impl_->slots.size()) *
@@ -1053,6 +1277,25 @@ std::uint64_t TerrainManager::state_hash() const {
 
 const std::vector<PatchEvent>& TerrainManager::events() const { return impl_->events; }
 
+std::vector<TerrainManager::PatchInfo> TerrainManager::patches() const {
+  std::vector<PatchInfo> out;
+  for (const auto& s : impl_->slots) {
+    if (s.state == Impl::State::Free) continue;
+    PatchInfo p;
+    p.patch = s.patch;
+    p.region = s.region;
+    p.origin = s.origin;
+    p.particle_scale = s.scale;
+    p.granule_radius_world = double(s.sim->def().particle_radius) * p.particle_scale;
+    p.steps_per_contact = s.sim->def().accuracy_steps_per_contact;
+    p.granules = s.granules;
+    p.ready = s.state == Impl::State::Active || s.state == Impl::State::Asleep;
+    p.asleep = s.state == Impl::State::Asleep;
+    out.push_back(p);
+  }
+  return out;
+}
+
 void TerrainManager::particles(std::vector<float>& xyzr) const {
   xyzr.clear();
   const Impl& I = *impl_;
@@ -1071,7 +1314,7 @@ std::vector<TerrainManager::GpuParticles> TerrainManager::gpu_particles() const 
     g.buffer = s.sim->gpu_particle_buffer();
     g.count = s.sim->particle_count();
     g.origin = s.origin;
-    g.scale = float(impl_->def.particle_scale);
+    g.scale = float(s.scale);
     g.fade = impl_->def.fade_frames > 0 ? std::min(1.0f, float(s.fade) / float(impl_->def.fade_frames)) : 1.0f;
     out.push_back(g);
   }
@@ -1113,22 +1356,30 @@ nlohmann::ordered_json TerrainManager::report() const {
                {"slots_used", used},
                {"peak_slots_used", I.peak_slots},
                {"granules_per_slot", I.def.granules_per_slot},
+               {"steps_per_contact", I.def.steps_per_contact},
                {"shell_particles_per_slot", I.def.shell_particles_per_slot},
                {"queued_requests", int(I.queue.size())},
                {"peak_queued_requests", I.peak_queue},
                {"lapsed_requests", I.lapsed_requests},
                {"extensions", I.extensions}};
   nlohmann::ordered_json tiles = nlohmann::ordered_json::array();
-  for (const GranuleTile& t : I.tiles)
-    tiles.push_back({{"granules", t.granules.size()},
-                     {"period_xz_m", t.period_xz * I.def.particle_scale},
-                     {"period_y_m", t.period_y * I.def.particle_scale},
+  for (const Impl::TileSet& set : I.tile_sets)
+    for (const GranuleTile& t : set.tiles)
+    tiles.push_back({{"particle_scale", set.scale},
+                     {"granules", t.granules.size()},
+                     {"period_xz_m", t.period_xz * set.scale},
+                     {"period_y_m", t.period_y * set.scale},
                      {"packing_fraction", t.packing_fraction},
                      {"settle_time_s", t.settle_time},
                      {"settled_speed_m_s", t.settled_speed}});
   r["tile"] = tiles.front();  // the shallowest (made at start-up)
   r["tile"]["tiles"] = tiles;
   r["tile"]["settle_wall_ms_all_tiles"] = I.tiles_settled_ms;
+  r["tile"]["cache"] = {{"dir", I.tile_cache},
+                        {"from_disk", I.tiles_from[int(TileCacheOutcome::Source::Disk)]},
+                        {"from_memory", I.tiles_from[int(TileCacheOutcome::Source::Memory)]},
+                        {"settled", I.tiles_from[int(TileCacheOutcome::Source::Settled)]},
+                        {"notes", I.tile_cache_notes}};
   if (!I.gl_note.empty()) r["depth_render_note"] = I.gl_note;
   return r;
 }

@@ -19,7 +19,8 @@
 //
 // Slots are created at start-up with fixed capacity; memory does not grow with particles.
 // Coordinates: a patch's simulation runs at unit particle scale, relative to the patch
-// origin (its world corner at the floor height): x_world = origin + scale · x_sim.
+// origin (its world corner at the floor height): x_world = origin + scale · x_sim, with the
+// patch's own scale (one per patch, chosen at promotion: TerrainManagerDef::scale_bands).
 #pragma once
 
 #include <Eigen/Core>
@@ -53,6 +54,23 @@ struct GranularMaterial {
 struct TerrainManagerDef {
   GranularMaterial material;
   double particle_scale = 1.0;                 // world size / simulated size (Leach & Marais §4.3)
+  // N: every slot's DEM substeps at dt <= t_c / N, t_c the contact time of the lightest pair
+  // (SimulationDef.accuracy_steps_per_contact; ../shared/DESIGN.md: stable to about t_c / 1.7,
+  // accurate from t_c / 20). Scene simulation.steps_per_contact; docs/tradeoff.md measures it.
+  int steps_per_contact = 20;
+  // Particle scale by distance from the camera (Leach & Marais §4.3, §6.3 scenario 2: finer
+  // granules near the observer, coarser far away). Empty: every patch at particle_scale.
+  // Otherwise a patch is promoted at the particle_scale of the first band whose max_distance
+  // (m) reaches the 3-D distance from `camera` to the centre of its request on the surface
+  // (beyond the last band: the last band's), and keeps it while it lives (Leach & Marais: the
+  // resolution is locked at initialisation); a patch growing under a body keeps its scale.
+  // max_distance strictly ascending. Each scale settles its own tile at start-up.
+  struct ScaleBand {
+    double max_distance = 0;                   // m
+    double particle_scale = 1;
+  };
+  std::vector<ScaleBand> scale_bands;
+  Eigen::Vector3d camera = Eigen::Vector3d::Zero();  // m, world; TerrainManager::set_camera moves it
   int slots = 2;                               // simulations in the pool
   int granules_per_slot = 16384;               // capacity of each slot (granules)
   int shell_particles_per_slot = 8192;         // capacity of each slot for body-shell spheres
@@ -72,6 +90,10 @@ struct TerrainManagerDef {
   int depth_resolution = 1024;                 // texels per side of the demotion depth render
   double surface_probe = 2.0;                  // probe radius of the rendered surface, × sphere radius (depth_conversion.hpp)
   bool use_gl = true;                          // depth render on GL (else, or if no context, on the CPU)
+  // On-disk cache of pre-settled granule tiles (manager/tile_cache.hpp): "" = the default
+  // ($SANDPATCH_TILE_CACHE, else $XDG_CACHE_HOME/sandpatch/tiles, else ~/.cache/sandpatch/tiles),
+  // "off" = none, anything else = that directory. A tile read back is bit-identical to a settled one.
+  std::string tile_cache;
   std::string backend = "cpu";                 // DEM backend of the pool: cpu (OpenMP) or gl (compute shaders)
   int threads = 0;                             // DEM threads, 0 = OpenMP default
   Eigen::Vector3d gravity{0.0, -9.81, 0.0};    // m/s²
@@ -104,6 +126,9 @@ class TerrainManager {
   // Requests a patch over the world rectangle [x0, x1] × [z0, z1] now, whether or not a body
   // is coming (e.g. a digging tool about to act); it is queued like a predicted contact.
   void request_patch(double x0, double z0, double x1, double z1, double time);
+  // Moves the camera the scale bands are measured from (m, world); patches already live keep
+  // their scale.
+  void set_camera(const Eigen::Vector3d& position);
   // Demotes every patch now (end of a run that wants the final terrain).
   Status demote_all(double time, Profile& profile);
 
@@ -121,6 +146,19 @@ class TerrainManager {
   // history and backend scratch buffers are not counted.
   std::int64_t pool_bytes() const;
   std::uint64_t state_hash() const;            // over every patch's DEM state
+  // Every live patch (promoted, not yet demoted), in slot order.
+  struct PatchInfo {
+    int patch = -1;                            // id (PatchEvent::patch)
+    GridRegion region;                         // heightfield samples it covers
+    Eigen::Vector3d origin = Eigen::Vector3d::Zero();  // m, world: its simulation's (0, 0, 0)
+    double particle_scale = 1;                 // world size / simulated size, fixed while it lives
+    double granule_radius_world = 0;           // m, sphere radius of its granules as the world sees them
+    int steps_per_contact = 20;                // N of its DEM (dt <= t_c / N)
+    int granules = 0;                          // uploaded
+    bool ready = false;                        // filled (simulating or asleep)
+    bool asleep = false;
+  };
+  std::vector<PatchInfo> patches() const;
   const std::vector<PatchEvent>& events() const;
   // Sphere centres and radii of every live patch (x, y, z, r; m, world relative to the
   // heightfield origin) with each patch's fade-in factor, for rendering.

@@ -3,8 +3,9 @@
 //
 // Notation: n = unit normal pointing from the partner to this sphere; delta = overlap (m);
 // v = velocity of this sphere's contact point relative to the partner's (m/s).
-//   normal      f_n = max(0, k_n delta - d),  d = c_n v.n, and |d| <= c_n delta / dt in the
-//               first substep of a contact (ContactParams::new_contact)   (N, never attractive)
+//   normal      f_n = max(0, k_n delta - d),  d = c_n v.n; in the first substep of a contact
+//               (ContactParams::new_contact) |d| = c_n (min(delta/dt, |v.n|) + |v.n|/2)
+//               instead, with the sign of v.n                          (N, never attractive)
 //   tangential  v_t = v - (v.n) n
 //     SpringHistory (Cundall-Strack): xi <- xi - (xi.n) n, rescaled to its old length;
 //                 xi <- xi + v_t dt; slip: if k_t |xi| > mu f_n, xi is shortened to
@@ -33,8 +34,8 @@ struct ContactParams {
   float dt = 0;      // s, substep
   bool bell = false;
   // true in the first substep of a contact (the pair or plane did not touch at the previous
-  // substep): the dashpot is then capped at c_n delta / dt (see contact_force). Callers that
-  // do not know leave it false: the plain dashpot (particles/dem.cpp and the GL shader today).
+  // substep): the dashpot then gives the impulse of the time since the touch plus half a step
+  // (see contact_force). particles/dem.cpp and shaders/dem/force.comp set it.
   bool new_contact = false;
 };
 
@@ -49,17 +50,25 @@ struct ContactForce {
 inline ContactForce contact_force(const ContactParams& p, Vec3 n, float delta, Vec3 v, Vec3& xi) {
   ContactForce out;
   float vn = dot(v, n);
-  // Dashpot c_n vn. In the first substep of a contact (p.new_contact) its magnitude is capped
-  // at c_n delta / dt: the overlap has grown by delta < |vn| dt since the touch, and the
-  // dashpot's impulse over an overlap change delta is exactly c_n delta; uncapped, the first
-  // substep applies c_n |vn| for a whole dt whatever the phase of the touch (e = 0.1 at
-  // dt = t_contact/50: -17 % ... +2 % with the phase; capped, +3.2 ... +3.4 %; docs/dem.md
-  // "Step size"). Only the first substep: capping every contact with delta < |vn| dt also
-  // strips the damping from lightly loaded resting contacts (overlap ~ m g / k_n) whose
-  // jitter is faster than delta/dt, and beds stopped settling (measured, docs/dem.md).
-  // The cap only shrinks the dashpot, never flips it, so damping still never adds energy.
+  // Dashpot c_n vn. The caller passes v at the substep's time t_n (particles/dem.cpp predicts
+  // the bodies' translation as v + (dt/2) a_prev, symplectic Euler's v being half a step old;
+  // less at large damping per substep, Simulation::velocity_predictor_gain). The kick at t_n stands
+  // for [t_n - dt/2, t_n + dt/2]; in the first substep of a contact (p.new_contact) the touch
+  // was delta/|vn| before t_n (delta < |vn| dt for an approach from outside), so the dashpot's
+  // impulse from the touch to t_n + dt/2 is c_n (delta + |vn| dt/2): |fd| = c_n (delta/dt +
+  // |vn|/2), with delta/dt capped at |vn| (a contact that did not start by approach, e.g. a
+  // body placed overlapping, gets at most 1.5 c_n |vn|). With the full c_n |vn| whatever the
+  // phase of the touch, e = 0.1 at dt = t_contact/50 came out -17 % ... +2 % with the phase;
+  // with this and the predictor, -1.2 ... -1.0 % (docs/dem.md "Step size"). Only the first
+  // substep: a cap on every contact with delta < |vn| dt also strips the damping from lightly
+  // loaded resting contacts (overlap ~ m g / k_n) and beds stopped settling (measured, ibid.).
+  // fd has the sign of vn, so the dashpot still opposes the normal motion.
   float fd = p.cn * vn;
-  if (p.new_contact && std::fabs(vn) * p.dt > delta) fd = std::copysign(p.cn * delta / p.dt, vn);
+  if (p.new_contact) {
+    const float avn = std::fabs(vn);
+    const float dd = delta < avn * p.dt ? delta / p.dt : avn;
+    fd = std::copysign(p.cn * (dd + 0.5f * avn), vn);
+  }
   float fn = p.kn * delta - fd;
   fn = fn > 0.0f ? fn : 0.0f;
   Vec3 vt = v - vn * n;

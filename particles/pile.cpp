@@ -68,6 +68,58 @@ FlankFit fit_flank(const std::vector<SurfacePoint>& points, const FlankFitDef& d
   return out;
 }
 
+ConeFit fit_cone_area(const std::vector<Vec3>& points, double radius, const ConeFitDef& def) {
+  ConeFit out;
+  if (!(def.cell > 0) || !(def.reach >= 0) || def.levels < 2 || !(radius > 0)) return out;
+  const double R = radius + def.reach;
+  if (R / def.cell > 1e4) return out;  // refuse a map of more than 1e8 cells
+  const int n = int(2 * R / def.cell) + 1;
+  std::vector<double> surf(std::size_t(n) * n, -1e300);
+  double H = -1e300;
+  for (const Vec3& p : points) {
+    const double x = p.x, z = p.z, y = p.y;
+    if (!(x * x + z * z <= radius * radius) || !std::isfinite(y)) continue;
+    H = std::max(H, y);
+    const int i0 = std::max(0, int((x - def.reach + R) / def.cell));
+    const int i1 = std::min(n - 1, int((x + def.reach + R) / def.cell));
+    const int k0 = std::max(0, int((z - def.reach + R) / def.cell));
+    const int k1 = std::min(n - 1, int((z + def.reach + R) / def.cell));
+    for (int k = k0; k <= k1; ++k)
+      for (int i = i0; i <= i1; ++i) {
+        const double cx = -R + (i + 0.5) * def.cell - x, cz = -R + (k + 0.5) * def.cell - z;
+        if (cx * cx + cz * cz > def.reach * def.reach) continue;
+        double& c = surf[std::size_t(k) * n + i];
+        c = std::max(c, y);
+      }
+  }
+  if (!(H > 0)) return out;
+  out.height = H;
+  std::vector<double> hs;
+  for (double c : surf)
+    if (c > -1e299) hs.push_back(c);
+  std::sort(hs.begin(), hs.end());
+  std::vector<std::pair<double, double>> used;  // (r(z), z)
+  double sx = 0, sy = 0, sxx = 0, sxy = 0;
+  for (int l = 0; l < def.levels; ++l) {
+    const double z = H * (def.lo_frac + (def.hi_frac - def.lo_frac) * l / (def.levels - 1));
+    const double cells = double(hs.end() - std::upper_bound(hs.begin(), hs.end(), z));
+    const double r = std::sqrt(cells * def.cell * def.cell / std::numbers::pi);
+    sx += r, sy += z, sxx += r * r, sxy += r * z;
+    used.push_back({r, z});
+  }
+  const int m = int(used.size());
+  const double den = m * sxx - sx * sx;
+  if (!(den > 0)) return out;
+  out.levels = m;
+  out.slope = (m * sxy - sx * sy) / den;
+  const double icpt = (sy - out.slope * sx) / m;
+  double r2 = 0;
+  for (auto [r, z] : used) r2 += (z - icpt - out.slope * r) * (z - icpt - out.slope * r);
+  out.residual = std::sqrt(r2 / m);
+  out.angle_deg = std::atan(-out.slope) * 180.0 / std::numbers::pi;
+  return out;
+}
+
 Status validate(const PileDef& pd) {
   auto bad = [](const char* f, double v, const char* allowed) {
     return Error{"", std::string("PileDef.") + f, format_number(v), allowed, ""};
@@ -81,6 +133,11 @@ Status validate(const PileDef& pd) {
   if (!(pd.floor_radius > 0)) return bad("floor_radius", pd.floor_radius, "must be > 0 (m)");
   if (!(pd.fit.bin > 0)) return bad("fit.bin", pd.fit.bin, "must be > 0 (m)");
   if (pd.fit.sectors < 1) return bad("fit.sectors", pd.fit.sectors, "must be >= 1");
+  if (!(pd.cone.cell > 0)) return bad("cone.cell", pd.cone.cell, "must be > 0 (m)");
+  if (!(pd.cone.reach >= 0)) return bad("cone.reach", pd.cone.reach, "must be >= 0 (m)");
+  if (pd.cone.levels < 2) return bad("cone.levels", pd.cone.levels, "must be >= 2");
+  if (!(pd.cone.lo_frac >= 0 && pd.cone.lo_frac < pd.cone.hi_frac && pd.cone.hi_frac <= 1))
+    return bad("cone.lo_frac", pd.cone.lo_frac, "must satisfy 0 <= lo_frac < hi_frac <= 1");
   return Ok{};
 }
 
@@ -149,10 +206,16 @@ void fit_pile(const PileDef& pd, const std::vector<Vec3>& pos, int floor_spheres
     pts.push_back(sp);
   }
   const FlankFit fit = fit_flank(pts, pd.fit);
-  out.angle_deg = fit.angle_deg;
-  out.residual = fit.residual;
-  out.fit_points = fit.points;
+  out.flank_angle_deg = fit.angle_deg;
+  out.flank_residual = fit.residual;
+  out.flank_points = fit.points;
   out.peak = fit.peak;
+  // the angle: the cone fit over the granules' sphere centres on the disc (axis-free)
+  std::vector<Vec3> cen(pos.begin() + floor_spheres, pos.end());
+  const ConeFit cone = fit_cone_area(cen, R, pd.cone);
+  out.angle_deg = cone.angle_deg;
+  out.residual = cone.residual;
+  out.fit_points = cone.levels;
   out.profile = fit.surface;
   out.spheres.assign(pos.begin() + floor_spheres, pos.end());
 }

@@ -153,6 +153,19 @@ struct SleepDef {
   double hold_time = 1.0;                      // s, ... for this long puts a patch to sleep
 };
 
+// Particle scale by distance from a camera (Leach & Marais §4.3, §6.3 scenario 2): a patch is
+// promoted at the particle_scale of the first band whose max_distance reaches the distance from
+// the camera (its position at the time of promotion) to the patch's centre on the surface;
+// beyond the last band, the last band's. A live patch keeps its scale.
+struct ScaleBandDef {
+  double max_distance = 0;                     // m, strictly ascending over the bands
+  double particle_scale = 1;                   // render size / simulated size in this band
+};
+struct ScaleByDistanceDef {
+  std::string camera;                          // name of a CameraDef
+  std::vector<ScaleBandDef> bands;             // 1 to 16
+};
+
 struct SimulationDef {
   double dt = 1.0 / 60.0;                      // s, fixed step of bodies and the frame
   int substeps = 1;                            // substeps per step (the DEM may substep further)
@@ -161,6 +174,8 @@ struct SimulationDef {
   int threads = 0;                             // worker threads, 0 = all hardware threads
   PoolDef pool;
   double particle_scale = 1.0;                 // render size / simulated size (Leach §4.3)
+  int steps_per_contact = 20;                  // N: the DEM substeps at dt <= t_c / N (t_c: contact time)
+  std::optional<ScaleByDistanceDef> scale_by_distance;  // instead of one particle_scale for every patch
   SleepDef sleep;
   double idle_timeout = 120.0;                 // s asleep and untouched before demotion (Leach & Marais)
   bool granular_patches = true;                // false: no patches, bodies meet the heightfield only (LOD off the other way)
@@ -180,6 +195,7 @@ struct SimulationPreset {
   double particle_scale;        // simulation.particle_scale: world granule size / the material's
   int granules_per_slot;        // simulation.pool.granules_per_slot: 32768 / particle_scale³
                                 //   rounded up to a multiple of 1024 (a slot holds the same world volume)
+  int steps_per_contact;        // simulation.steps_per_contact: the DEM's dt = t_c / N
   const char* measured;         // the sweep's setting behind it, its cost and error (docs/tradeoff.md)
 };
 const std::vector<SimulationPreset>& simulation_presets();

@@ -39,25 +39,30 @@ def s1(paper):
 # --- 2: three simulations at three distances from the camera (one granule size: see description)
 def s2(paper):
     r = 0.024 if paper else 0.06
-    # patch side = body footprint + 2 m apron: near 7 m, mid 3.7 m, far 2.5 m -> granules 7.8 : 2.2 : 1
-    bodies=[
-      {"name":"near_crate","shape":{"type":"box","half_extents":[2.5,0.3,2.5]},"mass":2000.0,"pose":{"position":[0.0,1.5,8.0]}},
-      {"name":"mid_ball","shape":{"type":"sphere","radius":0.85},"density":600.0,"pose":{"position":[0.0,2.0,-12.0]}},
-      {"name":"far_ball","shape":{"type":"sphere","radius":0.25},"density":1000.0,"pose":{"position":[0.0,1.5,-24.0]}}]
+    # the same crate at 3, 23 and 35 m from the camera; the patch under each takes the particle
+    # scale of its distance band (simulation.scale_by_distance), as in the paper
+    crate = lambda name, z: {"name":name,"shape":{"type":"box","half_extents":[2.5,0.3,2.5]},"mass":2000.0,
+                             "pose":{"position":[0.0,1.5,z]}}
+    bodies=[crate("near_crate", 8.0), crate("mid_crate", -12.0), crate("far_crate", -24.0)]
+    common = ("three simulations at three particle scales at three distances from the camera. "
+              "The same 2 t crate lands 3, 23 and 35 m from the camera; simulation.scale_by_distance gives the patch under it particle scale 1, 1.59 and 2")
     return {"version":1,
       "name":"leach_2_three_scales" + ("_paper" if paper else ""),
-      "description":("Leach & Marais 6.3, scenario 2 at paper size (GPU machines): three simulations at 3, 23 and 35 m from the camera, "
-                     "46,060 / 16,572 / 7,360 granules (the paper: 202,352 / 54,876 / 25,776 particles). "
-                     "A scene has one simulation.particle_scale for all patches, so the three sizes come from three patch areas, not three particle scales."
+      "description":("Leach & Marais 6.3, scenario 2 at paper size (GPU machines): " + common +
+                     ": about 46,000 / 12,000 / 6,000 granules (estimated from the small variant's patches) "
+                     "(the paper: 202,352 / 54,876 / 25,776 particles = 50,588 / 13,719 / 6,444 granules)."
                      if paper else
-                     "Leach & Marais 6.3, scenario 2 sized for a 2-core machine: three simulations at 3, 23 and 35 m from the camera, "
-                     "about 4,000 / 1,400 / 640 granules of radius 6 cm (the paper: 7.9 : 2.1 : 1). One particle_scale per scene, so the sizes come from patch areas. "
+                     "Leach & Marais 6.3, scenario 2 sized for a 2-core machine: " + common +
+                     " (granule radius 6, 9.5 and 12 cm in the world): 4,078 / 810 / 639 granules (measured, sandpatch run). "
                      "The paper variant is leach_2_three_scales_paper.json."),
       "terrain":terrain(257,64.0,0.6),
       "materials":mat(r, 2.0e4 if paper else 5.0e4),
       "bodies":bodies,
       "simulation":{"dt":1/120,"substeps":1,"duration":(20.0 if paper else 1.5),"backend":("gl" if paper else "cpu"),
                     "pool":{"slots":3,"granules_per_slot":(65536 if paper else 8192)},
+                    "scale_by_distance":{"camera":"main","bands":[{"max_distance":10.0,"particle_scale":1.0},
+                                                                 {"max_distance":30.0,"particle_scale":1.59},
+                                                                 {"max_distance":1000.0,"particle_scale":2.0}]},
                     "sleep":{"speed_threshold":0.01,"hold_time":1.0},"idle_timeout":120.0},
       "cameras":[{"name":"main","position":[0.0,2.5,11.0],"target":[0.0,0.0,-12.0],"fov_deg":50.0,"width":1280,"height":720}],
       "outputs":{"report":True}}

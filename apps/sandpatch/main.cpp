@@ -127,6 +127,8 @@ int main(int argc, char** argv) {
   blodc->add_option("--sizes", lod_sizes, "Terrain sizes in cells per side, ascending, comma-separated (default 512,1024,2048,4096,8192)");
   blodc->add_option("--seconds", blod.seconds, "Simulated seconds per terrain size (default 1)");
   blodc->add_option("--threads", blod.threads, "Worker threads (0 = all)");
+  blodc->add_option("--window", blod.window, "Simulated seconds per size per turn (default 0.025)");
+  blodc->add_flag("--quick", blod.quick, "No full-terrain checks, no sleeping patch (tests)");
   blodc->add_flag("--json", blod.json, "Print one JSON object on the last line");
 
   BenchTradeoffArgs btrade;

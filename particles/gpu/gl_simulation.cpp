@@ -396,10 +396,14 @@ struct GlSimulation::Impl {
     for (int k = kGridCount; k <= kGridCopyBack; ++k) dispatch_indirect(Kernel(k));
     glBindBuffer(GL_DISPATCH_INDIRECT_BUFFER, 0);
     glProgramUniform1f(prog[kForce].id(), glGetUniformLocation(prog[kForce].id(), "u_dt"), dt);
+    glProgramUniform1i(prog[kForce].id(), glGetUniformLocation(prog[kForce].id(), "u_first_law"),
+                       guard->contact_timing_on(dt) ? 1 : 0);
     dispatch(kForce, np_gpu, wg);
     cur_s = 1 - cur_s;  // the springs written become the ones read next substep
     bind_all();
     glProgramUniform1f(prog[kBodies].id(), glGetUniformLocation(prog[kBodies].id(), "u_dt"), dt);
+    glProgramUniform1f(prog[kBodies].id(), glGetUniformLocation(prog[kBodies].id(), "u_pred"),
+                       float(guard->velocity_predictor_gain(dt)));
     dispatch(kBodies, nb_gpu, wg);
   }
 
@@ -851,10 +855,12 @@ Status GlSimulation::step(double dt_frame) {
   if (status[1] > 0)
     return Error{"", "step", "NaN", std::to_string(status[1]) + " bodies became non-finite in the integrate stage",
                  "reduce the frame dt or material.normal_stiffness, or check the inputs"};
-  if (s.def.material.shear == ShearLaw::SpringHistory && int(status[2]) > s.K)
+  // (the slots hold the springs and, with either law, which contacts are not new: force.comp)
+  if (int(status[2]) > s.K)
     return Error{"", "GlOptions.max_contacts_per_sphere", std::to_string(s.K),
                  "is full: a sphere touched " + std::to_string(status[2]) + " partners at once; raise max_contacts_per_sphere",
-                 "the springs beyond the capacity restarted from zero this frame"};
+                 "the springs beyond the capacity restarted from zero this frame, and those contacts were "
+                 "treated as new (first-substep dashpot)"};
   if (vmax < s.def.sleep_speed) {
     s.below_time += dt_frame;
     if (s.below_time >= s.def.sleep_time && s.def.sleep_time > 0) s.asleep = true;

@@ -13,7 +13,8 @@
 //                including the tangential spring with history (one spring per sphere and
 //                partner, kept in max_contacts_per_sphere slots keyed by partner id)
 //   3. bodies    each body sums its spheres in id order, integrates (symplectic Euler,
-//                normalised quaternion) and rebuilds its spheres
+//                normalised quaternion) and rebuilds its spheres (with the velocity
+//                predicted half a substep ahead, translation only, as dem.cpp)
 // After the frame one 32-byte status block is read back (max granule speed, NaN count,
 // contact slots needed, contacts, grid rebuilds), which drives the sleep logic and the error
 // reports. Asleep frames move only kinematic shells and wake on their contact, as dem.cpp.
@@ -34,7 +35,8 @@
 namespace sandpatch::gpu {
 
 struct GlOptions {
-  // Tangential-spring slots per sphere (partners touching at once). 12 equal spheres can
+  // Contact slots per sphere (partners touching at once): the tangential spring, and which
+  // contacts are not new (the first-substep dashpot, either shear law). 12 equal spheres can
   // touch one (kissing number); a granule's own 3 are not contacts. More simultaneous
   // contacts than this are reported by step() as an Error naming this field.
   int max_contacts_per_sphere = 16;

@@ -5,6 +5,9 @@
 // (an asleep frame, dem.cpp move_kinematic).
 //   v += dt (F/m + g);  w += dt I^-1 (T - w x I w) (body frame; isotropic granules skip
 //   the gyroscopic term);  x += dt v;  q += dt/2 (w, 0) q, normalised
+// The spheres get the velocity predicted to the next contact stage's time, v + u_pred dt a
+// with a = (v - v_old)/dt this substep's acceleration, translation only (dem.cpp `bodies`;
+// u_pred = Simulation::velocity_predictor_gain; zero when a body is only rebuilt, modes 1, 2).
 layout(local_size_x = SP_WG) in;
 
 uniform int u_mode;          // 0: sum + integrate + rebuild, 1: rebuild only, 2: move kinematic
@@ -12,6 +15,7 @@ uniform uint u_first_body;
 uniform float u_dt;          // s
 uniform vec3 u_gravity;      // m/s^2, sim units
 uniform float u_reach;       // d + r of a granule (m), for its speed |v| + |w| (d + r)
+uniform float u_pred;        // velocity predictor gain (1/2, less at large damping per substep)
 uniform float u_resort_d2;   // (skin / 2)^2 (m^2): a larger displacement since the sort re-sorts
 
 // Returns the largest squared displacement of the body's spheres since the last sort.
@@ -37,6 +41,7 @@ void main() {
   const uint fl = B.flags[b];
   const vec3 x = B.pos[b].xyz;
   vec3 v = B.vel[b].xyz, w = B.omega[b].xyz;
+  const vec3 v_old = v;
   vec4 q = B.quat[b];
   const float invm = B.mass[b].y;
   if (u_mode == 1) {
@@ -88,5 +93,5 @@ void main() {
   if (isnan(chk) || isinf(chk)) atomicAdd(G.status[1], 1u);
   B.pos[b].xyz = xn;
   B.quat[b] = q;
-  if (rebuild(b, xn, q, v, w, invm) > u_resort_d2) atomicOr(G.status[5], 1u);
+  if (rebuild(b, xn, q, v + u_pred * (v - v_old), w, invm) > u_resort_d2) atomicOr(G.status[5], 1u);
 }

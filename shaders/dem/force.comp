@@ -7,17 +7,23 @@
 // The laws are particles/contact.hpp's contact_force, operation by operation:
 //   n = unit normal from the partner to this sphere, delta = r_i + r_j - |x_i - x_j|,
 //   v = (u_i + w_i x (-r_i n)) - (u_j + w_j x (r_j n)) = (u_i - u_j) + n x (r_i w_i + r_j w_j)
-//   f_n = max(0, k_n delta - c_n v.n),  c_n = 2 zeta sqrt(k_n m_eff) = cn0 / sqrt(1/m_i + 1/m_j)
+//   f_n = max(0, k_n delta - c_n v.n),  c_n = 2 zeta sqrt(k_n m_eff) = cn0 / sqrt(1/m_i + 1/m_j);
+//     in a contact's first substep the dashpot is c_n (min(delta/dt, |v.n|) + |v.n|/2) with the
+//     sign of v.n (contact.hpp). The sphere velocities are the bodies' predicted to this
+//     substep's time, v + u_pred dt a_prev, translation only (bodies.comp), as on the CPU.
 //   SpringHistory: xi rotated into the tangent plane (length kept), xi += v_t dt, slip
 //     shortens xi to mu f_n / k_t, f_t = -k_t xi - beta c_t v_t, largest beta in [0, 1]
 //     with |f_t| <= mu f_n.   Bell: f_t = -min(mu f_n, k_b |v_t|) v_t / |v_t|
 // Springs live in SP_K slots per sphere (by particle id), keyed by the partner's id; a
-// contact that ends forgets its spring. Boundary planes (floor; side walls) use the same law
-// with their own springs (W, slot per plane) and c_n from the sphere's body mass alone.
+// contact that ends forgets its spring. A touching partner without a slot from the last
+// substep is a new contact (first substep); with Bell's law the slots carry only that (xi 0).
+// Boundary planes (floor; side walls) use the same law with their own springs (W, slot per
+// plane; a plane not in the last substep's mask is new) and c_n from the sphere's body mass.
 layout(local_size_x = SP_WG) in;
 
 uniform float u_kn, u_cn0, u_kt, u_ctr, u_mu, u_kb, u_dt;
 uniform bool u_bell;
+uniform bool u_first_law;  // the first-substep dashpot is on (Simulation::contact_timing_on)
 uniform float u_floor_y;
 uniform bool u_walls;
 // terrain outside the filled rectangle (dem.hpp TerrainGrid): bilinear heights
@@ -54,10 +60,17 @@ struct ContactOut {
   float energy;
 };
 
-ContactOut contact_force(float cn, vec3 n, float delta, vec3 v, inout vec3 xi) {
+// first: the contact's first substep (contact.hpp ContactParams::new_contact)
+ContactOut contact_force(float cn, vec3 n, float delta, vec3 v, bool first, inout vec3 xi) {
   ContactOut o;
   float vn = dot(v, n);
-  float fn = u_kn * delta - cn * vn;
+  float fd = cn * vn;
+  if (first && u_first_law) {
+    const float avn = abs(vn);
+    const float dd = delta < avn * u_dt ? delta / u_dt : avn;
+    fd = (vn < 0.0 ? -1.0 : 1.0) * (cn * (dd + 0.5 * avn));
+  }
+  float fn = u_kn * delta - fd;
   fn = fn > 0.0 ? fn : 0.0;
   vec3 vt = v - vn * n;
   vec3 ft = vec3(0.0);
@@ -142,18 +155,19 @@ void main() {
           const vec3 nrm = d * inv;
           const vec3 v = (ui - P.vel[j].xyz) + cross(nrm, rwi + pj.w * P.omega[j].xyz);
           const float cn = u_cn0 / sqrt(invm_i + invm_j);
-          // this pair's spring from the last substep (zero for a new contact)
+          // this pair's spring from the last substep (zero for a new contact, and no slot)
           vec3 xi = vec3(0.0);
-          if (!u_bell)
-            for (uint k = 0u; k < old_count; ++k) {
-              const uvec4 sl = SIn.slot[sbase + k];
-              if (int(sl.w) == jid) {
-                xi = uintBitsToFloat(sl.xyz);
-                break;
-              }
+          bool first = true;
+          for (uint k = 0u; k < old_count; ++k) {
+            const uvec4 sl = SIn.slot[sbase + k];
+            if (int(sl.w) == jid) {
+              xi = uintBitsToFloat(sl.xyz);
+              first = false;
+              break;
             }
-          ContactOut cf = contact_force(cn, nrm, rs - dist, v, xi);
-          if (!u_bell && found < uint(SP_K)) SOut.slot[sbase + found] = uvec4(floatBitsToUint(xi), uint(jid));
+          }
+          ContactOut cf = contact_force(cn, nrm, rs - dist, v, first, xi);
+          if (found < uint(SP_K)) SOut.slot[sbase + found] = uvec4(floatBitsToUint(xi), uint(jid));
           ++found;
           if (id < jid || (B.flags[P.body[j]] & SP_BODY_STATIC) != 0u) ++owned;
           F += cf.f;
@@ -203,8 +217,9 @@ void main() {
         mask |= 1u << uint(slot);
         const uint wslot = uint(id) * 6u + uint(slot);
         const vec3 v = ui + cross(wi, nrm * (-ri));
-        vec3 xi = (old_mask & (1u << uint(slot))) != 0u ? W.xi[wslot].xyz : vec3(0.0);
-        ContactOut cf = contact_force(cnw, nrm, ri - dist, v, xi);
+        const bool first = (old_mask & (1u << uint(slot))) == 0u;
+        vec3 xi = first ? vec3(0.0) : W.xi[wslot].xyz;
+        ContactOut cf = contact_force(cnw, nrm, ri - dist, v, first, xi);
         W.xi[wslot] = vec4(xi, 0.0);
         F += cf.f;
         T += cross(nrm * (-ri), cf.ft);

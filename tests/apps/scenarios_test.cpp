@@ -83,6 +83,37 @@ TEST(Scenarios, PaperVariantsHoldThePapersSimulations) {
   for (int k = 0; k < 10; ++k) EXPECT_DOUBLE_EQ(three["bodies"][k]["spawn_time"].get<double>(), 10.0 * k);
 }
 
+TEST(Scenarios, SecondScenarioRunsThreeParticleScalesAtThreeDistances) {
+  // Leach & Marais §6.3 scenario 2: three simulations at three particle scales at three
+  // distances from the camera. The bands of simulation.scale_by_distance put each body's patch
+  // (centred under it, on the flat surface at y = 0) in its own band, finer nearer the camera.
+  for (const char* file : {"leach_2_three_scales.json", "leach_2_three_scales_paper.json"}) {
+    const auto j = read(file);
+    const auto& sbd = j["simulation"]["scale_by_distance"];
+    ASSERT_TRUE(sbd.is_object()) << file;
+    ASSERT_EQ(sbd["camera"], j["cameras"][0]["name"]) << file;
+    const auto cam = j["cameras"][0]["position"];
+    const auto& bands = sbd["bands"];
+    ASSERT_EQ(bands.size(), 3u) << file;
+    std::vector<double> scale_of_body;
+    for (const auto& b : j["bodies"]) {
+      const auto p = b["pose"]["position"];
+      const double d = std::sqrt(std::pow(p[0].get<double>() - cam[0].get<double>(), 2) + std::pow(cam[1].get<double>(), 2) +
+                                 std::pow(p[2].get<double>() - cam[2].get<double>(), 2));
+      double s = bands.back()["particle_scale"].get<double>();
+      for (const auto& band : bands)
+        if (d <= band["max_distance"].get<double>()) {
+          s = band["particle_scale"].get<double>();
+          break;
+        }
+      scale_of_body.push_back(s);
+    }
+    ASSERT_EQ(scale_of_body.size(), 3u) << file;
+    EXPECT_LT(scale_of_body[0], scale_of_body[1]) << file;  // near finer than mid, mid finer than far
+    EXPECT_LT(scale_of_body[1], scale_of_body[2]) << file;
+  }
+}
+
 TEST(Scenarios, SmallVariantsKeepTheShapeOfThePapers) {
   // Same bodies and slots as the paper variants; only granule sizes, arrival interval and duration shrink.
   for (const char* s : kScenes) {
@@ -95,6 +126,8 @@ TEST(Scenarios, SmallVariantsKeepTheShapeOfThePapers) {
     }
     EXPECT_GT(small["materials"][0]["granule_radius"].get<double>(), paper["materials"][0]["granule_radius"].get<double>()) << s;
     EXPECT_EQ(small["simulation"]["backend"], "cpu") << s;
+    EXPECT_EQ(small["simulation"].value("scale_by_distance", nlohmann::json()), paper["simulation"].value("scale_by_distance", nlohmann::json()))
+        << s;
   }
   const auto three = read("leach_3_ten_bodies.json");
   for (int k = 0; k < 10; ++k) EXPECT_DOUBLE_EQ(three["bodies"][k]["spawn_time"].get<double>(), 2.0 * k);

@@ -1,7 +1,10 @@
 // tests bench/bench_lod.cpp: the generated scenes are valid and keep the bodies where they are
-// while the terrain grows; bad arguments are refused with the option, value and what is allowed.
-// (The timings themselves are a program, `sandpatch bench lod`, never a test.)
+// while the terrain grows; bad arguments are refused with the option, value and what is allowed;
+// a two-frame --quick run interleaves the sizes and reports the issue's JSON shape. (The
+// timings themselves are a program, `sandpatch bench lod`, never asserted by a test.)
 #include <gtest/gtest.h>
+
+#include <cmath>
 
 #include "bench/bench.hpp"
 #include "scene/scene.hpp"
@@ -81,4 +84,53 @@ TEST(BenchLod, BadArgumentsNameOptionValueAndAllowed) {
   a = BenchLodArgs{};
   a.threads = -1;
   EXPECT_NE(check_bench_lod_args(a).find("--threads = -1"), std::string::npos);
+  a = BenchLodArgs{};
+  a.window = 2.0;  // longer than --seconds (1)
+  e = check_bench_lod_args(a);
+  EXPECT_NE(e.find("--window = 2"), std::string::npos) << e;
+  EXPECT_NE(e.find("--seconds]"), std::string::npos) << e;
+  a.window = 0.001;  // less than one frame
+  EXPECT_NE(check_bench_lod_args(a).find("--window = 0.001"), std::string::npos);
+}
+
+// Two sizes set up in one process and advanced one frame each in turn, twice: the JSON line
+// has the issue's shape ({"results": [{"terrain", "wall_s_per_sim_s"}], "lod_off"}); both
+// sizes simulated the same 2 frames with the same DEM state (the same work: the bodies and
+// patches sit in the same place), Bullet updated the same bounds a step at both sizes and none
+// on the idle terrain; the LOD-off granule count follows G = (N·s)² d φ / (16/3 π r³)
+// (relative 1e-9).
+TEST(BenchLod, QuickRunInterleavesSizesAndReportsTheIssueShape) {
+  BenchLodArgs a;
+  a.sizes = {64, 128};
+  a.seconds = 2.0 / 120.0;
+  a.window = 1.0 / 120.0;
+  a.threads = 2;
+  a.quick = true;
+  a.json = true;
+  testing::internal::CaptureStdout();
+  const int code = run_bench_lod(a);
+  const std::string out = testing::internal::GetCapturedStdout();
+  ASSERT_EQ(code, 0) << out;
+  const std::string last = out.substr(out.rfind('\n', out.size() - 2) + 1);
+  const auto j = nlohmann::json::parse(last);
+  ASSERT_EQ(j["results"].size(), 2u);
+  EXPECT_TRUE(j["method"]["interleaved"].get<bool>());
+  EXPECT_EQ(j["method"]["rounds"], 2);
+  for (int k = 0; k < 2; ++k) {
+    const auto& r = j["results"][k];
+    EXPECT_EQ(r["terrain"], a.sizes[k]);
+    EXPECT_GT(r["wall_s_per_sim_s"].get<double>(), 0.0);
+    EXPECT_GT(r["cpu_s_per_sim_s"].get<double>(), 0.0);
+    EXPECT_NEAR(r["simulated_s"].get<double>(), 2.0 / 120.0, 1e-12);
+    EXPECT_EQ(r["window_wall_over_smallest"]["windows"], 2);
+    EXPECT_TRUE(r["stage_ms_per_sim_s"].contains("dem"));
+    EXPECT_TRUE(r["stage_ms_per_sim_s"].contains("bodies"));
+    EXPECT_EQ(r["bullet"]["aabb_updates_per_step"], j["results"][0]["bullet"]["aabb_updates_per_step"]);
+  }
+  EXPECT_TRUE(j["same_dem_state_every_size"].get<bool>());
+  EXPECT_EQ(j["idle"]["bullet"]["aabb_updates_per_step"], 0);
+  const auto& lod_off = j["lod_off"];
+  const double phi = lod_off["phi"].get<double>(), r = lod_off["granule_radius_m"].get<double>();
+  const double g64 = std::pow(64 * 0.5, 2) * lod_off["depth_m"].get<double>() * phi / (16.0 / 3.0 * M_PI * r * r * r);
+  EXPECT_NEAR(lod_off["estimates"][0]["granules"].get<double>() / g64, 1.0, 1e-9);
 }

@@ -170,14 +170,19 @@ TEST(ExtremesManager, BodiesAt100MetresPerSecond) {
 // 100 spheres (r = 10 cm) 0.5 m apart on a 10 × 10 grid, dropped together from 0.3 m, onto a
 // pool of 2 slots of 300 granules. Their requests overlap: merged without a bound they made
 // one patch no slot could hold (an error mid-run naming granules_per_slot); now they merge only
-// up to what a slot holds (max_merged_side) and the rest queue. For 3 s: no error, nothing
-// non-finite, no body below the patch floor, every body ends within [surface − 3 cm,
-// surface + 5 cm], the ledger closes within kLedgerPct, and the report's pool section lists
-// what still waits. The queue does NOT drain within 3 s (measured: 1 request waits, both
-// patches awake): a body resting across a patch's edge is carried by the heightfield and by
-// the granules at once and jitters at 0.1-0.3 m/s, so its patch never sleeps (docs/extremes.md;
-// the same edge as docs/manager.md "Bodies crossing a patch edge"). Asserted as measured (at
-// most 2 requests waiting), so that a fix shows up here.
+// up to what a slot holds (max_merged_side) and the rest queue, and lapse as their bodies come
+// to rest on the heightfield. The queue drains: every patch falls asleep, is demoted after
+// idle_timeout and nothing waits. Measured: drained at 2.30 s on the DEM and Bullet world of
+// commit af3a266, 3.25 s with other changes to them in progress (asserted within [1.0, 4.5] s:
+// the bodies land at 0.25 s, a patch sleeps 0.3 s after its last motion and is demoted 0.2 s
+// later; the upper bound leaves room for changes to the DEM). Also: no error, nothing non-finite,
+// no body below the patch floor, every body ends within [surface − 3 cm, surface + 5 cm], the
+// ledger closes within kLedgerPct. Before the fix (terrain_manager.cpp `carrier`, `engages`)
+// the queue never drained (1-2 requests waiting at 3 s, both patches awake): spheres resting
+// across the seam of the two patches had a shell in both, each DEM gave the full support force
+// (30.6 N + 18.3 N on 19.6 N of weight) and they bounced at 0.24-0.34 m/s; spheres across one
+// patch's edge were held by the heightfield and pulled down by their sinking shell (-19.6 N
+// DEM, +39.2 N heightfield) at up to 0.1 m/s (docs/extremes.md).
 TEST(ExtremesManager, HundredBodiesAtOnceOnTwoSlots) {
   Heightfield hf = flat_terrain(61, 0.1f, 1.0f);
   auto world = BulletWorld::create(hf, {0, -9.81f, 0});
@@ -202,10 +207,12 @@ TEST(ExtremesManager, HundredBodiesAtOnceOnTwoSlots) {
     peak_queue = std::max(peak_queue, (*m)->queued_requests());
     if (drained_at < 0 && run.t > 0.5 && (*m)->queued_requests() == 0 && (*m)->active_patches() == 0) drained_at = run.t;
   };
-  for (int f = 0; f < 180 && drained_at < 0; ++f) ASSERT_TRUE(run.frames(1).ok()) << run.last_error;
+  for (int f = 0; f < 300 && drained_at < 0; ++f) ASSERT_TRUE(run.frames(1).ok()) << run.last_error;
   const int waiting = (*m)->queued_requests();
   EXPECT_EQ((*m)->report()["pool"]["queued_requests"].get<int>(), waiting) << "the report lists what waits";
-  EXPECT_LE(waiting, 2);
+  EXPECT_EQ(waiting, 0);
+  EXPECT_GE(drained_at, 1.0) << "the queue drained (-1: not within 5 s)";
+  EXPECT_LE(drained_at, 4.5) << "the queue drained (-1: not within 5 s)";
   EXPECT_GE(peak_queue, 10) << "most requests waited for a slot";
   ASSERT_TRUE(run.demote_all().ok()) << run.last_error;
   print_summary(::testing::UnitTest::GetInstance()->current_test_info()->name(), **m, run.profile);
@@ -221,7 +228,7 @@ TEST(ExtremesManager, HundredBodiesAtOnceOnTwoSlots) {
   const auto rep = (*m)->report();
   EXPECT_LT(std::abs(rep["ledger"]["total"]["error_pct"].get<double>()), kLedgerPct) << rep["ledger"]["total"].dump();
   EXPECT_TRUE(heights_finite(hf));
-  std::printf("100 bodies / 2 slots: %zu patches, peak queue %d, drained at %.2f s (-1: not), %d waiting at 3 s, lapsed %d, "
+  std::printf("100 bodies / 2 slots: %zu patches, peak queue %d, drained at %.2f s (-1: not), %d waiting at the end, lapsed %d, "
               "clearance [%.3f, %.3f] m, ledger %+.2f %%\n",
               rep["ledger"]["patches"].size(), peak_queue, drained_at, waiting, rep["pool"]["lapsed_requests"].get<int>(), lo, hi,
               rep["ledger"]["total"]["error_pct"].get<double>());

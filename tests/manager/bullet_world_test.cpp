@@ -127,3 +127,76 @@ TEST(BulletWorld, SeesHeightfieldEditsWithoutCopy) {
   for (int i = 0; i < 300; ++i) (*w)->step(1.0f / 60.0f);
   EXPECT_NEAR((*w)->state(*id).position.y(), 1.5, 0.02);
 }
+
+// An idle tile costs a step nothing, counted rather than timed (BulletWorld::stats): the same
+// ball dropped on the shared edge of two tiles of a 4-tile and a 1024-tile terrain (same
+// 16-cell tiles, same local ground) gives Bullet the same work, whatever the tile count:
+// bounds recomputed only for the active ball (none once it sleeps), the tiles in the
+// broadphase's fixed tree, the same overlapping pairs, internal-edge info only for the tiles
+// the ball came near; and the ball ends where it would on the small terrain (1e-5 m: the same
+// float arithmetic), resting one radius above the ground (2 cm: Bullet's contact slop).
+TEST(BulletWorld, IdleTilesCostAStepNothing) {
+  Heightfield small = flat(33, 0.5f, 16);    // 2 × 2 tiles of 8 m; shared edge at x = 8 m
+  Heightfield large = flat(513, 0.5f, 16);   // 32 × 32 tiles
+  auto ws = BulletWorld::create(small, {0, -9.81f, 0});
+  auto wl = BulletWorld::create(large, {0, -9.81f, 0});
+  ASSERT_TRUE(ws.ok() && wl.ok());
+  EXPECT_EQ((*ws)->stats().tiles, 4);
+  EXPECT_EQ((*wl)->stats().tiles, 1024);
+  EXPECT_EQ((*wl)->stats().edge_maps, 0);  // nothing built before a body comes near
+  for (int i = 0; i < 3; ++i) (*wl)->step(1.0f / 120.0f);
+  EXPECT_EQ((*wl)->stats().aabb_updates_per_step, 0);  // empty world: nothing to update
+  EXPECT_EQ((*wl)->stats().dynamic_proxies, 0);
+  EXPECT_EQ((*wl)->stats().fixed_proxies, 1024);
+  auto a = (*ws)->add_body(ball({8.0, 1.5, 4.0}, 0.25f));
+  auto b = (*wl)->add_body(ball({8.0, 1.5, 4.0}, 0.25f));
+  ASSERT_TRUE(a.ok() && b.ok());
+  for (int i = 0; i < 120; ++i) {
+    (*ws)->step(1.0f / 120.0f);
+    (*wl)->step(1.0f / 120.0f);
+  }
+  const BulletWorld::Stats s = (*ws)->stats(), l = (*wl)->stats();
+  EXPECT_EQ(l.aabb_updates_per_step, s.aabb_updates_per_step);
+  EXPECT_LE(l.aabb_updates_per_step, 1);  // the ball, while awake
+  EXPECT_LE(l.dynamic_proxies, 1);
+  EXPECT_EQ(l.pairs, s.pairs);
+  EXPECT_LE(l.pairs, 2);                  // the ball against the two tiles under it
+  EXPECT_EQ(l.edge_maps, s.edge_maps);
+  EXPECT_EQ(l.edge_maps, 2);              // x in [7, 9] m, z in [3, 5] m: tiles (0, 0) and (1, 0)
+  const BodyState ps = (*ws)->state(*a), pl = (*wl)->state(*b);
+  EXPECT_NEAR(pl.position.y(), 0.25, 0.02);
+  EXPECT_NEAR(pl.position.x(), 8.0, 0.05);
+  EXPECT_NEAR(pl.position.z(), 4.0, 0.05);
+  EXPECT_LT((pl.position - ps.position).norm(), 1e-5);
+}
+
+// Internal-edge info is built ahead of a moving body: a frictionless ball sliding at 6 m/s
+// across fifteen 4 m tiles stays on the ground (centre within 2 cm of one radius up: no hop at
+// a tile edge or a triangle edge) and on its line (z within 5 cm), and the tiles it passed
+// have their info, the rest of the terrain none.
+TEST(BulletWorld, SlidingBallCrossesTilesWithoutKicks) {
+  Heightfield hf = flat(129, 0.5f, 8);  // 16 × 16 tiles of 4 m
+  auto w = BulletWorld::create(hf, {0, -9.81f, 0});
+  ASSERT_TRUE(w.ok());
+  RigidBodyDef d = ball({2.0, 0.25, 10.0}, 0.25f);
+  d.linear_velocity = {6.0f, 0.0f, 0.0f};
+  d.friction = 0.0f;  // combined μ = 0.8 × 0; rolling resistance 1 × 0 + 0 × 0.8 (Bullet's rule)
+  d.rolling_friction = 0.0f;
+  auto id = (*w)->add_body(d);
+  ASSERT_TRUE(id.ok());
+  double worst_y = 0, worst_z = 0;
+  for (int i = 0; i < 1200 && (*w)->state(*id).position.x() < 60.0; ++i) {
+    (*w)->step(1.0f / 120.0f);
+    const BodyState s = (*w)->state(*id);
+    worst_y = std::max(worst_y, std::abs(s.position.y() - 0.25));
+    worst_z = std::max(worst_z, std::abs(s.position.z() - 10.0));
+  }
+  EXPECT_GT((*w)->state(*id).position.x(), 60.0);
+  EXPECT_LT(worst_y, 0.02);
+  EXPECT_LT(worst_z, 0.05);
+  const BulletWorld::Stats s = (*w)->stats();
+  // Swept: x from 0.75 m to past 61 m, z from 8.75 to 11.25 m (the ball ± 1 m reach): tile
+  // columns 0-15 of row 2 (z 8-12 m).
+  EXPECT_EQ(s.edge_maps, 16);
+  EXPECT_LT(s.edge_maps, s.tiles);
+}

@@ -87,8 +87,12 @@ TEST(TerrainManager, BarrelLeavesCraterAndRim) {
 
 // Pool exhaustion (issue 5): three spheres land at once in three places with one pool slot.
 // The first lands on particles; the other two wait in the queue and land on the heightfield
-// meanwhile (at rest at surface + radius); every patch sleeps and is demoted after the idle
-// timeout, the queue drains, and no request is dropped.
+// meanwhile (at rest at surface + radius). A body lying on the heightfield asks for no patch
+// and is not taken up by one (terrain_manager.cpp `lying`: a patch promoted under a resting
+// body threw it out of the fill), so their requests lapse; the patch sleeps and is demoted
+// after the idle timeout, and the queue drains with every slot free. (Before that rule the
+// two resting spheres' Bullet jitter, about sleep_speed, asked again and each place got a patch
+// in turn: 3 promotions, drained at 6.9 s.)
 TEST(TerrainManager, PoolExhaustionQueueDrains) {
   Heightfield hf = test::terrain_8m("flat");
   auto world = BulletWorld::create(hf, {0, -9.81f, 0});
@@ -128,7 +132,7 @@ TEST(TerrainManager, PoolExhaustionQueueDrains) {
     peak_queue = std::max(peak_queue, (*m)->queued_requests());
     int demoted = 0;
     for (const PatchEvent& e : (*m)->events()) demoted += e.kind == PatchEventKind::Demoted;
-    if (t > 1.0 && demoted >= 3 && (*m)->queued_requests() == 0) break;
+    if (t > 1.0 && demoted >= 1 && (*m)->queued_requests() == 0 && (*m)->active_patches() == 0) break;
   }
   EXPECT_GE(peak_queue, 1) << "the pool of one slot never queued a request";
   EXPECT_EQ((*m)->queued_requests(), 0) << "the queue drained by t = " << t << " s";
@@ -137,14 +141,21 @@ TEST(TerrainManager, PoolExhaustionQueueDrains) {
     promoted += e.kind == PatchEventKind::Promoted;
     demoted += e.kind == PatchEventKind::Demoted;
   }
-  EXPECT_GE(promoted, 3) << "every landing place got its patch in turn";
+  EXPECT_GE(promoted, 1) << "the first landing place got its patch";
   EXPECT_EQ(promoted, demoted + (*m)->active_patches());
+  EXPECT_EQ((*m)->active_patches(), 0) << "every patch demoted by t = " << t << " s";
+  // Each landing place got a patch, or its requests lapsed when its body came to rest (a body
+  // bouncing on the heightfield may ask, and lapse, more than once; measured: 1 promotion, 4
+  // lapsed, drained at 2.42 s).
+  EXPECT_GE((*m)->report()["pool"]["lapsed_requests"].get<int>() + promoted, 3);
+  EXPECT_LT(t, 5.0) << "drained within 5 s (measured 2.42 s)";
   for (RigidBodyId id : ids) {
     const BodyState st = (*world)->state(id);
     EXPECT_NEAR(st.position.y(), 1.0 + 0.1, 0.1) << "a sphere rests on the surface (heightfield or particles) within 2 d";
     EXPECT_LT(st.linear_velocity.norm(), 0.05f);
   }
-  std::printf("pool of 1: %d promotions, %d demotions, peak queue %d, drained at t = %.2f s\n", promoted, demoted, peak_queue, t);
+  std::printf("pool of 1: %d promotions, %d demotions, %d lapsed, peak queue %d, drained (queue empty, slot free) at t = %.2f s\n",
+              promoted, demoted, (*m)->report()["pool"]["lapsed_requests"].get<int>(), peak_queue, t);
 }
 
 // A body driven across a patch's edge (issue 5; Leach & Marais left it open): a sphere

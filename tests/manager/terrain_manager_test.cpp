@@ -147,6 +147,118 @@ TEST(TerrainManager, QueueWaitsForAFreeSlot) {
   EXPECT_EQ((*m)->report()["pool"]["peak_queued_requests"].get<int>(), 1);
 }
 
+// steps_per_contact reaches every slot's DEM (dt <= t_c / N); out of [2, 1000] it is refused
+// naming the field.
+TEST(TerrainManager, StepsPerContactReachesEverySlot) {
+  Heightfield hf = hills();
+  auto world = BulletWorld::create(hf, {0, -9.81f, 0});
+  ASSERT_TRUE(world.ok());
+  auto def = small_def();
+  def.slots = 2;
+  def.granules_per_slot = 3000;
+  def.steps_per_contact = 10;
+  auto m = TerrainManager::create(def, hf, **world);
+  ASSERT_TRUE(m.ok()) << m.message();
+  Profile prof;
+  (*m)->request_patch(1.0, 1.0, 2.0, 2.0, 0.0);
+  (*m)->request_patch(5.0, 5.0, 6.0, 6.0, 0.0);
+  ASSERT_TRUE((*m)->before_bodies(0, 1.0 / 60, prof).ok());
+  const auto live = (*m)->patches();
+  ASSERT_EQ(live.size(), 2u);
+  for (const auto& p : live) EXPECT_EQ(p.steps_per_contact, 10);
+  EXPECT_EQ((*m)->report()["pool"]["steps_per_contact"].get<int>(), 10);
+  for (int bad : {1, 1001}) {
+    def.steps_per_contact = bad;
+    auto r = TerrainManager::create(def, hf, **world);
+    ASSERT_FALSE(r.ok());
+    EXPECT_EQ(r.error().field, "steps_per_contact");
+    EXPECT_NE(r.error().allowed.find("[2, 1000]"), std::string::npos) << r.message();
+  }
+}
+
+// Particle scale by distance from the camera (Leach & Marais §4.3, §6.3 scenario 2): two
+// patches promoted at 1.2 m and 7.5 m from the camera take the scales of their bands (1 and
+// 2); each patch's granules are r·s in the world and lie between its floor and the surface
+// (x_world = origin + s·x_sim), its ledger counts granules of its own size, and a patch keeps
+// its scale when the camera moves.
+TEST(TerrainManager, ParticleScaleByDistanceFromTheCamera) {
+  Heightfield hf = hills();
+  auto world = BulletWorld::create(hf, {0, -9.81f, 0});
+  ASSERT_TRUE(world.ok());
+  auto def = small_def();
+  def.slots = 2;
+  def.scale_bands = {{3.0, 1.0}, {20.0, 2.0}};
+  def.camera = {0.5, 1.5, 0.5};
+  auto m = TerrainManager::create(def, hf, **world);
+  ASSERT_TRUE(m.ok()) << m.message();
+  Profile prof;
+  (*m)->request_patch(1.0, 1.0, 1.6, 1.6, 0.0);  // centre 1.2 m from the camera: band 1
+  (*m)->request_patch(5.5, 5.5, 6.1, 6.1, 0.0);  // 7.5 m: band 2
+  const double dt = 1.0 / 60.0;
+  double t = 0;
+  for (int f = 0; f < 30; ++f, t += dt) {
+    ASSERT_TRUE((*m)->before_bodies(t, dt, prof).ok());
+    ASSERT_TRUE((*m)->after_bodies(t, dt, prof).ok());
+  }
+  (*m)->set_camera({5.8, 1.5, 5.8});  // next to the far patch now: live patches keep their scale
+  for (int f = 0; f < 30; ++f, t += dt) {
+    ASSERT_TRUE((*m)->before_bodies(t, dt, prof).ok());
+    ASSERT_TRUE((*m)->after_bodies(t, dt, prof).ok());
+  }
+  const auto live = (*m)->patches();
+  ASSERT_EQ(live.size(), 2u);
+  const double expect_scale[2] = {1.0, 2.0};
+  std::vector<float> xyzr;
+  (*m)->particles(xyzr);
+  const auto groups = (*m)->particle_groups();
+  ASSERT_EQ(groups.size(), 2u);
+  std::size_t first = 0;
+  double bulk_density[2] = {0, 0};
+  for (int k = 0; k < 2; ++k) {
+    const auto& p = live[std::size_t(k)];
+    const double s = expect_scale[k];
+    EXPECT_TRUE(p.ready);
+    EXPECT_DOUBLE_EQ(p.particle_scale, s);
+    EXPECT_NEAR(p.granule_radius_world, 0.025 * s, 1e-7);
+    // Every sphere of the patch: radius r·s, inside its region, above its floor and at most one
+    // granule bounding diameter (≈ 4.5 r·s) above the hills' highest point (1.05 m).
+    const double x0 = p.region.i0 * 0.1, x1 = (p.region.i0 + p.region.ni - 1) * 0.1;
+    const double z0 = p.region.j0 * 0.1, z1 = (p.region.j0 + p.region.nj - 1) * 0.1;
+    float top = -1e9f;
+    for (std::size_t q = first; q < first + groups[std::size_t(k)].first; ++q) {
+      const float* sp = &xyzr[4 * q];
+      ASSERT_NEAR(sp[3], 0.025 * s, 1e-6);
+      ASSERT_GE(sp[0], x0 - 1e-4);
+      ASSERT_LE(sp[0], x1 + 1e-4);
+      ASSERT_GE(sp[2], z0 - 1e-4);
+      ASSERT_LE(sp[2], z1 + 1e-4);
+      ASSERT_GE(sp[1], p.origin.y() - 0.5 * 0.025 * s);
+      top = std::max(top, sp[1]);
+    }
+    EXPECT_LT(top, 1.05 + 4.5 * 0.025 * s);
+    EXPECT_GT(top, p.origin.y() + 0.5 * def.patch_depth);
+    first += groups[std::size_t(k)].first;
+  }
+  ASSERT_TRUE((*m)->demote_all(t, prof).ok());
+  const auto rep = (*m)->report();
+  ASSERT_EQ(rep["ledger"]["patches"].size(), 2u);
+  for (int k = 0; k < 2; ++k) {
+    const auto& l = rep["ledger"]["patches"][std::size_t(k)];
+    const double s = expect_scale[k];
+    EXPECT_DOUBLE_EQ(l["particle_scale"].get<double>(), s);
+    // Mass: granules of the patch's own size (4 spheres of r·s) in the volume they filled; the
+    // world's bulk density is the same at both scales (granule solid volume / region volume).
+    const double vg = 4.0 * 4.0 / 3.0 * 3.14159265358979 * std::pow(0.025 * s, 3);
+    bulk_density[k] = l["granules"].get<double>() * vg / l["volume_before_m3"].get<double>();
+    std::printf("scale %.0f: %d granules, solid fraction of the region %.3f, ledger %+.2f %%\n", s,
+                l["granules"].get<int>(), bulk_density[k], l["error_pct"].get<double>());
+    EXPECT_LT(std::abs(l["error_pct"].get<double>()), 5.0) << l.dump();
+  }
+  // s³ = 8 times fewer granules per volume at scale 2; the solid fraction agrees within 15 %.
+  EXPECT_NEAR(bulk_density[1] / bulk_density[0], 1.0, 0.15);
+  EXPECT_EQ(rep["tile"]["tiles"].size(), 2u) << "one tile per scale";
+}
+
 // A patch larger than a slot holds is refused with the capacity to raise named.
 TEST(TerrainManager, TooSmallSlotNamesTheCapacity) {
   Heightfield hf = hills();

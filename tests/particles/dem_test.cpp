@@ -5,9 +5,12 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdlib>
+#include <string>
 #include <numbers>
 
 #include "particles/bed.hpp"
+#include "particles/contact_simd.hpp"
 
 namespace sandpatch {
 namespace {
@@ -101,10 +104,34 @@ TEST(Simulation, StabilityGuard) {
   EXPECT_FALSE(s->step(-1).ok());
 }
 
+// The contact timing correction (velocity predictor + first-substep dashpot) follows the
+// accuracy asked of the guard: off at the default t_c/20, on from t_c/50 (Auto); On and Off
+// force it. When on, the predictor's gain is 1/2 for the default material (e = 0.3: damping
+// per substep 2 zeta w0 dt well below 0.2).
+TEST(Simulation, ContactTimingFollowsTheAccuracyAsked) {
+  SimulationDef d = small_box();
+  auto at = [&](int N, SimulationDef::ContactTiming t) {
+    SimulationDef e = d;
+    e.accuracy_steps_per_contact = N;
+    e.contact_timing = t;
+    auto s = Simulation::create(e);
+    EXPECT_TRUE(s.ok());
+    const double dt = s->max_substep_dt();
+    return std::pair{s->contact_timing_on(dt), s->velocity_predictor_gain(dt)};
+  };
+  using T = SimulationDef::ContactTiming;
+  EXPECT_EQ(at(20, T::Auto), std::pair(false, 0.0));
+  EXPECT_EQ(at(49, T::Auto), std::pair(false, 0.0));
+  EXPECT_EQ(at(50, T::Auto), std::pair(true, 0.5));
+  EXPECT_EQ(at(20, T::On), std::pair(true, 0.5));
+  EXPECT_EQ(at(100, T::Off), std::pair(false, 0.0));
+}
+
 namespace {
 // A loose lattice of granules falling into a box (a few hundred contacts per step).
-std::uint64_t run_pile(int threads, int steps) {
+std::uint64_t run_pile(int threads, int steps, int steps_per_contact = 20) {
   SimulationDef d = small_box();
+  d.accuracy_steps_per_contact = steps_per_contact;
   d.threads = threads;
   d.max_bodies = 200;
   d.max_particles = 800;
@@ -129,12 +156,33 @@ TEST(Simulation, DeterministicAcrossThreadsAndRuns) {
   std::uint64_t h2b = run_pile(2, 3000);
   EXPECT_EQ(h1, h2);
   EXPECT_EQ(h2, h2b);
+  // with the contact timing correction on (first-substep flags carried across list rebuilds)
+  EXPECT_EQ(run_pile(1, 3000, 50), run_pile(2, 3000, 50));
+}
+
+// The AVX2 pair kernel (particles/contact_avx2.cpp, used when the CPU has AVX2) gives the
+// scalar contact law's results bit for bit: the same state hash with SANDPATCH_DEM_KERNEL=scalar,
+// with the timing correction off and on. (On a CPU without AVX2 both runs are scalar.)
+TEST(Simulation, Avx2PairKernelMatchesScalarBitForBit) {
+  const char* saved = std::getenv("SANDPATCH_DEM_KERNEL");
+  const std::string keep = saved ? saved : "";
+  for (int N : {20, 50}) {
+    ::unsetenv("SANDPATCH_DEM_KERNEL");
+    const std::uint64_t fast = run_pile(2, 3000, N);
+    ::setenv("SANDPATCH_DEM_KERNEL", "scalar", 1);
+    const std::uint64_t scalar = run_pile(2, 3000, N);
+    EXPECT_EQ(fast, scalar) << "N = " << N;
+  }
+  if (saved) ::setenv("SANDPATCH_DEM_KERNEL", keep.c_str(), 1); else ::unsetenv("SANDPATCH_DEM_KERNEL");
+  std::printf("AVX2 pair kernel available: %s\n", simd::avx2_available() ? "yes" : "no");
 }
 
 namespace {
 // A dilute gas of granules in a walled box without gravity (volume fraction ~2%).
-Simulation make_gas(float e, float mu, int n) {
+Simulation make_gas(float e, float mu, int n,
+                    SimulationDef::ContactTiming timing = SimulationDef::ContactTiming::Auto) {
   SimulationDef d = small_box();
+  d.contact_timing = timing;
   d.bounds_max = {0.15f, 0.15f, 0.15f};
   d.gravity_world = {0, 0, 0};
   d.floor_height = 0;
@@ -181,19 +229,23 @@ TEST(Energy, ConservedWithoutDampingOrFriction) {
 // e = 0.5, mu = 0.5: energy never rises, checked every step. Tolerance: 1e-4 of the initial
 // energy per step (the symplectic-Euler energy of a contact oscillates by O(w dt) of the
 // contact's elastic energy; measured worst rise is printed).
+// Checked with the contact timing correction off (the default at t_c/20) and on.
 TEST(Energy, NeverRisesWithDamping) {
-  Simulation s = make_gas(0.5f, 0.5f, 125);
-  double e0 = s.kinetic_energy() + s.potential_energy();
-  double prev = e0, worst_rise = 0;
-  for (int k = 0; k < 10000; ++k) {
-    ASSERT_TRUE(s.step(5e-5).ok());
-    double e = s.kinetic_energy() + s.potential_energy();
-    worst_rise = std::max(worst_rise, (e - prev) / e0);
-    prev = e;
+  for (auto timing : {SimulationDef::ContactTiming::Off, SimulationDef::ContactTiming::On}) {
+    Simulation s = make_gas(0.5f, 0.5f, 125, timing);
+    double e0 = s.kinetic_energy() + s.potential_energy();
+    double prev = e0, worst_rise = 0;
+    for (int k = 0; k < 10000; ++k) {
+      ASSERT_TRUE(s.step(5e-5).ok());
+      double e = s.kinetic_energy() + s.potential_energy();
+      worst_rise = std::max(worst_rise, (e - prev) / e0);
+      prev = e;
+    }
+    EXPECT_LT(worst_rise, 1e-4);
+    EXPECT_LT(prev, e0);
+    std::printf("damped, timing %s: worst per-step rise %.3g of E0, final/initial %.3f\n",
+                timing == SimulationDef::ContactTiming::On ? "on" : "off", worst_rise, prev / e0);
   }
-  EXPECT_LT(worst_rise, 1e-4);
-  EXPECT_LT(prev, e0);
-  std::printf("damped: worst per-step rise %.3g of E0, final/initial %.3f\n", worst_rise, prev / e0);
 }
 
 // A granule dropped on the floor comes to rest; the simulation falls asleep after

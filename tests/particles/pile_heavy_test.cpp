@@ -36,11 +36,11 @@ void run_piles(std::vector<PileRun>& runs) {
       auto r = measure_repose(d);
       runs[k].ok = r.ok();
       if (r) runs[k].r = std::move(*r);
-      std::printf("mu %.2f seed %llu: angle %.2f deg, residual %.2g m over %d bins, height %.3f m, %d granules, "
-                  "%.2f s simulated, %.1f s wall, at rest %d (%.2g m/s)\n",
+      std::printf("mu %.2f seed %llu: angle %.2f deg (cone fit, residual %.2g m over %d levels; flank fit %.2f deg), "
+                  "height %.3f m, %d granules, %.2f s simulated, %.1f s wall, at rest %d (%.2g m/s)\n",
                   runs[k].mu, (unsigned long long)runs[k].seed, runs[k].r.angle_deg, runs[k].r.residual,
-                  runs[k].r.fit_points, runs[k].r.peak, runs[k].r.granules, runs[k].r.sim_seconds,
-                  runs[k].r.wall_seconds, int(runs[k].r.at_rest), runs[k].r.final_speed);
+                  runs[k].r.fit_points, runs[k].r.flank_angle_deg, runs[k].r.peak, runs[k].r.granules,
+                  runs[k].r.sim_seconds, runs[k].r.wall_seconds, int(runs[k].r.at_rest), runs[k].r.final_speed);
       std::fflush(stdout);
     }
   };

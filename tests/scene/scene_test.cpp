@@ -169,6 +169,7 @@ TEST(Scene, EveryFieldOfTheFullSceneIsParsed) {
   EXPECT_EQ(sim.pool.slots, 8);
   EXPECT_EQ(sim.pool.granules_per_slot, 100000);
   EXPECT_EQ(sim.particle_scale, 4.0);
+  EXPECT_EQ(sim.steps_per_contact, 30);
   EXPECT_EQ(sim.sleep.speed_threshold, 0.02);
   EXPECT_EQ(sim.sleep.hold_time, 2.5);
   EXPECT_EQ(sim.idle_timeout, 60.0);
@@ -557,6 +558,10 @@ TEST(ScenePreset, EveryPresetSetsItsKnobs) {
     EXPECT_EQ(r->simulation.preset, name);
     EXPECT_DOUBLE_EQ(r->simulation.particle_scale, p->particle_scale);
     EXPECT_EQ(r->simulation.pool.granules_per_slot, p->granules_per_slot);
+    EXPECT_EQ(r->simulation.steps_per_contact, p->steps_per_contact);
+    // accurate from t_c / 20, stable to about t_c / 1.7 (DESIGN.md): presets stay in [10, 50]
+    EXPECT_GE(p->steps_per_contact, 10);
+    EXPECT_LE(p->steps_per_contact, 50);
     // A slot holds the same world volume: capacity x scale^3 stays within one 1024-block of 32768.
     EXPECT_GE(p->granules_per_slot * std::pow(p->particle_scale, 3), 32768.0 - 1e-9);
     EXPECT_LT((p->granules_per_slot - 1024) * std::pow(p->particle_scale, 3), 32768.0);
@@ -579,6 +584,84 @@ TEST(ScenePreset, ExplicitFieldsOverrideThePreset) {
   const auto r2 = parse(scene_with({{"simulation", {{"preset", "game"}, {"pool", {{"granules_per_slot", 2048}}}}}}));
   ASSERT_TRUE(r2.ok()) << all(r2);
   EXPECT_EQ(r2->simulation.pool.granules_per_slot, 2048);
+  EXPECT_EQ(r2->simulation.steps_per_contact, find_simulation_preset("game")->steps_per_contact);  // not given
+  // steps_per_contact given beside a preset wins, before or after it
+  const auto r3 = parse(scene_with({{"simulation", {{"steps_per_contact", 37}, {"preset", "game"}}}}));
+  ASSERT_TRUE(r3.ok()) << all(r3);
+  EXPECT_EQ(r3->simulation.steps_per_contact, 37);
+}
+
+TEST(SceneSimulation, ScaleByDistanceIsParsedAndRoundTrips) {
+  const nlohmann::json cams = nlohmann::json::array({{{"name", "main"}, {"position", {0, 2, 10}}, {"target", {0, 0, 0}}}});
+  const nlohmann::json sbd = {{"camera", "main"},
+                              {"bands", {{{"max_distance", 10}, {"particle_scale", 1}},
+                                         {{"max_distance", 25}, {"particle_scale", 1.5}},
+                                         {{"max_distance", 60}, {"particle_scale", 2}}}}};
+  const auto r = parse(scene_with({{"simulation", {{"scale_by_distance", sbd}}}, {"cameras", cams}}));
+  ASSERT_TRUE(r.ok()) << all(r);
+  ASSERT_TRUE(r->simulation.scale_by_distance.has_value());
+  const auto& d = *r->simulation.scale_by_distance;
+  EXPECT_EQ(d.camera, "main");
+  ASSERT_EQ(d.bands.size(), 3u);
+  EXPECT_EQ(d.bands[1].max_distance, 25.0);
+  EXPECT_EQ(d.bands[2].particle_scale, 2.0);
+  const nlohmann::json j = scene_to_json(*r);
+  EXPECT_EQ(j["simulation"]["scale_by_distance"], sbd);
+  const auto again = parse_scene(j.dump(), "again.json", kData);
+  ASSERT_TRUE(again.ok()) << all(again);
+  EXPECT_EQ(scene_to_json(*again), j);
+  const auto plain = parse(scene_with(nlohmann::json::object()));
+  ASSERT_TRUE(plain.ok()) << all(plain);
+  EXPECT_FALSE(plain->simulation.scale_by_distance.has_value());
+  EXPECT_FALSE(scene_to_json(*plain)["simulation"].contains("scale_by_distance"));
+}
+
+TEST(SceneSimulation, ScaleByDistanceErrorsNameFieldValueAndRange) {
+  const nlohmann::json cams = nlohmann::json::array({{{"name", "main"}, {"position", {0, 2, 10}}, {"target", {0, 0, 0}}}});
+  auto with = [&](const nlohmann::json& sbd) { return parse(scene_with({{"simulation", {{"scale_by_distance", sbd}}}, {"cameras", cams}})); };
+  auto band = [](double d, double s) { return nlohmann::json{{"max_distance", d}, {"particle_scale", s}}; };
+  // not ascending
+  const auto order = with({{"camera", "main"}, {"bands", nlohmann::json::array({band(20, 1), band(10, 2)})}});
+  EXPECT_TRUE(has_error(order, "simulation.scale_by_distance.bands[1].max_distance", "10", "greater than the previous")) << all(order);
+  EXPECT_NE(all(order).find("follows 20 m"), std::string::npos) << all(order);
+  // distance and scale out of range
+  const auto range = with({{"camera", "main"}, {"bands", nlohmann::json::array({band(-1, 1), band(10, 0)})}});
+  EXPECT_TRUE(has_error(range, "simulation.scale_by_distance.bands[0].max_distance", "-1", "(0, 10000000] m")) << all(range);
+  EXPECT_TRUE(has_error(range, "simulation.scale_by_distance.bands[1].particle_scale", "0", "[0.001, 1000]")) << all(range);
+  // unknown camera, with the near miss
+  const auto cam = with({{"camera", "mian"}, {"bands", nlohmann::json::array({band(10, 1)})}});
+  EXPECT_TRUE(has_error(cam, "simulation.scale_by_distance.camera", "\"mian\"", "must name a camera: main")) << all(cam);
+  EXPECT_NE(all(cam).find("did you mean 'main'"), std::string::npos) << all(cam);
+  // missing and empty bands, unknown key in a band
+  EXPECT_TRUE(has_error(with({{"camera", "main"}}), "simulation.scale_by_distance.bands", "", "array of 1 to 16"));
+  const auto empty = with({{"camera", "main"}, {"bands", nlohmann::json::array()}});
+  EXPECT_TRUE(has_error(empty, "simulation.scale_by_distance.bands", "[]", "1 to 16 bands")) << all(empty);
+  nlohmann::json odd = band(5, 1);
+  odd["scale"] = 2;
+  const auto key = with({{"camera", "main"}, {"bands", nlohmann::json::array({odd})}});
+  ASSERT_FALSE(key.ok());
+  EXPECT_NE(all(key).find("simulation.scale_by_distance.bands[0].scale"), std::string::npos) << all(key);
+}
+
+TEST(SceneSimulation, StepsPerContactDefaultsTo20AndIsChecked) {
+  const auto plain = parse(scene_with(nlohmann::json::object()));
+  ASSERT_TRUE(plain.ok()) << all(plain);
+  EXPECT_EQ(plain->simulation.steps_per_contact, 20);  // the DEM's default, t_c / 20
+  const auto given = parse(scene_with({{"simulation", {{"steps_per_contact", 50}}}}));
+  ASSERT_TRUE(given.ok()) << all(given);
+  EXPECT_EQ(given->simulation.steps_per_contact, 50);
+  EXPECT_EQ(scene_to_json(*given)["simulation"]["steps_per_contact"], 50);
+  // below 2 the DEM is unstable (t_c / 1.7), above 1000 absurd; fractions and strings are refused
+  for (const nlohmann::json& bad : {nlohmann::json(1), nlohmann::json(1001), nlohmann::json(10.5), nlohmann::json("20")}) {
+    const auto r = parse(scene_with({{"simulation", {{"steps_per_contact", bad}}}}));
+    ASSERT_FALSE(r.ok()) << bad;
+    ASSERT_EQ(r.errors().size(), 1u) << all(r);
+    const Error& e = r.error();
+    EXPECT_EQ(e.file, "test.json");
+    EXPECT_EQ(e.field, "simulation.steps_per_contact");
+    EXPECT_NE(e.value.find(bad.is_string() ? "20" : bad.dump()), std::string::npos) << e.message();
+    EXPECT_NE(e.allowed.find("[2, 1000]"), std::string::npos) << e.message();
+  }
 }
 
 TEST(ScenePreset, BadNameNamesFileFieldValueAndTheAllowedNames) {
