@@ -40,6 +40,7 @@
 #include "heightfield/heightfield.hpp"
 #include "manager/bullet_world.hpp"
 #include "manager/profile.hpp"
+#include "manager/run.hpp"
 #include "manager/terrain.hpp"
 #include "manager/terrain_manager.hpp"
 #include "scene/scene.hpp"
@@ -78,34 +79,6 @@ double median(std::vector<double> v) {
   std::sort(v.begin(), v.end());
   const std::size_t n = v.size();
   return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
-
-// The manager's settings from a scene: as manager/run.cpp's manager_def (keep the two alike).
-TerrainManagerDef manager_def(const SceneDef& scene, int threads) {
-  const SimulationDef& sim = scene.simulation;
-  const MaterialDef* mat = scene.terrain.material.empty() ? &scene.materials.front()
-                                                         : scene.find_material(scene.terrain.material);
-  TerrainManagerDef d;
-  d.material.radius = float(mat->granule_radius);
-  d.material.density = float(mat->density);
-  d.material.friction = float(mat->friction);
-  d.material.restitution = float(mat->restitution_value());
-  d.material.stiffness = float(mat->stiffness);
-  d.material.tangential_stiffness_ratio = float(mat->tangential_stiffness_ratio);
-  d.particle_scale = sim.particle_scale;
-  d.steps_per_contact = sim.steps_per_contact;
-  d.slots = sim.pool.slots;
-  d.granules_per_slot = sim.pool.granules_per_slot;
-  d.soil_depth = scene.terrain.soil_depth.value_or(2.0);
-  d.patch_depth = std::min(d.patch_depth, d.soil_depth);
-  d.sleep_speed = sim.sleep.speed_threshold;
-  d.sleep_time = sim.sleep.hold_time;
-  d.idle_timeout = sim.idle_timeout;
-  d.gravity = {sim.gravity[0], sim.gravity[1], sim.gravity[2]};
-  d.threads = threads;
-  d.seed = sim.seed;
-  d.backend = "cpu";
-  return d;
 }
 
 // A scene body as a Bullet body (the bench's shapes: sphere, box, cylinder), as run.cpp does.
@@ -180,7 +153,7 @@ Result<std::unique_ptr<Lane>> make_lane(const nlohmann::json& scene_json, int ce
   lane->world = std::move(*world);
   lane->setup_bullet_s = seconds_since(t0);
   t0 = Clock::now();
-  auto m = TerrainManager::create(manager_def(s, threads), *lane->hf, *lane->world);
+  auto m = TerrainManager::create(manager_def(s, threads, "cpu"), *lane->hf, *lane->world);
   if (!m) return m.errors();
   lane->manager = std::move(*m);
   lane->setup_manager_s = seconds_since(t0);

@@ -143,34 +143,6 @@ class ProgressPrinter {
   int next_pct_ = 0;
 };
 
-// The terrain manager's definition from the scene (docs/scene-format.md).
-TerrainManagerDef manager_def(const SceneDef& scene, int threads, const std::string& backend) {
-  const SimulationDef& sim = scene.simulation;
-  const MaterialDef* mat = scene.terrain.material.empty() ? &scene.materials.front()
-                                                         : scene.find_material(scene.terrain.material);
-  TerrainManagerDef d;
-  d.material.radius = float(mat->granule_radius);
-  d.material.density = float(mat->density);
-  d.material.friction = float(mat->friction);
-  d.material.restitution = float(mat->restitution_value());
-  d.material.stiffness = float(mat->stiffness);
-  d.material.tangential_stiffness_ratio = float(mat->tangential_stiffness_ratio);
-  d.particle_scale = sim.particle_scale;
-  d.steps_per_contact = sim.steps_per_contact;
-  d.slots = sim.pool.slots;
-  d.granules_per_slot = sim.pool.granules_per_slot;
-  d.soil_depth = scene.terrain.soil_depth.value_or(2.0);
-  d.patch_depth = std::min(d.patch_depth, d.soil_depth);
-  d.sleep_speed = sim.sleep.speed_threshold;
-  d.sleep_time = sim.sleep.hold_time;
-  d.idle_timeout = sim.idle_timeout;
-  d.gravity = {sim.gravity[0], sim.gravity[1], sim.gravity[2]};
-  d.threads = threads;
-  d.seed = sim.seed;
-  d.backend = backend;
-  return d;
-}
-
 // Camera pose at simulated time t: fixed, or linear between path keyframes (held outside).
 render::CameraView camera_at(const CameraDef& c, double t) {
   render::CameraView v;
@@ -312,6 +284,34 @@ double median(std::vector<double> v) {
 }
 
 }  // namespace
+
+// The terrain manager's definition from the scene (docs/scene-format.md).
+TerrainManagerDef manager_def(const SceneDef& scene, int threads, const std::string& backend) {
+  const SimulationDef& sim = scene.simulation;
+  const MaterialDef* mat = scene.terrain.material.empty() ? &scene.materials.front()
+                                                         : scene.find_material(scene.terrain.material);
+  TerrainManagerDef d;
+  d.material.radius = float(mat->granule_radius);
+  d.material.density = float(mat->density);
+  d.material.friction = float(mat->friction);
+  d.material.restitution = float(mat->restitution_value());
+  d.material.stiffness = float(mat->stiffness);
+  d.material.tangential_stiffness_ratio = float(mat->tangential_stiffness_ratio);
+  d.particle_scale = sim.particle_scale;
+  d.steps_per_contact = sim.steps_per_contact;
+  d.slots = sim.pool.slots;
+  d.granules_per_slot = sim.pool.granules_per_slot;
+  d.soil_depth = scene.terrain.soil_depth.value_or(2.0);
+  d.patch_depth = std::min(d.patch_depth, d.soil_depth);
+  d.sleep_speed = sim.sleep.speed_threshold;
+  d.sleep_time = sim.sleep.hold_time;
+  d.idle_timeout = sim.idle_timeout;
+  d.gravity = {sim.gravity[0], sim.gravity[1], sim.gravity[2]};
+  d.threads = threads;
+  d.seed = sim.seed;
+  d.backend = backend;
+  return d;
+}
 
 RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
   RunResult res;

@@ -13,6 +13,7 @@
 #include <string>
 
 #include "common/error.hpp"
+#include "manager/terrain_manager.hpp"
 #include "scene/scene.hpp"
 
 namespace sandpatch {
@@ -60,5 +61,10 @@ struct RunResult {
 // bedrock, an unwritable output directory) returns BadInput before the first frame and
 // writes nothing.
 RunResult run_scene(const SceneDef& scene, const RunOptions& options);
+
+// The terrain manager's definition from a scene's terrain material and simulation section
+// (docs/scene-format.md); the scale bands and bedrock need the heightfield and cameras and are
+// set by run_scene. `backend`: "cpu" or "gl". Also used by `bench lod`.
+TerrainManagerDef manager_def(const SceneDef& scene, int threads, const std::string& backend);
 
 }  // namespace sandpatch
