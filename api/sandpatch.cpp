@@ -571,8 +571,7 @@ Status Terrain::step(double dt, int substeps) {
   I.removing.clear();
   {
     auto timer = I.profile.time(core::Stage::Bodies);
-    const float sub = float(dt / substeps);
-    for (int k = 0; k < substeps; ++k) I.world->step(sub);
+    I.world->step_frame(float(dt), substeps);  // the patches' forces act over every substep
     for (const auto& id : I.world->bodies()) {
       const core::BodyState st = I.world->state(id);
       if (!st.position.allFinite() || !st.linear_velocity.allFinite() || !st.angular_velocity.allFinite()) {

@@ -19,6 +19,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "common/hash.hpp"
 #include "particles/bed.hpp"
 #include "particles/contact_simd.hpp"
 #include "particles/dem.hpp"
@@ -148,6 +149,8 @@ int run_bench_dem(const BenchDemArgs& a) {
                 cps, double(wall_contacts) / a.steps / spheres, (long long)resorts, sim->max_granule_speed());
     std::printf("neighbour-list entries per sphere %.2f (pairs examined per sphere per step)\n",
                 double(entries) / a.steps / spheres);
+    std::printf("state hash %016llx (same for any thread count and either pair kernel)\n",
+                (unsigned long long)sim->state_hash());
   }
   nlohmann::json j = {{"bench", "dem"},
                       {"backend", a.backend},
@@ -166,6 +169,7 @@ int run_bench_dem(const BenchDemArgs& a) {
                       {"grid_rebuilds", resorts},
                       {"settle_steps", settle + 1},
                       {"settled_max_speed", vmax_settled},
+                      {"state_hash", Hasher::to_hex(sim->state_hash())},
                       {"contact_model", "linear spring-dashpot + tangential spring with history"}};
   if (a.json) std::printf("%s\n", j.dump().c_str());
   return 0;

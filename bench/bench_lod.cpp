@@ -184,8 +184,7 @@ Status advance(Lane& l, long long frames) {
     if (Status st = l.manager->before_bodies(t, l.dt, l.profile); !st) return st;
     {
       auto timer = l.profile.time(Stage::Bodies);
-      const float sub_dt = float(l.dt / l.scene.simulation.substeps);
-      for (int s = 0; s < l.scene.simulation.substeps; ++s) l.world->step(sub_dt);
+      l.world->step_frame(float(l.dt), l.scene.simulation.substeps);
     }
     if (Status st = l.manager->after_bodies(t, l.dt, l.profile); !st) return st;
     l.peak_granules = std::max(l.peak_granules, l.manager->granules());

@@ -1,27 +1,40 @@
 // bench tradeoff: what each knob users turn costs and what it gets wrong (issue 7, "The trade,
 // measured"; docs/tradeoff.md).
 //
-// Two reference cases, each run at every setting of the sweep:
+// Three reference cases, each run at every setting of the sweep:
 //   pile    the angle of repose of a poured pile (particles/pile.hpp pour_pile, the pour and
 //           cone fit of measure_repose on a simulation whose guard substeps at t_c / N): the
 //           pile's world volume is fixed, so particle scale s pours 1/s^3 as many granules
 //   crater  a sphere dropped into a settled granular bed (measure_crater below, straight on the
 //           DEM): crater depth and rim volume from the particle surface before and after
 //           (Uehara et al. 2003, PRL 90 194301, for the experiment and its depth law)
+//   drop    a Bullet sphere dropped onto a small flat heightfield terrain driven by the real
+//           TerrainManager in the frame of manager/run.cpp (bench/tradeoff_drop.hpp): crater
+//           depth and volume read from the heightfield after demote_all, what a library user sees
 // Error of a setting: relative to the reference (the finest setting of its case) — the pile's
 // |angle − angle_ref| / angle_ref, the crater's max(|depth − ref| / ref, |rim − ref| / ref) (the
 // rim term only when the reference's rim is at least a granule sphere radius high: lower, it is
-// the roughness of the surface).
+// the roughness of the surface), the drop's the same with the crater volume as a third term.
 // Cost: wall seconds of the measured phase and the real-time factor (simulated / wall seconds).
 // A repeat of one setting with another seed gives each case's noise floor.
 //
-// Why straight on the DEM and not through the terrain manager (run_scene): a run pays the
-// pre-settled tile at start-up (seconds to minutes) and its patch is sized by the body, so the
-// patch-size knob could not be turned; here one settled bed per scale is cut to every patch
-// size, as the manager cuts its tiles. LOD on/off does not apply: both cases are one patch from
-// start to end (LOD decides where patches are and costs nothing measurable when idle; `bench
-// lod` measures it). The scene's `substeps` splits the Bullet step only; inside a patch the DEM
-// integrates the body itself in substeps of t_c / N, which is the knob swept here.
+// Why the crater case runs straight on the DEM: a run pays the pre-settled tile at start-up and
+// its patch is sized by the body, so the patch-size knob could not be turned; here one settled
+// bed per scale is cut to every patch size, as the manager cuts its tiles. The knobs only the
+// manager's path has are turned on the drop case:
+//   substeps            the scene's Bullet steps per frame (run.cpp: BulletWorld::step_frame, dt /
+//                       substeps each, the patch's force held over all of them)
+//   granules_per_slot   slot capacity; a patch that needs more is refused by the manager (its
+//                       error names simulation.pool.granules_per_slot): that setting's outcome
+//                       is "refused", reported with the message, never an error of the bench
+//   LOD on / off        on: the manager's contact prediction places the patch (apron swept,
+//                       0.2 and 0.5 m; the default 1 m covers this small terrain whole); off: the
+//                       whole terrain as particles from t = 0 (request_patch), kept to the end
+// The drop's reference is LOD off (the whole terrain as particles, no patch edge near the
+// sphere) at scale 1 and N = 50 with one Bullet substep, the scene default. The substeps rows
+// found that the patch's force (BulletWorld::apply_force) reached only the first Bullet
+// substep of a frame (Bullet clears applied forces after every stepSimulation): the sphere
+// sank 3x as deep at 4 substeps. Fixed by BulletWorld::step_frame; docs/tradeoff.md.
 #include "bench/bench_tradeoff.hpp"
 
 #include <omp.h>
@@ -39,6 +52,7 @@
 #include <set>
 
 #include "bench/bench_util.hpp"
+#include "bench/tradeoff_drop.hpp"
 #include "gl/context.hpp"
 #include "particles/bed.hpp"
 #include "particles/dem.hpp"
@@ -209,9 +223,17 @@ Result<CraterResult> run_impact(Sim& sim, const CraterDef& d, const SettledBed& 
 
 }  // namespace
 
-const char* to_string(TradeoffCase c) { return c == TradeoffCase::Pile ? "pile" : "crater"; }
+const char* to_string(TradeoffCase c) {
+  return c == TradeoffCase::Pile ? "pile" : c == TradeoffCase::Crater ? "crater" : "drop";
+}
 const char* to_string(TradeoffSweep s) {
   return s == TradeoffSweep::Quick ? "quick" : s == TradeoffSweep::Full ? "full" : "default";
+}
+
+DropDef tradeoff_drop_def(TradeoffSweep sweep) {
+  DropDef d;
+  if (sweep == TradeoffSweep::Quick) d.run_seconds = 1.0;
+  return d;
 }
 
 int tradeoff_pile_granules(TradeoffSweep sweep) { return sweep == TradeoffSweep::Quick ? 100 : 400; }
@@ -234,6 +256,26 @@ std::vector<TradeoffSetting> tradeoff_sweep(TradeoffSweep sweep) {
            (seed != 1 ? "_seed" + std::to_string(seed) : "");
     v.push_back(t);
   };
+  // the drop case (bench/tradeoff_drop.hpp): through the TerrainManager
+  auto drop = [&](double s, int n, int sub, bool lod, double apron, int slot, std::uint64_t seed = 1, bool ref = false,
+                  bool noise = false) {
+    TradeoffSetting t;
+    t.kind = TradeoffCase::Drop;
+    t.knobs.particle_scale = s;
+    t.knobs.steps_per_contact = n;
+    t.knobs.patch_radii = 0;
+    t.knobs.substeps = sub;
+    t.knobs.granules_per_slot = slot;
+    t.knobs.lod = lod;
+    t.knobs.lod_apron = lod ? apron : 0;
+    t.knobs.seed = seed;
+    t.reference = ref;
+    t.noise = noise;
+    t.id = "drop_s" + num_id(s) + "_n" + std::to_string(n) + "_sub" + std::to_string(sub) +
+           (lod ? "_lod" + num_id(apron) : std::string("_lodoff")) + "_slot" + std::to_string(slot) +
+           (seed != 1 ? "_seed" + std::to_string(seed) : "");
+    v.push_back(t);
+  };
   using C = TradeoffCase;
   switch (sweep) {
     case TradeoffSweep::Quick:
@@ -245,6 +287,14 @@ std::vector<TradeoffSetting> tradeoff_sweep(TradeoffSweep sweep) {
       add(C::Crater, 1, 20, 4);
       add(C::Crater, 1.5, 20, 4);
       add(C::Crater, 1, 20, 3);
+      // the drop at particle scale 2 (212 granules for the whole terrain, 176 for the LOD patch)
+      drop(2, 20, 1, false, 0, 16384, 1, true);
+      drop(2, 20, 1, true, 0.5, 16384);
+      drop(2, 20, 2, true, 0.5, 16384);
+      drop(2, 20, 1, false, 0, 192);  // the whole terrain needs 212: refused
+      drop(2, 20, 1, true, 0.5, 192);  // the LOD patch fits
+      drop(2, 20, 1, false, 0, 16384, 2, false, true);
+      drop(2, 20, 1, true, 0.5, 16384, 2, false, true);
       break;
     case TradeoffSweep::Default:
       add(C::Pile, 1, 50, 0, "cpu", 1, true);
@@ -264,6 +314,22 @@ std::vector<TradeoffSetting> tradeoff_sweep(TradeoffSweep sweep) {
       add(C::Crater, 2, 10, 4.5);
       add(C::Crater, 2, 20, 6, "gl");
       add(C::Crater, 1, 20, 6, "cpu", 2, false, true);
+      // the drop at particle scale 1: 1835 granules for the whole terrain, 1590 for the LOD
+      // patch (the apron rounded out to whole tile periods: 0.2 and 0.5 m give the same patch)
+      drop(1, 50, 1, false, 0, 16384, 1, true);
+      drop(1, 20, 1, false, 0, 16384);
+      drop(1, 10, 1, false, 0, 16384);
+      drop(1, 20, 2, false, 0, 16384);
+      drop(1, 20, 1, true, 0.2, 16384);
+      drop(1, 20, 2, true, 0.2, 16384);
+      drop(1, 20, 4, true, 0.2, 16384);
+      drop(1, 20, 1, true, 0.2, 1700);   // fits the LOD patch (1590) ...
+      drop(1, 20, 1, false, 0, 1700);    // ... not the whole terrain (1835): refused
+      drop(1, 20, 1, true, 0.2, 1024);   // refused
+      drop(2, 20, 1, true, 0.2, 16384);
+      drop(2, 20, 1, false, 0, 16384);
+      drop(1, 20, 1, false, 0, 16384, 2, false, true);
+      drop(1, 20, 1, true, 0.2, 16384, 2, false, true);
       break;
     case TradeoffSweep::Full:
       add(C::Pile, 0.79, 100, 0, "cpu", 1, true);
@@ -281,6 +347,28 @@ std::vector<TradeoffSetting> tradeoff_sweep(TradeoffSweep sweep) {
       add(C::Crater, 1.5, 20, 6, "gl");
       add(C::Crater, 1, 20, 8, "cpu", 2, false, true);
       add(C::Crater, 1, 20, 8, "cpu", 3, false, true);
+      // the drop at particle scale 1: 1835 granules for the whole terrain, 1590 for the LOD
+      // patch (the apron rounded out to whole tile periods: 0.2 and 0.5 m give the same patch)
+      drop(1, 100, 1, false, 0, 16384, 1, true);
+      drop(1, 50, 1, false, 0, 16384);
+      drop(1, 20, 1, false, 0, 16384);
+      drop(1, 10, 1, false, 0, 16384);
+      drop(1, 20, 2, false, 0, 16384);
+      drop(1, 20, 1, true, 0.2, 16384);
+      drop(1, 20, 2, true, 0.2, 16384);
+      drop(1, 20, 4, true, 0.2, 16384);
+      drop(1, 20, 1, true, 0.2, 1700);   // fits the LOD patch (1590) ...
+      drop(1, 20, 1, false, 0, 1700);    // ... not the whole terrain (1835): refused
+      drop(1, 20, 1, true, 0.2, 1024);   // refused
+      drop(2, 20, 1, true, 0.2, 16384);
+      drop(2, 20, 1, false, 0, 16384);
+      drop(1, 20, 8, true, 0.2, 16384);
+      drop(1.5, 20, 1, true, 0.2, 16384);
+      drop(1, 20, 1, true, 0.5, 16384);
+      drop(1, 20, 1, true, 1.0, 16384);  // the manager's default apron: the whole terrain here
+      drop(1, 20, 1, false, 0, 16384, 2, false, true);
+      drop(1, 20, 1, false, 0, 16384, 3, false, true);
+      drop(1, 20, 1, true, 0.2, 16384, 2, false, true);
       break;
   }
   return v;
@@ -437,6 +525,7 @@ struct Row {
   TradeoffSetting set;
   bool ran = false;
   std::string skipped;     // why not run ("" when it ran)
+  std::string refused;     // drop: the manager's refusal ("" when it ran)
   double wall_s = 0, sim_s = 0, setup_s = 0;
   double dt = 0, contact_time = 0;
   int granules = 0;
@@ -446,10 +535,13 @@ struct Row {
   int fit_points = 0;
   // crater
   CraterResult crater;
+  // drop (through the TerrainManager); drop.refused: the manager refused the setting
+  DropResult drop;
   // against the reference
   double error = std::numeric_limits<double>::quiet_NaN();
   double error_a = std::numeric_limits<double>::quiet_NaN();  // pile: angle; crater: depth (relative)
-  double error_b = std::numeric_limits<double>::quiet_NaN();  // crater: rim volume (relative)
+  double error_b = std::numeric_limits<double>::quiet_NaN();  // crater, drop: rim volume (relative)
+  double error_v = std::numeric_limits<double>::quiet_NaN();  // drop: crater volume (relative)
   bool pareto = false;
   double scatter = std::numeric_limits<double>::quiet_NaN();  // noise repeats: |x - x_twin| / ref
 };
@@ -505,12 +597,12 @@ int run_bench_tradeoff(const BenchTradeoffArgs& a) {
                                 "the CPU in tests/particles/gpu); the crater's gl setting measures the backend"}});
   skipped.push_back({{"case", "pile"}, {"knob", "patch size"},
                      {"reason", "the pile lies on its own fixed floor disc (0.2 m), not in a patch"}});
-  skipped.push_back({{"case", "both"}, {"knob", "LOD on/off"},
-                     {"reason", "each case is one patch from start to end; LOD only decides where patches are "
-                                "(sandpatch bench lod measures it)"}});
-  skipped.push_back({{"case", "both"}, {"knob", "simulation.substeps"},
-                     {"reason", "splits the Bullet step of bodies off the patches; inside a patch the DEM integrates "
-                                "the body in substeps of t_c / N (steps_per_contact)"}});
+  skipped.push_back({{"case", "pile, crater"}, {"knob", "LOD on/off, simulation.substeps, slot capacity"},
+                     {"reason", "these two run straight on the DEM, one patch and no Bullet; the drop case turns these "
+                                "knobs through the TerrainManager"}});
+  skipped.push_back({{"case", "drop"}, {"knob", "backend = gl, patch size"},
+                     {"reason", "the crater case measures the backend on the same DEM; the drop's patch size is what "
+                                "LOD on (the apron) or off (the whole terrain) makes it"}});
 
   std::printf("bench tradeoff (%s sweep): %zu settings, %d threads, load %.2f; pile of %d granules at scale 1, crater "
               "of a %.1f cm sphere (rho %.0f kg/m^3) dropped %.0f cm; material k_n %.0f N/m, e %.2f, mu %.2f, r %.1f mm\n",
@@ -556,6 +648,38 @@ int run_bench_tradeoff(const BenchTradeoffArgs& a) {
                   "(RTF %.4f)\n",
                   row.set.id.c_str(), row.granules, k.steps_per_contact, row.angle, row.fit_points,
                   row.at_rest ? "at rest" : "NOT at rest", row.sim_s, row.wall_s, row.sim_s / row.wall_s);
+    } else if (row.set.kind == TradeoffCase::Drop) {
+      DropDef dd = tradeoff_drop_def(a.sweep);
+      dd.threads = threads;
+      auto res = measure_drop(dd, k);
+      if (!res) {
+        std::fprintf(stderr, "bench tradeoff: %s: %s", row.set.id.c_str(), res.message().c_str());
+        return 1;
+      }
+      row.drop = *res;
+      row.setup_s = res->setup_seconds;
+      row.dt = res->dt;
+      row.contact_time = res->contact_time;
+      if (res->refused) {
+        // the setting's outcome: the manager refused the patch (slot too small)
+        row.refused = res->refusal;
+        while (!row.refused.empty() && row.refused.back() == '\n') row.refused.pop_back();
+        std::printf("  %-40s refused at t = %.3f s: %s\n", row.set.id.c_str(), res->refused_at, row.refused.c_str());
+      } else {
+        row.ran = true;
+        row.wall_s = res->wall_seconds;
+        row.sim_s = res->sim_seconds;
+        row.granules = res->granules;
+        std::printf("  %-40s %5d granules (%d patch%s), dt t_c/%d, %d Bullet substep%s: depth %5.2f cm, crater %6.0f "
+                    "cm^3 (r %.0f cm), rim %6.0f cm^3 (height %.2f cm), sphere sank %.2f cm, far field %+.2f cm, ledger "
+                    "%+.2f %%, %s; "
+                    "%.2f s simulated in %6.1f s wall (RTF %.4f; DEM %.1f s; set-up %.1f s)\n",
+                    row.set.id.c_str(), row.granules, res->patches, res->patches == 1 ? "" : "es", k.steps_per_contact,
+                    k.substeps, k.substeps == 1 ? "" : "s", res->depth * 100, res->crater_volume * 1e6,
+                    res->crater_radius * 100, res->rim_volume * 1e6, res->rim_height * 100, res->sphere_sink * 100,
+                    res->far_field_dh * 100, res->ledger_error_pct, res->asleep_at_end ? "asleep" : "awake", row.sim_s, row.wall_s,
+                    row.sim_s / row.wall_s, res->dem_seconds, row.setup_s);
+      }
     } else {
       if (k.backend == "gl" && !gl_skip.empty()) {
         row.skipped = gl_skip;
@@ -588,28 +712,39 @@ int run_bench_tradeoff(const BenchTradeoffArgs& a) {
   }
 
   // errors against each case's reference; the Pareto front per case (noise repeats left out)
-  bool rim_resolved_out = false;
-  for (TradeoffCase c : {TradeoffCase::Pile, TradeoffCase::Crater}) {
+  bool rim_resolved_out = false, drop_rim_resolved = false;
+  for (TradeoffCase c : {TradeoffCase::Pile, TradeoffCase::Crater, TradeoffCase::Drop}) {
     const Row* ref = nullptr;
     for (const auto& row : rows)
       if (row.set.kind == c && row.set.reference && row.ran) ref = &row;
     if (!ref) continue;
-    const bool rim_resolved = c == TradeoffCase::Crater && ref->crater.rim_volume > 0 &&
-                              ref->crater.rim_height >= double(r) * ref->set.knobs.particle_scale;
+    // the rim counts only when the reference resolves one: at least a granule sphere radius
+    // high (world) — lower, it is the roughness of a granular surface
+    const bool rim_resolved =
+        (c == TradeoffCase::Crater && ref->crater.rim_volume > 0 &&
+         ref->crater.rim_height >= double(r) * ref->set.knobs.particle_scale) ||
+        (c == TradeoffCase::Drop && ref->drop.rim_volume > 0 &&
+         ref->drop.rim_height >= double(tradeoff_drop_def(a.sweep).granule_radius) * ref->set.knobs.particle_scale);
     if (c == TradeoffCase::Crater) rim_resolved_out = rim_resolved;
+    if (c == TradeoffCase::Drop) drop_rim_resolved = rim_resolved;
+    auto rel = [](double x, double x_ref) { return x_ref > 0 ? std::abs(x - x_ref) / x_ref : NAN; };
     for (auto& row : rows) {
       if (row.set.kind != c || !row.ran) continue;
       if (c == TradeoffCase::Pile) {
         row.error_a = ref->angle != 0 ? std::abs(row.angle - ref->angle) / std::abs(ref->angle) : NAN;
         row.error = row.error_a;
-      } else {
-        row.error_a = ref->crater.depth > 0 ? std::abs(row.crater.depth - ref->crater.depth) / ref->crater.depth : NAN;
-        // the rim counts only when the reference resolves one: at least a granule sphere radius
-        // high (world) — lower, it is the roughness of a granular surface
-        row.error_b = rim_resolved
-                          ? std::abs(row.crater.rim_volume - ref->crater.rim_volume) / ref->crater.rim_volume
-                          : NAN;
+      } else if (c == TradeoffCase::Crater) {
+        row.error_a = rel(row.crater.depth, ref->crater.depth);
+        row.error_b = rim_resolved ? rel(row.crater.rim_volume, ref->crater.rim_volume) : NAN;
         row.error = std::isfinite(row.error_b) ? std::max(row.error_a, row.error_b) : row.error_a;
+      } else {
+        // drop: the worst of depth, crater volume and (when resolved) rim volume
+        row.error_a = rel(row.drop.depth, ref->drop.depth);
+        row.error_v = rel(row.drop.crater_volume, ref->drop.crater_volume);
+        row.error_b = rim_resolved ? rel(row.drop.rim_volume, ref->drop.rim_volume) : NAN;
+        row.error = row.error_a;
+        for (double e : {row.error_v, row.error_b})
+          if (std::isfinite(e)) row.error = std::isfinite(row.error) ? std::max(row.error, e) : e;
       }
     }
     // noise floor: a repeat with another seed against its seed-1 twin (same knobs), relative to the reference
@@ -618,16 +753,24 @@ int run_bench_tradeoff(const BenchTradeoffArgs& a) {
       for (const auto& twin : rows) {
         const auto &ka = row.set.knobs, &kb = twin.set.knobs;
         if (twin.set.kind != c || !twin.ran || twin.set.noise || ka.particle_scale != kb.particle_scale ||
-            ka.steps_per_contact != kb.steps_per_contact || ka.patch_radii != kb.patch_radii || ka.backend != kb.backend)
+            ka.steps_per_contact != kb.steps_per_contact || ka.patch_radii != kb.patch_radii ||
+            ka.backend != kb.backend || ka.substeps != kb.substeps || ka.lod != kb.lod ||
+            ka.lod_apron != kb.lod_apron || ka.granules_per_slot != kb.granules_per_slot)
           continue;
         if (c == TradeoffCase::Pile) {
           row.scatter = std::abs(row.angle - twin.angle) / std::abs(ref->angle);
-        } else {
+        } else if (c == TradeoffCase::Crater) {
           const double sd = std::abs(row.crater.depth - twin.crater.depth) / ref->crater.depth;
           const double sr = rim_resolved
                                 ? std::abs(row.crater.rim_volume - twin.crater.rim_volume) / ref->crater.rim_volume
                                 : NAN;
           row.scatter = std::isfinite(sr) ? std::max(sd, sr) : sd;
+        } else {
+          double sc = std::abs(row.drop.depth - twin.drop.depth) / ref->drop.depth;
+          if (ref->drop.crater_volume > 0)
+            sc = std::max(sc, std::abs(row.drop.crater_volume - twin.drop.crater_volume) / ref->drop.crater_volume);
+          if (rim_resolved) sc = std::max(sc, std::abs(row.drop.rim_volume - twin.drop.rim_volume) / ref->drop.rim_volume);
+          row.scatter = sc;
         }
       }
     }
@@ -645,13 +788,15 @@ int run_bench_tradeoff(const BenchTradeoffArgs& a) {
 
   // CSV (one row a setting) and JSON
   std::string csv =
-      "id,case,particle_scale,steps_per_contact,patch_radii,backend,seed,reference,noise,ran,granules,dt_s,"
-      "dt_over_tc,sim_s,wall_s,wall_s_per_sim_s,real_time_factor,angle_deg,depth_m,rim_volume_m3,rim_height_m,"
-      "crater_radius_m,error,error_angle_or_depth,error_rim,pareto,skipped\n";
+      "id,case,particle_scale,steps_per_contact,patch_radii,backend,substeps,granules_per_slot,lod,lod_apron_m,seed,"
+      "reference,noise,ran,outcome,granules,dt_s,dt_over_tc,sim_s,wall_s,wall_s_per_sim_s,real_time_factor,angle_deg,"
+      "depth_m,crater_volume_m3,rim_volume_m3,rim_height_m,crater_radius_m,error,error_angle_or_depth,error_rim,"
+      "error_crater_volume,pareto,skipped\n";
   ojson settings = ojson::array();
   for (const auto& row : rows) {
     const auto& k = row.set.knobs;
-    const bool crater = row.set.kind == TradeoffCase::Crater;
+    const bool crater = row.set.kind == TradeoffCase::Crater, drop = row.set.kind == TradeoffCase::Drop;
+    const std::string outcome = row.ran ? "ok" : !row.refused.empty() ? "refused" : "skipped";
     const double cost = row.ran ? row.wall_s / row.sim_s : NAN, rtf = row.ran ? row.sim_s / row.wall_s : NAN;
     auto f = [](double v) {
       if (!std::isfinite(v)) return std::string();
@@ -659,32 +804,54 @@ int run_bench_tradeoff(const BenchTradeoffArgs& a) {
       std::snprintf(b, sizeof b, "%.6g", v);
       return std::string(b);
     };
+    const bool pile = row.set.kind == TradeoffCase::Pile;
+    const double depth = !row.ran ? NAN : crater ? row.crater.depth : drop ? row.drop.depth : NAN;
+    const double cvol = !row.ran ? NAN : crater ? row.crater.crater_volume : drop ? row.drop.crater_volume : NAN;
+    const double rvol = !row.ran ? NAN : crater ? row.crater.rim_volume : drop ? row.drop.rim_volume : NAN;
+    const double rh = !row.ran ? NAN : crater ? row.crater.rim_height : drop ? row.drop.rim_height : NAN;
+    const double crad = !row.ran ? NAN : crater ? row.crater.crater_radius : drop ? row.drop.crater_radius : NAN;
+    const bool timed = row.ran && row.dt > 0 && row.contact_time > 0;
+    std::string why = row.ran ? "" : !row.refused.empty() ? row.refused : row.skipped;
+    std::replace(why.begin(), why.end(), '"', '\'');
+    std::replace(why.begin(), why.end(), '\n', ' ');
     csv += row.set.id + "," + to_string(row.set.kind) + "," + f(k.particle_scale) + "," +
            std::to_string(k.steps_per_contact) + "," + (crater ? f(k.patch_radii) : "") + "," + k.backend + "," +
+           (drop ? std::to_string(k.substeps) : "") + "," + (drop ? std::to_string(k.granules_per_slot) : "") + "," +
+           (drop ? (k.lod ? "on" : "off") : "") + "," + (drop && k.lod ? f(k.lod_apron) : "") + "," +
            std::to_string(k.seed) + "," + (row.set.reference ? "1" : "0") + "," + (row.set.noise ? "1" : "0") + "," +
-           (row.ran ? "1" : "0") + "," + std::to_string(row.granules) + "," + f(row.ran ? row.dt : NAN) + "," +
-           f(row.ran ? row.dt / row.contact_time : NAN) + "," + f(row.ran ? row.sim_s : NAN) + "," +
-           f(row.ran ? row.wall_s : NAN) + "," + f(cost) + "," + f(rtf) + "," + f(!crater && row.ran ? row.angle : NAN) +
-           "," + f(crater && row.ran ? row.crater.depth : NAN) + "," + f(crater && row.ran ? row.crater.rim_volume : NAN) +
-           "," + f(crater && row.ran ? row.crater.rim_height : NAN) + "," +
-           f(crater && row.ran ? row.crater.crater_radius : NAN) + "," + f(row.error) + "," + f(row.error_a) + "," +
-           f(row.error_b) + "," + (row.pareto ? "1" : "0") + ",\"" + row.skipped + "\"\n";
+           (row.ran ? "1" : "0") + "," + outcome + "," + std::to_string(row.granules) + "," + f(timed ? row.dt : NAN) +
+           "," + f(timed ? row.dt / row.contact_time : NAN) + "," + f(row.ran ? row.sim_s : NAN) + "," +
+           f(row.ran ? row.wall_s : NAN) + "," + f(cost) + "," + f(rtf) + "," + f(pile && row.ran ? row.angle : NAN) +
+           "," + f(depth) + "," + f(cvol) + "," + f(rvol) + "," + f(rh) + "," + f(crad) + "," + f(row.error) + "," +
+           f(row.error_a) + "," + f(row.error_b) + "," + f(row.error_v) + "," + (row.pareto ? "1" : "0") + ",\"" +
+           why + "\"\n";
     ojson j = {{"id", row.set.id},
                {"case", to_string(row.set.kind)},
                {"particle_scale", k.particle_scale},
                {"steps_per_contact", k.steps_per_contact},
                {"patch_radii", crater ? ojson(k.patch_radii) : ojson()},
                {"backend", k.backend},
+               {"substeps", drop ? ojson(k.substeps) : ojson()},
+               {"granules_per_slot", drop ? ojson(k.granules_per_slot) : ojson()},
+               {"lod", drop ? ojson(k.lod ? "on" : "off") : ojson()},
+               {"lod_apron_m", drop && k.lod ? ojson(k.lod_apron) : ojson()},
                {"seed", k.seed},
                {"reference", row.set.reference},
                {"noise", row.set.noise},
-               {"ran", row.ran}};
-    if (!row.ran) {
+               {"ran", row.ran},
+               {"outcome", outcome}};
+    if (!row.refused.empty()) {
+      // the manager refused the setting: its message names the capacity to raise
+      j["refused"] = row.refused;
+      j["refused_at_s"] = row.drop.refused_at;
+      j["pool_bytes"] = row.drop.pool_bytes;
+      j["setup_s"] = row.setup_s;
+    } else if (!row.ran) {
       j["skipped"] = row.skipped;
     } else {
       j["granules"] = row.granules;
-      j["dt_s"] = row.dt;
-      j["dt_over_tc"] = row.dt / row.contact_time;
+      j["dt_s"] = timed ? ojson(row.dt) : ojson();
+      j["dt_over_tc"] = timed ? ojson(row.dt / row.contact_time) : ojson();
       j["sim_s"] = row.sim_s;
       j["wall_s"] = row.wall_s;
       j["wall_s_per_sim_s"] = cost;
@@ -701,6 +868,23 @@ int run_bench_tradeoff(const BenchTradeoffArgs& a) {
         ojson dh = ojson::array();  // Δh per bin of bin_m from the axis (null: empty bin)
         for (double v : row.crater.dh) dh.push_back(v > -1e299 ? ojson(v) : ojson());
         j["dh_m"] = dh;
+      } else if (drop) {
+        j["depth_m"] = row.drop.depth;
+        j["crater_volume_m3"] = row.drop.crater_volume;
+        j["crater_radius_m"] = row.drop.crater_radius;
+        j["rim_volume_m3"] = row.drop.rim_volume;
+        j["rim_height_m"] = row.drop.rim_height;
+        j["sphere_sink_m"] = row.drop.sphere_sink;
+        j["far_field_dh_m"] = row.drop.far_field_dh;
+        j["ledger_error_pct"] = row.drop.ledger_error_pct;
+        j["patches"] = row.drop.patches;
+        j["pool_bytes"] = row.drop.pool_bytes;
+        j["dem_wall_s"] = row.drop.dem_seconds;
+        j["asleep_at_end"] = row.drop.asleep_at_end;
+        j["setup_s"] = row.setup_s;
+        ojson dh = ojson::array();  // mean Δh per radial bin of one sample spacing from the axis (null: no sample)
+        for (double v : row.drop.dh) dh.push_back(v > -1e299 ? ojson(v) : ojson());
+        j["dh_m"] = dh;
       } else {
         j["angle_deg"] = row.angle;
         j["fit_points"] = row.fit_points;
@@ -709,14 +893,16 @@ int run_bench_tradeoff(const BenchTradeoffArgs& a) {
         j["at_rest"] = row.at_rest;
       }
       j["error"] = jnum(row.error);
-      j[crater ? "error_depth" : "error_angle"] = jnum(row.error_a);
-      if (crater) j["error_rim"] = jnum(row.error_b);
+      j[crater || drop ? "error_depth" : "error_angle"] = jnum(row.error_a);
+      if (crater || drop) j["error_rim"] = jnum(row.error_b);
+      if (drop) j["error_crater_volume"] = jnum(row.error_v);
       j["pareto"] = row.pareto;
       if (row.set.noise) j["seed_scatter"] = jnum(row.scatter);
     }
     settings.push_back(j);
   }
   const double load_after = load_average();
+  const DropDef dd0 = tradeoff_drop_def(a.sweep);
   const fs::path csv_path = out / "tradeoff.csv", json_path = out / "tradeoff.json", png_path = out / "tradeoff.png";
   ojson result = {{"bench", "tradeoff"},
                   {"sweep", to_string(a.sweep)},
@@ -726,7 +912,9 @@ int run_bench_tradeoff(const BenchTradeoffArgs& a) {
                   {"cost", "wall_s_per_sim_s: wall seconds of the measured phase per simulated second (1 / real_time_factor)"},
                   {"error", "pile: |angle - angle_ref| / angle_ref; crater: max(|depth - ref| / ref, |rim volume - ref| / "
                             "ref), the rim term only when the reference's rim is at least a granule sphere radius high "
-                            "(cases.crater.rim_in_error); ref = the case's reference setting"},
+                            "(cases.crater.rim_in_error); drop: max(|depth - ref| / ref, |crater volume - ref| / ref, "
+                            "|rim volume - ref| / ref), the rim term as the crater's (cases.drop.rim_in_error); ref = "
+                            "the case's reference setting; a refused setting has no error (outcome refused)"},
                   {"cases",
                    {{"pile", {{"granules_at_scale_1", pile_n}, {"granule_radius_m", r}, {"floor_radius_m", 0.2}}},
                     {"crater", {{"sphere_radius_m", cd.sphere_radius}, {"sphere_density", cd.sphere_density},
@@ -734,6 +922,16 @@ int run_bench_tradeoff(const BenchTradeoffArgs& a) {
                                 {"bed_depth_m", cd.bed_depth_radii * cd.sphere_radius}, {"impact_seconds", cd.impact_seconds},
                                 {"bin_m", cd.bin_radii * cd.sphere_radius}, {"granule_radius_m", r},
                                 {"rim_in_error", rim_resolved_out}}},
+                    {"drop", {{"path", "Bullet sphere onto a flat heightfield through the TerrainManager (bench/tradeoff_drop.hpp); "
+                                       "crater measured in the heightfield after demote_all"},
+                              {"sphere_radius_m", dd0.sphere_radius}, {"sphere_density", dd0.sphere_density},
+                              {"drop_height_m", dd0.drop_height}, {"impact_speed_m_s", std::sqrt(2 * kG * dd0.drop_height)},
+                              {"terrain_side_m", dd0.terrain_side}, {"spacing_m", dd0.spacing},
+                              {"patch_depth_m", dd0.patch_depth}, {"run_seconds", dd0.run_seconds},
+                              {"frame_dt_s", dd0.frame_dt}, {"granule_radius_m", dd0.granule_radius},
+                              {"material", {{"normal_stiffness", dd0.stiffness}, {"restitution", dd0.restitution},
+                                            {"friction", dd0.friction}, {"density", dd0.granule_density}}},
+                              {"rim_in_error", drop_rim_resolved}}},
                     {"material", {{"normal_stiffness", mat.normal_stiffness}, {"restitution", mat.restitution},
                                   {"friction", mat.friction}, {"density", mat.density}}}}},
                   {"settings", settings},
@@ -767,13 +965,17 @@ int run_bench_tradeoff(const BenchTradeoffArgs& a) {
   }
 
   // summary table
-  std::printf("\n%-28s %8s %10s %8s %9s %s\n", "setting", "granules", "wall/sim", "RTF", "error", "pareto");
+  std::printf("\n%-40s %8s %10s %8s %9s %s\n", "setting", "granules", "wall/sim", "RTF", "error", "pareto");
   for (const auto& row : rows) {
-    if (!row.ran) {
-      std::printf("%-28s skipped: %s\n", row.set.id.c_str(), row.skipped.c_str());
+    if (!row.refused.empty()) {
+      std::printf("%-40s refused: %s\n", row.set.id.c_str(), row.refused.c_str());
       continue;
     }
-    std::printf("%-28s %8d %10.2f %8.4f %9.4f %s%s%s\n", row.set.id.c_str(), row.granules, row.wall_s / row.sim_s,
+    if (!row.ran) {
+      std::printf("%-40s skipped: %s\n", row.set.id.c_str(), row.skipped.c_str());
+      continue;
+    }
+    std::printf("%-40s %8d %10.2f %8.4f %9.4f %s%s%s\n", row.set.id.c_str(), row.granules, row.wall_s / row.sim_s,
                 row.sim_s / row.wall_s, row.error, row.pareto ? "*" : "", row.set.reference ? " (reference)" : "",
                 row.set.noise ? " (other seed: noise floor)" : "");
   }
@@ -786,9 +988,10 @@ int run_bench_tradeoff(const BenchTradeoffArgs& a) {
     ojson list = ojson::array();
     for (const auto& s : settings) {
       ojson e = {{"id", s["id"]}, {"case", s["case"]}, {"ran", s["ran"]}};
-      for (const char* key : {"particle_scale", "steps_per_contact", "patch_radii", "backend", "seed", "reference", "noise",
-                              "wall_s", "wall_s_per_sim_s", "real_time_factor", "error", "seed_scatter", "pareto",
-                              "skipped"})
+      for (const char* key : {"particle_scale", "steps_per_contact", "patch_radii", "backend", "substeps",
+                              "granules_per_slot", "lod", "lod_apron_m", "seed", "reference", "noise", "outcome", "wall_s",
+                              "wall_s_per_sim_s", "real_time_factor", "error", "seed_scatter", "pareto", "skipped",
+                              "refused"})
         if (s.contains(key)) e[key] = s[key];
       list.push_back(e);
     }

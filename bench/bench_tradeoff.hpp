@@ -1,8 +1,10 @@
 // `sandpatch bench tradeoff` (bench/bench_tradeoff.cpp, docs/tradeoff.md): the knobs users turn
-// (particle scale, DEM dt relative to the contact time, patch size, backend) swept over two fixed
-// reference cases, the angle of repose of a poured pile and the crater a dropped sphere leaves in
-// a granular bed; per setting the wall time, the real-time factor and the error against the
-// finest setting of the sweep; the Pareto front of error against cost.
+// (particle scale, DEM dt relative to the contact time, patch size, backend, Bullet substeps,
+// slot capacity, LOD on or off) swept over three fixed reference cases: the angle of repose of a
+// poured pile, the crater a dropped sphere leaves in a granular bed (straight on the DEM), and
+// the crater a Bullet sphere leaves in a heightfield terrain driven by the TerrainManager
+// (bench/tradeoff_drop.hpp); per setting the wall time, the real-time factor and the error
+// against the finest setting of the sweep; the Pareto front of error against cost.
 #pragma once
 
 #include <cstdint>
@@ -17,7 +19,7 @@
 
 namespace sandpatch {
 
-enum class TradeoffCase { Pile, Crater };
+enum class TradeoffCase { Pile, Crater, Drop };
 const char* to_string(TradeoffCase c);
 
 // The knobs of one setting.
@@ -33,11 +35,24 @@ struct TradeoffKnobs {
   // capacity a patch needs follows from it (granules reported per setting).
   double patch_radii = 8.0;
   std::string backend = "cpu";  // crater only: "cpu" (OpenMP) or "gl" (compute shaders)
-  std::uint64_t seed = 1;       // bed lattice / pour jitter and orientations
+  std::uint64_t seed = 1;       // bed lattice / pour jitter and orientations; drop: the tile's settling seed
+  // Drop only (bench/tradeoff_drop.hpp, through the TerrainManager):
+  // Bullet steps per frame (scene simulation.substeps): run.cpp steps the bodies `substeps`
+  // times by dt / substeps (BulletWorld::step_frame) after the manager handed them the patch's
+  // mean contact force, which acts over every substep.
+  int substeps = 1;
+  // Slot capacity (scene simulation.pool.granules_per_slot). A patch that needs more is refused
+  // by the manager (an error naming the field): that setting's outcome is "refused".
+  int granules_per_slot = 16384;
+  // LOD on: patches where the manager predicts contacts, lod_apron m around the footprint
+  // (TerrainManagerDef::lod.apron); off: the whole terrain as particles from t = 0
+  // (request_patch over it), no demotion until the end in either.
+  bool lod = true;
+  double lod_apron = 0.2;       // m, LOD on only
 };
 
 struct TradeoffSetting {
-  std::string id;               // unique, e.g. "crater_s1.5_n20_p8_cpu"
+  std::string id;               // unique, e.g. "crater_s1.5_n20_p8_cpu", "drop_s1_n20_sub1_lodoff_slot16384"
   TradeoffCase kind = TradeoffCase::Pile;
   TradeoffKnobs knobs;
   bool reference = false;       // the finest setting of its case: errors are measured against it
@@ -51,6 +66,9 @@ const char* to_string(TradeoffSweep s);
 // The settings of a sweep, reference first within each case. Quick: small piles and beds (a
 // test); Default: a few minutes on 2 cores; Full: finer scales and more steps per contact.
 std::vector<TradeoffSetting> tradeoff_sweep(TradeoffSweep sweep);
+// The drop case's definition for the sweep (Quick: a shorter run).
+struct DropDef;
+DropDef tradeoff_drop_def(TradeoffSweep sweep);
 // Pile size (granules) at particle scale 1 for the sweep; 1/s^3 of it at scale s.
 int tradeoff_pile_granules(TradeoffSweep sweep);
 
@@ -134,8 +152,11 @@ struct BenchTradeoffArgs {
 std::string check_bench_tradeoff_args(const BenchTradeoffArgs& args);
 // Writes OUT/tradeoff.csv (one row a setting), OUT/tradeoff.json (everything) and, with a plot
 // script, OUT/tradeoff.png. With json the last stdout line is one JSON object:
-// {"bench": "tradeoff", "csv": ..., "plot": ... or null, "settings": [{"id", "case", knobs...,
-// "wall_s", "real_time_factor", "error", "pareto", ...}], ...}. Exit: 0 ok, 1 failure, 2 bad input.
+// {"bench": "tradeoff", "csv": ..., "plot": ... or null, "settings": [{"id", "case", knobs...
+// (substeps, granules_per_slot, lod, lod_apron_m: null outside the drop case), "outcome" (ok,
+// refused, skipped), "wall_s", "real_time_factor", "error", "pareto", "refused" (the manager's
+// message), ...}], ...}. A refused drop setting is an outcome, not a failure. Exit: 0 ok, 1
+// failure, 2 bad input.
 int run_bench_tradeoff(const BenchTradeoffArgs& args);
 
 }  // namespace sandpatch

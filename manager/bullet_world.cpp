@@ -460,6 +460,53 @@ void BulletWorld::step(float dt) {
   impl_->world->stepSimulation(dt, 0, dt);
 }
 
+void BulletWorld::step_frame(float dt, int substeps) {
+  assert(dt > 0.0f && substeps >= 1);
+  const float sub = dt / float(substeps);
+  if (substeps == 1) {
+    step(sub);
+    return;
+  }
+  // The force and torque each body holds now (N, N m; apply_force's, or the game's on an
+  // adopted body). Bullet adds gravity inside stepSimulation, so these are the applied ones
+  // only; it clears them after each stepSimulation, and they are given again before every
+  // substep after the first.
+  struct Held {
+    btRigidBody* rb;
+    btVector3 force, torque;
+  };
+  std::vector<Held> held;
+  for (const auto& b : impl_->bodies) {
+    if (!b.rb) continue;
+    const btVector3& f = b.rb->getTotalForce();
+    const btVector3& t = b.rb->getTotalTorque();
+    if (!f.isZero() || !t.isZero()) held.push_back({b.rb, f, t});
+  }
+  // getTotalForce() is after the body's linear factor (applyCentralForce adds force *
+  // m_linearFactor; applyTorque torque * m_angularFactor): divide it out so that applying
+  // again gives the same total. Exact for a factor of 1 (every body add_body creates); for an
+  // adopted body with another factor, to float round-off; a component whose factor is 0
+  // holds no force, and gets none.
+  auto unfactor = [](const btVector3& v, const btVector3& factor) {
+    btVector3 r(0, 0, 0);
+    for (int i = 0; i < 3; ++i)
+      if (factor[i] != btScalar(0)) r[i] = v[i] / factor[i];
+    return r;
+  };
+  for (auto& h : held) {
+    h.force = unfactor(h.force, h.rb->getLinearFactor());
+    h.torque = unfactor(h.torque, h.rb->getAngularFactor());
+  }
+  for (int k = 0; k < substeps; ++k) {
+    if (k > 0)
+      for (const auto& h : held) {
+        h.rb->applyCentralForce(h.force);
+        h.rb->applyTorque(h.torque);
+      }
+    step(sub);
+  }
+}
+
 void BulletWorld::terrain_changed() {
   for (auto& t : impl_->tiles) {
     const float lo = impl_->terrain->tile_min_height(t.tx, t.tz), hi = impl_->terrain->tile_max_height(t.tx, t.tz);

@@ -100,6 +100,12 @@ class BulletWorld {
 
   // Advances every body by exactly dt seconds (one Bullet step, no accumulator).
   void step(float dt);
+  // One frame of dt seconds in `substeps` equal Bullet steps of dt / substeps. Forces and
+  // torques given by apply_force (or to an adopted btRigidBody directly) before the call act
+  // over every substep, i.e. over the whole frame: Bullet's stepSimulation clears applied
+  // forces after each call, so a loop of step(dt / substeps) would give a body only
+  // 1 / substeps of the impulse. step_frame(dt, 1) is step(dt).
+  void step_frame(float dt, int substeps);
 
   // Re-reads the heights of every tile (after the heightfield was edited): updates the
   // vertical bounds of the tile shapes that changed.
@@ -122,7 +128,7 @@ class BulletWorld {
 
   // ---- coupling with granular patches ----
   // Adds a force (N, world, through the centre of mass) and a torque (N m, world) for the next
-  // step only.
+  // step() only, or for every substep of the next step_frame().
   void apply_force(RigidBodyId id, const Eigen::Vector3f& force, const Eigen::Vector3f& torque);
   // Whether the body collides with the heightfield (off while granules carry it).
   void set_terrain_collision(RigidBodyId id, bool enabled);

@@ -423,7 +423,6 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
   frame_ms.reserve(std::size_t(frames));
   ProgressPrinter progress(opt.progress, frames, dt);
   const auto t_start = Clock::now();
-  const float sub_dt = float(dt / sim.substeps);
 
   auto export_heightfield = [&](const HeightfieldOutputDef& o, long long frame, double t) -> Status {
     const fs::path p = out_dir / expand_pattern(o.file, frame, t, format_ext(o.format));
@@ -460,7 +459,7 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
         return fail(ExitCode::RuntimeFailure, "dem", st.message());
     {
       auto timer = profile.time(Stage::Bodies);
-      for (int s = 0; s < sim.substeps; ++s) world.step(sub_dt);
+      world.step_frame(float(dt), sim.substeps);  // the patches' forces act over every substep
       for (std::size_t i = 0; i < ids.size(); ++i) {
         if (!spawned[i]) continue;
         const BodyState st = world.state(ids[i]);

@@ -119,6 +119,7 @@ struct Simulation::Impl {
   // on the order, so neither do the results.
   std::vector<std::int32_t> body_order;
   bool need_sort = true;
+  float shape_offsets[16] = {};        // the granule's 4 sphere offsets (x, y, z, 0), m, body frame
 
   // Verlet neighbour list (CSR, sorted order, no cap): for sphere i the entries
   // [nstart[i], nstart[i+1]) hold every sphere j of another body with
@@ -210,9 +211,11 @@ struct Simulation::Impl {
                  w_zxy = _mm_shuffle_ps(w4, w4, _MM_SHUFFLE(3, 1, 0, 2));
     const __m128 invm4 = _mm_set1_ps(b.mass[4 * i + 1]);
     float d2max = 0;
+    // a granule's sphere offsets are the shape's (the values p.offset holds, without the load)
+    const bool granule = b.flags[i] & kBodyGranule;
     for (int k = 0, first = b.first[i], cnt = b.count[i]; k < cnt; ++k) {
       const int s = slot_of[first + k];
-      const float* O = &p.offset[4 * s];
+      const float* O = granule ? &shape_offsets[4 * k] : &p.offset[4 * s];
       const __m128 arm = _mm_add_ps(_mm_add_ps(_mm_mul_ps(c0, _mm_set1_ps(O[0])), _mm_mul_ps(c1, _mm_set1_ps(O[1]))),
                                     _mm_mul_ps(c2, _mm_set1_ps(O[2])));
       const __m128 xs = _mm_add_ps(x4, arm);
@@ -624,34 +627,53 @@ struct Simulation::Impl {
 
   // ---- sphere stage (called by the body stage for each sphere of a body, so a body's
   // spheres are gathered while they are in cache): sphere i sums its pair results in list
-  // order and adds the boundaries; writes force/torque of sphere i.
+  // order and adds the boundaries; returns the sphere's force and torque (the body stage sums
+  // them straight into the body: the particle fields force/torque are the GL backend's).
   struct LawConstants {
     float kn, cn0, kt, ctr, mu, kb;  // N/m, c_n = cn0 / sqrt(1/m_i + 1/m_j), N/m, c_t/c_n, -, N s/m
   } law{};
   struct SphereSum {
     Vec3 F, T;  // N, N m (about the sphere centre)
   };
+  // What gather_sphere reads, copied to a local of the body stage once per substep: held in
+  // members, these were loaded again after every float store (the compiler cannot tell a
+  // store to a force from one to a member), ~20 instructions per sphere-step.
+  struct GatherCtx {
+    LawConstants law;
+    const float *P, *V, *W, *PF;
+    const std::int32_t *NS, *NO, *MT, *B;
+    const std::uint32_t* BF;
+    float* WX;
+    std::uint32_t* WM;
+    Vec3 bmin, bmax;
+    float floor_y;
+    bool walls, terrain, first_law;
+  };
+  GatherCtx gather_ctx() const {
+    return {law,           p.pos.data(), p.vel.data(),   p.omega.data(),    pf.data(),
+            nstart.data(), nown.data(),  mate.data(),    p.body.data(),     b.flags.data(),
+            const_cast<float*>(wxi.data()), const_cast<std::uint32_t*>(wmask.data()),
+            def.bounds_min, def.bounds_max, def.floor_height, def.side_walls, !def.terrain.empty(), first_law};
+  }
   template <bool kBell>
-  __attribute__((always_inline)) SphereSum gather_sphere(const int i, const float dt, std::int64_t& nwall) {
-    const float kn = law.kn, cn0 = law.cn0, kt = law.kt, ctr = law.ctr, mu = law.mu, kb = law.kb;
-    const float* P = p.pos.data();
-    const float* V = p.vel.data();
-    const float* W = p.omega.data();
-    const std::int32_t* NS = nstart.data();
-    float* WX = wxi.data();
-    std::uint32_t* WM = wmask.data();
-    float* FO = p.force.data();
-    float* TO = p.torque.data();
-    const std::uint32_t* BF = b.flags.data();
-    const std::int32_t* B = p.body.data();
-    const Vec3 bmin = def.bounds_min, bmax = def.bounds_max;
-    const float floor_y = def.floor_height;
-    const bool walls = def.side_walls, terrain = !def.terrain.empty();
-    const std::int32_t* MT = mate.data();
-    const std::int32_t* NO = nown.data();
-    const float* PF = pf.data();
+  __attribute__((always_inline)) SphereSum gather_sphere(const GatherCtx& g, const int i, const float dt,
+                                                         std::int64_t& nwall) {
+    const float kn = g.law.kn, cn0 = g.law.cn0, kt = g.law.kt, ctr = g.law.ctr, mu = g.law.mu, kb = g.law.kb;
+    const float* P = g.P;
+    const float* V = g.V;
+    const float* W = g.W;
+    const std::int32_t* NS = g.NS;
+    float* WX = g.WX;
+    std::uint32_t* WM = g.WM;
+    const std::uint32_t* BF = g.BF;
+    const std::int32_t* B = g.B;
+    const Vec3 bmin = g.bmin, bmax = g.bmax;
+    const float floor_y = g.floor_y;
+    const bool walls = g.walls, terrain = g.terrain;
+    const std::int32_t* MT = g.MT;
+    const std::int32_t* NO = g.NO;
+    const float* PF = g.PF;
       Vec3 F{}, T{};
-      float E = 0;
       if (!(BF[B[i]] & kBodyStatic)) {
         const Vec3 pi{P[4 * i], P[4 * i + 1], P[4 * i + 2]};
         const float ri = P[4 * i + 3];
@@ -696,14 +718,13 @@ struct Simulation::Impl {
             Vec3 xi{};
             if (old_mask & (1u << slot)) xi = {xe[0], xe[1], xe[2]};
             ContactParams cp{kn, cnw, kt, ctr * cnw, mu, kb, dt, kBell};
-            cp.new_contact = first_law && !(old_mask & (1u << slot));  // first substep of this plane contact
+            cp.new_contact = g.first_law && !(old_mask & (1u << slot));  // first substep of this plane contact
             ContactForce cf = contact_force(cp, nrm, ri - dist, v, xi);
             xe[0] = xi.x;
             xe[1] = xi.y;
             xe[2] = xi.z;
             F = F + cf.f;
             T = T + cross(nrm * (-ri), cf.ft);
-            E += cf.energy;
           };
           if (pi.y - floor_y < ri) plane(0, {0, 1, 0}, pi.y - floor_y);
           if (walls) {
@@ -746,13 +767,6 @@ struct Simulation::Impl {
           WM[i] = mask;
         }
       }
-      FO[4 * i] = F.x;
-      FO[4 * i + 1] = F.y;
-      FO[4 * i + 2] = F.z;
-      FO[4 * i + 3] = E;
-      TO[4 * i] = T.x;
-      TO[4 * i + 1] = T.y;
-      TO[4 * i + 2] = T.z;
       return {F, T};
   }
 
@@ -768,15 +782,16 @@ struct Simulation::Impl {
     const int n = nb;
     const bool ordered = int(body_order.size()) == n;
     const std::int32_t* order = body_order.data();
+    const GatherCtx gctx = gather_ctx();
 #pragma omp parallel for num_threads(threads) schedule(dynamic, 128) reduction(max : d2max, vmax) reduction(+ : bad, nwall) if (n > 2048 || np > 4096)
     for (int t = 0; t < n; ++t) {
       const int i = ordered ? order[t] : t;
       const std::uint32_t fl = b.flags[i];
       const Vec3 x = ld3(b.pos, i);
       Vec3 F{}, T{};
-      for (int k = 0; k < b.count[i]; ++k) {
-        int s = slot_of[b.first[i] + k];
-        const SphereSum ss = gather_sphere<kBell>(s, dt, nwall);
+      for (int k = 0, first = b.first[i], cnt = b.count[i]; k < cnt; ++k) {
+        const int s = slot_of[first + k];
+        const SphereSum ss = gather_sphere<kBell>(gctx, s, dt, nwall);
         const Vec3 f = ss.F;
         F = F + f;
         T = T + ss.T + cross(ld3(p.pos, s) - x, f);
@@ -1025,6 +1040,11 @@ Result<Simulation> Simulation::create(const SimulationDef& d) {
   Impl& s = *im;
   s.def = d;
   s.shape = make_granule_shape(d.particle_radius, d.granule_edge_factor, d.material.density);
+  for (int k = 0; k < 4; ++k) {
+    s.shape_offsets[4 * k] = s.shape.offsets[k].x;
+    s.shape_offsets[4 * k + 1] = s.shape.offsets[k].y;
+    s.shape_offsets[4 * k + 2] = s.shape.offsets[k].z;
+  }
   s.gravity = d.scale.gravity_to_sim(d.gravity_world);
   s.threads = d.threads > 0 ? d.threads : omp_get_max_threads();
   s.simd_pairs = simd::use_avx2_pair_kernel();

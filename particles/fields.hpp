@@ -28,8 +28,8 @@
   X(float,         vel,    4, 0, "m/s; xyz = velocity of the sphere centre, w = inverse mass of the body (1/kg), 0 if not dynamic") \
   X(float,         omega,  4, 0, "rad/s; xyz = angular velocity of the body (world frame), w unused")          \
   X(float,         offset, 4, 0, "m; xyz = centre offset from the body's centre of mass, body frame, w unused") \
-  X(float,         force,  4, 0, "N; xyz = sum of contact forces on the sphere, w = elastic energy share (J)") \
-  X(float,         torque, 4, 0, "N m; xyz = torque of the contact forces about the sphere centre, w unused") \
+  X(float,         force,  4, 0, "N; xyz = sum of contact forces on the sphere, w = elastic energy share (J); GL backend only (the CPU body stage sums straight into the body)") \
+  X(float,         torque, 4, 0, "N m; xyz = torque of the contact forces about the sphere centre, w unused; GL backend only") \
   X(std::int32_t,  body,   1, 0, "index of the body the sphere belongs to")                                   \
   X(std::int32_t,  id,     1, 1, "stable particle id (creation order); key of the contact history")
 

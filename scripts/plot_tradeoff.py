@@ -1,8 +1,10 @@
 #!/usr/bin/env python3
 """Error against cost from `sandpatch bench tradeoff` (OUT/tradeoff.json): one panel per reference
-case (poured pile, crater), each setting a point at (wall seconds per simulated second, error
+case (poured pile, crater straight on the DEM, drop through the terrain manager), each setting a point at (wall seconds per simulated second, error
 against the case's reference), the Pareto front joined and marked, the reference and the noise
-floor (the same setting with another seed) drawn as such.
+floor (the same setting with another seed) drawn as such. Drop settings are labelled with
+their substeps (sub), LOD (off, or the apron in m) and slot capacity; settings the manager refused
+(slot too small) are listed under their panel.
 
     python3 scripts/plot_tradeoff.py OUT/tradeoff.json [OUT/tradeoff.png]
 
@@ -43,13 +45,20 @@ def main(argv):
               "or bash scripts/install-deps.sh); the data is in " + src, file=sys.stderr)
         return 3
 
-    cases = [c for c in ("pile", "crater") if any(r["case"] == c for r in rows)]
+    refused = [s for s in data["settings"] if s.get("outcome") == "refused"]
+    cases = [c for c in ("pile", "crater", "drop") if any(r["case"] == c for r in rows)]
     fig, axes = plt.subplots(1, len(cases), figsize=(6.5 * len(cases), 5), dpi=100, squeeze=False)
-    titles = {"pile": "angle of repose of a poured pile", "crater": "crater of a dropped sphere"}
+    titles = {"pile": "angle of repose of a poured pile", "crater": "crater of a dropped sphere (DEM)",
+              "drop": "sphere on a heightfield through the terrain manager"}
     for ax, case in zip(axes[0], cases):
         pts = [r for r in rows if r["case"] == case]
+        top_slot = max((r.get("granules_per_slot") or 0) for r in pts)
+        # errors past `cap` (%) are drawn at the cap with their value in the label (one far point
+        # would squash the rest of the panel)
+        errs = sorted(100.0 * r["error"] for r in pts)
+        cap = max(120.0, errs[len(errs) // 2] * 3) if errs else 120.0
         for r in pts:
-            x, y = r["wall_s_per_sim_s"], 100.0 * r["error"]
+            x, y = r["wall_s_per_sim_s"], min(100.0 * r["error"], cap)
             if r.get("noise"):
                 style = dict(marker="x", color="tab:gray", s=50)
             elif r.get("reference"):
@@ -62,14 +71,22 @@ def main(argv):
             label = f"s{r['particle_scale']:g} N{r['steps_per_contact']}"
             if case == "crater":
                 label += f" p{r['patch_radii']:g}" + (" gl" if r.get("backend") == "gl" else "")
+            if case == "drop":
+                lod = "LOD off" if r.get("lod") == "off" else f"LOD {r.get('lod_apron_m', 0):g} m"
+                label += f" sub{r.get('substeps', 1)} {lod}"
+                if r.get("granules_per_slot") != top_slot:
+                    label += f" slot {r.get('granules_per_slot')}"
             if r.get("noise"):
                 label += f" seed{r['seed']}"
-            ax.annotate(label, (x, y), textcoords="offset points", xytext=(4, 4), fontsize=7)
+            if 100.0 * r["error"] > cap:
+                label += f" (error {100.0 * r['error']:.0f} %, off scale)"
+            ax.annotate(label, (x, y), textcoords="offset points", xytext=(4, 4), fontsize=6.5)
         front = sorted((r for r in pts if r.get("pareto")), key=lambda r: r["wall_s_per_sim_s"])
         if front:
-            ax.plot([r["wall_s_per_sim_s"] for r in front], [100.0 * r["error"] for r in front], color="tab:red",
-                    linewidth=1.2, zorder=2, label="Pareto front")
-            ax.scatter([r["wall_s_per_sim_s"] for r in front], [100.0 * r["error"] for r in front], facecolors="none",
+            ax.plot([r["wall_s_per_sim_s"] for r in front], [min(100.0 * r["error"], cap) for r in front],
+                    color="tab:red", linewidth=1.2, zorder=2, label="Pareto front")
+            ax.scatter([r["wall_s_per_sim_s"] for r in front], [min(100.0 * r["error"], cap) for r in front],
+                       facecolors="none",
                        edgecolors="tab:red", s=140, linewidths=1.2, zorder=4)
         noise = [100.0 * r["seed_scatter"] for r in pts if r.get("noise") and r.get("seed_scatter") is not None]
         if noise:
@@ -84,11 +101,19 @@ def main(argv):
         ax.set_ylabel("error against the reference (%)")
         ax.set_ylim(bottom=-1)
         ax.set_title(titles.get(case, case), fontsize=10)
-        ax.legend(fontsize=7, loc="upper right")
+        gone = [s for s in refused if s.get("case") == case]
+        if gone:
+            text = "refused (slot too small): " + ", ".join(
+                f"{'LOD off' if s.get('lod') == 'off' else 'LOD on'} s{s['particle_scale']:g} slot {s.get('granules_per_slot')}"
+                for s in gone)
+            ax.text(0.01, 0.55, text, transform=ax.transAxes, fontsize=7, color="tab:red", va="center",
+                    bbox=dict(facecolor="white", edgecolor="none", alpha=0.8))
+        ax.legend(fontsize=7, loc="best")
         ax.grid(True, which="both", alpha=0.3)
     load = data.get("load_average", ["?", "?"])
     fig.suptitle(f"sandpatch bench tradeoff ({data.get('sweep', '?')} sweep, {data.get('threads', '?')} threads, "
-                 f"load {load[0]:.1f}-{load[1]:.1f}); s = particle scale, N = t_c/dt, p = patch side / R",
+                 f"load {load[0]:.1f}-{load[1]:.1f}); s = particle scale, N = t_c/dt, p = patch side / R, "
+                 f"sub = Bullet substeps",
                  fontsize=9)
     fig.tight_layout()
     fig.savefig(png)

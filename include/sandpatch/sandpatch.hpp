@@ -336,7 +336,7 @@ class SANDPATCH_API Terrain {
 
   // ---- the step ----
   // Advances exactly dt seconds: lod, activation, dem, `substeps` rigid-body steps of
-  // dt / substeps, sleep, demotion. dt in (0, 0.1] s, substeps in [1, 1000] (the scene-file
+  // dt / substeps (a granular patch's force on a body acts over all of them), sleep, demotion. dt in (0, 0.1] s, substeps in [1, 1000] (the scene-file
   // rules); the DEM substeps itself below its critical step. A non-finite body state is an
   // error naming the body.
   Status step(double dt, int substeps = 1);

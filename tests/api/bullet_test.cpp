@@ -6,19 +6,13 @@
 #include <memory>
 #include <sandpatch/bullet.hpp>
 
+#include "tests/api/terrain_defs.hpp"
+
 namespace sp = sandpatch::api;
+using sp::test::flat_def;  // 10 m flat, no granular patches
+using sp::test::sand_def;  // 4 m flat, coarse granules (5 cm), k_n = 1e5 N/m
 
 namespace {
-
-sp::TerrainDef flat_def() {
-  sp::TerrainDef d;
-  d.procedural = "flat";
-  d.samples_x = d.samples_z = 41;
-  d.spacing = 0.25;
-  d.base_height = 1.0f;
-  d.granular_patches = false;
-  return d;
-}
 
 // A game-side body: shape, motion state and the body, kept alive together.
 struct GameBody {
@@ -112,24 +106,6 @@ TEST(ApiBullet, ShapesConvertOrAreRefusedByName) {
   ASSERT_FALSE(s.ok());
   EXPECT_EQ(s.errors().front().field, "btRigidBody.mass");
 }
-
-namespace {
-
-sp::TerrainDef sand_def() {  // as tests/api/sandpatch_test.cpp: 5 cm granules, k_n = 1e5 N/m
-  sp::TerrainDef d;
-  d.procedural = "flat";
-  d.samples_x = d.samples_z = 41;
-  d.spacing = 0.1;
-  d.base_height = 1.0f;
-  d.material.granule_radius = 0.05;
-  d.material.stiffness = 1.0e5;
-  d.slots = 1;
-  d.granules_per_slot = 6000;
-  d.patch_depth = 0.3;
-  return d;
-}
-
-}  // namespace
 
 // In place, no patches: the game's own btRigidBody (not a copy) falls under Terrain::step and
 // rests at surface + radius within 1 cm; its motion state follows; remove_body gives it back

@@ -10,20 +10,13 @@
 #include <string>
 #include <sandpatch/sandpatch.hpp>
 
+#include "tests/api/terrain_defs.hpp"
+
 namespace sp = sandpatch::api;
+using sp::test::flat_def;  // 10 m flat, no granular patches
+using sp::test::sand_def;  // 4 m flat, coarse granules (5 cm), k_n = 1e5 N/m
 
 namespace {
-
-// A small flat terrain without granular patches: creation is instant (no granule tile).
-sp::TerrainDef flat_def() {
-  sp::TerrainDef d;
-  d.procedural = "flat";
-  d.samples_x = d.samples_z = 41;
-  d.spacing = 0.25;
-  d.base_height = 1.0f;
-  d.granular_patches = false;
-  return d;
-}
 
 // The first error of `r` (which must have failed) for messages.
 template <class T>
@@ -298,23 +291,6 @@ TEST(Api, SphereRestsOnTheHeightfield) {
   s = t->body_state(*h);
   EXPECT_NEAR(s->position[0], 502.0 + 1.0 / 60.0, 1e-3);
   EXPECT_NEAR(s->linear_velocity[1], -9.81 / 60.0, 1e-3);
-}
-
-// Granular patches with coarse granules (granule_radius 5 cm, d = 10 cm, so a patch holds a
-// few hundred granules and the test takes seconds), stiff enough for a 20 kg sphere landing at
-// 2.4 m/s (k_n = 1e5 N/m, the scene files' default).
-sp::TerrainDef sand_def() {
-  sp::TerrainDef d;
-  d.procedural = "flat";
-  d.samples_x = d.samples_z = 41;
-  d.spacing = 0.1;
-  d.base_height = 1.0f;
-  d.material.granule_radius = 0.05;
-  d.material.stiffness = 1.0e5;
-  d.slots = 1;
-  d.granules_per_slot = 6000;
-  d.patch_depth = 0.3;
-  return d;
 }
 
 // A sphere dropped onto sand: a patch is requested and promoted before the sphere lands

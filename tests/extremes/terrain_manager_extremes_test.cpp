@@ -39,43 +39,42 @@ constexpr double kLedgerPct = 10.0;
 // keeps the heights under a carried body below its lowest point); nothing non-finite; the ledger of each patch closes within
 // kLedgerPct.
 TEST(ExtremesManager, PatchAtTheTerrainCornerAndEdge) {
-  Heightfield hf = flat_terrain(41, 0.1f, 1.0f);  // 4 m × 4 m
-  auto world = BulletWorld::create(hf, {0, -9.81f, 0});
-  ASSERT_TRUE(world.ok());
+  Rig rig(flat_terrain(41, 0.1f, 1.0f));  // 4 m × 4 m
+  ASSERT_TRUE(rig.ok()) << rig.error;
   std::vector<RigidBodyId> ids;
   for (auto xz : {std::pair{0.12, 0.12}, std::pair{2.0, 0.12}, std::pair{3.88, 3.88}}) {
-    auto id = (*world)->add_body(sphere(0.1f, 5.0f, {xz.first, 1.3, xz.second}));
+    auto id = rig.add_sphere(0.1f, 5.0f, {xz.first, 1.3, xz.second});
     ASSERT_TRUE(id.ok());
     ids.push_back(*id);
   }
   TerrainManagerDef def = coarse_def();
   def.slots = 3;
-  auto m = TerrainManager::create(def, hf, **world);
-  ASSERT_TRUE(m.ok()) << m.message();
-  Watch w(hf, def.patch_depth);
-  Stepper run(**m, **world, w);
-  ASSERT_TRUE(run.frames(60).ok()) << run.last_error;
-  EXPECT_EQ(count_events(**m, PatchEventKind::Promoted), 3);
-  ASSERT_TRUE(run.demote_all().ok()) << run.last_error;
-  print_summary(::testing::UnitTest::GetInstance()->current_test_info()->name(), **m, run.profile);
+  ASSERT_TRUE(rig.start(def).ok()) << rig.error;
+  TerrainManager& m = *rig.manager;
+  Watch w(rig);
+  Stepper run(rig, w);
+  ASSERT_TRUE(run.frames(60).ok()) << rig.error;
+  EXPECT_EQ(count_events(m, PatchEventKind::Promoted), 3);
+  ASSERT_TRUE(run.demote_all().ok()) << rig.error;
+  print_summary(::testing::UnitTest::GetInstance()->current_test_info()->name(), m, rig.profile);
   EXPECT_TRUE(w.finite) << w.note;
   EXPECT_GT(w.min_clearance, -def.patch_depth) << "a body went below the patch floor: " << w.note;
   for (RigidBodyId id : ids) {
-    const double c = clearance(hf, **world, id);
+    const double c = clearance(rig, id);
     EXPECT_GT(c, -0.03) << "body " << id.index << " sank below the surface (m)";
     EXPECT_LT(c, 0.05) << "body " << id.index << " did not land (m)";
     std::printf("body %d ends %.4f m above the surface\n", id.index, c);
   }
-  const auto rep = (*m)->report();
+  const auto rep = m.report();
   for (const auto& p : rep["ledger"]["patches"]) {
     const int i0 = p["region"][0], j0 = p["region"][1], ni = p["region"][2], nj = p["region"][3];
     EXPECT_GE(i0, 0);
     EXPECT_GE(j0, 0);
-    EXPECT_LE(i0 + ni, hf.samples_x());
-    EXPECT_LE(j0 + nj, hf.samples_z());
+    EXPECT_LE(i0 + ni, rig.hf.samples_x());
+    EXPECT_LE(j0 + nj, rig.hf.samples_z());
     EXPECT_LT(std::abs(p["error_pct"].get<double>()), kLedgerPct) << p.dump();
   }
-  EXPECT_TRUE(heights_finite(hf));
+  EXPECT_TRUE(heights_finite(rig.hf));
   std::printf("corner/edge: %zu patches, worst ledger %.2f %%, clearance min over run %.3f m\n",
               rep["ledger"]["patches"].size(), worst_ledger_pct(rep), w.min_clearance);
 }
@@ -84,22 +83,21 @@ TEST(ExtremesManager, PatchAtTheTerrainCornerAndEdge) {
 // of the edge samples, so a contact is predicted, but the patch request lies off the
 // terrain): the request is dropped, no patch, no error; the sphere falls on past the edge.
 TEST(ExtremesManager, BodyFallingPastTheEdgeAsksForNothing) {
-  Heightfield hf = flat_terrain(41, 0.1f, 1.0f);
-  auto world = BulletWorld::create(hf, {0, -9.81f, 0});
-  ASSERT_TRUE(world.ok());
-  auto id = (*world)->add_body(sphere(0.1f, 5.0f, {-0.16, 1.3, 2.0}));
+  Rig rig(flat_terrain(41, 0.1f, 1.0f));
+  ASSERT_TRUE(rig.ok()) << rig.error;
+  auto id = rig.add_sphere(0.1f, 5.0f, {-0.16, 1.3, 2.0});
   ASSERT_TRUE(id.ok());
   TerrainManagerDef def = coarse_def();
   def.lod.apron = 0.05;
-  auto m = TerrainManager::create(def, hf, **world);
-  ASSERT_TRUE(m.ok()) << m.message();
-  Watch w(hf, def.patch_depth);
+  ASSERT_TRUE(rig.start(def).ok()) << rig.error;
+  TerrainManager& m = *rig.manager;
+  Watch w(rig);
   w.skip_off_terrain = true;
-  Stepper run(**m, **world, w);
-  ASSERT_TRUE(run.frames(40).ok()) << run.last_error;
-  EXPECT_EQ((*m)->active_patches(), 0);
-  EXPECT_EQ((*m)->queued_requests(), 0);
-  EXPECT_LT((*world)->state(*id).position.y(), 1.0) << "it fell past the edge";
+  Stepper run(rig, w);
+  ASSERT_TRUE(run.frames(40).ok()) << rig.error;
+  EXPECT_EQ(m.active_patches(), 0);
+  EXPECT_EQ(m.queued_requests(), 0);
+  EXPECT_LT(rig.world->state(*id).position.y(), 1.0) << "it fell past the edge";
   EXPECT_TRUE(w.finite) << w.note;
 }
 
@@ -114,31 +112,30 @@ TEST(ExtremesManager, BodyFallingPastTheEdgeAsksForNothing) {
 TEST(ExtremesManager, BodiesAt100MetresPerSecond) {
   // Hills of ±10 cm: the first pre-settled tile then holds the relief of the crater the first
   // impact leaves (on flat ground a deeper tile was settled mid-run: 14 s in one frame here).
-  Heightfield hf = hills_terrain(61, 0.1f, 1.0f, 0.1f, 4.0f);  // 6 m × 6 m
-  auto world = BulletWorld::create(hf, {0, -9.81f, 0});
-  ASSERT_TRUE(world.ok());
-  RigidBodyDef down = sphere(0.1f, 5.0f, {1.5, 4.5, 3.0});
+  Rig rig(hills_terrain(61, 0.1f, 1.0f, 0.1f, 4.0f));  // 6 m × 6 m
+  ASSERT_TRUE(rig.ok()) << rig.error;
+  RigidBodyDef down = test::sphere_body(0.1f, 5.0f, {1.5, 4.5, 3.0});
   down.linear_velocity = {0, -100, 0};
-  RigidBodyDef slant = sphere(0.1f, 5.0f, {1.0, 3.6, 1.5});
+  RigidBodyDef slant = test::sphere_body(0.1f, 5.0f, {1.0, 3.6, 1.5});
   slant.linear_velocity = {70.7f, -70.7f, 0};
-  auto a = (*world)->add_body(down), b = (*world)->add_body(slant);
+  auto a = rig.world->add_body(down), b = rig.world->add_body(slant);
   ASSERT_TRUE(a.ok() && b.ok());
   TerrainManagerDef def = coarse_def();
   def.slots = 2;
-  auto m = TerrainManager::create(def, hf, **world);
-  ASSERT_TRUE(m.ok()) << m.message();
-  Watch w(hf, def.patch_depth);
+  ASSERT_TRUE(rig.start(def).ok()) << rig.error;
+  TerrainManager& m = *rig.manager;
+  Watch w(rig);
   w.skip_off_terrain = true;
-  Stepper run(**m, **world, w);
+  Stepper run(rig, w);
   int landings_on_filling = 0;
   run.each_frame = [&] {
     for (RigidBodyId id : {*a, *b}) {
-      const BodyState st = (*world)->state(id);
-      if (clearance(hf, **world, id) < st.linear_velocity.norm() / 60.0 && (*m)->filling_patches() > 0)
+      const BodyState st = rig.world->state(id);
+      if (clearance(rig, id) < st.linear_velocity.norm() / 60.0 && m.filling_patches() > 0)
         ++landings_on_filling;
     }
   };
-  ASSERT_TRUE(run.frames(60).ok()) << run.last_error;
+  ASSERT_TRUE(run.frames(60).ok()) << rig.error;
   EXPECT_EQ(landings_on_filling, 0) << "a body reached the surface while its patch was still filling";
   EXPECT_TRUE(w.finite) << w.note;
   EXPECT_GT(w.min_clearance, -def.patch_depth) << "tunnelled below the patch floor: " << w.note;
@@ -148,20 +145,20 @@ TEST(ExtremesManager, BodiesAt100MetresPerSecond) {
   // terrain (measured: 17.6 m/s, 133 rad/s). Either way it never went below the floor.
   int skipped_off = 0;
   for (RigidBodyId id : {*a, *b}) {
-    if (id.index == b->index && !on_terrain(hf, **world, id)) {
+    if (id.index == b->index && !on_terrain(rig, id)) {
       ++skipped_off;
       continue;
     }
-    const double c = clearance(hf, **world, id);
+    const double c = clearance(rig, id);
     EXPECT_GT(c, -def.patch_depth);
     EXPECT_LT(c, 0.05);  // 0.5 d: on the granules, over the heightfield of before the impact
-    EXPECT_LT((*world)->state(id).linear_velocity.norm(), 1.0) << "not at rest after 1 s (m/s)";
+    EXPECT_LT(rig.world->state(id).linear_velocity.norm(), 1.0) << "not at rest after 1 s (m/s)";
   }
-  ASSERT_TRUE(run.demote_all().ok()) << run.last_error;
-  print_summary(::testing::UnitTest::GetInstance()->current_test_info()->name(), **m, run.profile);
-  EXPECT_TRUE(heights_finite(hf));
+  ASSERT_TRUE(run.demote_all().ok()) << rig.error;
+  print_summary(::testing::UnitTest::GetInstance()->current_test_info()->name(), m, rig.profile);
+  EXPECT_TRUE(heights_finite(rig.hf));
   std::printf("100 m/s: lowest clearance %.3f m (floor at -%.2f m), final %.3f / %.3f m, 45-degree body %s\n",
-              w.min_clearance, def.patch_depth, clearance(hf, **world, *a), clearance(hf, **world, *b),
+              w.min_clearance, def.patch_depth, clearance(rig, *a), clearance(rig, *b),
               skipped_off ? "skipped off the terrain" : "at rest on it");
 }
 
@@ -184,50 +181,49 @@ TEST(ExtremesManager, BodiesAt100MetresPerSecond) {
 // patch's edge were held by the heightfield and pulled down by their sinking shell (-19.6 N
 // DEM, +39.2 N heightfield) at up to 0.1 m/s (docs/extremes.md).
 TEST(ExtremesManager, HundredBodiesAtOnceOnTwoSlots) {
-  Heightfield hf = flat_terrain(61, 0.1f, 1.0f);
-  auto world = BulletWorld::create(hf, {0, -9.81f, 0});
-  ASSERT_TRUE(world.ok());
+  Rig rig(flat_terrain(61, 0.1f, 1.0f));
+  ASSERT_TRUE(rig.ok()) << rig.error;
   std::vector<RigidBodyId> ids;
   for (int j = 0; j < 10; ++j)
     for (int i = 0; i < 10; ++i) {
-      auto id = (*world)->add_body(sphere(0.1f, 2.0f, {0.75 + 0.5 * i, 1.4, 0.75 + 0.5 * j}));
+      auto id = rig.add_sphere(0.1f, 2.0f, {0.75 + 0.5 * i, 1.4, 0.75 + 0.5 * j});
       ASSERT_TRUE(id.ok());
       ids.push_back(*id);
     }
   TerrainManagerDef def = coarse_def();
   def.slots = 2;
   def.granules_per_slot = 300;
-  auto m = TerrainManager::create(def, hf, **world);
-  ASSERT_TRUE(m.ok()) << m.message();
-  Watch w(hf, def.patch_depth);
-  Stepper run(**m, **world, w);
+  ASSERT_TRUE(rig.start(def).ok()) << rig.error;
+  TerrainManager& m = *rig.manager;
+  Watch w(rig);
+  Stepper run(rig, w);
   double drained_at = -1;
   int peak_queue = 0;
   run.each_frame = [&] {
-    peak_queue = std::max(peak_queue, (*m)->queued_requests());
-    if (drained_at < 0 && run.t > 0.5 && (*m)->queued_requests() == 0 && (*m)->active_patches() == 0) drained_at = run.t;
+    peak_queue = std::max(peak_queue, m.queued_requests());
+    if (drained_at < 0 && rig.t > 0.5 && m.queued_requests() == 0 && m.active_patches() == 0) drained_at = rig.t;
   };
-  for (int f = 0; f < 300 && drained_at < 0; ++f) ASSERT_TRUE(run.frames(1).ok()) << run.last_error;
-  const int waiting = (*m)->queued_requests();
-  EXPECT_EQ((*m)->report()["pool"]["queued_requests"].get<int>(), waiting) << "the report lists what waits";
+  for (int f = 0; f < 300 && drained_at < 0; ++f) ASSERT_TRUE(run.frames(1).ok()) << rig.error;
+  const int waiting = m.queued_requests();
+  EXPECT_EQ(m.report()["pool"]["queued_requests"].get<int>(), waiting) << "the report lists what waits";
   EXPECT_EQ(waiting, 0);
   EXPECT_GE(drained_at, 1.0) << "the queue drained (-1: not within 5 s)";
   EXPECT_LE(drained_at, 4.5) << "the queue drained (-1: not within 5 s)";
   EXPECT_GE(peak_queue, 10) << "most requests waited for a slot";
-  ASSERT_TRUE(run.demote_all().ok()) << run.last_error;
-  print_summary(::testing::UnitTest::GetInstance()->current_test_info()->name(), **m, run.profile);
+  ASSERT_TRUE(run.demote_all().ok()) << rig.error;
+  print_summary(::testing::UnitTest::GetInstance()->current_test_info()->name(), m, rig.profile);
   EXPECT_TRUE(w.finite) << w.note;
   EXPECT_GT(w.min_clearance, -def.patch_depth) << w.note;
   double lo = 1e9, hi = -1e9;
   for (RigidBodyId id : ids) {
-    lo = std::min(lo, clearance(hf, **world, id));
-    hi = std::max(hi, clearance(hf, **world, id));
+    lo = std::min(lo, clearance(rig, id));
+    hi = std::max(hi, clearance(rig, id));
   }
   EXPECT_GT(lo, -0.03);
   EXPECT_LT(hi, 0.05);
-  const auto rep = (*m)->report();
+  const auto rep = m.report();
   EXPECT_LT(std::abs(rep["ledger"]["total"]["error_pct"].get<double>()), kLedgerPct) << rep["ledger"]["total"].dump();
-  EXPECT_TRUE(heights_finite(hf));
+  EXPECT_TRUE(heights_finite(rig.hf));
   std::printf("100 bodies / 2 slots: %zu patches, peak queue %d, drained at %.2f s (-1: not), %d waiting at the end, lapsed %d, "
               "clearance [%.3f, %.3f] m, ledger %+.2f %%\n",
               rep["ledger"]["patches"].size(), peak_queue, drained_at, waiting, rep["pool"]["lapsed_requests"].get<int>(), lo, hi,
@@ -241,26 +237,26 @@ TEST(ExtremesManager, HundredBodiesAtOnceOnTwoSlots) {
 // none at all), and the sphere lands on the heightfield: rests within [surface − 2 cm,
 // surface + 1 cm], finite, heights unchanged.
 TEST(ExtremesManager, ZeroSoilDepthMakesNoParticles) {
-  Heightfield hf = hills_terrain(61, 0.1f, 1.0f, 0.1f, 2.0f);
+  Rig rig(hills_terrain(61, 0.1f, 1.0f, 0.1f, 2.0f));
+  ASSERT_TRUE(rig.ok()) << rig.error;
+  const Heightfield& hf = rig.hf;
   const Heightfield original = hf;
-  auto world = BulletWorld::create(hf, {0, -9.81f, 0});
-  ASSERT_TRUE(world.ok());
-  auto id = (*world)->add_body(sphere(0.1f, 5.0f, {2.2, 1.6, 2.7}));
+  auto id = rig.add_sphere(0.1f, 5.0f, {2.2, 1.6, 2.7});
   ASSERT_TRUE(id.ok());
   TerrainManagerDef def = coarse_def();
   def.soil_depth = 0;
-  auto m = TerrainManager::create(def, hf, **world);
-  ASSERT_TRUE(m.ok()) << m.message();
-  Watch w(hf, def.patch_depth);
-  Stepper run(**m, **world, w);
+  ASSERT_TRUE(rig.start(def).ok()) << rig.error;
+  TerrainManager& m = *rig.manager;
+  Watch w(rig);
+  Stepper run(rig, w);
   int most_granules = 0;
-  run.each_frame = [&] { most_granules = std::max(most_granules, (*m)->granules()); };
-  ASSERT_TRUE(run.frames(60).ok()) << run.last_error;
+  run.each_frame = [&] { most_granules = std::max(most_granules, m.granules()); };
+  ASSERT_TRUE(run.frames(60).ok()) << rig.error;
   EXPECT_EQ(most_granules, 0) << "granules below the bedrock (soil depth 0)";
-  ASSERT_TRUE(run.demote_all().ok()) << run.last_error;
-  print_summary(::testing::UnitTest::GetInstance()->current_test_info()->name(), **m, run.profile);
+  ASSERT_TRUE(run.demote_all().ok()) << rig.error;
+  print_summary(::testing::UnitTest::GetInstance()->current_test_info()->name(), m, rig.profile);
   EXPECT_TRUE(w.finite) << w.note;
-  const double c = clearance(hf, **world, *id);
+  const double c = clearance(rig, *id);
   EXPECT_GT(c, -0.02);
   EXPECT_LT(c, 0.01);
   double changed = 0;
@@ -282,10 +278,10 @@ TEST(ExtremesManager, ZeroSoilDepthMakesNoParticles) {
 // Before, the manager ignored bedrock_height (patches went patch_depth below the lowest
 // surface, 20 cm under the bedrock here).
 TEST(ExtremesManager, FlatBedrockMeetingTheSurface) {
-  Heightfield hf = hills_terrain(61, 0.1f, 1.0f, 0.4f, 4.0f);
+  Rig rig(hills_terrain(61, 0.1f, 1.0f, 0.4f, 4.0f));
+  ASSERT_TRUE(rig.ok()) << rig.error;
+  const Heightfield& hf = rig.hf;
   const Heightfield original = hf;
-  auto world = BulletWorld::create(hf, {0, -9.81f, 0});
-  ASSERT_TRUE(world.ok());
   int ci = 30, cj = 30;
   for (int j = 15; j <= 45; ++j)
     for (int i = 15; i <= 45; ++i)
@@ -294,35 +290,35 @@ TEST(ExtremesManager, FlatBedrockMeetingTheSurface) {
   for (int j = cj - 8; j <= cj + 8; ++j)
     for (int i = ci - 8; i <= ci + 8; ++i) lo = std::min(lo, hf.height(i, j)), hi = std::max(hi, hf.height(i, j));
   const double bedrock = lo + 0.4 * (hi - lo);  // m, local
-  auto id = (*world)->add_body(sphere(0.1f, 5.0f, {0.1 * ci, hi + 0.4, 0.1 * cj}));
+  auto id = rig.add_sphere(0.1f, 5.0f, {0.1 * ci, hi + 0.4, 0.1 * cj});
   ASSERT_TRUE(id.ok());
   TerrainManagerDef def = coarse_def();
   def.bedrock_height = bedrock;
-  auto m = TerrainManager::create(def, hf, **world);
-  ASSERT_TRUE(m.ok()) << m.message();
-  Watch w(hf, def.patch_depth);
-  Stepper run(**m, **world, w);
+  ASSERT_TRUE(rig.start(def).ok()) << rig.error;
+  TerrainManager& m = *rig.manager;
+  Watch w(rig);
+  Stepper run(rig, w);
   double lowest_centre = std::numeric_limits<double>::infinity();
   int most_granules = 0;
   std::vector<float> xyzr;
   run.each_frame = [&] {
-    (*m)->particles(xyzr);
-    most_granules = std::max(most_granules, (*m)->granules());
+    m.particles(xyzr);
+    most_granules = std::max(most_granules, m.granules());
     for (std::size_t k = 0; k < xyzr.size(); k += 4) {
       if (!std::isfinite(xyzr[k]) || !std::isfinite(xyzr[k + 1]) || !std::isfinite(xyzr[k + 2])) w.finite = false;
       lowest_centre = std::min(lowest_centre, double(xyzr[k + 1]));
     }
   };
-  ASSERT_TRUE(run.frames(60).ok()) << run.last_error;
+  ASSERT_TRUE(run.frames(60).ok()) << rig.error;
   EXPECT_GT(most_granules, 0) << "there is soil above the bedrock on the crest";
   EXPECT_GE(lowest_centre, bedrock + 0.5 * def.material.radius) << "a patch sphere below the bedrock (m, local)";
-  ASSERT_TRUE(run.demote_all().ok()) << run.last_error;
-  print_summary(::testing::UnitTest::GetInstance()->current_test_info()->name(), **m, run.profile);
+  ASSERT_TRUE(run.demote_all().ok()) << rig.error;
+  print_summary(::testing::UnitTest::GetInstance()->current_test_info()->name(), m, rig.profile);
   EXPECT_TRUE(w.finite) << w.note;
-  const double c = clearance(hf, **world, *id);
+  const double c = clearance(rig, *id);
   EXPECT_GT(c, -0.03);
   EXPECT_LT(c, 0.03);
-  EXPECT_TRUE(heights_finite(hf));
+  EXPECT_TRUE(heights_finite(rig.hf));
   double rock_raised = 0;
   int rock = 0;
   for (int j = 0; j < hf.samples_z(); ++j)
@@ -332,7 +328,7 @@ TEST(ExtremesManager, FlatBedrockMeetingTheSurface) {
         ++rock;
       }
   EXPECT_LT(rock_raised, 0.05) << "bare rock raised by the demotion (m)";
-  const auto rep = (*m)->report();
+  const auto rep = m.report();
   std::printf("flat bedrock %.3f m (surface %.3f..%.3f): %d granules at most, lowest centre %.4f m = bedrock + %.2f r, "
               "bare rock raised by %.4f m at most (%d samples), body ends %.4f m above the surface, ledger %+.2f %%\n",
               bedrock, lo, hi, most_granules, lowest_centre, (lowest_centre - bedrock) / def.material.radius, rock_raised,
@@ -347,38 +343,37 @@ TEST(ExtremesManager, FlatBedrockMeetingTheSurface) {
 // the surface (within ±3 cm); ledger within kLedgerPct. (The two-minute drain with three
 // promotions is TerrainManager.PoolExhaustionQueueDrains, heavy.)
 TEST(ExtremesManager, PoolOfOneSlot) {
-  Heightfield hf = flat_terrain(61, 0.1f, 1.0f);
-  auto world = BulletWorld::create(hf, {0, -9.81f, 0});
-  ASSERT_TRUE(world.ok());
+  Rig rig(flat_terrain(61, 0.1f, 1.0f));
+  ASSERT_TRUE(rig.ok()) << rig.error;
   std::vector<RigidBodyId> ids;
   for (double x : {1.5, 3.0, 4.5}) {
-    auto id = (*world)->add_body(sphere(0.1f, 5.0f, {x, 1.4, 3.0}));
+    auto id = rig.add_sphere(0.1f, 5.0f, {x, 1.4, 3.0});
     ASSERT_TRUE(id.ok());
     ids.push_back(*id);
   }
   TerrainManagerDef def = coarse_def();
   def.slots = 1;
-  auto m = TerrainManager::create(def, hf, **world);
-  ASSERT_TRUE(m.ok()) << m.message();
-  Watch w(hf, def.patch_depth);
-  Stepper run(**m, **world, w);
+  ASSERT_TRUE(rig.start(def).ok()) << rig.error;
+  TerrainManager& m = *rig.manager;
+  Watch w(rig);
+  Stepper run(rig, w);
   int peak_queue = 0;
   double drained_at = -1;
   run.each_frame = [&] {
-    peak_queue = std::max(peak_queue, (*m)->queued_requests());
-    if (drained_at < 0 && run.t > 0.3 && (*m)->queued_requests() == 0 && (*m)->active_patches() == 0) drained_at = run.t;
+    peak_queue = std::max(peak_queue, m.queued_requests());
+    if (drained_at < 0 && rig.t > 0.3 && m.queued_requests() == 0 && m.active_patches() == 0) drained_at = rig.t;
   };
-  for (int f = 0; f < 150 && drained_at < 0; ++f) ASSERT_TRUE(run.frames(1).ok()) << run.last_error;
+  for (int f = 0; f < 150 && drained_at < 0; ++f) ASSERT_TRUE(run.frames(1).ok()) << rig.error;
   EXPECT_GE(peak_queue, 1) << "the other two waited";
   EXPECT_GE(drained_at, 0.0) << "not drained within 2.5 s";
-  ASSERT_TRUE(run.demote_all().ok()) << run.last_error;
-  print_summary(::testing::UnitTest::GetInstance()->current_test_info()->name(), **m, run.profile);
+  ASSERT_TRUE(run.demote_all().ok()) << rig.error;
+  print_summary(::testing::UnitTest::GetInstance()->current_test_info()->name(), m, rig.profile);
   EXPECT_TRUE(w.finite) << w.note;
   for (RigidBodyId id : ids) {
-    EXPECT_GT(clearance(hf, **world, id), -0.03);
-    EXPECT_LT(clearance(hf, **world, id), 0.03);
+    EXPECT_GT(clearance(rig, id), -0.03);
+    EXPECT_LT(clearance(rig, id), 0.03);
   }
-  const auto rep = (*m)->report();
+  const auto rep = m.report();
   EXPECT_EQ(rep["pool"]["peak_slots_used"].get<int>(), 1);
   EXPECT_LT(std::abs(rep["ledger"]["total"]["error_pct"].get<double>()), kLedgerPct);
   std::printf("pool of one: peak queue %d, drained at %.2f s, %zu patches, ledger %+.2f %%\n", peak_queue, drained_at,

@@ -1,11 +1,16 @@
 // tests manager/bullet_world.cpp: fixed steps without an accumulator, heightfield contact
-// across tiles, and the double-precision world origin.
+// across tiles, the double-precision world origin, and applied forces held over a frame's
+// substeps (step_frame).
+#include <btBulletDynamicsCommon.h>
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
+#include <memory>
 
 #include "heightfield/heightfield.hpp"
 #include "manager/bullet_world.hpp"
+#include "rig.hpp"
 
 using namespace sandpatch;
 
@@ -199,4 +204,138 @@ TEST(BulletWorld, SlidingBallCrossesTilesWithoutKicks) {
   // columns 0-15 of row 2 (z 8-12 m).
   EXPECT_EQ(s.edge_maps, 16);
   EXPECT_LT(s.edge_maps, s.tiles);
+}
+
+namespace {
+
+// |a − b| / |b|.
+double rel_err(const Eigen::Vector3f& a, const Eigen::Vector3f& b) {
+  return (a.cast<double>() - b.cast<double>()).norm() / b.cast<double>().norm();
+}
+
+}  // namespace
+
+// A force and torque given by apply_force act over every substep of step_frame(dt, k): a free
+// sphere (10 kg, r = 0.5 m, 45 m above the ground) given F and τ gains Δv = (F/m + g) dt and
+// Δω = τ dt / I (I = 2/5 m r², Bullet's sphere) in one frame of dt, whatever k (1, 2, 4 and 3),
+// within 1e-6 relative (float round-off of k additions). A loop of step(dt / k) gives
+// (F/(k m) + g) dt: Bullet's stepSimulation clears applied forces after each call, and that
+// is what the terrain manager's coupling lost with more than one substep (docs/tradeoff.md).
+// Gravity is not held twice (Bullet adds it inside each step), and the next frame without
+// apply_force feels gravity only.
+TEST(BulletWorld, StepFrameHoldsAppliedForceOverEverySubstep) {
+  Heightfield hf = flat(17, 1.0f, 8);
+  const Eigen::Vector3f g(0, -9.81f, 0), F(30.0f, 70.0f, -50.0f), tau(0.2f, -0.1f, 0.3f);
+  const float dt = 1.0f / 60.0f;
+  for (int k : {1, 2, 3, 4}) {
+    SCOPED_TRACE("substeps " + std::to_string(k));
+    auto w = BulletWorld::create(hf, g);
+    ASSERT_TRUE(w.ok());
+    auto id = (*w)->add_body(ball({8, 45, 8}));
+    ASSERT_TRUE(id.ok());
+    const float m = (*w)->mass(*id);
+    const Eigen::Vector3f I = (*w)->principal_inertia(*id);
+    EXPECT_NEAR(I.x(), 0.4 * 10.0 * 0.25, 1e-5);
+    (*w)->apply_force(*id, F, tau);
+    (*w)->step_frame(dt, k);
+    const BodyState s1 = (*w)->state(*id);
+    EXPECT_LT(rel_err(s1.linear_velocity, (F / m + g) * dt), 1e-6) << s1.linear_velocity.transpose();
+    EXPECT_LT(rel_err(s1.angular_velocity, tau.cwiseQuotient(I) * dt), 1e-6) << s1.angular_velocity.transpose();
+    (*w)->step_frame(dt, k);  // no force given: gravity only, the spin kept
+    const BodyState s2 = (*w)->state(*id);
+    EXPECT_LT(rel_err(s2.linear_velocity - s1.linear_velocity, g * dt), 1e-5);
+    EXPECT_LT(rel_err(s2.angular_velocity, s1.angular_velocity), 1e-6);
+  }
+}
+
+// The same for a body the game hands over (adopt_body) with a linear factor (0.5, 1, 0) and an
+// angular factor (1, 0, 2): Bullet scales an applied force by the factors once
+// (btRigidBody::applyCentralForce, applyTorque), and step_frame holds that scaled force, not
+// the factor applied twice: Δv = f ∘ F dt / m, Δω = a ∘ τ dt / I over 3 substeps (no gravity),
+// within 1e-6 relative.
+TEST(BulletWorld, StepFrameHoldsForceOfAdoptedBodyWithFactors) {
+  Heightfield hf = flat(17, 1.0f, 8);
+  const float m = 4.0f, r = 0.3f;
+  btSphereShape shape(r);
+  btVector3 inertia;
+  shape.calculateLocalInertia(m, inertia);
+  btTransform tr;
+  tr.setIdentity();
+  tr.setOrigin(btVector3(8, 40, 8));
+  btDefaultMotionState motion(tr);
+  btRigidBody body(btRigidBody::btRigidBodyConstructionInfo(m, &motion, &shape, inertia));
+  body.setLinearFactor(btVector3(0.5f, 1.0f, 0.0f));
+  body.setAngularFactor(btVector3(1.0f, 0.0f, 2.0f));
+  {
+    auto w = BulletWorld::create(hf, Eigen::Vector3f::Zero());
+    ASSERT_TRUE(w.ok());
+    auto id = (*w)->adopt_body(&body, "game ball");
+    ASSERT_TRUE(id.ok()) << id.message();
+    const Eigen::Vector3f F(30.0f, 70.0f, -50.0f), tau(0.2f, -0.1f, 0.3f);
+    const Eigen::Vector3f f(0.5f, 1.0f, 0.0f), a(1.0f, 0.0f, 2.0f);
+    const Eigen::Vector3f I = (*w)->principal_inertia(*id);
+    const float dt = 1.0f / 60.0f;
+    (*w)->apply_force(*id, F, tau);
+    (*w)->step_frame(dt, 3);
+    const BodyState s = (*w)->state(*id);
+    EXPECT_LT(rel_err(s.linear_velocity, f.cwiseProduct(F) * dt / m), 1e-6) << s.linear_velocity.transpose();
+    EXPECT_EQ(s.linear_velocity.z(), 0.0f);
+    EXPECT_LT(rel_err(s.angular_velocity, a.cwiseProduct(tau).cwiseQuotient(I) * dt), 1e-6)
+        << s.angular_velocity.transpose();
+    EXPECT_NEAR(s.angular_velocity.y(), 0.0f, 1e-9);  // round-off of the world inertia tensor only
+  }  // the world gives the body back before it goes
+}
+
+// What the terrain manager's coupling sees: a sphere (r = 0.1 m, 5 kg) dropped from 0.3 m onto
+// a patch (the rig of tests/manager/rig.hpp: granules of r = 2.5 cm, patch 0.2 m deep) in the
+// frames of manager/run.cpp with `substeps` Bullet steps of dt / substeps (step_frame). With 1
+// and with 2 substeps the sphere comes to rest and the patch falls asleep within 5 s, the
+// sphere stays put while it sleeps (1e-4 m: hold_resting_bodies' support force held over both
+// substeps), and it rests within 1 cm (0.4 granule radius) of the 1-substep depth. Measured:
+// 7.6 mm deeper at 2 substeps. That rest is the coupling's position update, not the force:
+// after a frame Bullet puts the body at x0 + dt (v0 + (v1 − v0)(k + 1) / 2k), i.e. x0 + v1 dt at
+// one substep, which trails the shell's own path (≈ x0 + (v0 + v1) dt / 2) while the sphere is
+// braked, and k substeps move it toward the shell's. With a loop of step(dt / 2) the patch's
+// force reached the first substep only: the sphere sank 16.6 mm deeper in 5 s, Bullet left it
+// falling at 4.1 cm/s (g dt / 4) after every frame, and the patch never slept.
+TEST(BulletWorld, SubstepsKeepTheSphereOnAPatch) {
+  double rest_y[2] = {0, 0};
+  for (int k : {1, 2}) {
+    SCOPED_TRACE("substeps " + std::to_string(k));
+    test::Rig rig(test::terrain_8m("flat"));
+    ASSERT_TRUE(rig.ok()) << rig.error;
+    auto id = rig.add_sphere(0.1f, 5.0f, {4.0, 1.4, 4.0});
+    ASSERT_TRUE(id.ok());
+    auto def = test::small_manager_def();
+    def.granules_per_slot = 4000;
+    def.patch_depth = 0.2;
+    def.lod.apron = 0.2;
+    ASSERT_TRUE(rig.start(def).ok()) << rig.error;
+    TerrainManager& m = *rig.manager;
+    auto frame = [&] {  // manager/run.cpp's frame
+      Status s = m.before_bodies(rig.t, rig.dt, rig.profile);
+      if (s) rig.world->step_frame(float(rig.dt), k);
+      if (s) s = m.after_bodies(rig.t, rig.dt, rig.profile);
+      rig.t += rig.dt;
+      return s;
+    };
+    double asleep_at = -1;
+    for (int f = 0; f < 300 && asleep_at < 0; ++f) {
+      Status s = frame();
+      ASSERT_TRUE(s.ok()) << s.message();
+      asleep_at = test::last_event_time(m, PatchEventKind::Asleep);
+    }
+    ASSERT_GE(asleep_at, 0.0) << "the patch carrying a resting sphere did not fall asleep within 5 s";
+    EXPECT_FALSE(rig.world->terrain_collision(*id)) << "the particles carry the sphere";
+    const double y = rig.world->state(*id).position.y();
+    for (int f = 0; f < 60; ++f) {
+      Status s = frame();
+      ASSERT_TRUE(s.ok()) << s.message();
+    }
+    rest_y[k - 1] = rig.world->state(*id).position.y();
+    std::printf("substeps %d: asleep at %.3f s, sphere centre %.5f m, after 60 frames more %.5f m\n", k, asleep_at, y,
+                rest_y[k - 1]);
+    EXPECT_NEAR(rest_y[k - 1], y, 1e-4) << "asleep, the sphere stays put (m)";
+  }
+  EXPECT_NEAR(rest_y[1], rest_y[0], 0.01) << "2 substeps against 1 (m)";
 }

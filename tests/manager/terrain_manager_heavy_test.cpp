@@ -9,21 +9,22 @@
 #include <cstdio>
 
 #include "heightfield/heightfield.hpp"
-#include "heightfield/procedural.hpp"
 #include "manager/bullet_world.hpp"
 #include "manager/terrain_manager.hpp"
-#include "tests/manager/terrain_fixtures.hpp"
+#include "tests/manager/rig.hpp"
 
 using namespace sandpatch;
+using test::small_manager_def;
 
 // A barrel dropped on sand (issue 5): it lands on the particles (not on the heightfield),
 // comes to rest in them, and after demotion the exported heightfield has a crater under it
 // and a rim around it; the volume ledger closes within 2 %.
 TEST(TerrainManager, BarrelLeavesCraterAndRim) {
-  Heightfield hf = test::terrain_8m("flat");
+  test::Rig rig(test::terrain_8m("flat"));
+  ASSERT_TRUE(rig.ok()) << rig.error;
+  const Heightfield& hf = rig.hf;
   const Heightfield original = hf;
-  auto world = BulletWorld::create(hf, {0, -9.81f, 0});
-  ASSERT_TRUE(world.ok());
+  BulletWorld& world = *rig.world;
   RigidBodyDef barrel;
   barrel.name = "barrel";
   barrel.shape.kind = RigidShapeKind::Cylinder;
@@ -31,39 +32,28 @@ TEST(TerrainManager, BarrelLeavesCraterAndRim) {
   barrel.shape.height = 0.5f;
   barrel.mass = 200.0f;  // kg: 2040 kg/m³, denser than the bed (~1300): it sinks in
   barrel.position = {4.0, 1.0 + 0.25 + 2.5, 4.0};  // bottom 2.5 m above the sand: lands at 7 m/s
-  auto body = (*world)->add_body(barrel);
+  auto body = world.add_body(barrel);
   ASSERT_TRUE(body.ok());
-  TerrainManagerDef def;
-  def.material.radius = 0.025f;
-  def.material.stiffness = 2.0e4f;
-  def.slots = 1;
+  auto def = small_manager_def();
   def.granules_per_slot = 12000;
   def.patch_depth = 0.3;
-  def.depth_resolution = 512;
-  def.use_gl = false;
-  auto m = TerrainManager::create(def, hf, **world);
-  ASSERT_TRUE(m.ok()) << m.message();
-  Profile prof;
-  const double dt = 1.0 / 60.0;
-  double t = 0;
+  ASSERT_TRUE(rig.start(def).ok()) << rig.error;
   bool carried = false;
-  for (int f = 0; f < 150; ++f, t += dt) {
-    auto st0 = (*m)->before_bodies(t, dt, prof);
-    ASSERT_TRUE(st0.ok()) << st0.message();
-    (*world)->step(float(dt));
-    ASSERT_TRUE((*m)->after_bodies(t, dt, prof).ok());
-    carried = carried || !(*world)->terrain_collision(*body);
-  }
-  const BodyState st = (*world)->state(*body);
+  auto watch_carried = [&] {
+    carried = carried || !world.terrain_collision(*body);
+    return false;  // all 150 frames
+  };
+  ASSERT_TRUE(rig.frames(150, watch_carried).ok()) << rig.error;
+  const BodyState st = world.state(*body);
   const double d = 0.05, bottom = st.position.y() - 0.25;
   EXPECT_TRUE(carried) << "the barrel never left the heightfield for the particles";
-  EXPECT_FALSE((*world)->terrain_collision(*body)) << "at rest, the particles carry the barrel";
+  EXPECT_FALSE(world.terrain_collision(*body)) << "at rest, the particles carry the barrel";
   EXPECT_LT(st.linear_velocity.norm(), 0.05f) << "the barrel comes to rest";
   // Resting on the old heightfield would put its bottom at 1.0 m exactly.
   EXPECT_LT(bottom, 1.0 - 0.2 * d) << "the barrel sinks into the sand";
   EXPECT_GT(bottom, 1.0 - 0.3) << "the barrel stays on the particles (patch floor 0.3 m down)";
 
-  ASSERT_TRUE((*m)->demote_all(t, prof).ok());
+  ASSERT_TRUE(rig.demote_all().ok()) << rig.error;
   // Crater: the mean height change under the barrel; rim: the highest mean over rings of
   // samples around it (radii in m from the axis).
   auto ring_mean = [&](double r0, double r1) {
@@ -79,7 +69,7 @@ TEST(TerrainManager, BarrelLeavesCraterAndRim) {
   const double crater = ring_mean(0.0, 0.15), rim = std::max({ring_mean(0.25, 0.35), ring_mean(0.35, 0.45), ring_mean(0.45, 0.55)});
   EXPECT_LT(crater, -0.5 * d) << "crater depth under the barrel";
   EXPECT_GT(rim, 0.1 * d) << "rim around the barrel";
-  const auto rep = (*m)->report();
+  const auto rep = rig.manager->report();
   EXPECT_LT(std::abs(rep["ledger"]["total"]["error_pct"].get<double>()), 2.0) << rep["ledger"].dump(2);
   std::printf("barrel bottom %.3f m below the surface, crater %.2f d, rim %+.2f d, ledger %.2f %%\n", 1.0 - bottom,
               crater / d, rim / d, rep["ledger"]["total"]["error_pct"].get<double>());
@@ -94,68 +84,51 @@ TEST(TerrainManager, BarrelLeavesCraterAndRim) {
 // two resting spheres' Bullet jitter, about sleep_speed, asked again and each place got a patch
 // in turn: 3 promotions, drained at 6.9 s.)
 TEST(TerrainManager, PoolExhaustionQueueDrains) {
-  Heightfield hf = test::terrain_8m("flat");
-  auto world = BulletWorld::create(hf, {0, -9.81f, 0});
-  ASSERT_TRUE(world.ok());
+  test::Rig rig(test::terrain_8m("flat"));
+  ASSERT_TRUE(rig.ok()) << rig.error;
   std::vector<RigidBodyId> ids;
   for (double x : {2.0, 4.0, 6.0}) {
-    RigidBodyDef b;
-    b.shape.kind = RigidShapeKind::Sphere;
-    b.shape.radius = 0.1f;
-    b.mass = 5.0f;
-    b.position = {x, 1.0 + 0.1 + 0.3, 4.0};
-    auto id = (*world)->add_body(b);
+    auto id = rig.add_sphere(0.1f, 5.0f, {x, 1.0 + 0.1 + 0.3, 4.0});
     ASSERT_TRUE(id.ok());
     ids.push_back(*id);
   }
-  TerrainManagerDef def;
-  def.material.radius = 0.025f;
-  def.material.stiffness = 2.0e4f;
-  def.slots = 1;
+  auto def = small_manager_def();
   def.granules_per_slot = 4000;
   def.patch_depth = 0.2;
   def.depth_resolution = 256;
-  def.use_gl = false;
   def.idle_timeout = 0.25;  // s asleep before demotion
   def.lod.apron = 0.2;
-  auto m = TerrainManager::create(def, hf, **world);
-  ASSERT_TRUE(m.ok()) << m.message();
-  Profile prof;
-  const double dt = 1.0 / 60.0;
-  double t = 0;
+  ASSERT_TRUE(rig.start(def).ok()) << rig.error;
+  TerrainManager& m = *rig.manager;
+  double drained_at = -1;  // s: time of the frame after which the queue was empty and every slot free
   int peak_queue = 0;
-  for (int f = 0; f < 900 && t < 15.0; ++f, t += dt) {
-    auto st = (*m)->before_bodies(t, dt, prof);
-    ASSERT_TRUE(st.ok()) << st.message();
-    (*world)->step(float(dt));
-    ASSERT_TRUE((*m)->after_bodies(t, dt, prof).ok());
-    peak_queue = std::max(peak_queue, (*m)->queued_requests());
-    int demoted = 0;
-    for (const PatchEvent& e : (*m)->events()) demoted += e.kind == PatchEventKind::Demoted;
-    if (t > 1.0 && demoted >= 1 && (*m)->queued_requests() == 0 && (*m)->active_patches() == 0) break;
+  for (int f = 0; f < 900 && rig.t < 15.0 && drained_at < 0; ++f) {
+    const double t = rig.t;
+    ASSERT_TRUE(rig.frame().ok()) << rig.error;
+    peak_queue = std::max(peak_queue, m.queued_requests());
+    const int demoted = test::count_events(m, PatchEventKind::Demoted);
+    if (t > 1.0 && demoted >= 1 && m.queued_requests() == 0 && m.active_patches() == 0) drained_at = t;
   }
+  const double t = drained_at >= 0 ? drained_at : rig.t;  // s: drained, else the end of the run
   EXPECT_GE(peak_queue, 1) << "the pool of one slot never queued a request";
-  EXPECT_EQ((*m)->queued_requests(), 0) << "the queue drained by t = " << t << " s";
-  int promoted = 0, demoted = 0;
-  for (const PatchEvent& e : (*m)->events()) {
-    promoted += e.kind == PatchEventKind::Promoted;
-    demoted += e.kind == PatchEventKind::Demoted;
-  }
+  EXPECT_EQ(m.queued_requests(), 0) << "the queue drained by t = " << t << " s";
+  const int promoted = test::count_events(m, PatchEventKind::Promoted);
+  const int demoted = test::count_events(m, PatchEventKind::Demoted);
   EXPECT_GE(promoted, 1) << "the first landing place got its patch";
-  EXPECT_EQ(promoted, demoted + (*m)->active_patches());
-  EXPECT_EQ((*m)->active_patches(), 0) << "every patch demoted by t = " << t << " s";
+  EXPECT_EQ(promoted, demoted + m.active_patches());
+  EXPECT_EQ(m.active_patches(), 0) << "every patch demoted by t = " << t << " s";
   // Each landing place got a patch, or its requests lapsed when its body came to rest (a body
   // bouncing on the heightfield may ask, and lapse, more than once; measured: 1 promotion, 4
   // lapsed, drained at 2.42 s).
-  EXPECT_GE((*m)->report()["pool"]["lapsed_requests"].get<int>() + promoted, 3);
+  EXPECT_GE(m.report()["pool"]["lapsed_requests"].get<int>() + promoted, 3);
   EXPECT_LT(t, 5.0) << "drained within 5 s (measured 2.42 s)";
   for (RigidBodyId id : ids) {
-    const BodyState st = (*world)->state(id);
+    const BodyState st = rig.world->state(id);
     EXPECT_NEAR(st.position.y(), 1.0 + 0.1, 0.1) << "a sphere rests on the surface (heightfield or particles) within 2 d";
     EXPECT_LT(st.linear_velocity.norm(), 0.05f);
   }
   std::printf("pool of 1: %d promotions, %d demotions, %d lapsed, peak queue %d, drained (queue empty, slot free) at t = %.2f s\n",
-              promoted, demoted, (*m)->report()["pool"]["lapsed_requests"].get<int>(), peak_queue, t);
+              promoted, demoted, m.report()["pool"]["lapsed_requests"].get<int>(), peak_queue, t);
 }
 
 // A body driven across a patch's edge (issue 5; Leach & Marais left it open): a sphere
@@ -164,49 +137,33 @@ TEST(TerrainManager, PoolExhaustionQueueDrains) {
 // the same frame), so the sphere stays on particles in every frame, and the volume ledger
 // of all patches closes.
 TEST(TerrainManager, BodyDrivenAcrossPatchEdgeStaysOnParticles) {
-  Heightfield hf = test::terrain_8m("flat");
-  auto world = BulletWorld::create(hf, {0, -9.81f, 0});
-  ASSERT_TRUE(world.ok());
-  RigidBodyDef b;
-  b.shape.kind = RigidShapeKind::Sphere;
-  b.shape.radius = 0.1f;
-  b.mass = 5.0f;
-  b.position = {3.0, 1.25, 4.0};
-  auto id = (*world)->add_body(b);
+  test::Rig rig(test::terrain_8m("flat"));
+  ASSERT_TRUE(rig.ok()) << rig.error;
+  BulletWorld& world = *rig.world;
+  auto id = rig.add_sphere(0.1f, 5.0f, {3.0, 1.25, 4.0});
   ASSERT_TRUE(id.ok());
-  TerrainManagerDef def;
-  def.material.radius = 0.025f;
-  def.material.stiffness = 2.0e4f;
-  def.slots = 1;
+  auto def = small_manager_def();
   def.granules_per_slot = 12000;
   def.patch_depth = 0.2;
   def.depth_resolution = 256;
-  def.use_gl = false;
   def.lod.apron = 0.2;
-  auto m = TerrainManager::create(def, hf, **world);
-  ASSERT_TRUE(m.ok()) << m.message();
-  Profile prof;
-  const double dt = 1.0 / 60.0;
-  double t = 0;
+  ASSERT_TRUE(rig.start(def).ok()) << rig.error;
   int off_particles = 0, driven = 0;
-  for (int f = 0; f < 240; ++f, t += dt) {
-    if (t >= 1.0) {  // landed and settled: drive it
-      BodyState st = (*world)->state(*id);
+  for (int f = 0; f < 240; ++f) {
+    if (rig.t >= 1.0) {  // landed and settled: drive it
+      BodyState st = world.state(*id);
       st.linear_velocity = {0.4f, st.linear_velocity.y(), 0.0f};
-      (*world)->set_state(*id, st);
+      world.set_state(*id, st);
       ++driven;
-      off_particles += (*world)->terrain_collision(*id);
+      off_particles += world.terrain_collision(*id);
     }
-    auto s = (*m)->before_bodies(t, dt, prof);
-    ASSERT_TRUE(s.ok()) << s.message();
-    (*world)->step(float(dt));
-    ASSERT_TRUE((*m)->after_bodies(t, dt, prof).ok());
+    ASSERT_TRUE(rig.frame().ok()) << rig.error;
   }
-  const BodyState st = (*world)->state(*id);
+  const BodyState st = world.state(*id);
   EXPECT_GT(st.position.x(), 3.0 + 0.8) << "the sphere was driven past the first patch's edge";
   EXPECT_EQ(off_particles, 0) << "frames the sphere spent on the heightfield instead of particles, of " << driven;
-  ASSERT_TRUE((*m)->demote_all(t, prof).ok());
-  const auto rep = (*m)->report();
+  ASSERT_TRUE(rig.demote_all().ok()) << rig.error;
+  const auto rep = rig.manager->report();
   EXPECT_GE(rep["pool"]["extensions"].get<int>(), 1);
   EXPECT_LT(std::abs(rep["ledger"]["total"]["error_pct"].get<double>()), 3.0) << rep["ledger"].dump(2);
   std::printf("driven: x %.2f m, %d extensions, %d of %d frames off particles, ledger %.2f %%\n", st.position.x(),

@@ -7,32 +7,12 @@
 #include <cstdio>
 
 #include "heightfield/heightfield.hpp"
-#include "heightfield/procedural.hpp"
-#include "manager/bullet_world.hpp"
 #include "manager/depth_conversion.hpp"
 #include "manager/terrain_manager.hpp"
-#include "tests/manager/terrain_fixtures.hpp"
+#include "tests/manager/rig.hpp"
 
 using namespace sandpatch;
-
-namespace {
-
-// Gentle hills: 8 m x 8 m at 0.1 m spacing, ±5 cm over a 4 m period.
-Heightfield hills() { return test::terrain_8m("hills"); }
-
-TerrainManagerDef small_def() {
-  TerrainManagerDef d;
-  d.material.radius = 0.025f;
-  d.material.stiffness = 2.0e4f;
-  d.slots = 1;
-  d.granules_per_slot = 6000;
-  d.patch_depth = 0.25;
-  d.depth_resolution = 512;
-  d.use_gl = false;  // the CPU depth render (same contract; the GL path is tested in depth_conversion_test)
-  return d;
-}
-
-}  // namespace
+using test::small_manager_def;
 
 // Round trip with nothing disturbing the patch (issue 5): heightfield -> particles ->
 // heightfield. d = 2 r = 5 cm, heightfield spacing 10 cm (2 d).
@@ -43,37 +23,28 @@ TerrainManagerDef small_def() {
 // renders the fill too and keeps the old heights where the surface did not move
 // (depth_conversion.hpp RenderBaseline; docs/manager.md "Round trip").
 TEST(TerrainManager, RoundTripWithoutDisturbance) {
-  Heightfield hf = hills();
+  test::Rig rig(test::terrain_8m("hills"));
+  ASSERT_TRUE(rig.ok()) << rig.error;
+  rig.step_bodies = false;  // no bodies
+  const Heightfield& hf = rig.hf;
   const Heightfield original = hf;
-  auto world = BulletWorld::create(hf, {0, -9.81f, 0});
-  ASSERT_TRUE(world.ok());
-  auto m = TerrainManager::create(small_def(), hf, **world);
-  ASSERT_TRUE(m.ok()) << m.message();
-  Profile prof;
-  (*m)->request_patch(3.0, 3.0, 4.6, 4.6, 0.0);
-  const double dt = 1.0 / 60.0;
-  double t = 0;
-  for (int f = 0; f < 60 && (*m)->ready_patches() == 0; ++f, t += dt) {
-    ASSERT_TRUE((*m)->before_bodies(t, dt, prof).ok());
-    ASSERT_TRUE((*m)->after_bodies(t, dt, prof).ok());
-  }
-  ASSERT_EQ((*m)->ready_patches(), 1);
-  EXPECT_GT((*m)->granules(), 500);
+  ASSERT_TRUE(rig.start(small_manager_def()).ok()) << rig.error;
+  TerrainManager& m = *rig.manager;
+  m.request_patch(3.0, 3.0, 4.6, 4.6, 0.0);
+  ASSERT_TRUE(rig.frames(60, [&] { return m.ready_patches() != 0; }).ok()) << rig.error;
+  ASSERT_EQ(m.ready_patches(), 1);
+  EXPECT_GT(m.granules(), 500);
   std::vector<float> start;
-  (*m)->particles(start);
-  for (int f = 0; f < 60; ++f, t += dt) {
-    auto st = (*m)->before_bodies(t, dt, prof);
-    ASSERT_TRUE(st.ok()) << st.message();
-    ASSERT_TRUE((*m)->after_bodies(t, dt, prof).ok());
-  }
+  m.particles(start);
+  ASSERT_TRUE(rig.frames(60).ok()) << rig.error;
   std::vector<float> end;
-  (*m)->particles(end);
+  m.particles(end);
   ASSERT_EQ(start.size(), end.size());
   const double d = 0.05;
   // The surface, as the demotion renders it (spheres grown by the probe, lowered by it), at
   // the heightfield samples inside the requested rectangle: RMS change over the first second.
   auto surface = [&](std::vector<float> xyzr) {
-    const float probe = float(small_def().surface_probe) * 0.025f;
+    const float probe = float(small_manager_def().surface_probe) * 0.025f;
     for (std::size_t k = 3; k < xyzr.size(); k += 4) xyzr[k] += probe;
     HeightImage img = render_heights_cpu(xyzr.data(), xyzr.size() / 4, 512, 2.5f, 2.5f, 5.1f, 5.1f, 0.0f);
     lower_by_probe(img, 0.0f, probe);
@@ -89,8 +60,8 @@ TEST(TerrainManager, RoundTripWithoutDisturbance) {
   EXPECT_LT(std::sqrt(moved2 / double(s0.size())), 0.1 * d)
       << "surface motion (issue target 0.1 d); spheres moved " << std::sqrt(spheres2 / double(start.size() / 4)) / d << " d RMS";
 
-  ASSERT_TRUE((*m)->demote_all(t, prof).ok());
-  const auto rep = (*m)->report();
+  ASSERT_TRUE(rig.demote_all().ok()) << rig.error;
+  const auto rep = m.report();
   ASSERT_EQ(rep["ledger"]["patches"].size(), 1u);
   // The region of samples the patch covered (rounded out to whole tile periods).
   const auto& reg = rep["ledger"]["patches"][0]["region"];
@@ -127,49 +98,45 @@ TEST(TerrainManager, RoundTripWithoutDisturbance) {
 // Pool exhaustion: a second request waits in the queue while the only slot is busy, and is
 // served after the first patch is demoted.
 TEST(TerrainManager, QueueWaitsForAFreeSlot) {
-  Heightfield hf = hills();
-  auto world = BulletWorld::create(hf, {0, -9.81f, 0});
-  ASSERT_TRUE(world.ok());
-  auto def = small_def();
+  test::Rig rig(test::terrain_8m("hills"));
+  ASSERT_TRUE(rig.ok()) << rig.error;
+  auto def = small_manager_def();
   def.granules_per_slot = 3000;
-  auto m = TerrainManager::create(def, hf, **world);
-  ASSERT_TRUE(m.ok()) << m.message();
-  Profile prof;
-  (*m)->request_patch(1.0, 1.0, 2.0, 2.0, 0.0);
-  (*m)->request_patch(5.0, 5.0, 6.0, 6.0, 0.0);
-  ASSERT_TRUE((*m)->before_bodies(0, 1.0 / 60, prof).ok());
-  EXPECT_EQ((*m)->active_patches(), 1);
-  EXPECT_EQ((*m)->queued_requests(), 1);
-  ASSERT_TRUE((*m)->demote_all(0.1, prof).ok());
-  ASSERT_TRUE((*m)->before_bodies(0.1, 1.0 / 60, prof).ok());
-  EXPECT_EQ((*m)->active_patches(), 1);
-  EXPECT_EQ((*m)->queued_requests(), 0);
-  EXPECT_EQ((*m)->report()["pool"]["peak_queued_requests"].get<int>(), 1);
+  ASSERT_TRUE(rig.start(def).ok()) << rig.error;
+  TerrainManager& m = *rig.manager;
+  m.request_patch(1.0, 1.0, 2.0, 2.0, 0.0);
+  m.request_patch(5.0, 5.0, 6.0, 6.0, 0.0);
+  ASSERT_TRUE(m.before_bodies(0, 1.0 / 60, rig.profile).ok());
+  EXPECT_EQ(m.active_patches(), 1);
+  EXPECT_EQ(m.queued_requests(), 1);
+  ASSERT_TRUE(m.demote_all(0.1, rig.profile).ok());
+  ASSERT_TRUE(m.before_bodies(0.1, 1.0 / 60, rig.profile).ok());
+  EXPECT_EQ(m.active_patches(), 1);
+  EXPECT_EQ(m.queued_requests(), 0);
+  EXPECT_EQ(m.report()["pool"]["peak_queued_requests"].get<int>(), 1);
 }
 
 // steps_per_contact reaches every slot's DEM (dt <= t_c / N); out of [2, 1000] it is refused
 // naming the field.
 TEST(TerrainManager, StepsPerContactReachesEverySlot) {
-  Heightfield hf = hills();
-  auto world = BulletWorld::create(hf, {0, -9.81f, 0});
-  ASSERT_TRUE(world.ok());
-  auto def = small_def();
+  test::Rig rig(test::terrain_8m("hills"));
+  ASSERT_TRUE(rig.ok()) << rig.error;
+  auto def = small_manager_def();
   def.slots = 2;
   def.granules_per_slot = 3000;
   def.steps_per_contact = 10;
-  auto m = TerrainManager::create(def, hf, **world);
-  ASSERT_TRUE(m.ok()) << m.message();
-  Profile prof;
-  (*m)->request_patch(1.0, 1.0, 2.0, 2.0, 0.0);
-  (*m)->request_patch(5.0, 5.0, 6.0, 6.0, 0.0);
-  ASSERT_TRUE((*m)->before_bodies(0, 1.0 / 60, prof).ok());
-  const auto live = (*m)->patches();
+  ASSERT_TRUE(rig.start(def).ok()) << rig.error;
+  TerrainManager& m = *rig.manager;
+  m.request_patch(1.0, 1.0, 2.0, 2.0, 0.0);
+  m.request_patch(5.0, 5.0, 6.0, 6.0, 0.0);
+  ASSERT_TRUE(m.before_bodies(0, 1.0 / 60, rig.profile).ok());
+  const auto live = m.patches();
   ASSERT_EQ(live.size(), 2u);
   for (const auto& p : live) EXPECT_EQ(p.steps_per_contact, 10);
-  EXPECT_EQ((*m)->report()["pool"]["steps_per_contact"].get<int>(), 10);
+  EXPECT_EQ(m.report()["pool"]["steps_per_contact"].get<int>(), 10);
   for (int bad : {1, 1001}) {
     def.steps_per_contact = bad;
-    auto r = TerrainManager::create(def, hf, **world);
+    auto r = TerrainManager::create(def, rig.hf, *rig.world);
     ASSERT_FALSE(r.ok());
     EXPECT_EQ(r.error().field, "steps_per_contact");
     EXPECT_NE(r.error().allowed.find("[2, 1000]"), std::string::npos) << r.message();
@@ -182,35 +149,26 @@ TEST(TerrainManager, StepsPerContactReachesEverySlot) {
 // (x_world = origin + s·x_sim), its ledger counts granules of its own size, and a patch keeps
 // its scale when the camera moves.
 TEST(TerrainManager, ParticleScaleByDistanceFromTheCamera) {
-  Heightfield hf = hills();
-  auto world = BulletWorld::create(hf, {0, -9.81f, 0});
-  ASSERT_TRUE(world.ok());
-  auto def = small_def();
+  test::Rig rig(test::terrain_8m("hills"));
+  ASSERT_TRUE(rig.ok()) << rig.error;
+  rig.step_bodies = false;  // no bodies
+  auto def = small_manager_def();
   def.slots = 2;
   def.scale_bands = {{3.0, 1.0}, {20.0, 2.0}};
   def.camera = {0.5, 1.5, 0.5};
-  auto m = TerrainManager::create(def, hf, **world);
-  ASSERT_TRUE(m.ok()) << m.message();
-  Profile prof;
-  (*m)->request_patch(1.0, 1.0, 1.6, 1.6, 0.0);  // centre 1.2 m from the camera: band 1
-  (*m)->request_patch(5.5, 5.5, 6.1, 6.1, 0.0);  // 7.5 m: band 2
-  const double dt = 1.0 / 60.0;
-  double t = 0;
-  for (int f = 0; f < 30; ++f, t += dt) {
-    ASSERT_TRUE((*m)->before_bodies(t, dt, prof).ok());
-    ASSERT_TRUE((*m)->after_bodies(t, dt, prof).ok());
-  }
-  (*m)->set_camera({5.8, 1.5, 5.8});  // next to the far patch now: live patches keep their scale
-  for (int f = 0; f < 30; ++f, t += dt) {
-    ASSERT_TRUE((*m)->before_bodies(t, dt, prof).ok());
-    ASSERT_TRUE((*m)->after_bodies(t, dt, prof).ok());
-  }
-  const auto live = (*m)->patches();
+  ASSERT_TRUE(rig.start(def).ok()) << rig.error;
+  TerrainManager& m = *rig.manager;
+  m.request_patch(1.0, 1.0, 1.6, 1.6, 0.0);  // centre 1.2 m from the camera: band 1
+  m.request_patch(5.5, 5.5, 6.1, 6.1, 0.0);  // 7.5 m: band 2
+  ASSERT_TRUE(rig.frames(30).ok()) << rig.error;
+  m.set_camera({5.8, 1.5, 5.8});  // next to the far patch now: live patches keep their scale
+  ASSERT_TRUE(rig.frames(30).ok()) << rig.error;
+  const auto live = m.patches();
   ASSERT_EQ(live.size(), 2u);
   const double expect_scale[2] = {1.0, 2.0};
   std::vector<float> xyzr;
-  (*m)->particles(xyzr);
-  const auto groups = (*m)->particle_groups();
+  m.particles(xyzr);
+  const auto groups = m.particle_groups();
   ASSERT_EQ(groups.size(), 2u);
   std::size_t first = 0;
   double bulk_density[2] = {0, 0};
@@ -239,8 +197,8 @@ TEST(TerrainManager, ParticleScaleByDistanceFromTheCamera) {
     EXPECT_GT(top, p.origin.y() + 0.5 * def.patch_depth);
     first += groups[std::size_t(k)].first;
   }
-  ASSERT_TRUE((*m)->demote_all(t, prof).ok());
-  const auto rep = (*m)->report();
+  ASSERT_TRUE(rig.demote_all().ok()) << rig.error;
+  const auto rep = m.report();
   ASSERT_EQ(rep["ledger"]["patches"].size(), 2u);
   for (int k = 0; k < 2; ++k) {
     const auto& l = rep["ledger"]["patches"][std::size_t(k)];
@@ -261,16 +219,13 @@ TEST(TerrainManager, ParticleScaleByDistanceFromTheCamera) {
 
 // A patch larger than a slot holds is refused with the capacity to raise named.
 TEST(TerrainManager, TooSmallSlotNamesTheCapacity) {
-  Heightfield hf = hills();
-  auto world = BulletWorld::create(hf, {0, -9.81f, 0});
-  ASSERT_TRUE(world.ok());
-  auto def = small_def();
+  test::Rig rig(test::terrain_8m("hills"));
+  ASSERT_TRUE(rig.ok()) << rig.error;
+  auto def = small_manager_def();
   def.granules_per_slot = 100;
-  auto m = TerrainManager::create(def, hf, **world);
-  ASSERT_TRUE(m.ok()) << m.message();
-  Profile prof;
-  (*m)->request_patch(1.0, 1.0, 4.0, 4.0, 0.0);
-  auto st = (*m)->before_bodies(0, 1.0 / 60, prof);
+  ASSERT_TRUE(rig.start(def).ok()) << rig.error;
+  rig.manager->request_patch(1.0, 1.0, 4.0, 4.0, 0.0);
+  auto st = rig.manager->before_bodies(0, 1.0 / 60, rig.profile);
   ASSERT_FALSE(st.ok());
   EXPECT_NE(st.message().find("granules_per_slot"), std::string::npos) << st.message();
 }
@@ -281,70 +236,51 @@ TEST(TerrainManager, TooSmallSlotNamesTheCapacity) {
 // contact, one surface granule at a side kept moving at 0.02-0.05 m/s for 4 s and the patch
 // never slept. Asleep, the patch's state no longer changes.
 TEST(TerrainManager, UntouchedPatchFallsAsleep) {
-  Heightfield hf = hills();
-  auto world = BulletWorld::create(hf, {0, -9.81f, 0});
-  ASSERT_TRUE(world.ok());
-  auto m = TerrainManager::create(small_def(), hf, **world);
-  ASSERT_TRUE(m.ok()) << m.message();
-  Profile prof;
-  (*m)->request_patch(3.0, 3.0, 3.6, 3.6, 0.0);
-  const double dt = 1.0 / 60.0;
-  double t = 0, asleep_at = -1;
-  for (int f = 0; f < 90 && asleep_at < 0; ++f, t += dt) {
-    ASSERT_TRUE((*m)->before_bodies(t, dt, prof).ok());
-    ASSERT_TRUE((*m)->after_bodies(t, dt, prof).ok());
-    for (const PatchEvent& e : (*m)->events())
-      if (e.kind == PatchEventKind::Asleep) asleep_at = e.time;
-  }
+  test::Rig rig(test::terrain_8m("hills"));
+  ASSERT_TRUE(rig.ok()) << rig.error;
+  rig.step_bodies = false;  // no bodies
+  ASSERT_TRUE(rig.start(small_manager_def()).ok()) << rig.error;
+  TerrainManager& m = *rig.manager;
+  m.request_patch(3.0, 3.0, 3.6, 3.6, 0.0);
+  double asleep_at = -1;
+  auto asleep = [&] {  // after each frame: stop once the patch fell asleep
+    asleep_at = test::last_event_time(m, PatchEventKind::Asleep);
+    return asleep_at >= 0;
+  };
+  ASSERT_TRUE(rig.frames(90, asleep).ok()) << rig.error;
   ASSERT_GE(asleep_at, 0.0) << "the patch did not fall asleep within 1.5 s";
   EXPECT_GE(asleep_at, 0.5) << "it cannot sleep before sleep_time";
-  const std::uint64_t h = (*m)->state_hash();
-  for (int f = 0; f < 10; ++f, t += dt) {
-    ASSERT_TRUE((*m)->before_bodies(t, dt, prof).ok());
-    ASSERT_TRUE((*m)->after_bodies(t, dt, prof).ok());
-  }
-  EXPECT_EQ((*m)->state_hash(), h) << "an asleep patch does not change";
+  const std::uint64_t h = m.state_hash();
+  ASSERT_TRUE(rig.frames(10).ok()) << rig.error;
+  EXPECT_EQ(m.state_hash(), h) << "an asleep patch does not change";
 }
 
 // A patch carrying a sphere at rest falls asleep too, and the sphere stays where it came to
 // rest while the patch sleeps (Bullet gets its weight back as the support force). Before,
 // the shell's state was set from Bullet every frame, which woke the patch each time.
 TEST(TerrainManager, PatchWithRestingBodyFallsAsleep) {
-  Heightfield hf = test::terrain_8m("flat");
-  auto world = BulletWorld::create(hf, {0, -9.81f, 0});
-  ASSERT_TRUE(world.ok());
-  RigidBodyDef b;
-  b.shape.kind = RigidShapeKind::Sphere;
-  b.shape.radius = 0.1f;
-  b.mass = 5.0f;
-  b.position = {4.0, 1.4, 4.0};
-  auto id = (*world)->add_body(b);
+  test::Rig rig(test::terrain_8m("flat"));
+  ASSERT_TRUE(rig.ok()) << rig.error;
+  auto id = rig.add_sphere(0.1f, 5.0f, {4.0, 1.4, 4.0});
   ASSERT_TRUE(id.ok());
-  auto def = small_def();
+  auto def = small_manager_def();
   def.granules_per_slot = 4000;
   def.patch_depth = 0.2;
   def.lod.apron = 0.2;
-  auto m = TerrainManager::create(def, hf, **world);
-  ASSERT_TRUE(m.ok()) << m.message();
-  Profile prof;
-  const double dt = 1.0 / 60.0;
-  double t = 0, asleep_at = -1;
-  for (int f = 0; f < 150 && asleep_at < 0; ++f, t += dt) {
-    ASSERT_TRUE((*m)->before_bodies(t, dt, prof).ok());
-    (*world)->step(float(dt));
-    ASSERT_TRUE((*m)->after_bodies(t, dt, prof).ok());
-    for (const PatchEvent& e : (*m)->events())
-      if (e.kind == PatchEventKind::Asleep) asleep_at = e.time;
-  }
+  ASSERT_TRUE(rig.start(def).ok()) << rig.error;
+  TerrainManager& m = *rig.manager;
+  BulletWorld& world = *rig.world;
+  double asleep_at = -1;
+  auto asleep = [&] {  // after each frame: stop once the patch fell asleep
+    asleep_at = test::last_event_time(m, PatchEventKind::Asleep);
+    return asleep_at >= 0;
+  };
+  ASSERT_TRUE(rig.frames(150, asleep).ok()) << rig.error;
   ASSERT_GE(asleep_at, 0.0) << "the patch carrying a resting sphere did not fall asleep within 2.5 s";
-  EXPECT_FALSE((*world)->terrain_collision(*id)) << "the particles carry the sphere";
-  const double y = (*world)->state(*id).position.y();
+  EXPECT_FALSE(world.terrain_collision(*id)) << "the particles carry the sphere";
+  const double y = world.state(*id).position.y();
   EXPECT_LT(y, 1.0 + 0.1) << "the sphere sank into the sand, it does not rest on the old heightfield";
-  for (int f = 0; f < 60; ++f, t += dt) {
-    ASSERT_TRUE((*m)->before_bodies(t, dt, prof).ok());
-    (*world)->step(float(dt));
-    ASSERT_TRUE((*m)->after_bodies(t, dt, prof).ok());
-  }
-  EXPECT_NEAR((*world)->state(*id).position.y(), y, 1e-4) << "asleep, the sphere stays put (m)";
-  for (const PatchEvent& e : (*m)->events()) EXPECT_NE(e.kind, PatchEventKind::Woke);
+  ASSERT_TRUE(rig.frames(60).ok()) << rig.error;
+  EXPECT_NEAR(world.state(*id).position.y(), y, 1e-4) << "asleep, the sphere stays put (m)";
+  for (const PatchEvent& e : m.events()) EXPECT_NE(e.kind, PatchEventKind::Woke);
 }

@@ -1,0 +1,208 @@
+// The drop case of `sandpatch bench tradeoff` (bench/tradeoff_drop.hpp): a Bullet sphere onto
+// a flat heightfield terrain through the TerrainManager, the crater read from the heightfield.
+#include "bench/tradeoff_drop.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <numbers>
+
+#include "bench/bench_tradeoff.hpp"
+#include "heightfield/heightfield.hpp"
+#include "heightfield/procedural.hpp"
+#include "manager/bullet_world.hpp"
+#include "manager/profile.hpp"
+#include "manager/terrain_manager.hpp"
+#include "particles/dem.hpp"
+
+namespace sandpatch {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+// The DEM substep and contact time a slot of this definition runs at for one frame: a probe
+// simulation with the slot's material, scale and N (TerrainManager's sim_def), no granules.
+void probe_dt(const DropDef& d, const TradeoffKnobs& k, double* dt, double* tc) {
+  *dt = *tc = 0;
+  SimulationDef sd;
+  sd.max_bodies = 4;
+  sd.max_particles = 16;
+  sd.particle_radius = d.granule_radius;
+  sd.material.density = d.granule_density;
+  sd.material.normal_stiffness = d.stiffness;
+  sd.material.restitution = d.restitution;
+  sd.material.friction = d.friction;
+  sd.accuracy_steps_per_contact = k.steps_per_contact;
+  sd.max_substeps = 100000;
+  sd.max_overlap_fraction = 0;
+  auto sc = ParticleScale::create(k.particle_scale);
+  if (!sc) return;
+  sd.scale = *sc;
+  auto sim = Simulation::create(sd);
+  if (!sim) return;
+  if (!sim->step(d.frame_dt)) return;
+  *dt = sim->last_step().substep_dt;
+  *tc = sim->contact_time();
+}
+
+}  // namespace
+
+Result<DropResult> measure_drop(const DropDef& d, const TradeoffKnobs& k) {
+  auto bad = [](const std::string& f, double v, const char* allowed) {
+    return Error{"", "DropDef." + f, format_number(v), allowed, ""};
+  };
+  if (!(d.sphere_radius > 0)) return bad("sphere_radius", d.sphere_radius, "must be > 0 (m)");
+  if (!(d.sphere_density > 0)) return bad("sphere_density", d.sphere_density, "must be > 0 (kg/m^3)");
+  if (!(d.drop_height >= 0)) return bad("drop_height", d.drop_height, "must be >= 0 (m)");
+  if (!(d.spacing > 0)) return bad("spacing", d.spacing, "must be > 0 (m)");
+  if (!(d.terrain_side >= 4 * d.sphere_radius)) return bad("terrain_side", d.terrain_side, "must be >= 4 sphere radii (m)");
+  if (!(d.run_seconds > 0)) return bad("run_seconds", d.run_seconds, "must be > 0 (s)");
+  if (!(d.frame_dt > 0)) return bad("frame_dt", d.frame_dt, "must be > 0 (s)");
+  if (!(d.patch_depth > 0)) return bad("patch_depth", d.patch_depth, "must be > 0 (m)");
+  if (k.substeps < 1) return bad("knobs.substeps", k.substeps, "must be >= 1");
+  if (k.lod && !(k.lod_apron >= 0)) return bad("knobs.lod_apron", k.lod_apron, "must be >= 0 (m)");
+  if (k.backend != "cpu" && k.backend != "gl") return Error{"", "DropDef.knobs.backend", k.backend, "cpu or gl", ""};
+
+  // the terrain
+  HeightfieldDef g;
+  g.samples_x = g.samples_z = int(std::lround(d.terrain_side / d.spacing)) + 1;
+  g.spacing = d.spacing;
+  ProceduralHeightsDef p;
+  p.kind = "flat";
+  p.height = float(d.surface_height);
+  auto hf = make_procedural(g, p);
+  if (!hf) return hf.errors();
+  const Heightfield original = *hf;
+  auto world = BulletWorld::create(*hf, {0, -9.81f, 0});
+  if (!world) return world.errors();
+
+  // the manager, as manager_def (manager/run.cpp) makes it from a scene, with the case's knobs
+  TerrainManagerDef md;
+  md.material.radius = d.granule_radius;
+  md.material.density = d.granule_density;
+  md.material.friction = d.friction;
+  md.material.restitution = d.restitution;
+  md.material.stiffness = d.stiffness;
+  md.particle_scale = k.particle_scale;
+  md.steps_per_contact = k.steps_per_contact;
+  md.slots = 1;
+  md.granules_per_slot = k.granules_per_slot;
+  md.patch_depth = d.patch_depth;
+  md.soil_depth = 2.0;
+  md.idle_timeout = 1e9;  // no demotion before demote_all, LOD on or off
+  md.lod.apron = k.lod ? k.lod_apron : 0.2;  // LOD off: the whole-terrain patch covers every prediction
+  md.fill_granules_per_frame = 1 << 20;  // the whole patch in its first frame, LOD on and off alike
+  md.use_gl = false;                     // the CPU depth render (same contract, no GL context needed)
+  md.backend = k.backend;
+  md.threads = d.threads;
+  md.seed = k.seed;
+  md.tile_cache = d.tile_cache;
+  const auto t0 = Clock::now();
+  auto made = TerrainManager::create(md, *hf, **world);
+  if (!made) return made.errors();
+  TerrainManager& m = **made;
+  DropResult out;
+  out.setup_seconds = seconds_since(t0);
+  probe_dt(d, k, &out.dt, &out.contact_time);
+
+  // the sphere
+  const double R = d.sphere_radius, c = 0.5 * d.terrain_side;
+  RigidBodyDef b;
+  b.name = "sphere";
+  b.shape.kind = RigidShapeKind::Sphere;
+  b.shape.radius = float(R);
+  b.mass = float(d.sphere_density * 4.0 / 3.0 * std::numbers::pi * R * R * R);
+  b.position = {c, d.surface_height + d.drop_height + R, c};
+  auto body = (*world)->add_body(b);
+  if (!body) return body.errors();
+
+  // the frame of manager/run.cpp
+  Profile prof;
+  const double dt = d.frame_dt;
+  const int frames = int(std::lround(d.run_seconds / dt));
+  if (!k.lod) m.request_patch(0, 0, d.terrain_side, d.terrain_side, 0.0);
+  const auto t1 = Clock::now();
+  double t = 0;
+  for (int f = 0; f < frames; ++f, t = f * dt) {
+    Status st = m.before_bodies(t, dt, prof);
+    if (st) {
+      // run.cpp's Bullet steps: the patch's force given by apply_force acts over every substep
+      (*world)->step_frame(float(dt), k.substeps);
+      st = m.after_bodies(t, dt, prof);
+    }
+    if (!st) {
+      // A patch larger than the slot is refused by the manager (promote(): the error names
+      // simulation.pool.granules_per_slot and the granules the patch needs): the outcome of
+      // that setting, not a failure of the bench.
+      if (st.error().field.find("granules_per_slot") == std::string::npos) return st.errors();
+      out.refused = true;
+      out.refusal = st.message();
+      out.refused_at = t;
+      out.wall_seconds = seconds_since(t1);
+      out.pool_bytes = m.pool_bytes();
+      return out;
+    }
+    out.granules = std::max(out.granules, m.granules());
+  }
+  bool asleep = m.active_patches() > 0;
+  for (const auto& pi : m.patches()) asleep = asleep && pi.asleep;
+  out.asleep_at_end = asleep;
+  out.sphere_sink = d.surface_height - ((*world)->state(*body).position.y() - R);
+  if (Status st = m.demote_all(t, prof); !st) return st.errors();
+  out.wall_seconds = seconds_since(t1);
+  out.sim_seconds = frames * dt;
+  out.dem_seconds = prof.timer(Stage::Dem).total_ms / 1000.0;
+  out.pool_bytes = m.pool_bytes();
+  for (const PatchEvent& e : m.events()) out.patches += e.kind == PatchEventKind::Promoted;
+  const auto rep = m.report();
+  out.ledger_error_pct = rep["ledger"]["total"]["error_pct"].get<double>();
+
+  // the crater in the heightfield
+  const double bin = d.spacing, sp2 = double(d.spacing) * d.spacing;
+  const int nbins = std::max(1, int(std::floor((c - bin) / bin)));
+  std::vector<double> sum(nbins, 0.0);
+  std::vector<int> count(nbins, 0);
+  double centre = 0;
+  int nc = 0;
+  for (int j = 0; j < hf->samples_z(); ++j)
+    for (int i = 0; i < hf->samples_x(); ++i) {
+      const double r = std::hypot(i * double(d.spacing) - c, j * double(d.spacing) - c);
+      const double dh = double(hf->height(i, j)) - original.height(i, j);
+      if (r <= 0.5 * R) centre += dh, ++nc;
+      const int kb = int(r / bin);
+      if (kb < nbins) sum[kb] += dh, ++count[kb];
+    }
+  out.depth = nc ? std::max(0.0, -centre / nc) : 0;
+  out.dh.assign(nbins, -1e300);
+  for (int kb = 0; kb < nbins; ++kb)
+    if (count[kb]) out.dh[kb] = sum[kb] / count[kb];
+  // The crater: bins from the axis whose mean Δh is below −(granule radius as the world sees it):
+  // the whole patch settles by about a centimetre when the impact shakes it (the manager's
+  // ledger), so "below the original surface" alone would run to the terrain's edge.
+  const double eps = double(d.granule_radius) * k.particle_scale;
+  int kb = 0;
+  while (kb < nbins && out.dh[kb] < -1e299) ++kb;
+  for (; kb < nbins && out.dh[kb] < -eps && out.dh[kb] > -1e299; ++kb) out.crater_radius = (kb + 1) * bin;
+  for (; kb < nbins && (out.dh[kb] > 0 || out.dh[kb] < -1e299); ++kb) {
+    if (out.dh[kb] < -1e299) continue;
+    out.rim_volume += sum[kb] * sp2;
+    out.rim_height = std::max(out.rim_height, out.dh[kb]);
+  }
+  // volume below the original surface within the crater's radius; far field: mean Δh of the
+  // samples beyond 2 R from the axis (inside the terrain's inscribed circle)
+  double far = 0;
+  int nf = 0;
+  for (int j = 0; j < hf->samples_z(); ++j)
+    for (int i = 0; i < hf->samples_x(); ++i) {
+      const double r = std::hypot(i * double(d.spacing) - c, j * double(d.spacing) - c);
+      const double dh = double(hf->height(i, j)) - original.height(i, j);
+      if (r < out.crater_radius) out.crater_volume += -dh * sp2;
+      if (r >= 2 * R && r < nbins * bin) far += dh, ++nf;
+    }
+  out.far_field_dh = nf ? far / nf : 0;
+  return out;
+}
+
+}  // namespace sandpatch
