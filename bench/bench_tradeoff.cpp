@@ -276,6 +276,21 @@ std::vector<TradeoffSetting> tradeoff_sweep(TradeoffSweep sweep) {
            (seed != 1 ? "_seed" + std::to_string(seed) : "");
     v.push_back(t);
   };
+  // The drop's rows of the default and full sweeps after their reference: N, substeps with LOD
+  // off and on, slot capacities (two refused), particle scale 2.
+  auto drop_knob_rows = [&]() {
+    drop(1, 20, 1, false, 0, 16384);
+    drop(1, 10, 1, false, 0, 16384);
+    drop(1, 20, 2, false, 0, 16384);
+    drop(1, 20, 1, true, 0.2, 16384);
+    drop(1, 20, 2, true, 0.2, 16384);
+    drop(1, 20, 4, true, 0.2, 16384);
+    drop(1, 20, 1, true, 0.2, 1700);   // fits the LOD patch (1590) ...
+    drop(1, 20, 1, false, 0, 1700);    // ... not the whole terrain (1835): refused
+    drop(1, 20, 1, true, 0.2, 1024);   // refused
+    drop(2, 20, 1, true, 0.2, 16384);
+    drop(2, 20, 1, false, 0, 16384);
+  };
   using C = TradeoffCase;
   switch (sweep) {
     case TradeoffSweep::Quick:
@@ -317,17 +332,7 @@ std::vector<TradeoffSetting> tradeoff_sweep(TradeoffSweep sweep) {
       // the drop at particle scale 1: 1835 granules for the whole terrain, 1590 for the LOD
       // patch (the apron rounded out to whole tile periods: 0.2 and 0.5 m give the same patch)
       drop(1, 50, 1, false, 0, 16384, 1, true);
-      drop(1, 20, 1, false, 0, 16384);
-      drop(1, 10, 1, false, 0, 16384);
-      drop(1, 20, 2, false, 0, 16384);
-      drop(1, 20, 1, true, 0.2, 16384);
-      drop(1, 20, 2, true, 0.2, 16384);
-      drop(1, 20, 4, true, 0.2, 16384);
-      drop(1, 20, 1, true, 0.2, 1700);   // fits the LOD patch (1590) ...
-      drop(1, 20, 1, false, 0, 1700);    // ... not the whole terrain (1835): refused
-      drop(1, 20, 1, true, 0.2, 1024);   // refused
-      drop(2, 20, 1, true, 0.2, 16384);
-      drop(2, 20, 1, false, 0, 16384);
+      drop_knob_rows();
       drop(1, 20, 1, false, 0, 16384, 2, false, true);
       drop(1, 20, 1, true, 0.2, 16384, 2, false, true);
       break;
@@ -351,17 +356,7 @@ std::vector<TradeoffSetting> tradeoff_sweep(TradeoffSweep sweep) {
       // patch (the apron rounded out to whole tile periods: 0.2 and 0.5 m give the same patch)
       drop(1, 100, 1, false, 0, 16384, 1, true);
       drop(1, 50, 1, false, 0, 16384);
-      drop(1, 20, 1, false, 0, 16384);
-      drop(1, 10, 1, false, 0, 16384);
-      drop(1, 20, 2, false, 0, 16384);
-      drop(1, 20, 1, true, 0.2, 16384);
-      drop(1, 20, 2, true, 0.2, 16384);
-      drop(1, 20, 4, true, 0.2, 16384);
-      drop(1, 20, 1, true, 0.2, 1700);   // fits the LOD patch (1590) ...
-      drop(1, 20, 1, false, 0, 1700);    // ... not the whole terrain (1835): refused
-      drop(1, 20, 1, true, 0.2, 1024);   // refused
-      drop(2, 20, 1, true, 0.2, 16384);
-      drop(2, 20, 1, false, 0, 16384);
+      drop_knob_rows();
       drop(1, 20, 8, true, 0.2, 16384);
       drop(1.5, 20, 1, true, 0.2, 16384);
       drop(1, 20, 1, true, 0.5, 16384);
