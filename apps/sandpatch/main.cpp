@@ -134,7 +134,8 @@ int main(int argc, char** argv) {
   BenchTradeoffArgs btrade;
   bool trade_quick = false, trade_full = false, trade_no_gl = false, trade_no_plot = false;
   auto* btradec = bench->add_subcommand("tradeoff", "Cost and error of the knobs (particle scale, dt / t_c, patch size, "
-                                                    "backend) on a poured pile and a crater; Pareto front; CSV + PNG");
+                                                    "backend, substeps, slot capacity, LOD on/off) on a poured pile, a "
+                                                    "crater and a drop through the terrain manager; Pareto front; CSV + PNG");
   auto* o_quick = btradec->add_flag("--quick", trade_quick, "Small sweep (seconds; used by the tests)");
   auto* o_full = btradec->add_flag("--full", trade_full, "Finer sweep (finer scales, t_c/100; long: see docs/tradeoff.md)");
   o_quick->excludes(o_full);
