@@ -81,32 +81,6 @@ double median(std::vector<double> v) {
   return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
 }
 
-// A scene body as a Bullet body (the bench's shapes: sphere, box, cylinder), as run.cpp does.
-RigidBodyDef rigid_body(const BodyDef& b) {
-  RigidBodyDef d;
-  d.name = b.name;
-  d.mass = float(b.mass_value());
-  d.position = {b.pose.position[0], b.pose.position[1], b.pose.position[2]};
-  const auto& q = b.pose.orientation;
-  d.orientation = Eigen::Quaternionf(float(q[0]), float(q[1]), float(q[2]), float(q[3])).normalized();
-  auto f3 = [](const Vec3d& v) { return Eigen::Vector3f(float(v[0]), float(v[1]), float(v[2])); };
-  d.linear_velocity = f3(b.linear_velocity);
-  d.angular_velocity = f3(b.angular_velocity);
-  d.friction = float(b.friction);
-  d.restitution = float(b.restitution);
-  d.shape.radius = float(b.shape.radius);
-  d.shape.height = float(b.shape.height);
-  d.shape.half_extents = f3(b.shape.half_extents);
-  switch (b.shape.kind) {
-    case ShapeKind::Sphere: d.shape.kind = RigidShapeKind::Sphere; break;
-    case ShapeKind::Box: d.shape.kind = RigidShapeKind::Box; break;
-    case ShapeKind::Cylinder: d.shape.kind = RigidShapeKind::Cylinder; break;
-    case ShapeKind::Capsule: d.shape.kind = RigidShapeKind::Capsule; break;
-    case ShapeKind::Mesh: break;  // not in the bench's scenes
-  }
-  return d;
-}
-
 // One scene held open: terrain, Bullet world, manager, and its own stage profile.
 struct Lane {
   std::string name;
@@ -157,7 +131,11 @@ Result<std::unique_ptr<Lane>> make_lane(const nlohmann::json& scene_json, int ce
   if (!m) return m.errors();
   lane->manager = std::move(*m);
   lane->setup_manager_s = seconds_since(t0);
-  for (const auto& b : s.bodies) lane->defs.push_back(rigid_body(b));
+  for (std::size_t i = 0; i < s.bodies.size(); ++i) {
+    auto d = to_rigid_body(s, i);
+    if (!d) return d.errors();
+    lane->defs.push_back(std::move(*d));
+  }
   lane->ids.resize(s.bodies.size());
   lane->spawned.assign(s.bodies.size(), false);
   return lane;

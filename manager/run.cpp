@@ -33,42 +33,6 @@ Eigen::Vector3f vec3f(const Vec3d& v) { return {float(v[0]), float(v[1]), float(
 ojson vec_json(const Eigen::Vector3d& v) { return ojson::array({v.x(), v.y(), v.z()}); }
 ojson vec_json(const Eigen::Vector3f& v) { return ojson::array({v.x(), v.y(), v.z()}); }
 
-// Scene body -> Bullet definition (meshes are read again from their validated OBJ).
-Result<RigidBodyDef> to_rigid_body(const SceneDef& scene, std::size_t index) {
-  const BodyDef& b = scene.bodies[index];
-  RigidBodyDef d;
-  d.name = b.name;
-  d.mass = float(b.mass_value());
-  d.position = {b.pose.position[0], b.pose.position[1], b.pose.position[2]};
-  const auto& q = b.pose.orientation;
-  d.orientation = Eigen::Quaternionf(float(q[0]), float(q[1]), float(q[2]), float(q[3])).normalized();
-  d.linear_velocity = vec3f(b.linear_velocity);
-  d.angular_velocity = vec3f(b.angular_velocity);
-  d.friction = float(b.friction);
-  d.restitution = float(b.restitution);
-  const ShapeDef& s = b.shape;
-  d.shape.radius = float(s.radius);
-  d.shape.height = float(s.height);
-  d.shape.half_extents = vec3f(s.half_extents);
-  switch (s.kind) {
-    case ShapeKind::Sphere: d.shape.kind = RigidShapeKind::Sphere; break;
-    case ShapeKind::Box: d.shape.kind = RigidShapeKind::Box; break;
-    case ShapeKind::Cylinder: d.shape.kind = RigidShapeKind::Cylinder; break;
-    case ShapeKind::Capsule: d.shape.kind = RigidShapeKind::Capsule; break;
-    case ShapeKind::Mesh: {
-      d.shape.kind = RigidShapeKind::Mesh;
-      auto mesh = load_obj_mesh(s.file, s.scale);
-      if (!mesh) return mesh.errors();
-      // Bodies are centred on their centre of mass.
-      const Eigen::Vector3f c = mesh->centroid().cast<float>();
-      for (const auto& v : mesh->vertices) d.shape.vertices.push_back(v - c);
-      d.shape.triangles = mesh->triangles;
-      break;
-    }
-  }
-  return d;
-}
-
 std::string expand_pattern(std::string pattern, long long frame, double t, const char* ext,
                            const std::string& camera = "") {
   char frame_s[32], time_s[32];
@@ -286,6 +250,41 @@ double median(std::vector<double> v) {
 }  // namespace
 
 // The terrain manager's definition from the scene (docs/scene-format.md).
+Result<RigidBodyDef> to_rigid_body(const SceneDef& scene, std::size_t index) {
+  const BodyDef& b = scene.bodies[index];
+  RigidBodyDef d;
+  d.name = b.name;
+  d.mass = float(b.mass_value());
+  d.position = {b.pose.position[0], b.pose.position[1], b.pose.position[2]};
+  const auto& q = b.pose.orientation;
+  d.orientation = Eigen::Quaternionf(float(q[0]), float(q[1]), float(q[2]), float(q[3])).normalized();
+  d.linear_velocity = vec3f(b.linear_velocity);
+  d.angular_velocity = vec3f(b.angular_velocity);
+  d.friction = float(b.friction);
+  d.restitution = float(b.restitution);
+  const ShapeDef& s = b.shape;
+  d.shape.radius = float(s.radius);
+  d.shape.height = float(s.height);
+  d.shape.half_extents = vec3f(s.half_extents);
+  switch (s.kind) {
+    case ShapeKind::Sphere: d.shape.kind = RigidShapeKind::Sphere; break;
+    case ShapeKind::Box: d.shape.kind = RigidShapeKind::Box; break;
+    case ShapeKind::Cylinder: d.shape.kind = RigidShapeKind::Cylinder; break;
+    case ShapeKind::Capsule: d.shape.kind = RigidShapeKind::Capsule; break;
+    case ShapeKind::Mesh: {
+      d.shape.kind = RigidShapeKind::Mesh;
+      auto mesh = load_obj_mesh(s.file, s.scale);
+      if (!mesh) return mesh.errors();
+      // Bodies are centred on their centre of mass.
+      const Eigen::Vector3f c = mesh->centroid().cast<float>();
+      for (const auto& v : mesh->vertices) d.shape.vertices.push_back(v - c);
+      d.shape.triangles = mesh->triangles;
+      break;
+    }
+  }
+  return d;
+}
+
 TerrainManagerDef manager_def(const SceneDef& scene, int threads, const std::string& backend) {
   const SimulationDef& sim = scene.simulation;
   const MaterialDef* mat = scene.terrain.material.empty() ? &scene.materials.front()

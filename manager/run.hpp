@@ -67,4 +67,8 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& options);
 // set by run_scene. `backend`: "cpu" or "gl". Also used by `bench lod`.
 TerrainManagerDef manager_def(const SceneDef& scene, int threads, const std::string& backend);
 
+// Scene body `index` as a Bullet body definition (meshes are read again from their validated
+// OBJ, centred on their centroid). Also used by `bench lod`.
+Result<RigidBodyDef> to_rigid_body(const SceneDef& scene, std::size_t index);
+
 }  // namespace sandpatch
