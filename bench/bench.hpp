@@ -21,6 +21,7 @@ struct BenchDemArgs {
   int steps = 1000;
   std::string backend = "cpu";
   int threads = 0;  // 0 = OpenMP default
+  int repeat = 1;   // timed blocks of `steps` steps on the one settled bed; the median is reported
   bool json = false;
 };
 

@@ -5,7 +5,8 @@
 // 2. settle  real parameters, dt = 5e-5 s, until the fastest granule (|v| + |w| reach) is
 //            below 0.01 m/s, at least 0.3 s and at most 0.8 s of simulated time (a few
 //            granules at the floor of large beds keep spinning; docs/dem.md)
-// 3. time    `steps` steps of the settled bed with the same parameters and count contacts
+// 3. time    `steps` steps of the settled bed with the same parameters and count contacts,
+//            `repeat` times; the median block's rate is the result
 #include "bench/bench.hpp"
 #include "bench/bench_util.hpp"
 
@@ -13,9 +14,11 @@
 
 #include <time.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
@@ -25,10 +28,15 @@
 #include "particles/dem.hpp"
 
 // Under `valgrind --tool=callgrind` the timed loop is dumped on its own (instruction counts
-// that do not depend on the machine's load); a no-op otherwise, and absent without the header.
+// that do not depend on the machine's load); with --instr-atstart=no the settling runs
+// uninstrumented (several times faster). A no-op otherwise, and absent without the header.
 #if __has_include(<valgrind/callgrind.h>)
 #include <valgrind/callgrind.h>
-#define SP_CALLGRIND_ZERO() CALLGRIND_ZERO_STATS
+#define SP_CALLGRIND_ZERO() \
+  do {                            \
+    CALLGRIND_START_INSTRUMENTATION; \
+    CALLGRIND_ZERO_STATS;         \
+  } while (0)
 #define SP_CALLGRIND_DUMP(name) CALLGRIND_DUMP_STATS_AT(name)
 #else
 #define SP_CALLGRIND_ZERO() ((void)0)
@@ -46,6 +54,10 @@ int run_bench_dem(const BenchDemArgs& a) {
   }
   if (a.steps < 1) {
     std::fprintf(stderr, "bench dem: --steps = %d: must be >= 1\n", a.steps);
+    return 2;
+  }
+  if (a.repeat < 1) {
+    std::fprintf(stderr, "bench dem: --repeat = %d: must be >= 1\n", a.repeat);
     return 2;
   }
   if (a.threads < 0) {
@@ -116,47 +128,72 @@ int run_bench_dem(const BenchDemArgs& a) {
     std::printf("settled: %d steps (%.3f s simulated) in %.1f s wall, max granule speed %.4f m/s\n", settle + 1,
                 (settle + 1) * dt, settle_s, vmax_settled);
 
-  // timed
+  // timed: `repeat` blocks of `steps` steps one after the other on the same bed; the rate
+  // reported is the median block's (this machine's load moves single runs by up to 1.6x)
   std::int64_t contacts = 0, wall_contacts = 0, resorts = 0, entries = 0;
+  std::vector<double> block_rate, block_cpu_ns;
+  double wall = 0, cpu = 0;
   SP_CALLGRIND_ZERO();
-  const double cpu0 = process_cpu_seconds();
-  t0 = std::chrono::steady_clock::now();
-  for (int k = 0; k < a.steps; ++k) {
-    if (auto st = sim->step(dt); !st) {
-      std::fprintf(stderr, "bench dem: timed step %d: %s", k, st.message().c_str());
-      return 1;
+  for (int blk = 0; blk < a.repeat; ++blk) {
+    const double cpu0 = process_cpu_seconds();
+    t0 = std::chrono::steady_clock::now();
+    for (int k = 0; k < a.steps; ++k) {
+      if (auto st = sim->step(dt); !st) {
+        std::fprintf(stderr, "bench dem: timed step %d: %s", blk * a.steps + k, st.message().c_str());
+        return 1;
+      }
+      contacts += sim->last_step().contacts;
+      wall_contacts += sim->last_step().wall_contacts;
+      resorts += sim->last_step().resorts;
+      entries += sim->last_step().neighbour_entries;
     }
-    contacts += sim->last_step().contacts;
-    wall_contacts += sim->last_step().wall_contacts;
-    resorts += sim->last_step().resorts;
-    entries += sim->last_step().neighbour_entries;
+    const double w = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    const double c = process_cpu_seconds() - cpu0;
+    wall += w;
+    cpu += c;
+    block_rate.push_back(double(spheres) * a.steps / w);
+    // CPU nanoseconds per sphere-step: the cost of the work whatever the load (with 1 thread;
+    // with more it also holds the time threads spin at barriers)
+    block_cpu_ns.push_back(1e9 * c / (double(spheres) * a.steps));
+    if (!a.json && a.repeat > 1)
+      std::printf("block %d: %d steps in %.3f s: %.3g sphere-steps/s, %.1f CPU ns per sphere-step\n", blk + 1, a.steps,
+                  w, block_rate.back(), block_cpu_ns.back());
   }
-  double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  const double cpu = process_cpu_seconds() - cpu0;
   SP_CALLGRIND_DUMP("bench dem timed loop");
-  // CPU nanoseconds per sphere-step: the cost of the work whatever the load (with 1 thread;
-  // with more it also holds the time threads spin at barriers)
-  const double cpu_ns = 1e9 * cpu / (double(spheres) * a.steps);
-  double ssps = double(spheres) * a.steps / wall;
-  double cps = 2.0 * double(contacts) / a.steps / spheres;  // sphere-sphere contacts per sphere
+  const int total_steps = a.steps * a.repeat;
+  auto median = [](std::vector<double> v) {
+    std::sort(v.begin(), v.end());
+    const std::size_t m = v.size() / 2;
+    return v.size() % 2 ? v[m] : 0.5 * (v[m - 1] + v[m]);
+  };
+  const double ssps = median(block_rate), cpu_ns = median(block_cpu_ns);
+  const double best = *std::max_element(block_rate.begin(), block_rate.end());
+  double cps = 2.0 * double(contacts) / total_steps / spheres;  // sphere-sphere contacts per sphere
   if (!a.json) {
-    std::printf("timed: %d steps in %.3f s: %.3g sphere-steps/s (%.2f ms/step)\n", a.steps, wall, ssps,
-                1e3 * wall / a.steps);
+    if (a.repeat > 1)
+      std::printf("timed: %d blocks of %d steps: median %.3g sphere-steps/s (best %.3g), %.1f CPU ns per sphere-step\n",
+                  a.repeat, a.steps, ssps, best, cpu_ns);
+    else
+      std::printf("timed: %d steps in %.3f s: %.3g sphere-steps/s (%.2f ms/step)\n", a.steps, wall, ssps,
+                  1e3 * wall / a.steps);
     std::printf("cpu: %.3f s of CPU for %.3f s of wall (%.2f cores busy of %d threads), %.1f CPU ns per sphere-step\n",
                 cpu, wall, cpu / wall, threads, cpu_ns);
     std::printf("contacts per sphere %.2f (sphere-sphere, other bodies), wall contacts per sphere %.3f, "
                 "grid rebuilds %lld, max granule speed %.4f m/s\n",
-                cps, double(wall_contacts) / a.steps / spheres, (long long)resorts, sim->max_granule_speed());
+                cps, double(wall_contacts) / total_steps / spheres, (long long)resorts, sim->max_granule_speed());
     std::printf("neighbour-list entries per sphere %.2f (pairs examined per sphere per step)\n",
-                double(entries) / a.steps / spheres);
-    std::printf("state hash %016llx (same for any thread count and either pair kernel)\n",
-                (unsigned long long)sim->state_hash());
+                double(entries) / total_steps / spheres);
+    std::printf("state hash %016llx after %d timed steps (same for any thread count and either pair kernel)\n",
+                (unsigned long long)sim->state_hash(), total_steps);
   }
   nlohmann::json j = {{"bench", "dem"},
                       {"backend", a.backend},
                       {"granules", a.granules},
                       {"spheres", spheres},
                       {"steps", a.steps},
+                      {"repeat", a.repeat},
+                      {"block_sphere_steps_per_s", block_rate},
+                      {"best_sphere_steps_per_s", best},
                       {"dt", dt},
                       {"threads", threads},
                       {"pair_kernel", kernel},
@@ -165,7 +202,7 @@ int run_bench_dem(const BenchDemArgs& a) {
                       {"cpu_ns_per_sphere_step", cpu_ns},
                       {"sphere_steps_per_s", ssps},
                       {"contacts_per_sphere", cps},
-                      {"list_entries_per_sphere", double(entries) / a.steps / spheres},
+                      {"list_entries_per_sphere", double(entries) / total_steps / spheres},
                       {"grid_rebuilds", resorts},
                       {"settle_steps", settle + 1},
                       {"settled_max_speed", vmax_settled},

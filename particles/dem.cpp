@@ -135,10 +135,12 @@ struct Simulation::Impl {
   // rebuilds like nxi). A touching pair without it is in its first substep (new_contact).
   std::vector<std::uint8_t> ntouch;
   // Each pair is computed once, by its owner entry: the sphere with the lower stable id, or
-  // the only side that has an entry (a static partner has no list). mate[e] is the mirrored
-  // entry (j -> i) or -1. The owner writes the pair's force on itself and n x f_t into pf;
-  // then every sphere gathers its entries in list order (fixed order, no atomics).
-  std::vector<std::int32_t> mate;
+  // the only side that has an entry (a static partner has no list). The owner writes the
+  // pair's force on itself and n x f_t into pf; then every sphere gathers its entries in list
+  // order (fixed order, no atomics): gather_src[e] is the entry whose result entry e reads,
+  // e itself on owner entries, the mirrored entry (j -> i) with the top bit set (negate f)
+  // on the others.
+  std::vector<std::uint32_t> gather_src;
   std::vector<std::uint8_t> owner;     // 1 if entry e computes the pair
   std::vector<std::int32_t> nown;      // per sphere: end of its owner entries ([nstart, nown) own)
   // 6 per entry (kPairResult): f (N), n x f_t (N); 2 floats of padding at the end, so the
@@ -367,7 +369,7 @@ struct Simulation::Impl {
       }
     }
     // mirrored entries and ownership (by stable id, so it survives re-sorts with the springs)
-    mate.resize(nstart[n]);
+    gather_src.resize(nstart[n]);
     owner.resize(nstart[n]);
     pf.assign(std::size_t(nstart[n]) * kPairResult + 2, 0.0f);
 #pragma omp parallel for num_threads(threads) schedule(dynamic, 256) if (n > 4096)
@@ -380,8 +382,8 @@ struct Simulation::Impl {
             m = k;
             break;
           }
-        mate[e] = m;
         owner[e] = e < nown[i] ? 1 : 0;
+        gather_src[e] = owner[e] ? std::uint32_t(e) : (std::uint32_t(m) | 0x80000000u);
         assert(owner[e] == ((m < 0 || p.id[i] < p.id[j]) ? 1 : 0));
       }
     }
@@ -654,6 +656,7 @@ struct Simulation::Impl {
   } law{};
   struct SphereSum {
     Vec3 F, T;  // N, N m (about the sphere centre)
+    Vec3 x;     // the sphere's centre, m
   };
   // What gather_sphere reads, copied to a local of the body stage once per substep: held in
   // members, these were loaded again after every float store (the compiler cannot tell a
@@ -661,8 +664,8 @@ struct Simulation::Impl {
   struct GatherCtx {
     LawConstants law;
     const float *P, *V, *W, *PF;
-    const std::int32_t *NS, *NO, *MT, *B;
-    const std::uint32_t* BF;
+    const std::int32_t* NS;
+    const std::uint32_t* GS;
     float* WX;
     std::uint32_t* WM;
     Vec3 bmin, bmax;
@@ -671,7 +674,7 @@ struct Simulation::Impl {
   };
   GatherCtx gather_ctx() const {
     return {law,           p.pos.data(), p.vel.data(),   p.omega.data(),    pf.data(),
-            nstart.data(), nown.data(),  mate.data(),    p.body.data(),     b.flags.data(),
+            nstart.data(), gather_src.data(),
             const_cast<float*>(wxi.data()), const_cast<std::uint32_t*>(wmask.data()),
             def.bounds_min, def.bounds_max, def.floor_height, def.side_walls, !def.terrain.empty(), first_law};
   }
@@ -685,35 +688,30 @@ struct Simulation::Impl {
     const std::int32_t* NS = g.NS;
     float* WX = g.WX;
     std::uint32_t* WM = g.WM;
-    const std::uint32_t* BF = g.BF;
-    const std::int32_t* B = g.B;
     const Vec3 bmin = g.bmin, bmax = g.bmax;
     const float floor_y = g.floor_y;
     const bool walls = g.walls, terrain = g.terrain;
-    const std::int32_t* MT = g.MT;
-    const std::int32_t* NO = g.NO;
+    const std::uint32_t* GS = g.GS;
     const float* PF = g.PF;
       Vec3 F{}, T{};
-      if (!(BF[B[i]] & kBodyStatic)) {
-        const Vec3 pi{P[4 * i], P[4 * i + 1], P[4 * i + 2]};
+      const Vec3 pi{P[4 * i], P[4 * i + 1], P[4 * i + 2]};
+      {
         const float ri = P[4 * i + 3];
         const Vec3 ui{V[4 * i], V[4 * i + 1], V[4 * i + 2]};
         const float invm_i = V[4 * i + 3];
         const Vec3 wi{W[4 * i], W[4 * i + 1], W[4 * i + 2]};
 
         // sphere-sphere: own entries from this substep's pair pass, mirrored ones negated
-        // (entries not touching hold zeros, so the sums need no branch)
+        // (entries not touching hold zeros, so the sums need no branch); one loop over the
+        // list, the sign from gather_src (adding -f is subtracting f, bit for bit)
         // (in 4-wide SSE2 registers: the same adds per component as Vec3's; lane 3 is unused)
         __m128 F4 = _mm_setzero_ps(), C4 = _mm_setzero_ps();
-        for (int e = NS[i], e1 = NO[i]; e < e1; ++e) {
-          const float* q = PF + kPairResult * std::size_t(e);
-          F4 = _mm_add_ps(F4, _mm_loadu_ps(q));      // f
-          C4 = _mm_add_ps(C4, _mm_loadu_ps(q + 3));  // n x f_t
-        }
-        for (int e = NO[i], e1 = NS[i + 1]; e < e1; ++e) {
-          const float* q = PF + kPairResult * std::size_t(MT[e]);
-          F4 = _mm_sub_ps(F4, _mm_loadu_ps(q));
-          C4 = _mm_add_ps(C4, _mm_loadu_ps(q + 3));
+        for (int e = NS[i], e1 = NS[i + 1]; e < e1; ++e) {
+          const std::uint32_t src = GS[e];
+          const float* q = PF + kPairResult * std::size_t(src & 0x7fffffffu);
+          const __m128 sign = _mm_castsi128_ps(_mm_set1_epi32(int(src & 0x80000000u)));
+          F4 = _mm_add_ps(F4, _mm_xor_ps(_mm_loadu_ps(q), sign));  // f
+          C4 = _mm_add_ps(C4, _mm_loadu_ps(q + 3));                  // n x f_t
         }
         alignas(16) float fc[8];
         _mm_store_ps(fc, F4);
@@ -726,7 +724,6 @@ struct Simulation::Impl {
         // WM[i] has bit k set while plane k touched the sphere at the last substep; a plane
         // contact that was not in the mask starts with a fresh spring.
         if (invm_i > 0.0f) {
-          const float cnw = cn0 / std::sqrt(invm_i);
           float* wx = WX + std::size_t(i) * 3 * kWallSlots;
           const std::uint32_t old_mask = WM[i];
           std::uint32_t mask = 0;
@@ -737,6 +734,7 @@ struct Simulation::Impl {
             const Vec3 v = ui + cross(wi, nrm * (-ri));
             Vec3 xi{};
             if (old_mask & (1u << slot)) xi = {xe[0], xe[1], xe[2]};
+            const float cnw = cn0 / std::sqrt(invm_i);
             ContactParams cp{kn, cnw, kt, ctr * cnw, mu, kb, dt, kBell};
             cp.new_contact = g.first_law && !(old_mask & (1u << slot));  // first substep of this plane contact
             ContactForce cf = contact_force(cp, nrm, ri - dist, v, xi);
@@ -784,10 +782,10 @@ struct Simulation::Impl {
               side(4, {0, 0, -1}, tg.fill_max_z - pi.z, tg.height(pi.x, tg.fill_max_z + ri));
             }
           }
-          WM[i] = mask;
+          if (mask != old_mask) WM[i] = mask;
         }
       }
-      return {F, T};
+      return {F, T, pi};
   }
 
   // ---- body stage: gather each sphere (gather_sphere), sum the spheres' forces in id order,
@@ -809,16 +807,20 @@ struct Simulation::Impl {
       const std::uint32_t fl = b.flags[i];
       const Vec3 x = ld3(b.pos, i);
       Vec3 F{}, T{};
+      if (fl & kBodyStatic) {  // no force on a static body's spheres (they have no list)
+        st3(b.force, i, F);
+        st3(b.torque, i, T);
+        continue;
+      }
       for (int k = 0, first = b.first[i], cnt = b.count[i]; k < cnt; ++k) {
         const int s = slot_of[first + k];
         const SphereSum ss = gather_sphere<kBell>(gctx, s, dt, nwall);
         const Vec3 f = ss.F;
         F = F + f;
-        T = T + ss.T + cross(ld3(p.pos, s) - x, f);
+        T = T + ss.T + cross(ss.x - x, f);
       }
       st3(b.force, i, F);
       st3(b.torque, i, T);
-      if (fl & kBodyStatic) continue;
       Vec3 v = ld3(b.vel, i), w = ld3(b.omega, i);
       const Vec3 v_old = v;
       Quat q = ldq(b.quat, i);

@@ -112,6 +112,8 @@ int main(int argc, char** argv) {
   bdem->add_option("--steps", dem.steps, "Timed steps")->check(CLI::PositiveNumber);
   bdem->add_option("--backend", dem.backend, "DEM backend")->check(CLI::IsMember({"cpu", "gl"}));
   bdem->add_option("--threads", dem.threads, "Worker threads (0 = all)")->check(CLI::NonNegativeNumber);
+  bdem->add_option("--repeat", dem.repeat, "Time the settled bed this many times (blocks of --steps); reports the median")
+      ->check(CLI::Range(1, 1000));
   bdem->add_flag("--json", dem.json, "Print one JSON object on the last line");
   render::BenchRenderArgs brend;
   auto* bren = bench->add_subcommand("render", "Clipmap vs full-grid triangles and frame time per terrain size");
