@@ -542,6 +542,12 @@ struct Row {
 };
 
 ojson jnum(double v) { return std::isfinite(v) ? ojson(v) : ojson(); }
+// A radial profile of Δh (m) per bin; a bin without samples (held as -1e300) becomes null.
+ojson dh_json(const std::vector<double>& dh) {
+  ojson out = ojson::array();
+  for (double v : dh) out.push_back(v > -1e299 ? ojson(v) : ojson());
+  return out;
+}
 
 }  // namespace
 
@@ -860,9 +866,7 @@ int run_bench_tradeoff(const BenchTradeoffArgs& a) {
         j["sphere_sink_m"] = row.crater.sphere_sink;
         j["final_speed_m_s"] = row.crater.final_speed;
         j["setup_s"] = row.setup_s;
-        ojson dh = ojson::array();  // Δh per bin of bin_m from the axis (null: empty bin)
-        for (double v : row.crater.dh) dh.push_back(v > -1e299 ? ojson(v) : ojson());
-        j["dh_m"] = dh;
+        j["dh_m"] = dh_json(row.crater.dh);  // Δh per bin of bin_m from the axis
       } else if (drop) {
         j["depth_m"] = row.drop.depth;
         j["crater_volume_m3"] = row.drop.crater_volume;
@@ -877,9 +881,7 @@ int run_bench_tradeoff(const BenchTradeoffArgs& a) {
         j["dem_wall_s"] = row.drop.dem_seconds;
         j["asleep_at_end"] = row.drop.asleep_at_end;
         j["setup_s"] = row.setup_s;
-        ojson dh = ojson::array();  // mean Δh per radial bin of one sample spacing from the axis (null: no sample)
-        for (double v : row.drop.dh) dh.push_back(v > -1e299 ? ojson(v) : ojson());
-        j["dh_m"] = dh;
+        j["dh_m"] = dh_json(row.drop.dh);  // mean Δh per radial bin of one sample spacing from the axis
       } else {
         j["angle_deg"] = row.angle;
         j["fit_points"] = row.fit_points;

@@ -164,16 +164,21 @@ Result<DropResult> measure_drop(const DropDef& d, const TradeoffKnobs& k) {
   const int nbins = std::max(1, int(std::floor((c - bin) / bin)));
   std::vector<double> sum(nbins, 0.0);
   std::vector<int> count(nbins, 0);
+  // f(r, dh) for every heightfield sample: its distance from the drop axis (m) and its
+  // height change since the start (m)
+  auto each_sample = [&](auto&& f) {
+    for (int j = 0; j < hf->samples_z(); ++j)
+      for (int i = 0; i < hf->samples_x(); ++i)
+        f(std::hypot(i * double(d.spacing) - c, j * double(d.spacing) - c),
+          double(hf->height(i, j)) - original.height(i, j));
+  };
   double centre = 0;
   int nc = 0;
-  for (int j = 0; j < hf->samples_z(); ++j)
-    for (int i = 0; i < hf->samples_x(); ++i) {
-      const double r = std::hypot(i * double(d.spacing) - c, j * double(d.spacing) - c);
-      const double dh = double(hf->height(i, j)) - original.height(i, j);
-      if (r <= 0.5 * R) centre += dh, ++nc;
-      const int kb = int(r / bin);
-      if (kb < nbins) sum[kb] += dh, ++count[kb];
-    }
+  each_sample([&](double r, double dh) {
+    if (r <= 0.5 * R) centre += dh, ++nc;
+    const int kb = int(r / bin);
+    if (kb < nbins) sum[kb] += dh, ++count[kb];
+  });
   out.depth = nc ? std::max(0.0, -centre / nc) : 0;
   out.dh.assign(nbins, -1e300);
   for (int kb = 0; kb < nbins; ++kb)
@@ -194,13 +199,10 @@ Result<DropResult> measure_drop(const DropDef& d, const TradeoffKnobs& k) {
   // samples beyond 2 R from the axis (inside the terrain's inscribed circle)
   double far = 0;
   int nf = 0;
-  for (int j = 0; j < hf->samples_z(); ++j)
-    for (int i = 0; i < hf->samples_x(); ++i) {
-      const double r = std::hypot(i * double(d.spacing) - c, j * double(d.spacing) - c);
-      const double dh = double(hf->height(i, j)) - original.height(i, j);
-      if (r < out.crater_radius) out.crater_volume += -dh * sp2;
-      if (r >= 2 * R && r < nbins * bin) far += dh, ++nf;
-    }
+  each_sample([&](double r, double dh) {
+    if (r < out.crater_radius) out.crater_volume += -dh * sp2;
+    if (r >= 2 * R && r < nbins * bin) far += dh, ++nf;
+  });
   out.far_field_dh = nf ? far / nf : 0;
   return out;
 }
