@@ -22,6 +22,9 @@ struct BenchDemArgs {
   std::string backend = "cpu";
   int threads = 0;  // 0 = OpenMP default
   int repeat = 1;   // timed blocks of `steps` steps on the one settled bed; the median is reported
+  // > 0: every second block runs with this many threads instead (Simulation::set_threads), so
+  // the two thread counts are timed on the same bed in the same minutes; each gets its median
+  int alternate_threads = 0;
   bool json = false;
 };
 

@@ -64,6 +64,11 @@ int run_bench_dem(const BenchDemArgs& a) {
     std::fprintf(stderr, "bench dem: --threads = %d: must be >= 0 (0 = all cores)\n", a.threads);
     return 2;
   }
+  if (a.alternate_threads < 0 || (a.alternate_threads > 0 && a.repeat < 2)) {
+    std::fprintf(stderr, "bench dem: --alternate-threads = %d: must be >= 1 with --repeat >= 2 (0 = off)\n",
+                 a.alternate_threads);
+    return 2;
+  }
   if (a.backend != "cpu") {
     std::fprintf(stderr, "bench dem: --backend = %s: only 'cpu' is available in this build\n", a.backend.c_str());
     return 2;
@@ -131,12 +136,17 @@ int run_bench_dem(const BenchDemArgs& a) {
   // timed: `repeat` blocks of `steps` steps one after the other on the same bed; the rate
   // reported is the median block's (this machine's load moves single runs by up to 1.6x)
   std::int64_t contacts = 0, wall_contacts = 0, resorts = 0, entries = 0;
+  double stage_s[4] = {};  // guard, pairs, bodies, sort (StepStats), wall s over the --threads blocks
   std::vector<double> block_rate, block_cpu_ns;
   double wall = 0, cpu = 0;
   SP_CALLGRIND_ZERO();
+  std::vector<double> alt_rate;  // blocks run with --alternate-threads
   for (int blk = 0; blk < a.repeat; ++blk) {
+    const bool alt = a.alternate_threads > 0 && blk % 2 == 1;
+    (void)sim->set_threads(alt ? a.alternate_threads : threads);  // (both validated above)
     const double cpu0 = process_cpu_seconds();
     t0 = std::chrono::steady_clock::now();
+    double blk_stage[4] = {};
     for (int k = 0; k < a.steps; ++k) {
       if (auto st = sim->step(dt); !st) {
         std::fprintf(stderr, "bench dem: timed step %d: %s", blk * a.steps + k, st.message().c_str());
@@ -146,11 +156,22 @@ int run_bench_dem(const BenchDemArgs& a) {
       wall_contacts += sim->last_step().wall_contacts;
       resorts += sim->last_step().resorts;
       entries += sim->last_step().neighbour_entries;
+      const StepStats& ls = sim->last_step();
+      blk_stage[0] += ls.guard_seconds, blk_stage[1] += ls.pair_seconds, blk_stage[2] += ls.body_seconds;
+      blk_stage[3] += ls.sort_seconds;
     }
     const double w = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     const double c = process_cpu_seconds() - cpu0;
+    if (alt) {
+      alt_rate.push_back(double(spheres) * a.steps / w);
+      if (!a.json)
+        std::printf("block %d: %d steps with %d threads in %.3f s: %.3g sphere-steps/s\n", blk + 1, a.steps,
+                    a.alternate_threads, w, alt_rate.back());
+      continue;
+    }
     wall += w;
     cpu += c;
+    for (int k = 0; k < 4; ++k) stage_s[k] += blk_stage[k];
     block_rate.push_back(double(spheres) * a.steps / w);
     // CPU nanoseconds per sphere-step: the cost of the work whatever the load (with 1 thread;
     // with more it also holds the time threads spin at barriers)
@@ -168,14 +189,22 @@ int run_bench_dem(const BenchDemArgs& a) {
   };
   const double ssps = median(block_rate), cpu_ns = median(block_cpu_ns);
   const double best = *std::max_element(block_rate.begin(), block_rate.end());
+  const double alt_ssps = alt_rate.empty() ? 0.0 : median(alt_rate);
   double cps = 2.0 * double(contacts) / total_steps / spheres;  // sphere-sphere contacts per sphere
+  // the stages' wall nanoseconds per sphere-step, over the blocks run with --threads
+  const int timed_blocks = int(block_rate.size());
+  double stage_ns[4];
+  for (int k = 0; k < 4; ++k) stage_ns[k] = 1e9 * stage_s[k] / (double(spheres) * a.steps * timed_blocks);
   if (!a.json) {
     if (a.repeat > 1)
       std::printf("timed: %d blocks of %d steps: median %.3g sphere-steps/s (best %.3g), %.1f CPU ns per sphere-step\n",
-                  a.repeat, a.steps, ssps, best, cpu_ns);
+                  timed_blocks, a.steps, ssps, best, cpu_ns);
     else
       std::printf("timed: %d steps in %.3f s: %.3g sphere-steps/s (%.2f ms/step)\n", a.steps, wall, ssps,
                   1e3 * wall / a.steps);
+    if (!alt_rate.empty())
+      std::printf("alternate blocks, %d threads: median %.3g sphere-steps/s; %d threads / %d threads = %.2f\n",
+                  a.alternate_threads, alt_ssps, threads, a.alternate_threads, ssps / alt_ssps);
     std::printf("cpu: %.3f s of CPU for %.3f s of wall (%.2f cores busy of %d threads), %.1f CPU ns per sphere-step\n",
                 cpu, wall, cpu / wall, threads, cpu_ns);
     std::printf("contacts per sphere %.2f (sphere-sphere, other bodies), wall contacts per sphere %.3f, "
@@ -183,6 +212,9 @@ int run_bench_dem(const BenchDemArgs& a) {
                 cps, double(wall_contacts) / total_steps / spheres, (long long)resorts, sim->max_granule_speed());
     std::printf("neighbour-list entries per sphere %.2f (pairs examined per sphere per step)\n",
                 double(entries) / total_steps / spheres);
+    std::printf("stages, wall ns per sphere-step (blocks with --threads): overlap guard %.1f, pair pass %.1f, "
+                "body stage %.1f, sort + list %.1f\n",
+                stage_ns[0], stage_ns[1], stage_ns[2], stage_ns[3]);
     std::printf("state hash %016llx after %d timed steps (same for any thread count and either pair kernel)\n",
                 (unsigned long long)sim->state_hash(), total_steps);
   }
@@ -192,6 +224,9 @@ int run_bench_dem(const BenchDemArgs& a) {
                       {"spheres", spheres},
                       {"steps", a.steps},
                       {"repeat", a.repeat},
+                      {"alternate_threads", a.alternate_threads},
+                      {"alternate_block_sphere_steps_per_s", alt_rate},
+                      {"alternate_sphere_steps_per_s", alt_ssps},
                       {"block_sphere_steps_per_s", block_rate},
                       {"best_sphere_steps_per_s", best},
                       {"dt", dt},
@@ -203,6 +238,8 @@ int run_bench_dem(const BenchDemArgs& a) {
                       {"sphere_steps_per_s", ssps},
                       {"contacts_per_sphere", cps},
                       {"list_entries_per_sphere", double(entries) / total_steps / spheres},
+                      {"stage_ns_per_sphere_step",
+                       {{"guard", stage_ns[0]}, {"pairs", stage_ns[1]}, {"bodies", stage_ns[2]}, {"sort", stage_ns[3]}}},
                       {"grid_rebuilds", resorts},
                       {"settle_steps", settle + 1},
                       {"settled_max_speed", vmax_settled},

@@ -152,6 +152,10 @@ struct StepStats {
   std::int64_t neighbour_entries = 0;    // entries of the neighbour list (pairs examined x 2)
   int resorts = 0;                       // grid + neighbour-list rebuilds this step
   bool slept = false;                    // the step did nothing because the sim was asleep
+  // Wall time of the step's stages, summed over its substeps (s, steady clock): the overlap
+  // guard (check_impacts), the pair pass (contacts), the body stage (gather, integrate,
+  // rebuild the spheres) and the grid sort + neighbour-list rebuild.
+  double guard_seconds = 0, pair_seconds = 0, body_seconds = 0, sort_seconds = 0;
 };
 
 class Simulation {
@@ -219,6 +223,9 @@ class Simulation {
   double potential_energy() const;               // J, gravity (rel. y = 0) + elastic springs
   double max_granule_speed() const;              // m/s, max |v| + |w| d over granules
   const StepStats& last_step() const;
+  // OpenMP threads of the following steps (0 = OpenMP's default); the results do not depend
+  // on it. Negative counts are refused.
+  Status set_threads(int threads);
   std::uint64_t state_hash() const;              // over the fields marked hashed in fields.hpp
   const SimulationDef& def() const;
   const GranuleShape& granule_shape() const;

@@ -114,6 +114,9 @@ int main(int argc, char** argv) {
   bdem->add_option("--threads", dem.threads, "Worker threads (0 = all)")->check(CLI::NonNegativeNumber);
   bdem->add_option("--repeat", dem.repeat, "Time the settled bed this many times (blocks of --steps); reports the median")
       ->check(CLI::Range(1, 1000));
+  bdem->add_option("--alternate-threads", dem.alternate_threads,
+                   "Run every second block with this many threads (scaling on one bed); needs --repeat >= 2")
+      ->check(CLI::Range(1, 1024));
   bdem->add_flag("--json", dem.json, "Print one JSON object on the last line");
   render::BenchRenderArgs brend;
   auto* bren = bench->add_subcommand("render", "Clipmap vs full-grid triangles and frame time per terrain size");

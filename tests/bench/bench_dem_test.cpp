@@ -65,3 +65,32 @@ TEST(BenchDem, BadArgumentsAreRefusedNamingTheOption) {
   EXPECT_EQ(run_bench_dem(a), 2);
   EXPECT_NE(testing::internal::GetCapturedStderr().find("--steps = 0"), std::string::npos);
 }
+
+TEST(BenchDem, AlternateThreadsTimesBothCountsOnOneBed) {
+  BenchDemArgs one;
+  one.granules = 40;
+  one.steps = 40;
+  one.threads = 1;
+  BenchDemArgs alt = one;
+  alt.steps = 10;
+  alt.repeat = 4;
+  alt.alternate_threads = 2;
+  const nlohmann::json a = run_json(one), b = run_json(alt);
+  // blocks 1 and 3 with 1 thread, 2 and 4 with 2: the state does not depend on the threads
+  EXPECT_EQ(a["state_hash"], b["state_hash"]);
+  EXPECT_EQ(b["alternate_threads"], 2);
+  EXPECT_EQ(b["block_sphere_steps_per_s"].size(), 2u);
+  ASSERT_EQ(b["alternate_block_sphere_steps_per_s"].size(), 2u);
+  std::vector<double> r = b["alternate_block_sphere_steps_per_s"].get<std::vector<double>>();
+  EXPECT_DOUBLE_EQ(b["alternate_sphere_steps_per_s"].get<double>(), 0.5 * (r[0] + r[1]));  // median of 2
+  EXPECT_EQ(a["alternate_block_sphere_steps_per_s"].size(), 0u);
+}
+
+TEST(BenchDem, AlternateThreadsNeedTwoBlocks) {
+  BenchDemArgs a;
+  a.granules = 10;
+  a.alternate_threads = 2;
+  testing::internal::CaptureStderr();
+  EXPECT_EQ(run_bench_dem(a), 2);
+  EXPECT_NE(testing::internal::GetCapturedStderr().find("--alternate-threads = 2"), std::string::npos);
+}

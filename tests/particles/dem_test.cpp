@@ -160,6 +160,47 @@ TEST(Simulation, DeterministicAcrossThreadsAndRuns) {
   EXPECT_EQ(run_pile(1, 3000, 50), run_pile(2, 3000, 50));
 }
 
+// Above 4,096 spheres the stages run on the threads (smaller beds run serially): 1,200 granules
+// falling in a box give the same state whether they run on 1 thread, on 2, or switch between
+// the two mid-run (Simulation::set_threads); a negative count is refused naming the field.
+TEST(Simulation, SetThreadsMidRunKeepsTheState) {
+  auto run = [](int threads_first, int threads_then) {
+    SimulationDef d;
+    d.bounds_min = {0, 0, 0};
+    d.bounds_max = {0.3f, 0.4f, 0.3f};
+    d.side_walls = true;
+    d.sleep_time = 0;
+    d.max_bodies = 1200;
+    d.max_particles = 4800;
+    d.threads = threads_first;
+    auto s = Simulation::create(d);
+    LatticeBedDef bed;
+    bed.nx = bed.nz = 10;
+    bed.layers = 12;
+    bed.min = {0.02f, 0.012f, 0.02f};
+    bed.seed = 11;
+    EXPECT_TRUE(add_lattice_bed(*s, bed).ok());
+    EXPECT_GT(s->particle_count(), 4096);
+    for (int k = 0; k < 1200; ++k) {  // the bottom layer lands after ~300 steps, the next on it
+      if (k == 600) {
+        EXPECT_TRUE(s->set_threads(threads_then).ok());
+      }
+      EXPECT_TRUE(s->step(5e-5).ok());
+    }
+    EXPECT_GT(s->last_step().contacts, 0);
+    return s->state_hash();
+  };
+  const std::uint64_t h11 = run(1, 1);
+  EXPECT_EQ(run(2, 2), h11);
+  EXPECT_EQ(run(2, 1), h11);
+  EXPECT_EQ(run(1, 2), h11);
+  SimulationDef d = small_box();
+  auto s = Simulation::create(d);
+  const Status st = s->set_threads(-1);
+  ASSERT_FALSE(st.ok());
+  EXPECT_NE(st.message().find("set_threads.threads = -1"), std::string::npos) << st.message();
+}
+
 // The AVX2 pair kernel (particles/contact_avx2.cpp, used when the CPU has AVX2) gives the
 // scalar contact law's results bit for bit: the same state hash with SANDPATCH_DEM_KERNEL=scalar,
 // with the timing correction off and on. (On a CPU without AVX2 both runs are scalar.)
