@@ -168,7 +168,7 @@ struct Simulation::Impl {
   // e itself on owner entries, the mirrored entry (j -> i) with the top bit set (negate f)
   // on the others. (Measured and not kept: the owner also writing -f, n x f_t into the
   // partner's entry, so the gather reads only its own consecutive entries: the body stage
-  // 0.9x, the pair pass 1.3x, docs/BENCHMARKS.md.)
+  // 0.7-0.9x, the pair pass 1.1-1.3x, no net gain; docs/BENCHMARKS.md, session 7.)
   std::vector<std::uint32_t> gather_src;
   std::vector<std::uint8_t> owner;     // 1 if entry e computes the pair
   std::vector<std::int32_t> nown;      // per sphere: end of its owner entries ([nstart, nown) own)

@@ -3,7 +3,7 @@
 //   sandpatch render [SCENE] --at T [--camera NAME] [--image FILE] [--out DIR]
 //   sandpatch check SCENE
 //   sandpatch info
-//   sandpatch bench dem [--granules N] [--steps S] [--backend cpu|gl] [--threads T] [--json]
+//   sandpatch bench dem [--granules N] [--steps S] [--repeat K] [--alternate-threads T2] [--backend cpu|gl] [--threads T] [--json]
 //   sandpatch bench render [--terrain N]... [--frames F] [--width W] [--height H] [--json]
 //   sandpatch bench lod [--sizes N,N,...] [--seconds S] [--threads T] [--json]
 //   sandpatch bench tradeoff [--quick | --full] [--threads T] [--out DIR] [--no-gl] [--no-plot] [--json]
