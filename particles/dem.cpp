@@ -86,6 +86,12 @@ inline Vec3 to_vec3(__m128 a) {
   return {f[0], f[1], f[2]};
 }
 inline __m128 from_vec3(Vec3 v) { return _mm_setr_ps(v.x, v.y, v.z, 0.0f); }
+// Orientation after dt (s) at angular velocity w (rad/s, world frame): q + (dt/2) (w, 0) q,
+// normalised (the body stage's integrator, granules' and shells').
+inline Quat advance_orientation(Quat q, Vec3 w, float dt) {
+  const Quat qd = Quat{w.x, w.y, w.z, 0.0f} * q;
+  return normalized(Quat{q.x + 0.5f * dt * qd.x, q.y + 0.5f * dt * qd.y, q.z + 0.5f * dt * qd.z, q.w + 0.5f * dt * qd.w});
+}
 // dot(a, a) of math.hpp: (x x + y y) + z z
 inline float norm2(__m128 a) {
   const __m128 aa = _mm_mul_ps(a, a);
@@ -888,10 +894,7 @@ struct Simulation::Impl {
     _mm_store_ps(xa, xn);
     _mm_store_ps(va, v);
     _mm_store_ps(wa, w);
-    Quat q = ldq(b.quat, i);
-    const Quat dq{wa[0], wa[1], wa[2], 0.0f};
-    const Quat qd = dq * q;
-    q = normalized(Quat{q.x + 0.5f * dt * qd.x, q.y + 0.5f * dt * qd.y, q.z + 0.5f * dt * qd.z, q.w + 0.5f * dt * qd.w});
+    const Quat q = advance_orientation(ldq(b.quat, i), Vec3{wa[0], wa[1], wa[2]}, dt);
     if (!std::isfinite(xa[0] + xa[1] + xa[2] + va[0] + va[1] + va[2] + wa[0] + wa[1] + wa[2] + q.w)) ++bad;
     _mm_storeu_ps(BP, xyz_keep_w(xn, x_st));
     stq(b.quat, i, q);
@@ -959,9 +962,7 @@ struct Simulation::Impl {
         if (fl & kBodyGranule) vmax = std::max(vmax, std::sqrt(dot(v, v)) + std::sqrt(dot(w, w)) * reach);
       }
       Vec3 xn = x + dt * v;
-      Quat dq{w.x, w.y, w.z, 0.0f};
-      Quat qd = dq * q;
-      q = normalized(Quat{q.x + 0.5f * dt * qd.x, q.y + 0.5f * dt * qd.y, q.z + 0.5f * dt * qd.z, q.w + 0.5f * dt * qd.w});
+      q = advance_orientation(q, w, dt);
       if (!std::isfinite(xn.x + xn.y + xn.z + v.x + v.y + v.z + w.x + w.y + w.z + q.w)) ++bad;
       st3(b.pos, i, xn);
       stq(b.quat, i, q);
