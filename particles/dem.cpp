@@ -26,8 +26,9 @@ namespace {
 
 // Tangential springs against the boundaries, per sphere: floor, walls x0, x1, z0, z1, terrain.
 constexpr int kWallSlots = 6;
-// Floats per neighbour-list entry of the pair pass's results (Simulation::Impl::pf).
-constexpr std::size_t kPairResult = 6;
+// Per sphere, the pair pass's sums (kAcc floats; Simulation::Impl::acc): contact force (N) in 0-2,
+// the sum of n x f_t (N) in 4-6 (the torque about the centre is -r times it); 3 and 7 stay 0.
+constexpr std::size_t kAcc = 8;
 
 // Structure-of-arrays generated from fields.hpp: a field of n components is (cap x n).
 struct ParticleArrays {
@@ -156,33 +157,33 @@ struct Simulation::Impl {
   bool need_sort = true;
   float shape_offsets[16] = {};        // the granule's 4 sphere offsets (x, y, z, 0), m, body frame
 
-  // Verlet neighbour list (CSR, sorted order, no cap): for sphere i the entries
-  // [nstart[i], nstart[i+1]) hold every sphere j of another body with
-  // |x_i - x_j| < r_i + r_j + skin at the last rebuild. Each entry carries the tangential
-  // spring of the pair as seen from i (3 floats); both spheres of a pair keep their own copy.
+  // Verlet neighbour list (CSR, sorted order, no cap), one entry per pair: for sphere i the
+  // entries [nstart[i], nstart[i+1]) hold every sphere j of another body with
+  // |x_i - x_j| < r_i + r_j + skin at the last rebuild for which i is the pair's owner: the
+  // sphere with the lower stable id, or the only side with a list (a static partner has none).
+  // Each entry carries the pair's tangential spring (3 floats).
   std::vector<std::int32_t> nstart;    // np + 1
   std::vector<std::int32_t> nbr;       // sorted index of the partner
   std::vector<std::int32_t> nbr_id;    // stable id of the partner (history carry-over)
-  std::vector<float> nxi;              // 3 per entry, m (used on owner entries only)
-  // 1 per entry: the pair touched at the last substep (owner entries only; carried over on
-  // rebuilds like nxi). A touching pair without it is in its first substep (new_contact).
+  std::vector<float> nxi;              // 3 per entry, m
+  // 1 per entry: the pair touched at the last substep (carried over on rebuilds like nxi). A
+  // touching pair without it is in its first substep (new_contact).
   std::vector<std::uint8_t> ntouch;
-  // Each pair is computed once, by its owner entry: the sphere with the lower stable id, or
-  // the only side that has an entry (a static partner has no list). The owner writes the
-  // pair's force on itself and n x f_t into pf; then every sphere gathers its entries in list
-  // order (fixed order, no atomics): gather_src[e] is the entry whose result entry e reads,
-  // e itself on owner entries, the mirrored entry (j -> i) with the top bit set (negate f)
-  // on the others. (Measured and not kept: the owner also writing -f, n x f_t into the
-  // partner's entry, so the gather reads only its own consecutive entries: the body stage
-  // 0.7-0.9x, the pair pass 1.1-1.3x, no net gain; docs/BENCHMARKS.md, session 7.)
-  std::vector<std::uint32_t> gather_src;
-  std::vector<std::uint8_t> owner;     // 1 if entry e computes the pair
-  std::vector<std::int32_t> nown;      // per sphere: end of its owner entries ([nstart, nown) own)
-  // 6 per entry (kPairResult): f (N), n x f_t (N); 2 floats of padding at the end, so the
-  // gather's 4-wide load of n x f_t (lane 3 unused) stays inside the array. An owner entry
-  // whose pair did not touch at the last substep holds zeros (pf is zeroed on a rebuild, an
-  // entry that stops touching is zeroed), so entries that stay apart are not written at all.
-  std::vector<float> pf;
+  // The pair pass computes each pair once and adds its result to both spheres' sums in acc
+  // (kAcc per sphere, sorted order; the body stage reads and zeroes them). No atomics and the
+  // same order of additions for any thread count: the spheres are split into slabs of two
+  // z-layers of cells (contiguous in the sorted order, z outermost; chunk_start), fixed by the
+  // grid, not by the threads. A pair reaches at most one layer up or down, so slabs of the same
+  // parity never write the same sphere: the even slabs run in parallel, then the odd ones, each
+  // slab on one thread front to back. (Before: each pair's result was stored per list entry and
+  // every sphere gathered its entries, the partner's mirrored one included; 2 list entries
+  // per pair, and the gather's loads of the mirrored results were 20 % of the body stage's
+  // samples on 64,000 spheres. docs/BENCHMARKS.md, session 8.)
+  struct alignas(32) SphereSums {
+    float v[kAcc];
+  };
+  std::vector<SphereSums> acc;  // one per sphere, 32-byte aligned: one cache line holds it
+  std::vector<std::int32_t> chunk_start;  // slabs + 1: sorted index where each slab begins
   std::vector<float> wxi;              // 3 per boundary plane (kWallSlots) per sphere, sorted order
   std::vector<std::uint32_t> wmask;    // per sphere: bit k = plane k touched at the last substep
 
@@ -320,6 +321,13 @@ struct Simulation::Impl {
       for (int i = 0; i < nb; ++i)  // bodies without spheres (none today) keep their place at the end
         if (!seen[i]) body_order.push_back(i);
     }
+    // slabs of two z-layers of cells (the pair pass's chunks)
+    chunk_start.clear();
+    for (int z = 0; z < gz; z += 2) chunk_start.push_back(cell_start[std::size_t(z) * gx * gy]);
+    chunk_start.push_back(np);
+    // the sums are zero between substeps (the body stage zeroes what it reads; this also clears
+    // what a step that failed half-way left)
+    std::fill(acc.begin(), acc.begin() + np, SphereSums{});
     need_sort = false;
     stats.resorts++;
     build_list(old_slot);
@@ -363,11 +371,13 @@ struct Simulation::Impl {
     const int n = np;
     const int old_np = ostart.empty() ? 0 : int(ostart.size()) - 1;
     nstart.assign(n + 1, 0);
+    // i owns the pair with j: a static partner has no list, else the lower stable id
+    auto owns = [&](int i, int j) { return (b.flags[p.body[j]] & kBodyStatic) || p.id[i] < p.id[j]; };
 #pragma omp parallel for num_threads(threads) schedule(dynamic, 256) if (n > 4096)
     for (int i = 0; i < n; ++i) {
       if (b.flags[p.body[i]] & kBodyStatic) continue;
       int cnt = 0;
-      for_near(i, [&](int) { ++cnt; });
+      for_near(i, [&](int j) { cnt += owns(i, j); });
       nstart[i + 1] = cnt;
     }
     for (int i = 0; i < n; ++i) nstart[i + 1] += nstart[i];
@@ -375,8 +385,6 @@ struct Simulation::Impl {
     nbr_id.resize(nstart[n]);
     nxi.assign(std::size_t(nstart[n]) * 3, 0.0f);
     ntouch.assign(std::size_t(nstart[n]), 0);
-    nown.assign(n, 0);
-    for (int i = 0; i < n; ++i) nown[i] = nstart[i];
 #pragma omp parallel for num_threads(threads) schedule(dynamic, 256) if (n > 4096)
     for (int i = 0; i < n; ++i) {
       if (b.flags[p.body[i]] & kBodyStatic) continue;
@@ -384,45 +392,22 @@ struct Simulation::Impl {
       const int id = p.id[i];
       const int oi = id < int(old_slot.size()) ? old_slot[id] : -1;
       const bool has_old = oi >= 0 && oi < old_np;
-      // owner entries first (the pair pass walks only those), then the mirrored ones
-      for (int pass = 0; pass < 2; ++pass) {
-        for_near(i, [&](int j) {
-          const bool own = (b.flags[p.body[j]] & kBodyStatic) || id < p.id[j];
-          if (own != (pass == 0)) return;
-          nbr[e] = j;
-          nbr_id[e] = p.id[j];
-          if (has_old && own)
-            for (int k = ostart[oi]; k < ostart[oi + 1]; ++k)
-              if (onbr_id[k] == p.id[j]) {
-                nxi[3 * e] = oxi[3 * k];
-                nxi[3 * e + 1] = oxi[3 * k + 1];
-                nxi[3 * e + 2] = oxi[3 * k + 2];
-                ntouch[e] = otouch[k];
-                break;
-              }
-          ++e;
-        });
-        if (pass == 0) nown[i] = e;
-      }
-    }
-    // mirrored entries and ownership (by stable id, so it survives re-sorts with the springs)
-    gather_src.resize(nstart[n]);
-    owner.resize(nstart[n]);
-    pf.assign(std::size_t(nstart[n]) * kPairResult + 2, 0.0f);
-#pragma omp parallel for num_threads(threads) schedule(dynamic, 256) if (n > 4096)
-    for (int i = 0; i < n; ++i) {
-      for (int e = nstart[i]; e < nstart[i + 1]; ++e) {
-        const int j = nbr[e];
-        int m = -1;
-        for (int k = nstart[j]; k < nstart[j + 1]; ++k)
-          if (nbr[k] == i) {
-            m = k;
-            break;
-          }
-        owner[e] = e < nown[i] ? 1 : 0;
-        gather_src[e] = owner[e] ? std::uint32_t(e) : (std::uint32_t(m) | 0x80000000u);
-        assert(owner[e] == ((m < 0 || p.id[i] < p.id[j]) ? 1 : 0));
-      }
+      for_near(i, [&](int j) {
+        if (!owns(i, j)) return;
+        nbr[e] = j;
+        nbr_id[e] = p.id[j];
+        if (has_old)
+          for (int k = ostart[oi]; k < ostart[oi + 1]; ++k)
+            if (onbr_id[k] == p.id[j]) {
+              nxi[3 * e] = oxi[3 * k];
+              nxi[3 * e + 1] = oxi[3 * k + 1];
+              nxi[3 * e + 2] = oxi[3 * k + 2];
+              ntouch[e] = otouch[k];
+              break;
+            }
+        ++e;
+      });
+      assert(e == nstart[i + 1]);
     }
   }
 
@@ -522,8 +507,8 @@ struct Simulation::Impl {
     return dt;
   }
 
-  // ---- contact stage, pair pass: each pair is computed once by its owner entry (the sums per
-  // sphere are made by gather_sphere, from the body stage)
+  // ---- contact stage, pair pass: each pair is computed once, by its owner's entry, and added
+  // to both spheres' sums (acc; read by gather_sphere in the body stage), slab by slab
   template <bool kBell>
   void contacts(float dt) {
     const Material& mat = def.material;
@@ -537,32 +522,40 @@ struct Simulation::Impl {
     const float* W = p.omega.data();
     const std::int32_t* NS = nstart.data();
     const std::int32_t* NB = nbr.data();
+    const std::int32_t* CS = chunk_start.data();
+    const int nchunks = int(chunk_start.size()) - 1;
     float* XI = nxi.data();
+    float* ACC = acc.data()->v;
     std::uint8_t* TCH = ntouch.data();
     std::int64_t npairs = 0;
     const int n = np;
     law = {kn, cn0, kt, ctr, mu, kb};  // for gather_sphere
 
-    const std::int32_t* NO = nown.data();
-    float* PF = pf.data();
-    // not touching: the spring is forgotten and the pair's result zeroed (only when it touched
-    // at the last substep: otherwise it is zero already)
+    // not touching: the spring is forgotten
     auto part = [&](int e, float* xe) __attribute__((always_inline)) {
-      if (TCH[e]) {
-        float* q = PF + kPairResult * std::size_t(e);
-        q[0] = q[1] = q[2] = q[3] = q[4] = q[5] = 0.0f;
-        TCH[e] = 0;
-      }
+      TCH[e] = 0;
       if (xe[0] != 0.0f || xe[1] != 0.0f || xe[2] != 0.0f) xe[0] = xe[1] = xe[2] = 0.0f;
+    };
+    // the pair's force f on i (N) and n x f_t (N) into both sums: i gets +f, j gets -f, both
+    // + n x f_t (their torques about their centres are -r_i and -r_j times it)
+    auto add_pair = [&](int i, int j, __m128 f4, __m128 c4) __attribute__((always_inline)) {
+      float* ai = ACC + kAcc * std::size_t(i);
+      float* aj = ACC + kAcc * std::size_t(j);
+      _mm_storeu_ps(ai, _mm_add_ps(_mm_loadu_ps(ai), f4));
+      _mm_storeu_ps(ai + 4, _mm_add_ps(_mm_loadu_ps(ai + 4), c4));
+      _mm_storeu_ps(aj, _mm_sub_ps(_mm_loadu_ps(aj), f4));
+      _mm_storeu_ps(aj + 4, _mm_add_ps(_mm_loadu_ps(aj + 4), c4));
     };
 #pragma omp parallel num_threads(threads) if (n > 4096)
     {
     if (!kBell && simd_pairs) {
     // pair pass, AVX2: the same walk; touching pairs are collected per thread into batches of
-    // 8 and evaluated by the kernel (same results, contact_simd.hpp). A chunk of spheres is
-    // one task, its last batch evaluated before the chunk ends.
+    // 8 and evaluated by the kernel (same results, contact_simd.hpp), then added to the sums in
+    // pair order (the pass reads no sum, so the additions are those of the scalar pass). A
+    // slab is one task, its last batch evaluated before the slab ends.
     const simd::PairLaw plaw{kn, cn0, kt, ctr, mu, dt};
     simd::PairBatch bt;
+    int bi[simd::kPairLanes], bj[simd::kPairLanes];
     auto flush = [&]() {
       const int cnt = bt.count;
       for (int k = cnt; k < simd::kPairLanes; ++k) {  // idle lanes: a copy of lane 0
@@ -576,21 +569,19 @@ struct Simulation::Impl {
       simd::spring_pairs_avx2(plaw, bt);
 #endif
       for (int k = 0; k < cnt; ++k) {
-        const std::size_t e = std::size_t(bt.entry[k]);
-        float* q = PF + kPairResult * e;
-        q[0] = bt.fx[k], q[1] = bt.fy[k], q[2] = bt.fz[k];
-        q[3] = bt.cx[k], q[4] = bt.cy[k], q[5] = bt.cz[k];
-        float* xe = XI + 3 * e;
+        float* xe = XI + 3 * std::size_t(bt.entry[k]);
         xe[0] = bt.xix[k], xe[1] = bt.xiy[k], xe[2] = bt.xiz[k];
+        add_pair(bi[k], bj[k], _mm_setr_ps(bt.fx[k], bt.fy[k], bt.fz[k], 0.0f),
+                 _mm_setr_ps(bt.cx[k], bt.cy[k], bt.cz[k], 0.0f));
       }
       bt.count = 0;
     };
-    constexpr int kChunk = 512;
+    for (int parity = 0; parity < 2; ++parity) {
 #pragma omp for schedule(dynamic, 1) reduction(+ : npairs)
-    for (int c0 = 0; c0 < n; c0 += kChunk) {
+    for (int c = parity; c < nchunks; c += 2) {
       bt.count = 0;
-      for (int i = c0, i1 = std::min(n, c0 + kChunk); i < i1; ++i) {
-        const int e0 = NS[i], e1 = NO[i];
+      for (int i = CS[c], i1 = CS[c + 1]; i < i1; ++i) {
+        const int e0 = NS[i], e1 = NS[i + 1];
         if (e0 == e1) continue;
         const Vec3 pi{P[4 * i], P[4 * i + 1], P[4 * i + 2]};
         const float ri = P[4 * i + 3];
@@ -620,16 +611,20 @@ struct Simulation::Impl {
           TCH[e] = 1;
           bt.xix[k] = xe[0], bt.xiy[k] = xe[1], bt.xiz[k] = xe[2];
           bt.entry[k] = e;
+          bi[k] = i, bj[k] = j;
           if (bt.count == simd::kPairLanes) flush();
         }
       }
       if (bt.count > 0) flush();
     }
+    }
     } else {
-    // pair pass: each owner entry computes its pair once
-#pragma omp for schedule(dynamic, 512) reduction(+ : npairs)
-    for (int i = 0; i < n; ++i) {
-      const int e0 = NS[i], e1 = NO[i];
+    // pair pass: each entry computes its pair once
+    for (int parity = 0; parity < 2; ++parity) {
+#pragma omp for schedule(dynamic, 1) reduction(+ : npairs)
+    for (int c = parity; c < nchunks; c += 2) {
+    for (int i = CS[c], i1 = CS[c + 1]; i < i1; ++i) {
+      const int e0 = NS[i], e1 = NS[i + 1];
       if (e0 == e1) continue;
       const Vec3 pi{P[4 * i], P[4 * i + 1], P[4 * i + 2]};
       const float ri = P[4 * i + 3];
@@ -644,7 +639,6 @@ struct Simulation::Impl {
         const float rs = ri + rj;
         const float d2 = dx * dx + dy * dy + dz * dz;
         float* xe = XI + 3 * std::size_t(e);
-        float* q = PF + kPairResult * std::size_t(e);
         if (d2 >= rs * rs || d2 <= 0.0f) {
           part(e, xe);
           continue;
@@ -674,14 +668,10 @@ struct Simulation::Impl {
         xe[0] = xi.x;
         xe[1] = xi.y;
         xe[2] = xi.z;
-        const Vec3 c = cross(nrm, cf.ft);
-        q[0] = cf.f.x;
-        q[1] = cf.f.y;
-        q[2] = cf.f.z;
-        q[3] = c.x;
-        q[4] = c.y;
-        q[5] = c.z;
+        add_pair(i, j, from_vec3(cf.f), from_vec3(cross(nrm, cf.ft)));
       }
+    }
+    }
     }
     }  // scalar pair pass
     }  // omp parallel
@@ -705,9 +695,8 @@ struct Simulation::Impl {
   // store to a force from one to a member), ~20 instructions per sphere-step.
   struct GatherCtx {
     LawConstants law;
-    const float *P, *V, *W, *PF;
-    const std::int32_t* NS;
-    const std::uint32_t* GS;
+    const float *P, *V, *W;
+    float* ACC;
     float* WX;
     std::uint32_t* WM;
     Vec3 bmin, bmax;
@@ -727,8 +716,7 @@ struct Simulation::Impl {
       x0 = std::max(x0, tg.fill_min_x), x1 = std::min(x1, tg.fill_max_x);
       z0 = std::max(z0, tg.fill_min_z), z1 = std::min(z1, tg.fill_max_z);
     }
-    return {law,           p.pos.data(), p.vel.data(),   p.omega.data(),    pf.data(),
-            nstart.data(), gather_src.data(),
+    return {law, p.pos.data(), p.vel.data(), p.omega.data(), const_cast<float*>(acc.data()->v),
             const_cast<float*>(wxi.data()), const_cast<std::uint32_t*>(wmask.data()),
             def.bounds_min, def.bounds_max, def.floor_height, def.side_walls, !def.terrain.empty(), first_law,
             x0, x1, z0, z1};
@@ -738,22 +726,13 @@ struct Simulation::Impl {
   __attribute__((always_inline)) __m128 gather_sphere4(const GatherCtx& g, const int i, const float dt,
                                                        std::int64_t& nwall, __m128& F4, __m128& T4) {
     const float* P = g.P;
-    const float* PF = g.PF;
-    const std::int32_t* NS = g.NS;
-    const std::uint32_t* GS = g.GS;
     const __m128 P4 = _mm_loadu_ps(P + 4 * std::size_t(i));  // centre, radius
     const float ri = P[4 * i + 3];
-    // sphere-sphere: own entries from this substep's pair pass, mirrored ones negated (entries
-    // not touching hold zeros, so the sums need no branch); one loop over the list, the sign
-    // from gather_src (adding -f is subtracting f, bit for bit); lane 3 is dropped
-    __m128 Fs = _mm_setzero_ps(), C4 = _mm_setzero_ps();
-    for (int e = NS[i], e1 = NS[i + 1]; e < e1; ++e) {
-      const std::uint32_t src = GS[e];
-      const float* q = PF + kPairResult * std::size_t(src & 0x7fffffffu);
-      const __m128 sign = _mm_castsi128_ps(_mm_set1_epi32(int(src & 0x80000000u)));
-      Fs = _mm_add_ps(Fs, _mm_xor_ps(_mm_loadu_ps(q), sign));  // f
-      C4 = _mm_add_ps(C4, _mm_loadu_ps(q + 3));                  // n x f_t
-    }
+    // sphere-sphere: the pair pass's sums, zeroed for the next substep
+    float* A = g.ACC + kAcc * std::size_t(i);
+    const __m128 Fs = _mm_loadu_ps(A), C4 = _mm_loadu_ps(A + 4);
+    _mm_storeu_ps(A, _mm_setzero_ps());
+    _mm_storeu_ps(A + 4, _mm_setzero_ps());
     F4 = xyz0(Fs);
     T4 = _mm_add_ps(_mm_setzero_ps(), _mm_mul_ps(xyz0(C4), _mm_set1_ps(-ri)));  // T{} + (-r_i) C
     // boundaries, for dynamic spheres near one (the rest only clear a mask left set)
@@ -922,9 +901,11 @@ struct Simulation::Impl {
       const std::uint32_t fl = b.flags[i];
       const Vec3 x = ld3(b.pos, i);
       Vec3 F{}, T{};
-      if (fl & kBodyStatic) {  // no force on a static body's spheres (they have no list)
+      if (fl & kBodyStatic) {  // no force on a static body (its spheres' sums are only cleared)
         st3(b.force, i, F);
         st3(b.torque, i, T);
+        for (int k = 0, first = b.first[i], cnt = b.count[i]; k < cnt; ++k)
+          acc[std::size_t(slot_of[first + k])] = SphereSums{};
         continue;
       }
       if (fl & kBodyGranule) {  // (granules are dynamic)
@@ -1222,6 +1203,7 @@ Result<Simulation> Simulation::create(const SimulationDef& d) {
   s.pos_at_sort.assign(std::size_t(d.max_particles) * 4, 0.0f);
   s.wxi.assign(std::size_t(d.max_particles) * 3 * kWallSlots, 0.0f);
   s.wmask.assign(d.max_particles, 0u);
+  s.acc.assign(std::size_t(d.max_particles), Impl::SphereSums{});
   s.guard_pt_mass.assign(d.max_bodies, 0.0f);
   s.guard_arm.assign(d.max_bodies, 0.0f);
   s.guard_rmin.assign(d.max_bodies, 0.0f);
@@ -1481,8 +1463,7 @@ double Simulation::potential_energy() const {
       }
     }
     if (m.shear == ShearLaw::SpringHistory && i < int(s.nstart.size()) - 1) {
-      for (int k = s.nstart[i]; k < s.nstart[i + 1]; ++k) {
-        if (!s.owner[k]) continue;  // the pair's spring lives on its owner entry
+      for (int k = s.nstart[i]; k < s.nstart[i + 1]; ++k) {  // one entry per pair
         const float* x = &s.nxi[3 * std::size_t(k)];
         e += 0.5 * kt * (double(x[0]) * x[0] + double(x[1]) * x[1] + double(x[2]) * x[2]);
       }
