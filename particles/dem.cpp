@@ -679,10 +679,10 @@ struct Simulation::Impl {
     stats.neighbour_entries = nstart.empty() ? 0 : nstart[np];
   }
 
-  // ---- sphere stage (called by the body stage for each sphere of a body, so a body's
-  // spheres are gathered while they are in cache): sphere i sums its pair results in list
-  // order and adds the boundaries; returns the sphere's force and torque (the body stage sums
-  // them straight into the body: the particle fields force/torque are the GL backend's).
+  // ---- sphere stage (called by the body stage for each sphere of a body): sphere i takes the
+  // pair pass's sums (and zeroes them) and adds the boundaries; returns the sphere's force and
+  // torque (the body stage sums them straight into the body: the particle fields force/torque
+  // are the GL backend's).
   struct LawConstants {
     float kn, cn0, kt, ctr, mu, kb;  // N/m, c_n = cn0 / sqrt(1/m_i + 1/m_j), N/m, c_t/c_n, -, N s/m
   } law{};

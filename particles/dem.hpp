@@ -12,11 +12,12 @@
 //   2. grid      when a sphere moved more than skin/2 since the last rebuild: counting-sort
 //                the spheres by cell (cell = 2 r_max + skin, no cap) and rebuild the Verlet
 //                neighbour list from the 27 cells, carrying each pair's spring over
-//   3. contacts  each pair is computed once, by its owner entry (lower stable id; 8 pairs at a
-//                time by the AVX2 kernel when the CPU has it, contact_simd.hpp, same bits)
-//   4. bodies    bodies in cell-sorted order; each gathers its spheres (every sphere sums its
-//                list entries in list order, plus the boundaries) and sums them in sphere-id
-//                order: every sum has a fixed order (no atomics)
+//   3. contacts  each pair is computed once, by its owner's entry (lower stable id; 8 pairs at
+//                a time by the AVX2 kernel when the CPU has it, contact_simd.hpp, same bits),
+//                and added to both spheres' sums; slabs of two z-layers of cells, the even
+//                ones in parallel, then the odd ones: a fixed order of additions (no atomics)
+//   4. bodies    bodies in cell-sorted order; each reads its spheres' sums (and zeroes them),
+//                adds the boundaries and sums its spheres in sphere-id order
 //   5. integrate symplectic Euler; quaternions normalised; NaN check; spheres rebuilt with
 //                the velocity the next contact stage sees (SimulationDef::contact_timing)
 // The same state in, the same state out, for any number of threads (a test).
