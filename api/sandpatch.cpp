@@ -1,6 +1,6 @@
 // The library for games (include/sandpatch/sandpatch.hpp, docs/api.md): the public API over
-// the heightfield, the Bullet world and the terrain manager, driven per step in the same
-// order as a scene run (manager/run.cpp): lod, activation, dem, bodies, sleep, demotion.
+// a World (manager/world.hpp), the frame owner a scene run steps too: the same stages, the
+// same state hash and the same report sections.
 //
 // Public types live in sandpatch::api; the internal ones (sandpatch::Error, Result, ...) are
 // reached through the `core` alias. Every public entry point validates its input and
@@ -17,12 +17,14 @@
 
 #include "common/error.hpp"
 #include "common/hash.hpp"
+#include "common/knobs.hpp"
 #include "heightfield/heightfield.hpp"
 #include "heightfield/io.hpp"
 #include "heightfield/procedural.hpp"
 #include "manager/bullet_world.hpp"
 #include "manager/profile.hpp"
 #include "manager/terrain_manager.hpp"
+#include "manager/world.hpp"
 #include "render/clipmap.hpp"
 #include "scene/mesh.hpp"
 
@@ -75,6 +77,11 @@ struct Checker {
     add(field, num(v), allowed);
   }
   void closed(const std::string& f, double v, double lo, double hi, const char* unit = "") { number(f, v, lo, hi, false, false, unit); }
+  // A setting of the knob table (common/knobs.hpp): its range; the field is the table's name.
+  void knob(const knobs::Knob& k, double v) {
+    if (k.allows(v)) return;
+    errs.push_back({"", k.api, num(v), "must be in " + knobs::describe_range(k), detail});
+  }
   void positive(const std::string& f, double v, double hi, const char* unit = "") { number(f, v, 0.0, hi, true, false, unit); }
   void integer(const std::string& field, long long v, long long lo, long long hi) {
     if (v < lo || v > hi) add(field, std::to_string(v), "must be in [" + std::to_string(lo) + ", " + std::to_string(hi) + "]");
@@ -139,26 +146,29 @@ std::vector<Error> validate(const TerrainDef& d) {
   }
   c.positive("spacing", d.spacing, 1e4, "m");
   c.finite("origin", d.origin, "m");
-  c.positive("soil_depth", d.soil_depth, 1e4, "m");
-  c.closed("material.granule_radius", d.material.granule_radius, 1e-5, 10.0, "m");
-  c.positive("material.density", d.material.density, 1e5, "kg/m^3");
-  c.closed("material.friction", d.material.friction, 0.0, 10.0);
-  c.positive("material.restitution", d.material.restitution, 1.0);
-  c.closed("material.stiffness", d.material.stiffness, 1.0, 1e12, "N/m");
-  c.closed("material.tangential_stiffness_ratio", d.material.tangential_stiffness_ratio, 0.0, 1.0);
-  c.integer("slots", d.slots, 1, 1024);
-  c.integer("granules_per_slot", d.granules_per_slot, 64, 16777216);
-  if (std::isfinite(d.soil_depth) && d.soil_depth > 0)
-    c.positive("patch_depth", d.patch_depth, d.soil_depth, "m (at most soil_depth)");
-  c.closed("particle_scale", d.particle_scale, 1e-3, 1e3);
-  c.closed("sleep_speed", d.sleep_speed, 0.0, 100.0, "m/s");
-  c.closed("sleep_time", d.sleep_time, 0.0, 1e4, "s");
-  c.closed("idle_timeout", d.idle_timeout, 0.0, 1e6, "s");
+  c.knob(knobs::kSoilDepth, d.soil_depth);
+  c.knob(knobs::kGranuleRadius, d.material.granule_radius);
+  c.knob(knobs::kDensity, d.material.density);
+  c.knob(knobs::kFriction, d.material.friction);
+  c.knob(knobs::kRestitution, d.material.restitution);
+  c.knob(knobs::kStiffness, d.material.stiffness);
+  c.knob(knobs::kTangentialRatio, d.material.tangential_stiffness_ratio);
+  c.knob(knobs::kSlots, d.slots);
+  c.knob(knobs::kGranulesPerSlot, d.granules_per_slot);
+  c.knob(knobs::kPatchDepth, d.patch_depth);
+  if (knobs::kPatchDepth.allows(d.patch_depth) && std::isfinite(d.soil_depth) && d.patch_depth > d.soil_depth)
+    c.add("patch_depth", num(d.patch_depth), "must be at most soil_depth (" + num(d.soil_depth) + " m)");
+  c.knob(knobs::kParticleScale, d.particle_scale);
+  c.knob(knobs::kStepsPerContact, d.steps_per_contact);
+  c.knob(knobs::kMaxSubsteps, d.max_substeps);
+  c.knob(knobs::kSleepSpeed, d.sleep_speed);
+  c.knob(knobs::kSleepTime, d.sleep_time);
+  c.knob(knobs::kIdleTimeout, d.idle_timeout);
   if (d.backend != "cpu" && d.backend != "gl") c.add("backend", "\"" + d.backend + "\"", "must be cpu or gl");
-  c.integer("threads", d.threads, 0, 1024);
-  c.positive("lod_horizon", d.lod_horizon, 10.0, "s");
-  c.closed("lod_margin", d.lod_margin, 0.0, 100.0, "m");
-  c.closed("lod_apron", d.lod_apron, 0.0, 1000.0, "m");
+  c.knob(knobs::kThreads, d.threads);
+  c.knob(knobs::kLodHorizon, d.lod_horizon);
+  c.knob(knobs::kLodMargin, d.lod_margin);
+  c.knob(knobs::kLodApron, d.lod_apron);
   c.finite("gravity", d.gravity, "m/s^2");
   return c.errs;
 }
@@ -245,35 +255,20 @@ const char* to_string(EventKind k) {
   return "unknown";
 }
 
-// Destruction order matters: the manager refers to the world and the heightfield, the world
-// reads the heightfield's tiles in place. Members are destroyed in reverse order.
 struct Terrain::Impl {
   TerrainDef def;
-  std::unique_ptr<core::Heightfield> hf;
-  std::unique_ptr<core::BulletWorld> world;
-  std::unique_ptr<core::TerrainManager> manager;  // null when granular_patches is false
-  core::Profile profile;
-  double time = 0;                                // s
-  long long frames = 0;
+  std::unique_ptr<core::World> world;
   std::size_t events_read = 0;                    // manager events already handed out
-  std::vector<core::GridRegion> dirty;            // demoted regions not yet taken
-  // Bodies removed by the game but still in the Bullet world until the next step's dem stage
-  // has let go of them (see remove_body).
-  std::vector<core::RigidBodyId> removing;
 
   core::RigidBodyId id(BodyHandle h) const { return {h.index, h.generation}; }
-  bool pending_removal(core::RigidBodyId b) const {
-    return std::any_of(removing.begin(), removing.end(),
-                       [&](const core::RigidBodyId& r) { return r.index == b.index && r.generation == b.generation; });
-  }
+  core::BulletWorld& bullet() { return world->bullet(); }
+  const core::BulletWorld& bullet() const { return world->bullet(); }
+  const core::Heightfield& hf() const { return world->heightfield(); }
+  core::TerrainManager* manager() const { return const_cast<core::World&>(*world).manager(); }
   Status check(BodyHandle h) const {
-    if (world->alive(id(h)) && !pending_removal(id(h))) return Ok{};
+    if (world->alive(id(h))) return Ok{};
     return Error{"", "BodyHandle", "{" + std::to_string(h.index) + ", " + std::to_string(h.generation) + "}",
                  "must be a live body of this terrain (removed, or never added)"};
-  }
-  void collect_dirty() {
-    if (!manager) return;
-    for (const auto& r : manager->take_dirty_regions()) dirty.push_back(r);
   }
 };
 
@@ -288,9 +283,8 @@ Result<Terrain> Terrain::create(const TerrainDef& def) {
   impl->def = def;
   auto hf = build_heightfield(def);
   if (!hf) return hf.errors();
-  impl->hf = std::make_unique<core::Heightfield>(std::move(*hf));
   const Eigen::Vector3f gravity(float(def.gravity[0]), float(def.gravity[1]), float(def.gravity[2]));
-  auto world = core::BulletWorld::create(*impl->hf, gravity);
+  auto world = core::World::create(std::move(*hf), gravity);
   if (!world) return convert(world.errors(), "TerrainDef.");
   impl->world = std::move(*world);
   if (def.granular_patches) {
@@ -302,6 +296,8 @@ Result<Terrain> Terrain::create(const TerrainDef& def) {
     m.material.stiffness = float(def.material.stiffness);
     m.material.tangential_stiffness_ratio = float(def.material.tangential_stiffness_ratio);
     m.particle_scale = def.particle_scale;
+    m.steps_per_contact = def.steps_per_contact;
+    m.max_substeps = def.max_substeps;
     m.slots = def.slots;
     m.granules_per_slot = def.granules_per_slot;
     m.patch_depth = def.patch_depth;
@@ -317,8 +313,7 @@ Result<Terrain> Terrain::create(const TerrainDef& def) {
     m.lod.apron = def.lod_apron;
     m.gravity = {def.gravity[0], def.gravity[1], def.gravity[2]};
     m.seed = def.seed;
-    auto tm = core::TerrainManager::create(m, *impl->hf, *impl->world);
-    if (!tm) {
+    if (core::Status tm = impl->world->enable_patches(m); !tm) {
       // Fields the manager names after the scene file's become TerrainDef's; the others (from
       // settling the granule tile, making the pool's simulations) keep their internal names.
       std::vector<Error> es = convert(tm.errors(), "",
@@ -327,14 +322,16 @@ Result<Terrain> Terrain::create(const TerrainDef& def) {
                                        {"simulation.pool.granules_per_slot", "TerrainDef.granules_per_slot"},
                                        {"simulation.backend", "TerrainDef.backend"},
                                        {"particle_scale", "TerrainDef.particle_scale"},
-                                       {"patch_depth", "TerrainDef.patch_depth"}});
+                                       {"patch_depth", "TerrainDef.patch_depth"},
+                                       {"terrain.patch_depth", "TerrainDef.patch_depth"},
+                                       {"steps_per_contact", "TerrainDef.steps_per_contact"},
+                                       {"max_substeps", "TerrainDef.max_substeps"}});
       for (auto& e : es)
         if (!e.field.starts_with("TerrainDef."))
           e.detail += std::string(e.detail.empty() ? "" : "; ") +
                       "while building the granule tile and the patch pool from TerrainDef.material";
       return es;
     }
-    impl->manager = std::move(*tm);
   }
   return Terrain(std::move(impl));
 }
@@ -421,9 +418,9 @@ Result<BodyHandle> Terrain::add_body(const BodyDef& d) {
     c.add("orientation", "[0, 0, 0, 0]", "must be a non-zero quaternion [w, x, y, z]");
   c.finite("linear_velocity", d.linear_velocity, "m/s");
   c.finite("angular_velocity", d.angular_velocity, "rad/s");
-  c.closed("friction", d.friction, 0.0, 10.0);
-  c.closed("restitution", d.restitution, 0.0, 1.0);
-  c.closed("rolling_friction", d.rolling_friction, 0.0, 10.0);
+  c.knob(knobs::kBodyFriction, d.friction);
+  c.knob(knobs::kBodyRestitution, d.restitution);
+  c.knob(knobs::kBodyRollingFriction, d.rolling_friction);
   if (!c.errs.empty()) return c.errs;
 
   r.shape.radius = float(s.radius);
@@ -442,10 +439,10 @@ Result<BodyHandle> Terrain::add_body(const BodyDef& d) {
   // The body's lowest point must start at or above the bedrock (surface − soil_depth): the
   // patches' granules stop there.
   Eigen::Vector3d lo, hi;
-  I.world->bounds(*id, &lo, &hi);
+  I.bullet().bounds(*id, &lo, &hi);
   const double bedrock = height_at(d.position[0], d.position[2]) - I.def.soil_depth;
   if (lo.y() < bedrock) {
-    I.world->remove_body(*id);
+    I.world->discard_body(*id);
     return Error{"", "BodyDef.position", vec_str(d.position),
                  "the body's lowest point must start at or above the bedrock (world y = " + num(bedrock) + " m here)",
                  "its lowest point is at y = " + num(lo.y()) + " m" + (d.name.empty() ? "" : " (body '" + d.name + "')")};
@@ -453,26 +450,12 @@ Result<BodyHandle> Terrain::add_body(const BodyDef& d) {
   return BodyHandle{id->index, id->generation};
 }
 
-// A body a patch carries has a shell in the patch's DEM, which the manager disables only when
-// it sees the body leave the patch (TerrainManager has no "body removed" call). So a removed
-// body is first moved 1 km above the terrain, at rest, and leaves the Bullet world in the next
-// step, after the dem stage has disabled its shell; to the game it is gone at once.
+// World::remove_body: gone to the game at once; a body a patch may carry leaves the Bullet
+// world in the next step, after the dem stage has let go of its shell.
 Status Terrain::remove_body(BodyHandle h) {
   Impl& I = *impl_;
   if (Status s = I.check(h); !s) return s;
-  const core::RigidBodyId id = I.id(h);
-  // An adopted body goes back to the game now, as it is: the patch that carries it sees it
-  // gone from the world in the next dem stage and disables its shell there.
-  if (!I.manager || I.world->adopted(id)) {
-    I.world->remove_body(id);
-    return Ok{};
-  }
-  core::BodyState st = I.world->state(id);
-  st.position.y() = I.hf->origin_y() + double(I.hf->max_height()) + 1000.0;
-  st.linear_velocity.setZero();
-  st.angular_velocity.setZero();
-  I.world->set_state(id, st);
-  I.removing.push_back(id);
+  I.world->remove_body(I.id(h));
   return Ok{};
 }
 
@@ -490,12 +473,12 @@ Result<BodyHandle> Terrain::adopt_bullet_body(void* bt_rigid_body, const std::st
   auto id = I.world->adopt_body(static_cast<btRigidBody*>(bt_rigid_body), name);
   if (!id) return convert(id.errors(), "");
   // As add_body: the body's lowest point must start at or above the bedrock.
-  const core::BodyState st = I.world->state(*id);
+  const core::BodyState st = I.bullet().state(*id);
   Eigen::Vector3d lo, hi;
-  I.world->bounds(*id, &lo, &hi);
+  I.bullet().bounds(*id, &lo, &hi);
   const double bedrock = height_at(st.position.x(), st.position.z()) - I.def.soil_depth;
   if (lo.y() < bedrock) {
-    I.world->remove_body(*id);  // given back unchanged
+    I.world->discard_body(*id);  // given back unchanged
     return Error{"", "btRigidBody.position", vec_str({st.position.x(), st.position.y(), st.position.z()}),
                  "the body's lowest point must start at or above the bedrock (world y = " + num(bedrock) + " m here)",
                  "its lowest point is at y = " + num(lo.y()) + " m" + (name.empty() ? "" : " (body '" + name + "')")};
@@ -507,7 +490,7 @@ bool Terrain::alive(BodyHandle h) const { return impl_->check(h).ok(); }
 
 Result<BodyState> Terrain::body_state(BodyHandle h) const {
   if (Status s = impl_->check(h); !s) return s.errors();
-  const core::BodyState st = impl_->world->state(impl_->id(h));
+  const core::BodyState st = impl_->bullet().state(impl_->id(h));
   BodyState out;
   out.position = {st.position.x(), st.position.y(), st.position.z()};
   out.orientation = {st.orientation.w(), st.orientation.x(), st.orientation.y(), st.orientation.z()};
@@ -524,10 +507,10 @@ Status Terrain::set_body_transform(BodyHandle h, const Vec3& position, const Qua
   if (c.errs.empty() && !eq_norm_positive(orientation))
     c.add("orientation", "[0, 0, 0, 0]", "must be a non-zero quaternion [w, x, y, z]");
   if (!c.errs.empty()) return c.errs;
-  core::BodyState st = impl_->world->state(impl_->id(h));
+  core::BodyState st = impl_->bullet().state(impl_->id(h));
   st.position = {position[0], position[1], position[2]};
   st.orientation = eq(orientation);
-  impl_->world->set_state(impl_->id(h), st);
+  impl_->bullet().set_state(impl_->id(h), st);
   return Ok{};
 }
 
@@ -537,59 +520,31 @@ Status Terrain::set_body_velocity(BodyHandle h, const Vec3f& linear, const Vec3f
   c.finite("linear", linear, "m/s");
   c.finite("angular", angular, "rad/s");
   if (!c.errs.empty()) return c.errs;
-  core::BodyState st = impl_->world->state(impl_->id(h));
+  core::BodyState st = impl_->bullet().state(impl_->id(h));
   st.linear_velocity = ev(linear);
   st.angular_velocity = ev(angular);
-  impl_->world->set_state(impl_->id(h), st);
+  impl_->bullet().set_state(impl_->id(h), st);
   return Ok{};
 }
 
 std::vector<BodyHandle> Terrain::bodies() const {
   std::vector<BodyHandle> out;
-  for (const auto& id : impl_->world->bodies())
-    if (!impl_->pending_removal(id)) out.push_back({id.index, id.generation});
+  for (const auto& id : impl_->world->bodies()) out.push_back({id.index, id.generation});
   return out;
 }
 
 // ---- the step ----
 
 Status Terrain::step(double dt, int substeps) {
-  Impl& I = *impl_;
   Checker c{"step.", "", {}};
   c.number("dt", dt, 0.0, 0.1, true, false, "s");
   c.integer("substeps", substeps, 1, 1000);
   if (!c.errs.empty()) return c.errs;
-  const double t = I.time;
-  auto fail = [&](const core::Status& s, const char* stage) {
-    std::vector<Error> out = convert(s.errors(), "");
-    for (auto& e : out) e.detail += std::string(e.detail.empty() ? "" : "; ") + "in the " + stage + " stage at t = " + num(t) + " s";
-    return out;
-  };
-  if (I.manager)
-    if (core::Status s = I.manager->before_bodies(t, dt, I.profile); !s) return fail(s, "dem");
-  for (const auto& id : I.removing) I.world->remove_body(id);  // their shells are disabled now
-  I.removing.clear();
-  {
-    auto timer = I.profile.time(core::Stage::Bodies);
-    I.world->step_frame(float(dt), substeps);  // the patches' forces act over every substep
-    for (const auto& id : I.world->bodies()) {
-      const core::BodyState st = I.world->state(id);
-      if (!st.position.allFinite() || !st.linear_velocity.allFinite() || !st.angular_velocity.allFinite()) {
-        const std::string& name = I.world->definition(id).name;
-        return Error{"", "body", name.empty() ? "{" + std::to_string(id.index) + ", " + std::to_string(id.generation) + "}" : name,
-                     "has a non-finite state at t = " + num(t + dt) + " s"};
-      }
-    }
-  }
-  if (I.manager)
-    if (core::Status s = I.manager->after_bodies(t, dt, I.profile); !s) return fail(s, "demotion");
-  I.collect_dirty();
-  ++I.frames;
-  I.time = t + dt;
+  if (core::Status s = impl_->world->step(dt, substeps); !s) return convert(s.errors(), "");
   return Ok{};
 }
 
-double Terrain::time() const { return impl_->time; }
+double Terrain::time() const { return impl_->world->time(); }
 
 Status Terrain::request_patch(double x0, double z0, double x1, double z1) {
   Checker c{"request_patch.", "", {}};
@@ -597,28 +552,25 @@ Status Terrain::request_patch(double x0, double z0, double x1, double z1) {
   if (c.errs.empty() && !(x1 > x0 && z1 > z0))
     c.add("rectangle", "[" + num(x0) + ", " + num(z0) + ", " + num(x1) + ", " + num(z1) + "]", "must have x1 > x0 and z1 > z0");
   if (!c.errs.empty()) return c.errs;
-  if (!impl_->manager) return Error{"", "TerrainDef.granular_patches", "false", "patches need granular_patches = true"};
-  impl_->manager->request_patch(x0, z0, x1, z1, impl_->time);
+  if (!impl_->manager()) return Error{"", "TerrainDef.granular_patches", "false", "patches need granular_patches = true"};
+  impl_->manager()->request_patch(x0, z0, x1, z1, impl_->world->time());
   return Ok{};
 }
 
 Status Terrain::demote_all() {
-  Impl& I = *impl_;
-  if (!I.manager) return Ok{};
-  if (core::Status s = I.manager->demote_all(I.time, I.profile); !s) return convert(s.errors(), "");
-  I.collect_dirty();
+  if (core::Status s = impl_->world->demote_all(); !s) return convert(s.errors(), "");
   return Ok{};
 }
 
 // ---- queries ----
 
 double Terrain::height_at(double x, double z) const {
-  const core::Heightfield& hf = *impl_->hf;
+  const core::Heightfield& hf = impl_->hf();
   return hf.origin_y() + double(hf.sample(float(x - hf.origin_x()), float(z - hf.origin_z())));
 }
 
 Vec3f Terrain::normal_at(double x, double z) const {
-  const core::Heightfield& hf = *impl_->hf;
+  const core::Heightfield& hf = impl_->hf();
   const Eigen::Vector3f n = hf.normal(float(x - hf.origin_x()), float(z - hf.origin_z()));
   return {n.x(), n.y(), n.z()};
 }
@@ -628,8 +580,8 @@ Vec3f Terrain::normal_at(double x, double z) const {
 std::vector<Event> Terrain::poll_events() {
   Impl& I = *impl_;
   std::vector<Event> out;
-  if (!I.manager) return out;
-  const auto& es = I.manager->events();
+  if (!I.manager()) return out;
+  const auto& es = I.manager()->events();
   for (; I.events_read < es.size(); ++I.events_read) {
     const core::PatchEvent& e = es[I.events_read];
     if (e.kind == core::PatchEventKind::Queued) continue;
@@ -638,19 +590,19 @@ std::vector<Event> Terrain::poll_events() {
   return out;
 }
 
-int Terrain::active_patches() const { return impl_->manager ? impl_->manager->active_patches() : 0; }
-int Terrain::granules() const { return impl_->manager ? impl_->manager->granules() : 0; }
+int Terrain::active_patches() const { return impl_->manager() ? impl_->manager()->active_patches() : 0; }
+int Terrain::granules() const { return impl_->manager() ? impl_->manager()->granules() : 0; }
 
 void Terrain::particles(std::vector<float>& xyzr) const {
   xyzr.clear();
-  if (impl_->manager) impl_->manager->particles(xyzr);
+  if (impl_->manager()) impl_->manager()->particles(xyzr);
 }
 
 std::vector<ParticleGroup> Terrain::particle_groups() const {
   std::vector<ParticleGroup> out;
-  if (!impl_->manager) return out;
+  if (!impl_->manager()) return out;
   std::size_t first = 0;
-  for (const auto& [count, fade] : impl_->manager->particle_groups()) {
+  for (const auto& [count, fade] : impl_->manager()->particle_groups()) {
     out.push_back({first, count, fade});
     first += count;
   }
@@ -660,17 +612,17 @@ std::vector<ParticleGroup> Terrain::particle_groups() const {
 // ---- heightfield data for renderers ----
 
 HeightfieldInfo Terrain::heightfield() const {
-  const core::Heightfield& hf = *impl_->hf;
+  const core::Heightfield& hf = impl_->hf();
   return {hf.samples_x(), hf.samples_z(), double(hf.spacing()), origin(), double(hf.min_height()), double(hf.max_height())};
 }
 
 Vec3 Terrain::origin() const {
-  const core::Heightfield& hf = *impl_->hf;
+  const core::Heightfield& hf = impl_->hf();
   return {hf.origin_x(), hf.origin_y(), hf.origin_z()};
 }
 
 Status Terrain::read_heights(GridRegion r, std::vector<float>& out) const {
-  const core::Heightfield& hf = *impl_->hf;
+  const core::Heightfield& hf = impl_->hf();
   const core::GridRegion g{r.i0, r.j0, r.ni, r.nj};
   if (r.empty() || !hf.contains(g))
     return Error{"", "GridRegion", "{" + std::to_string(r.i0) + ", " + std::to_string(r.j0) + ", " + std::to_string(r.ni) + ", " +
@@ -684,9 +636,7 @@ Status Terrain::read_heights(GridRegion r, std::vector<float>& out) const {
 
 std::vector<GridRegion> Terrain::take_dirty_regions() {
   std::vector<GridRegion> out;
-  impl_->collect_dirty();
-  for (const auto& r : impl_->dirty) out.push_back({r.i0, r.j0, r.ni, r.nj});
-  impl_->dirty.clear();
+  for (const auto& r : impl_->world->take_dirty_regions()) out.push_back({r.i0, r.j0, r.ni, r.nj});
   return out;
 }
 
@@ -707,7 +657,7 @@ Status Terrain::select_clipmap(const ClipmapDef& def, const ClipmapView& view, C
   c.finite("viewer", view.viewer, "m");
   c.finite("view_proj", view.view_proj, "");
   if (!c.errs.empty()) return c.errs;
-  const core::Heightfield& hf = *impl_->hf;
+  const core::Heightfield& hf = impl_->hf();
   core::render::ClipmapView v;
   const float lx = float(view.viewer[0] - hf.origin_x()), lz = float(view.viewer[2] - hf.origin_z());
   v.viewer = {lx, float(view.viewer[1] - hf.origin_y()), lz};
@@ -731,52 +681,13 @@ Status Terrain::select_clipmap(const ClipmapDef& def, const ClipmapView& view, C
 // ---- report ----
 
 std::string Terrain::report_json() const {
-  const Impl& I = *impl_;
   ojson r;
   r["sandpatch_version"] = kVersion;
-  r["simulated_s"] = I.time;
-  r["steps"] = I.frames;
-  r["stages"] = I.profile.to_json();
-  ojson bodies = ojson::array();
-  for (const auto& id : I.world->bodies()) {
-    if (I.pending_removal(id)) continue;
-    const core::BodyState s = I.world->state(id);
-    bodies.push_back({{"name", I.world->definition(id).name},
-                      {"position_m", {s.position.x(), s.position.y(), s.position.z()}},
-                      {"linear_velocity_m_s", {s.linear_velocity.x(), s.linear_velocity.y(), s.linear_velocity.z()}}});
-  }
-  r["bodies"] = bodies;
-  if (I.manager) {
-    r["patches_live"] = I.manager->active_patches();
-    r["granules_live"] = I.manager->granules();
-    const ojson manager_report = I.manager->report();  // named: iterating a temporary's items() dangles
-    for (const auto& [key, value] : manager_report.items()) r[key] = value;
-  }
-  const core::Heightfield& hf = *I.hf;
-  r["terrain"] = {{"samples_x", hf.samples_x()},
-                  {"samples_z", hf.samples_z()},
-                  {"spacing_m", hf.spacing()},
-                  {"origin_m", {hf.origin_x(), hf.origin_y(), hf.origin_z()}}};
+  const ojson w = impl_->world->report();
+  for (const auto& [key, value] : w.items()) r[key] = value;
   return r.dump(2);
 }
 
-std::uint64_t Terrain::state_hash() const {
-  const Impl& I = *impl_;
-  core::Hasher h;
-  h.pod(I.time);
-  for (const auto& id : I.world->bodies()) {
-    if (I.pending_removal(id)) continue;
-    const core::BodyState s = I.world->state(id);
-    h.pod(id.index);
-    h.pod(id.generation);
-    h.pod(s.position);
-    h.pod(s.orientation.coeffs());
-    h.pod(s.linear_velocity);
-    h.pod(s.angular_velocity);
-  }
-  h.pod(I.hf->hash());
-  if (I.manager) h.pod(I.manager->state_hash());
-  return h.value();
-}
+std::uint64_t Terrain::state_hash() const { return impl_->world->state_hash(); }
 
 }  // namespace sandpatch::api

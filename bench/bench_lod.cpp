@@ -20,10 +20,9 @@
 //             frames are advanced until every live patch is asleep, then one more simulated
 //             second is timed.
 //
-// The frame loop here is run_scene's (manager/run.cpp) without outputs: spawn, the manager's
-// lod / activation / dem, one Bullet step, sleep / demotion, each timed as the same named
-// stage (manager/profile.hpp). It is repeated here because run_scene runs one scene to its
-// end and this bench must hold several open at once.
+// Each size is a World (manager/world.hpp) made from its scene as `sandpatch run` makes it,
+// stepped by World::step (the frame of run_scene without outputs), so the stages timed are the
+// same named stages (manager/profile.hpp); several are held open at once.
 #include <omp.h>
 
 #include <algorithm>
@@ -40,9 +39,10 @@
 #include "heightfield/heightfield.hpp"
 #include "manager/bullet_world.hpp"
 #include "manager/profile.hpp"
-#include "manager/run.hpp"
+#include "manager/scene_world.hpp"
 #include "manager/terrain.hpp"
 #include "manager/terrain_manager.hpp"
+#include "manager/world.hpp"
 #include "scene/scene.hpp"
 
 namespace sandpatch {
@@ -81,18 +81,13 @@ double median(std::vector<double> v) {
   return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
 }
 
-// One scene held open: terrain, Bullet world, manager, and its own stage profile.
+// One scene held open: its World (terrain, Bullet world, manager, stage profile).
 struct Lane {
   std::string name;
   int cells = 0;
   SceneDef scene;
-  std::unique_ptr<Heightfield> hf;
-  std::unique_ptr<BulletWorld> world;
-  std::unique_ptr<TerrainManager> manager;
-  std::vector<RigidBodyDef> defs;
-  std::vector<RigidBodyId> ids;
-  std::vector<bool> spawned;
-  Profile profile;
+  std::unique_ptr<World> world;
+  TerrainManager* manager = nullptr;    // the world's
   long long frame = 0;
   double dt = kDt;
   // s: set-up, by part, and the end-of-run demotion
@@ -103,7 +98,7 @@ struct Lane {
   int peak_granules = 0;
 
   double simulated_s() const { return double(frame) * dt; }
-  double dem_s() const { return profile.timer(Stage::Dem).total_ms / 1000.0; }
+  double dem_s() const { return world->profile().timer(Stage::Dem).total_ms / 1000.0; }
 };
 
 Result<std::unique_ptr<Lane>> make_lane(const nlohmann::json& scene_json, int cells, int threads) {
@@ -118,26 +113,23 @@ Result<std::unique_ptr<Lane>> make_lane(const nlohmann::json& scene_json, int ce
   auto t0 = Clock::now();
   auto hf = load_scene_terrain(s);
   if (!hf) return hf.errors();
-  lane->hf = std::make_unique<Heightfield>(std::move(*hf));
   lane->setup_terrain_s = seconds_since(t0);
+  const TerrainManagerDef md = manager_def(s, *hf, threads, "cpu");
   t0 = Clock::now();
   const Vec3d& g = s.simulation.gravity;
-  auto world = BulletWorld::create(*lane->hf, Eigen::Vector3f(float(g[0]), float(g[1]), float(g[2])));
+  auto world = World::create(std::move(*hf), Eigen::Vector3f(float(g[0]), float(g[1]), float(g[2])));
   if (!world) return world.errors();
   lane->world = std::move(*world);
   lane->setup_bullet_s = seconds_since(t0);
   t0 = Clock::now();
-  auto m = TerrainManager::create(manager_def(s, threads, "cpu"), *lane->hf, *lane->world);
-  if (!m) return m.errors();
-  lane->manager = std::move(*m);
+  if (Status st = lane->world->enable_patches(md); !st) return st.errors();
+  lane->manager = lane->world->manager();
   lane->setup_manager_s = seconds_since(t0);
   for (std::size_t i = 0; i < s.bodies.size(); ++i) {
     auto d = to_rigid_body(s, i);
     if (!d) return d.errors();
-    lane->defs.push_back(std::move(*d));
+    lane->world->schedule_body(*d, s.bodies[i].spawn_time);
   }
-  lane->ids.resize(s.bodies.size());
-  lane->spawned.assign(s.bodies.size(), false);
   return lane;
 }
 
@@ -148,30 +140,14 @@ Status advance(Lane& l, long long frames) {
   const long long quiet_frame = std::llround(kQuietUntil / l.dt);
   for (long long k = 0; k < frames; ++k, ++l.frame) {
     const auto f0 = Clock::now();
-    const double t = double(l.frame) * l.dt;
-    {
-      auto timer = l.profile.time(Stage::Spawn);
-      for (std::size_t i = 0; i < l.defs.size(); ++i) {
-        if (l.spawned[i] || l.scene.bodies[i].spawn_time > t + 1e-9) continue;
-        auto id = l.world->add_body(l.defs[i]);
-        if (!id) return id.errors();
-        l.ids[i] = *id;
-        l.spawned[i] = true;
-      }
-    }
-    if (Status st = l.manager->before_bodies(t, l.dt, l.profile); !st) return st;
-    {
-      auto timer = l.profile.time(Stage::Bodies);
-      l.world->step_frame(float(l.dt), l.scene.simulation.substeps);
-    }
-    if (Status st = l.manager->after_bodies(t, l.dt, l.profile); !st) return st;
+    if (Status st = l.world->step(l.dt, l.scene.simulation.substeps); !st) return st;
     l.peak_granules = std::max(l.peak_granules, l.manager->granules());
     {
-      auto timer = l.profile.time(Stage::Outputs);
-      (void)l.manager->take_dirty_regions();  // what a renderer would take
+      auto timer = l.world->profile().time(Stage::Outputs);
+      (void)l.world->take_dirty_regions();  // what a renderer would take
     }
     l.frame_ms.push_back(std::chrono::duration<double, std::milli>(Clock::now() - f0).count());
-    if (l.frame + 1 == quiet_frame) l.dem_ms_quiet = l.profile.timer(Stage::Dem).total_ms;
+    if (l.frame + 1 == quiet_frame) l.dem_ms_quiet = l.world->profile().timer(Stage::Dem).total_ms;
   }
   const double wall = seconds_since(w0), cpu = process_cpu_seconds() - c0;
   l.wall_s += wall;
@@ -200,7 +176,7 @@ double granule_seconds(const Lane& l, double until) {
 ojson stages_per_sim_s(const Lane& l) {
   ojson j = ojson::object();
   const double sim = l.simulated_s();
-  const ojson profile = l.profile.to_json();
+  const ojson profile = l.world->profile().to_json();
   for (const auto& [name, t] : profile.items()) j[name] = t["total_ms"].get<double>() / sim;
   return j;
 }
@@ -283,6 +259,7 @@ nlohmann::json lod_bench_scene(LodBenchScene kind, int cells, int threads) {
       break;
     }
   }
+  for (auto& b : bodies) b["restitution"] = 0.2;  // against the heightfield, as every result here was measured
   s["bodies"] = bodies;
   const bool loose = kind == LodBenchScene::Asleep;
   s["simulation"] = {{"dt", kDt},
@@ -343,7 +320,7 @@ int run_bench_lod(const BenchLodArgs& a) {
     if (!lane) return fail("set-up " + std::to_string(n), lane.message());
     const Lane& l = **lane;
     std::printf("  set up %5d² cells: terrain %.2f s, Bullet %.2f s (%d tiles), manager %.2f s; peak RSS %.0f MB\n", n,
-                l.setup_terrain_s, l.setup_bullet_s, l.world->terrain_tile_count(), l.setup_manager_s, peak_rss_mb());
+                l.setup_terrain_s, l.setup_bullet_s, l.world->bullet().terrain_tile_count(), l.setup_manager_s, peak_rss_mb());
     std::fflush(stdout);
     lanes.push_back(std::move(*lane));
   }
@@ -381,10 +358,10 @@ int run_bench_lod(const BenchLodArgs& a) {
     for (std::size_t r = 0; r < l.window_wall_s.size(); ++r)
       if (small.window_wall_s[r] > 0) ratio.push_back(l.window_wall_s[r] / small.window_wall_s[r]);
     const ojson stages = stages_per_sim_s(l);
-    const ojson bullet = bullet_stats(*l.world);
+    const ojson bullet = bullet_stats(l.world->bullet());
     const std::uint64_t dem_hash = l.manager->state_hash();
     const auto end0 = Clock::now();
-    if (Status st = l.manager->demote_all(sim, l.profile); !st) return fail(l.name, st.message());
+    if (Status st = l.world->demote_all(); !st) return fail(l.name, st.message());
     l.end_s = seconds_since(end0);
     char hex[24];
     std::snprintf(hex, sizeof hex, "%016llx", static_cast<unsigned long long>(dem_hash));
@@ -402,7 +379,7 @@ int run_bench_lod(const BenchLodArgs& a) {
                        {"end_demotion_s", l.end_s},
                        {"simulated_s", sim},
                        {"peak_granules", l.peak_granules},
-                       {"terrain_tiles", l.world->terrain_tile_count()},
+                       {"terrain_tiles", l.world->bullet().terrain_tile_count()},
                        {"bullet", bullet},
                        {"dem_state_hash", hex},
                        {"frame_median_ms", median(l.frame_ms)},
@@ -520,7 +497,7 @@ int run_bench_lod(const BenchLodArgs& a) {
             {"wall_s_per_sim_s", l.wall_s / l.simulated_s()},
             {"frame_median_ms", median(l.frame_ms)},
             {"setup_s", l.setup_terrain_s + l.setup_bullet_s + l.setup_manager_s},
-            {"bullet", bullet_stats(*l.world)},
+            {"bullet", bullet_stats(l.world->bullet())},
             {"stage_ms_per_sim_s", stages_per_sim_s(l)}};
     std::printf("idle: %d² cells, no bodies: %.4f s wall per simulated s, frame median %.4f ms, Bullet updates %d bounds a "
                 "step (%d tiles), stages (ms per simulated s):%s\n",

@@ -13,6 +13,7 @@
 #include "manager/bullet_world.hpp"
 #include "manager/profile.hpp"
 #include "manager/terrain_manager.hpp"
+#include "manager/world.hpp"
 #include "particles/dem.hpp"
 
 namespace sandpatch {
@@ -75,8 +76,10 @@ Result<DropResult> measure_drop(const DropDef& d, const TradeoffKnobs& k) {
   auto hf = make_procedural(g, p);
   if (!hf) return hf.errors();
   const Heightfield original = *hf;
-  auto world = BulletWorld::create(*hf, {0, -9.81f, 0});
-  if (!world) return world.errors();
+  auto made_world = World::create(std::move(*hf), {0, -9.81f, 0});
+  if (!made_world) return made_world.errors();
+  World& world = **made_world;
+  const Heightfield* terrain = &world.heightfield();
 
   // the manager, as manager_def (manager/run.cpp) makes it from a scene, with the case's knobs
   TerrainManagerDef md;
@@ -100,9 +103,8 @@ Result<DropResult> measure_drop(const DropDef& d, const TradeoffKnobs& k) {
   md.seed = k.seed;
   md.tile_cache = d.tile_cache;
   const auto t0 = Clock::now();
-  auto made = TerrainManager::create(md, *hf, **world);
-  if (!made) return made.errors();
-  TerrainManager& m = **made;
+  if (Status st = world.enable_patches(md); !st) return st.errors();
+  TerrainManager& m = *world.manager();
   DropResult out;
   out.setup_seconds = seconds_since(t0);
   probe_dt(d, k, &out.dt, &out.contact_time);
@@ -115,23 +117,17 @@ Result<DropResult> measure_drop(const DropDef& d, const TradeoffKnobs& k) {
   b.shape.radius = float(R);
   b.mass = float(d.sphere_density * 4.0 / 3.0 * std::numbers::pi * R * R * R);
   b.position = {c, d.surface_height + d.drop_height + R, c};
-  auto body = (*world)->add_body(b);
+  auto body = world.add_body(b);
   if (!body) return body.errors();
 
-  // the frame of manager/run.cpp
-  Profile prof;
+  // the frame of every caller (World::step)
   const double dt = d.frame_dt;
   const int frames = int(std::lround(d.run_seconds / dt));
   if (!k.lod) m.request_patch(0, 0, d.terrain_side, d.terrain_side, 0.0);
   const auto t1 = Clock::now();
-  double t = 0;
-  for (int f = 0; f < frames; ++f, t = f * dt) {
-    Status st = m.before_bodies(t, dt, prof);
-    if (st) {
-      // run.cpp's Bullet steps: the patch's force given by apply_force acts over every substep
-      (*world)->step_frame(float(dt), k.substeps);
-      st = m.after_bodies(t, dt, prof);
-    }
+  for (int f = 0; f < frames; ++f) {
+    const double t = world.time();
+    Status st = world.step(dt, k.substeps);
     if (!st) {
       // A patch larger than the slot is refused by the manager (promote(): the error names
       // simulation.pool.granules_per_slot and the granules the patch needs): the outcome of
@@ -149,11 +145,11 @@ Result<DropResult> measure_drop(const DropDef& d, const TradeoffKnobs& k) {
   bool asleep = m.active_patches() > 0;
   for (const auto& pi : m.patches()) asleep = asleep && pi.asleep;
   out.asleep_at_end = asleep;
-  out.sphere_sink = d.surface_height - ((*world)->state(*body).position.y() - R);
-  if (Status st = m.demote_all(t, prof); !st) return st.errors();
+  out.sphere_sink = d.surface_height - (world.bullet().state(*body).position.y() - R);
+  if (Status st = world.demote_all(); !st) return st.errors();
   out.wall_seconds = seconds_since(t1);
   out.sim_seconds = frames * dt;
-  out.dem_seconds = prof.timer(Stage::Dem).total_ms / 1000.0;
+  out.dem_seconds = world.profile().timer(Stage::Dem).total_ms / 1000.0;
   out.pool_bytes = m.pool_bytes();
   for (const PatchEvent& e : m.events()) out.patches += e.kind == PatchEventKind::Promoted;
   const auto rep = m.report();
@@ -167,10 +163,10 @@ Result<DropResult> measure_drop(const DropDef& d, const TradeoffKnobs& k) {
   // f(r, dh) for every heightfield sample: its distance from the drop axis (m) and its
   // height change since the start (m)
   auto each_sample = [&](auto&& f) {
-    for (int j = 0; j < hf->samples_z(); ++j)
-      for (int i = 0; i < hf->samples_x(); ++i)
+    for (int j = 0; j < terrain->samples_z(); ++j)
+      for (int i = 0; i < terrain->samples_x(); ++i)
         f(std::hypot(i * double(d.spacing) - c, j * double(d.spacing) - c),
-          double(hf->height(i, j)) - original.height(i, j));
+          double(terrain->height(i, j)) - original.height(i, j));
   };
   double centre = 0;
   int nc = 0;

@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "common/error.hpp"
+#include "common/knobs.hpp"
 
 class btRigidBody;
 
@@ -45,9 +46,9 @@ struct RigidBodyDef {
   Eigen::Quaternionf orientation = Eigen::Quaternionf::Identity();
   Eigen::Vector3f linear_velocity = Eigen::Vector3f::Zero();   // m/s
   Eigen::Vector3f angular_velocity = Eigen::Vector3f::Zero();  // rad/s
-  float friction = 0.5f;                                 // Coulomb μ against the heightfield
-  float restitution = 0.1f;                              // against the heightfield
-  float rolling_friction = 0.05f;                        // rolling resistance (dimensionless torque arm / radius);
+  float friction = float(knobs::kBodyFriction.def);      // Coulomb μ against the heightfield
+  float restitution = float(knobs::kBodyRestitution.def);  // against the heightfield
+  float rolling_friction = float(knobs::kBodyRollingFriction.def);  // rolling resistance (dimensionless torque arm / radius);
                                                          // soil resists rolling, and it damps the sideways kicks
                                                          // Bullet gives a body landing on triangle edges
 };

@@ -13,6 +13,8 @@
 // from everything else (../shared/STYLE.md).
 #pragma once
 
+#include "common/knobs.hpp"
+
 #include <Eigen/Core>
 #include <vector>
 
@@ -21,10 +23,10 @@
 namespace sandpatch {
 
 struct LodDef {
-  double horizon = 0.5;   // s, how far ahead contacts are predicted
+  double horizon = knobs::kLodHorizon.def;  // s, how far ahead contacts are predicted
   int samples = 16;       // samples of the path over the horizon (>= 1)
-  double margin = 0.05;   // m, clearance that already counts as contact
-  double apron = 1.0;     // m, added around the contact footprint on every side
+  double margin = knobs::kLodMargin.def;    // m, clearance that already counts as contact
+  double apron = knobs::kLodApron.def;      // m, added around the contact footprint on every side
 };
 
 struct BodyMotion {

@@ -1,10 +1,6 @@
-// `sandpatch run`: a scene advanced headless at its fixed step, frame by frame, as a short
-// list of named stages (profile.hpp), with the run report written at the end.
-//
-// What a run simulates today: bodies in Bullet colliding with the heightfield (and each
-// other). The granule patches (issues 3-5) join the frame as the Lod / Activation / Dem /
-// Sleep / Demotion stages when the manager lands; until then the report says so in its
-// warnings and never reports stages that did not run.
+// `sandpatch run`: a scene advanced headless at its fixed step, frame by frame, through the
+// World (manager/world.hpp: the named, timed stages), its outputs written between frames and
+// the run report at the end.
 #pragma once
 
 #include <cstdint>
@@ -13,18 +9,17 @@
 #include <string>
 
 #include "common/error.hpp"
+#include "manager/run_outputs.hpp"
 #include "manager/terrain_manager.hpp"
 #include "scene/scene.hpp"
 
 namespace sandpatch {
 
-enum class ProgressStyle { Auto, Bar, Lines, None };
-
 // One frame of a run, handed to RunOptions::on_frame at the end of the frame.
 struct FrameSample {
   long long frame = 0;        // index of the frame, 0-based
   double time_s = 0;          // s, simulated time at the END of the frame ((frame + 1) × dt)
-  double frame_ms = 0;        // ms wall, the whole frame (as the run report's frames.median_ms counts it)
+  double frame_ms = 0;        // ms wall, the frame's World::step (as the report's frames.median_ms counts it; outputs not included)
   double dem_ms = 0;          // ms wall, this frame's Dem stage (0 when no patch simulated)
   int patches_filling = 0;    // slots promoted and still uploading granules
   int patches_active = 0;     // slots filled and simulating
@@ -61,14 +56,5 @@ struct RunResult {
 // bedrock, an unwritable output directory) returns BadInput before the first frame and
 // writes nothing.
 RunResult run_scene(const SceneDef& scene, const RunOptions& options);
-
-// The terrain manager's definition from a scene's terrain material and simulation section
-// (docs/scene-format.md); the scale bands and bedrock need the heightfield and cameras and are
-// set by run_scene. `backend`: "cpu" or "gl". Also used by `bench lod`.
-TerrainManagerDef manager_def(const SceneDef& scene, int threads, const std::string& backend);
-
-// Scene body `index` as a Bullet body definition (meshes are read again from their validated
-// OBJ, centred on their centroid). Also used by `bench lod`.
-Result<RigidBodyDef> to_rigid_body(const SceneDef& scene, std::size_t index);
 
 }  // namespace sandpatch

@@ -10,7 +10,7 @@
 namespace sandpatch {
 namespace {
 
-constexpr double kDefaultSoilDepth = 2.0;  // m, docs/scene-format.md terrain.soil_depth
+constexpr double kDefaultSoilDepth = knobs::kSoilDepth.def;  // m, terrain.soil_depth
 
 // Re-grids `hf` to another (square) spacing, keeping the samples: used when the scene gives
 // the terrain's size instead of its spacing, which is only known after the file is read.

@@ -112,7 +112,7 @@ struct TerrainManager::Impl {
       const double got = std::max(1e-6, double(t->period_y) + t->surface_offset);
       td.layers = int(std::ceil(td.layers * 1.05 * (fill_depth + 2.0 * double(t->shape.centre_distance + t->shape.radius)) / got));
     }
-    return Error{"", "simulation.patch_depth", std::to_string(fill_depth * set.scale),
+    return Error{"", "terrain.patch_depth", std::to_string(fill_depth * set.scale),
                  "no pre-settled granule tile this deep could be made; lower terrain.patch_depth"};
   }
   // m³ (world) of one granule's solid at particle scale s.
@@ -235,7 +235,7 @@ struct TerrainManager::Impl {
     // dt <= t_c / N; a frame may take as many substeps as 64 at N = 20 allowed (the same
     // frame length in contact times), so a finer N never refuses a frame a coarser one runs.
     sd.accuracy_steps_per_contact = def.steps_per_contact;
-    sd.max_substeps = std::max(64, (64 * def.steps_per_contact + 19) / 20);
+    sd.max_substeps = def.max_substeps > 0 ? def.max_substeps : std::max(64, (64 * def.steps_per_contact + 19) / 20);
     // The DEM's overlap guard refuses a step when a body could overlap something immovable by
     // more than a fraction of r. In a patch a body lands on granules that give way (a 30 kg
     // barrel at 3 m/s on k_n = 2e4 N/m trips it while the bed stops it within 0.2 m:
@@ -913,6 +913,7 @@ Result<std::unique_ptr<TerrainManager>> TerrainManager::create(const TerrainMana
   if (def.slots < 1) bad("pool.slots", def.slots, "must be >= 1");
   if (def.steps_per_contact < 2 || def.steps_per_contact > 1000)
     bad("steps_per_contact", def.steps_per_contact, "must be in [2, 1000] (the DEM substep is t_c / N)");
+  if (def.max_substeps < 0) bad("max_substeps", def.max_substeps, "must be >= 0 (0 = automatic)");
   if (def.granules_per_slot < 16) bad("pool.granules_per_slot", def.granules_per_slot, "must be >= 16");
   if (!(def.patch_depth > 0)) bad("patch_depth", def.patch_depth, "must be > 0 (m)");
   if (!(def.surface_probe >= 0 && def.surface_probe <= 4)) bad("surface_probe", def.surface_probe, "must be in [0, 4] sphere radii");

@@ -32,6 +32,7 @@
 #include <vector>
 
 #include "common/error.hpp"
+#include "common/knobs.hpp"
 #include "heightfield/heightfield.hpp"
 #include "manager/bullet_world.hpp"
 #include "manager/lod.hpp"
@@ -43,21 +44,23 @@ class Context;
 }
 
 struct GranularMaterial {
-  float radius = 0.025f;                       // m, sphere radius r of the 4 spheres of a granule (simulated)
-  float density = 2650.0f;                     // kg/m³ of the grain solid
-  float friction = 0.5f;                       // μ
-  float restitution = 0.3f;                    // e
-  float stiffness = 2.0e4f;                    // k_n, N/m
-  float tangential_stiffness_ratio = 2.0f / 7.0f;
+  float radius = float(knobs::kGranuleRadius.def);  // m, sphere radius r of the 4 spheres of a granule (simulated)
+  float density = float(knobs::kDensity.def);  // kg/m³ of the grain solid
+  float friction = float(knobs::kFriction.def);  // μ
+  float restitution = float(knobs::kRestitution.def);  // e
+  float stiffness = float(knobs::kStiffness.def);  // k_n, N/m
+  float tangential_stiffness_ratio = float(knobs::kTangentialRatio.def);  // k_t / k_n
 };
 
 struct TerrainManagerDef {
   GranularMaterial material;
-  double particle_scale = 1.0;                 // world size / simulated size (Leach & Marais §4.3)
+  double particle_scale = knobs::kParticleScale.def;  // world size / simulated size (Leach & Marais §4.3)
   // N: every slot's DEM substeps at dt <= t_c / N, t_c the contact time of the lightest pair
   // (SimulationDef.accuracy_steps_per_contact; ../shared/DESIGN.md: stable to about t_c / 1.7,
   // accurate from t_c / 20). Scene simulation.steps_per_contact; docs/tradeoff.md measures it.
-  int steps_per_contact = 20;
+  int steps_per_contact = int(knobs::kStepsPerContact.def);
+  // Most DEM substeps per frame before the frame is refused (0 = max(64, 64 N / 20)).
+  int max_substeps = int(knobs::kMaxSubsteps.def);
   // Particle scale by distance from the camera (Leach & Marais §4.3, §6.3 scenario 2: finer
   // granules near the observer, coarser far away). Empty: every patch at particle_scale.
   // Otherwise a patch is promoted at the particle_scale of the first band whose max_distance
@@ -71,19 +74,19 @@ struct TerrainManagerDef {
   };
   std::vector<ScaleBand> scale_bands;
   Eigen::Vector3d camera = Eigen::Vector3d::Zero();  // m, world; TerrainManager::set_camera moves it
-  int slots = 2;                               // simulations in the pool
-  int granules_per_slot = 16384;               // capacity of each slot (granules)
+  int slots = int(knobs::kSlots.def);          // simulations in the pool
+  int granules_per_slot = int(knobs::kGranulesPerSlot.def);  // capacity of each slot (granules)
   int shell_particles_per_slot = 8192;         // capacity of each slot for body-shell spheres
-  double patch_depth = 0.4;                    // m of granules under the lowest surface point of a patch
-  double soil_depth = 2.0;                     // m, bedrock = surface − soil_depth (patches stop there)
+  double patch_depth = knobs::kPatchDepth.def; // m of granules under the lowest surface point of a patch
+  double soil_depth = knobs::kSoilDepth.def;   // m, bedrock = surface − soil_depth (patches stop there)
   // m, heightfield-local: a flat bedrock (scene terrain.bedrock_height; -inf = none). The
   // bedrock under a sample is the higher of surface − soil_depth and min(surface, this): a
   // surface below it is bare rock. A patch's floor is at or above the bedrock everywhere in
   // its region, and a region with no soil above it gets no patch (docs/extremes.md).
   double bedrock_height = -std::numeric_limits<double>::infinity();
-  double sleep_speed = 0.01;                   // m/s, a patch sleeps when everything is slower ...
-  double sleep_time = 0.5;                     // s, ... for this long
-  double idle_timeout = 120.0;                 // s asleep before demotion (Leach & Marais: two minutes)
+  double sleep_speed = knobs::kSleepSpeed.def; // m/s, a patch sleeps when everything is slower ...
+  double sleep_time = knobs::kSleepTime.def;   // s, ... for this long
+  double idle_timeout = knobs::kIdleTimeout.def;  // s asleep before demotion (Leach & Marais: two minutes)
   LodDef lod;                                  // contact prediction
   int fill_granules_per_frame = 4096;          // upload bound per frame
   int fade_frames = 30;                        // frames over which a new patch fades in
@@ -95,7 +98,7 @@ struct TerrainManagerDef {
   // "off" = none, anything else = that directory. A tile read back is bit-identical to a settled one.
   std::string tile_cache;
   std::string backend = "cpu";                 // DEM backend of the pool: cpu (OpenMP) or gl (compute shaders)
-  int threads = 0;                             // DEM threads, 0 = OpenMP default
+  int threads = int(knobs::kThreads.def);      // DEM threads, 0 = OpenMP default
   Eigen::Vector3d gravity{0.0, -9.81, 0.0};    // m/s²
   std::uint64_t seed = 1;
 };

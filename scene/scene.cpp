@@ -432,6 +432,12 @@ class Obj {
     return v;
   }
 
+  // Optional fields from the knob table (common/knobs.hpp): its range and unit.
+  void knob(const std::string& key, double& out, const knobs::Knob& k) {
+    number(key, out, Range{k.lo, k.hi, k.lo_open, k.hi_open, k.unit});
+  }
+  void knob(const std::string& key, int& out, const knobs::Knob& k) { integer(key, out, k.lo, k.hi, k.unit); }
+
   // Optional fields: `out` keeps its default when absent or invalid.
   void number(const std::string& key, double& out, const Range& r) {
     if (const json* v = get(key)) {
@@ -763,7 +769,15 @@ TerrainDef parse_terrain(Ctx& c, const json& j) {
     t.soil_depth = o.number_opt("soil_depth", positive(1e4, "m"));
     t.bedrock_height = o.number_opt("bedrock_height", closed(-1e6, 1e6, "m"));
   }
-  if (!t.soil_depth && !t.bedrock_height && !o.has("soil_depth") && !o.has("bedrock_height")) t.soil_depth = 2.0;
+  if (!t.soil_depth && !t.bedrock_height && !o.has("soil_depth") && !o.has("bedrock_height")) t.soil_depth = knobs::kSoilDepth.def;
+  // patch_depth: given, at most the soil depth; left out, the default or the soil depth if less.
+  if (o.has("patch_depth")) {
+    o.knob("patch_depth", t.patch_depth, knobs::kPatchDepth);
+    if (t.soil_depth && t.patch_depth > *t.soil_depth)
+      c.error(o.at("patch_depth"), fmt_num(t.patch_depth), "must be at most terrain.soil_depth (" + fmt_num(*t.soil_depth) + " m)");
+  } else if (t.soil_depth) {
+    t.patch_depth = std::min(t.patch_depth, *t.soil_depth);
+  }
   o.string("material", t.material);
   o.finish();
   return t;
@@ -773,17 +787,18 @@ MaterialDef parse_material(Ctx& c, const json& j, const std::string& path) {
   MaterialDef m;
   Obj o(c, j, path);
   o.string_req("name", m.name, "a unique name");
-  o.number("density", m.density, positive(1e5, "kg/m^3"));
-  o.number("friction", m.friction, closed(0.0, 10.0, ""));
+  o.knob("density", m.density, knobs::kDensity);
+  o.knob("friction", m.friction, knobs::kFriction);
   if (!o.both("restitution", "damping_ratio")) {
     const bool given = o.has("restitution") || o.has("damping_ratio");
-    m.restitution = o.number_opt("restitution", {0.0, 1.0, true, false, ""});
+    m.restitution = o.number_opt("restitution", {knobs::kRestitution.lo, knobs::kRestitution.hi, knobs::kRestitution.lo_open,
+                                                 knobs::kRestitution.hi_open, knobs::kRestitution.unit});
     m.damping_ratio = o.number_opt("damping_ratio", {0.0, 100.0, false, false, ""});
     if (!given && o.valid()) c.missing(o.at("restitution"), "one of 'restitution' (e in (0, 1]) or 'damping_ratio' (ζ in [0, 100])");
   }
-  o.number("stiffness", m.stiffness, closed(1.0, 1e12, "N/m"));
-  o.number("tangential_stiffness_ratio", m.tangential_stiffness_ratio, closed(0.0, 1.0, ""));
-  o.number("granule_radius", m.granule_radius, closed(1e-5, 10.0, "m"));
+  o.knob("stiffness", m.stiffness, knobs::kStiffness);
+  o.knob("tangential_stiffness_ratio", m.tangential_stiffness_ratio, knobs::kTangentialRatio);
+  o.knob("granule_radius", m.granule_radius, knobs::kGranuleRadius);
   o.number("packing_fraction", m.packing_fraction, {0.0, 0.74, true, false, ""});
   o.finish();
   return m;
@@ -895,14 +910,15 @@ BodyDef parse_body(Ctx& c, const json& j, const std::string& path, std::optional
   o.vec3("linear_velocity", b.linear_velocity, closed(-1e3, 1e3, "m/s"));
   o.vec3("angular_velocity", b.angular_velocity, closed(-1e4, 1e4, "rad/s"));
   o.number("spawn_time", b.spawn_time, closed(0.0, 1e6, "s"));
-  o.number("friction", b.friction, closed(0.0, 10.0, ""));
-  o.number("restitution", b.restitution, closed(0.0, 1.0, ""));
+  o.knob("friction", b.friction, knobs::kBodyFriction);
+  o.knob("restitution", b.restitution, knobs::kBodyRestitution);
+  o.knob("rolling_friction", b.rolling_friction, knobs::kBodyRollingFriction);
   o.finish();
   return b;
 }
 
-SimulationDef parse_simulation(Ctx& c, const json& j) {
-  SimulationDef s;
+SceneSimulationDef parse_simulation(Ctx& c, const json& j) {
+  SceneSimulationDef s;
   Obj o(c, j, "simulation");
   // A preset first: the fields below override it.
   if (const json* pj = o.get("preset")) {
@@ -920,15 +936,23 @@ SimulationDef parse_simulation(Ctx& c, const json& j) {
   o.integer("substeps", s.substeps, 1, 1000);
   o.number("duration", s.duration, positive(1e6, "s"));
   o.enumeration("backend", s.backend, kBackends);
-  o.integer("threads", s.threads, 0, 1024);
+  o.knob("threads", s.threads, knobs::kThreads);
   if (const json* pj = o.get("pool")) {
     Obj p(c, *pj, o.at("pool"));
-    p.integer("slots", s.pool.slots, 1, 1024);
-    p.integer("granules_per_slot", s.pool.granules_per_slot, 64, 16777216);
+    p.knob("slots", s.pool.slots, knobs::kSlots);
+    p.knob("granules_per_slot", s.pool.granules_per_slot, knobs::kGranulesPerSlot);
     p.finish();
   }
-  o.number("particle_scale", s.particle_scale, closed(1e-3, 1e3, ""));
-  o.integer("steps_per_contact", s.steps_per_contact, 2, 1000);
+  o.knob("particle_scale", s.particle_scale, knobs::kParticleScale);
+  o.knob("steps_per_contact", s.steps_per_contact, knobs::kStepsPerContact);
+  o.knob("max_substeps", s.max_substeps, knobs::kMaxSubsteps);
+  if (const json* lj = o.get("lod")) {
+    Obj p(c, *lj, o.at("lod"));
+    p.knob("horizon", s.lod.horizon, knobs::kLodHorizon);
+    p.knob("margin", s.lod.margin, knobs::kLodMargin);
+    p.knob("apron", s.lod.apron, knobs::kLodApron);
+    p.finish();
+  }
   if (const json* bj = o.get("scale_by_distance")) {
     Obj p(c, *bj, o.at("scale_by_distance"));
     ScaleByDistanceDef d;
@@ -955,11 +979,11 @@ SimulationDef parse_simulation(Ctx& c, const json& j) {
   }
   if (const json* sj = o.get("sleep")) {
     Obj p(c, *sj, o.at("sleep"));
-    p.number("speed_threshold", s.sleep.speed_threshold, closed(0.0, 100.0, "m/s"));
-    p.number("hold_time", s.sleep.hold_time, closed(0.0, 1e4, "s"));
+    p.knob("speed_threshold", s.sleep.speed_threshold, knobs::kSleepSpeed);
+    p.knob("hold_time", s.sleep.hold_time, knobs::kSleepTime);
     p.finish();
   }
-  o.number("idle_timeout", s.idle_timeout, closed(0.0, 1e6, "s"));
+  o.knob("idle_timeout", s.idle_timeout, knobs::kIdleTimeout);
   o.boolean("granular_patches", s.granular_patches);
   o.vec3("gravity", s.gravity, closed(-1e3, 1e3, "m/s^2"));
   o.u64("seed", s.seed);
@@ -1332,7 +1356,8 @@ nlohmann::json scene_to_json(const SceneDef& s) {
   t["vertical_offset"] = s.terrain.vertical_offset;
   t["origin"] = s.terrain.origin;
   if (s.terrain.bedrock_height) t["bedrock_height"] = *s.terrain.bedrock_height;
-  else t["soil_depth"] = s.terrain.soil_depth.value_or(2.0);
+  else t["soil_depth"] = s.terrain.soil_depth.value_or(knobs::kSoilDepth.def);
+  t["patch_depth"] = s.terrain.patch_depth;
   t["material"] = s.terrain.material;
   j["terrain"] = t;
 
@@ -1379,6 +1404,7 @@ nlohmann::json scene_to_json(const SceneDef& s) {
     bj["spawn_time"] = b.spawn_time;
     bj["friction"] = b.friction;
     bj["restitution"] = b.restitution;
+    bj["rolling_friction"] = b.rolling_friction;
     j["bodies"].push_back(bj);
   }
 
@@ -1392,6 +1418,8 @@ nlohmann::json scene_to_json(const SceneDef& s) {
       {"pool", {{"slots", sim.pool.slots}, {"granules_per_slot", sim.pool.granules_per_slot}}},
       {"particle_scale", sim.particle_scale},
       {"steps_per_contact", sim.steps_per_contact},
+      {"max_substeps", sim.max_substeps},
+      {"lod", {{"horizon", sim.lod.horizon}, {"margin", sim.lod.margin}, {"apron", sim.lod.apron}}},
       {"sleep", {{"speed_threshold", sim.sleep.speed_threshold}, {"hold_time", sim.sleep.hold_time}}},
       {"idle_timeout", sim.idle_timeout},
       {"granular_patches", sim.granular_patches},

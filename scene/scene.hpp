@@ -20,6 +20,7 @@
 #include <nlohmann/json_fwd.hpp>
 
 #include "common/error.hpp"
+#include "common/knobs.hpp"
 
 namespace sandpatch {
 
@@ -69,7 +70,8 @@ struct TerrainDef {
   double vertical_scale = 1.0;                 // m per sample unit (png16: m for the full 0..65535 range)
   double vertical_offset = 0.0;                // m, added after scaling
   Vec3d origin = {0.0, 0.0, 0.0};              // m, world position of sample (0, 0) at height 0
-  std::optional<double> soil_depth;            // m, bedrock = surface − soil_depth (default 2 m)
+  std::optional<double> soil_depth;            // m, bedrock = surface − soil_depth (default knobs::kSoilDepth, 2 m)
+  double patch_depth = knobs::kPatchDepth.def; // m of granules under a patch's lowest surface point (<= soil depth)
   std::optional<double> bedrock_height;        // m above origin[1], flat bedrock (instead of soil_depth)
   std::string material;                        // name of a MaterialDef (default: the first material)
 
@@ -81,14 +83,16 @@ struct TerrainDef {
 
 struct MaterialDef {
   std::string name;                            // unique, referenced by terrain.material
-  double density = 2650.0;                     // kg/m³ of the grain solid (quartz)
-  double friction = 0.5;                       // μ, Coulomb coefficient between spheres
+  double density = knobs::kDensity.def;        // kg/m³ of the grain solid (quartz)
+  double friction = knobs::kFriction.def;      // μ, Coulomb coefficient between spheres
   std::optional<double> restitution;           // e in (0, 1]  } exactly one of the two is set
   std::optional<double> damping_ratio;         // ζ in [0, 1)  }
-  double stiffness = 1.0e5;                    // k_n, N/m, normal contact stiffness
-  double tangential_stiffness_ratio = 2.0 / 7.0;  // k_t / k_n
-  double granule_radius = 0.025;               // m, radius of each of the 4 spheres of a granule
-  double packing_fraction = 0.6;               // φ, granule solid volume / bulk volume
+  double stiffness = knobs::kStiffness.def;    // k_n, N/m, normal contact stiffness
+  double tangential_stiffness_ratio = knobs::kTangentialRatio.def;  // k_t / k_n
+  double granule_radius = knobs::kGranuleRadius.def;  // m, radius of each of the 4 spheres of a granule
+  // φ, granule solid volume / bulk volume: validated, not used by the simulation (the
+  // pre-settled tile measures its own φ; the report gives it as tile.packing_fraction).
+  double packing_fraction = 0.6;
 
   // ζ from whichever was given: ζ = −ln e / sqrt(π² + ln² e).
   double damping_ratio_value() const;
@@ -132,8 +136,9 @@ struct BodyDef {
   Vec3d linear_velocity = {0.0, 0.0, 0.0};     // m/s, world
   Vec3d angular_velocity = {0.0, 0.0, 0.0};    // rad/s, world
   double spawn_time = 0.0;                     // s, simulated time at which the body appears
-  double friction = 0.5;                       // μ against terrain and other bodies
-  double restitution = 0.2;                    // e in [0, 1] for body–body / body–heightfield contacts
+  double friction = knobs::kBodyFriction.def;  // μ against terrain and other bodies
+  double restitution = knobs::kBodyRestitution.def;  // e in [0, 1] for body–body / body–heightfield contacts
+  double rolling_friction = knobs::kBodyRollingFriction.def;  // rolling resistance (torque arm / radius)
 
   // Mass in kg: `mass`, or density × shape.volume().
   double mass_value() const;
@@ -144,13 +149,13 @@ struct BodyDef {
 enum class Backend { Cpu, Gl };
 
 struct PoolDef {
-  int slots = 4;                               // simulations kept ready (active patches at once)
-  int granules_per_slot = 32768;               // capacity of each slot
+  int slots = int(knobs::kSlots.def);          // simulations kept ready (active patches at once)
+  int granules_per_slot = int(knobs::kGranulesPerSlot.def);  // capacity of each slot
 };
 
 struct SleepDef {
-  double speed_threshold = 0.01;               // m/s, every granule slower than this ...
-  double hold_time = 1.0;                      // s, ... for this long puts a patch to sleep
+  double speed_threshold = knobs::kSleepSpeed.def;  // m/s, every granule slower than this ...
+  double hold_time = knobs::kSleepTime.def;    // s, ... for this long puts a patch to sleep
 };
 
 // Particle scale by distance from a camera (Leach & Marais §4.3, §6.3 scenario 2): a patch is
@@ -166,18 +171,28 @@ struct ScaleByDistanceDef {
   std::vector<ScaleBandDef> bands;             // 1 to 16
 };
 
-struct SimulationDef {
+// Contact prediction (manager/lod.hpp): a patch is requested when a body's ballistic path
+// comes within `margin` of the terrain inside `horizon`.
+struct LodSectionDef {
+  double horizon = knobs::kLodHorizon.def;     // s
+  double margin = knobs::kLodMargin.def;       // m
+  double apron = knobs::kLodApron.def;         // m, around a contact's footprint on every side
+};
+
+struct SceneSimulationDef {
   double dt = 1.0 / 60.0;                      // s, fixed step of bodies and the frame
   int substeps = 1;                            // substeps per step (the DEM may substep further)
   double duration = 10.0;                      // s, simulated time of a run
   Backend backend = Backend::Cpu;              // DEM backend
   int threads = 0;                             // worker threads, 0 = all hardware threads
   PoolDef pool;
-  double particle_scale = 1.0;                 // render size / simulated size (Leach §4.3)
-  int steps_per_contact = 20;                  // N: the DEM substeps at dt <= t_c / N (t_c: contact time)
+  double particle_scale = knobs::kParticleScale.def;  // render size / simulated size (Leach §4.3)
+  int steps_per_contact = int(knobs::kStepsPerContact.def);  // N: the DEM substeps at dt <= t_c / N (t_c: contact time)
+  int max_substeps = int(knobs::kMaxSubsteps.def);  // most DEM substeps per frame, 0 = max(64, 64 N / 20)
+  LodSectionDef lod;
   std::optional<ScaleByDistanceDef> scale_by_distance;  // instead of one particle_scale for every patch
   SleepDef sleep;
-  double idle_timeout = 120.0;                 // s asleep and untouched before demotion (Leach & Marais)
+  double idle_timeout = knobs::kIdleTimeout.def;  // s asleep and untouched before demotion (Leach & Marais)
   bool granular_patches = true;                // false: no patches, bodies meet the heightfield only (LOD off the other way)
   Vec3d gravity = {0.0, -9.81, 0.0};           // m/s²
   std::uint64_t seed = 1;                      // all randomness of a run
@@ -258,7 +273,7 @@ struct SceneDef {
   TerrainDef terrain;
   std::vector<MaterialDef> materials;
   std::vector<BodyDef> bodies;
-  SimulationDef simulation;
+  SceneSimulationDef simulation;
   std::vector<CameraDef> cameras;
   OutputsDef outputs;
 

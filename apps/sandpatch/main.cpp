@@ -25,6 +25,7 @@
 
 #include "bench/bench.hpp"
 #include "bench/bench_tradeoff.hpp"
+#include "common/knobs.hpp"
 #include "gl/context.hpp"
 #include "manager/run.hpp"
 #include "particles/gpu/bench_gl.hpp"
@@ -102,7 +103,9 @@ int main(int argc, char** argv) {
   auto* check = app.add_subcommand("check", "Validate a scene file and exit (0 valid, 2 invalid)");
   check->add_option("scene", check_path, "Scene file")->required();
 
-  app.add_subcommand("info", "Print versions, thread count and the OpenGL renderer EGL finds");
+  bool info_knobs = false;
+  auto* info = app.add_subcommand("info", "Print versions, thread count and the OpenGL renderer EGL finds");
+  info->add_flag("--knobs", info_knobs, "Print the table of settings (scene field, library field, default, range) as markdown");
 
   auto* bench = app.add_subcommand("bench", "Benchmarks (programs, not tests; docs/BENCHMARKS.md)");
   bench->require_subcommand(1);
@@ -170,7 +173,13 @@ int main(int argc, char** argv) {
     return rc == 0 ? 0 : code(ExitCode::BadInput);
   }
 
-  if (app.got_subcommand("info")) return cmd_info();
+  if (app.got_subcommand("info")) {
+    if (info_knobs) {
+      std::fputs(knobs::knob_table_markdown().c_str(), stdout);
+      return code(ExitCode::Ok);
+    }
+    return cmd_info();
+  }
 
   if (app.got_subcommand("check")) {
     auto scene = load_scene_file(check_path);

@@ -157,6 +157,8 @@ struct TerrainDef {
   int granules_per_slot = 16384;               // capacity of each slot, [64, 16777216]
   double patch_depth = 0.4;                    // m of granules under a patch's lowest surface point, (0, soil_depth]
   double particle_scale = 1.0;                 // world size / simulated size, [1e-3, 1e3]
+  int steps_per_contact = 20;                  // N: the DEM substeps at dt <= t_c / N (t_c the contact time), [2, 1000]
+  int max_substeps = 0;                        // most DEM substeps in one step() before it is refused; 0 = max(64, 64 N / 20), [0, 100000]
   double sleep_speed = 0.01;                   // m/s: a patch sleeps when every granule is slower ... [0, 100]
   double sleep_time = 0.5;                     // s ... for this long, [0, 1e4]
   double idle_timeout = 120.0;                 // s asleep before it is turned back into heightfield, [0, 1e6]

@@ -46,7 +46,7 @@ inline TerrainManagerDef coarse_def() {
 
 // Lowest point of the body's bounds minus the terrain surface under its centre (m).
 inline double clearance(const Rig& rig, RigidBodyId id) {
-  const Heightfield& hf = rig.hf;
+  const Heightfield& hf = rig.hf();
   Eigen::Vector3d lo, hi;
   rig.world->bounds(id, &lo, &hi);
   const Eigen::Vector3d c = 0.5 * (lo + hi);
@@ -55,7 +55,7 @@ inline double clearance(const Rig& rig, RigidBodyId id) {
 }
 
 inline bool on_terrain(const Rig& rig, RigidBodyId id) {
-  const Heightfield& hf = rig.hf;
+  const Heightfield& hf = rig.hf();
   const Eigen::Vector3d p = rig.world->state(id).position;
   const double x = p.x() - hf.origin_x(), z = p.z() - hf.origin_z();
   const double w = (hf.samples_x() - 1) * double(hf.spacing()), d = (hf.samples_z() - 1) * double(hf.spacing());
@@ -98,7 +98,7 @@ struct Watch {
   double min_clearance = std::numeric_limits<double>::infinity();
   std::string note;
   void check() {
-    const double t = rig.t;
+    const double t = rig.t();
     for (RigidBodyId id : rig.world->bodies()) {
       const BodyState st = rig.world->state(id);
       const bool ok = st.position.allFinite() && st.linear_velocity.allFinite() && st.angular_velocity.allFinite() &&
@@ -150,7 +150,7 @@ struct Stepper {
                   st.position.x(), st.position.y(), st.position.z(), st.linear_velocity.x(), st.linear_velocity.y(),
                   st.linear_velocity.z(), st.angular_velocity.norm(), int(world.terrain_collision(fast)));
     }
-    std::printf("t %.2f s: queued %d, patches %d (filling %d, asleep %d), granules %d, fastest body %.3f m/s\n", rig.t,
+    std::printf("t %.2f s: queued %d, patches %d (filling %d, asleep %d), granules %d, fastest body %.3f m/s\n", rig.t(),
                 m.queued_requests(), m.active_patches(), m.filling_patches(), m.asleep_patches(), m.granules(), vmax);
   }
 };

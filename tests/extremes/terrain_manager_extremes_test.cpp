@@ -56,7 +56,7 @@ TEST(ExtremesManager, PatchAtTheTerrainCornerAndEdge) {
   ASSERT_TRUE(run.frames(60).ok()) << rig.error;
   EXPECT_EQ(count_events(m, PatchEventKind::Promoted), 3);
   ASSERT_TRUE(run.demote_all().ok()) << rig.error;
-  print_summary(::testing::UnitTest::GetInstance()->current_test_info()->name(), m, rig.profile);
+  print_summary(::testing::UnitTest::GetInstance()->current_test_info()->name(), m, rig.profile());
   EXPECT_TRUE(w.finite) << w.note;
   EXPECT_GT(w.min_clearance, -def.patch_depth) << "a body went below the patch floor: " << w.note;
   for (RigidBodyId id : ids) {
@@ -70,11 +70,11 @@ TEST(ExtremesManager, PatchAtTheTerrainCornerAndEdge) {
     const int i0 = p["region"][0], j0 = p["region"][1], ni = p["region"][2], nj = p["region"][3];
     EXPECT_GE(i0, 0);
     EXPECT_GE(j0, 0);
-    EXPECT_LE(i0 + ni, rig.hf.samples_x());
-    EXPECT_LE(j0 + nj, rig.hf.samples_z());
+    EXPECT_LE(i0 + ni, rig.hf().samples_x());
+    EXPECT_LE(j0 + nj, rig.hf().samples_z());
     EXPECT_LT(std::abs(p["error_pct"].get<double>()), kLedgerPct) << p.dump();
   }
-  EXPECT_TRUE(heights_finite(rig.hf));
+  EXPECT_TRUE(heights_finite(rig.hf()));
   std::printf("corner/edge: %zu patches, worst ledger %.2f %%, clearance min over run %.3f m\n",
               rep["ledger"]["patches"].size(), worst_ledger_pct(rep), w.min_clearance);
 }
@@ -155,8 +155,8 @@ TEST(ExtremesManager, BodiesAt100MetresPerSecond) {
     EXPECT_LT(rig.world->state(id).linear_velocity.norm(), 1.0) << "not at rest after 1 s (m/s)";
   }
   ASSERT_TRUE(run.demote_all().ok()) << rig.error;
-  print_summary(::testing::UnitTest::GetInstance()->current_test_info()->name(), m, rig.profile);
-  EXPECT_TRUE(heights_finite(rig.hf));
+  print_summary(::testing::UnitTest::GetInstance()->current_test_info()->name(), m, rig.profile());
+  EXPECT_TRUE(heights_finite(rig.hf()));
   std::printf("100 m/s: lowest clearance %.3f m (floor at -%.2f m), final %.3f / %.3f m, 45-degree body %s\n",
               w.min_clearance, def.patch_depth, clearance(rig, *a), clearance(rig, *b),
               skipped_off ? "skipped off the terrain" : "at rest on it");
@@ -201,7 +201,7 @@ TEST(ExtremesManager, HundredBodiesAtOnceOnTwoSlots) {
   int peak_queue = 0;
   run.each_frame = [&] {
     peak_queue = std::max(peak_queue, m.queued_requests());
-    if (drained_at < 0 && rig.t > 0.5 && m.queued_requests() == 0 && m.active_patches() == 0) drained_at = rig.t;
+    if (drained_at < 0 && rig.t() > 0.5 && m.queued_requests() == 0 && m.active_patches() == 0) drained_at = rig.t();
   };
   for (int f = 0; f < 300 && drained_at < 0; ++f) ASSERT_TRUE(run.frames(1).ok()) << rig.error;
   const int waiting = m.queued_requests();
@@ -211,7 +211,7 @@ TEST(ExtremesManager, HundredBodiesAtOnceOnTwoSlots) {
   EXPECT_LE(drained_at, 4.5) << "the queue drained (-1: not within 5 s)";
   EXPECT_GE(peak_queue, 10) << "most requests waited for a slot";
   ASSERT_TRUE(run.demote_all().ok()) << rig.error;
-  print_summary(::testing::UnitTest::GetInstance()->current_test_info()->name(), m, rig.profile);
+  print_summary(::testing::UnitTest::GetInstance()->current_test_info()->name(), m, rig.profile());
   EXPECT_TRUE(w.finite) << w.note;
   EXPECT_GT(w.min_clearance, -def.patch_depth) << w.note;
   double lo = 1e9, hi = -1e9;
@@ -223,7 +223,7 @@ TEST(ExtremesManager, HundredBodiesAtOnceOnTwoSlots) {
   EXPECT_LT(hi, 0.05);
   const auto rep = m.report();
   EXPECT_LT(std::abs(rep["ledger"]["total"]["error_pct"].get<double>()), kLedgerPct) << rep["ledger"]["total"].dump();
-  EXPECT_TRUE(heights_finite(rig.hf));
+  EXPECT_TRUE(heights_finite(rig.hf()));
   std::printf("100 bodies / 2 slots: %zu patches, peak queue %d, drained at %.2f s (-1: not), %d waiting at the end, lapsed %d, "
               "clearance [%.3f, %.3f] m, ledger %+.2f %%\n",
               rep["ledger"]["patches"].size(), peak_queue, drained_at, waiting, rep["pool"]["lapsed_requests"].get<int>(), lo, hi,
@@ -239,7 +239,7 @@ TEST(ExtremesManager, HundredBodiesAtOnceOnTwoSlots) {
 TEST(ExtremesManager, ZeroSoilDepthMakesNoParticles) {
   Rig rig(hills_terrain(61, 0.1f, 1.0f, 0.1f, 2.0f));
   ASSERT_TRUE(rig.ok()) << rig.error;
-  const Heightfield& hf = rig.hf;
+  const Heightfield& hf = rig.hf();
   const Heightfield original = hf;
   auto id = rig.add_sphere(0.1f, 5.0f, {2.2, 1.6, 2.7});
   ASSERT_TRUE(id.ok());
@@ -254,7 +254,7 @@ TEST(ExtremesManager, ZeroSoilDepthMakesNoParticles) {
   ASSERT_TRUE(run.frames(60).ok()) << rig.error;
   EXPECT_EQ(most_granules, 0) << "granules below the bedrock (soil depth 0)";
   ASSERT_TRUE(run.demote_all().ok()) << rig.error;
-  print_summary(::testing::UnitTest::GetInstance()->current_test_info()->name(), m, rig.profile);
+  print_summary(::testing::UnitTest::GetInstance()->current_test_info()->name(), m, rig.profile());
   EXPECT_TRUE(w.finite) << w.note;
   const double c = clearance(rig, *id);
   EXPECT_GT(c, -0.02);
@@ -280,7 +280,7 @@ TEST(ExtremesManager, ZeroSoilDepthMakesNoParticles) {
 TEST(ExtremesManager, FlatBedrockMeetingTheSurface) {
   Rig rig(hills_terrain(61, 0.1f, 1.0f, 0.4f, 4.0f));
   ASSERT_TRUE(rig.ok()) << rig.error;
-  const Heightfield& hf = rig.hf;
+  const Heightfield& hf = rig.hf();
   const Heightfield original = hf;
   int ci = 30, cj = 30;
   for (int j = 15; j <= 45; ++j)
@@ -313,12 +313,12 @@ TEST(ExtremesManager, FlatBedrockMeetingTheSurface) {
   EXPECT_GT(most_granules, 0) << "there is soil above the bedrock on the crest";
   EXPECT_GE(lowest_centre, bedrock + 0.5 * def.material.radius) << "a patch sphere below the bedrock (m, local)";
   ASSERT_TRUE(run.demote_all().ok()) << rig.error;
-  print_summary(::testing::UnitTest::GetInstance()->current_test_info()->name(), m, rig.profile);
+  print_summary(::testing::UnitTest::GetInstance()->current_test_info()->name(), m, rig.profile());
   EXPECT_TRUE(w.finite) << w.note;
   const double c = clearance(rig, *id);
   EXPECT_GT(c, -0.03);
   EXPECT_LT(c, 0.03);
-  EXPECT_TRUE(heights_finite(rig.hf));
+  EXPECT_TRUE(heights_finite(rig.hf()));
   double rock_raised = 0;
   int rock = 0;
   for (int j = 0; j < hf.samples_z(); ++j)
@@ -361,13 +361,13 @@ TEST(ExtremesManager, PoolOfOneSlot) {
   double drained_at = -1;
   run.each_frame = [&] {
     peak_queue = std::max(peak_queue, m.queued_requests());
-    if (drained_at < 0 && rig.t > 0.3 && m.queued_requests() == 0 && m.active_patches() == 0) drained_at = rig.t;
+    if (drained_at < 0 && rig.t() > 0.3 && m.queued_requests() == 0 && m.active_patches() == 0) drained_at = rig.t();
   };
   for (int f = 0; f < 150 && drained_at < 0; ++f) ASSERT_TRUE(run.frames(1).ok()) << rig.error;
   EXPECT_GE(peak_queue, 1) << "the other two waited";
   EXPECT_GE(drained_at, 0.0) << "not drained within 2.5 s";
   ASSERT_TRUE(run.demote_all().ok()) << rig.error;
-  print_summary(::testing::UnitTest::GetInstance()->current_test_info()->name(), m, rig.profile);
+  print_summary(::testing::UnitTest::GetInstance()->current_test_info()->name(), m, rig.profile());
   EXPECT_TRUE(w.finite) << w.note;
   for (RigidBodyId id : ids) {
     EXPECT_GT(clearance(rig, id), -0.03);

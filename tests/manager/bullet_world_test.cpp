@@ -312,13 +312,7 @@ TEST(BulletWorld, SubstepsKeepTheSphereOnAPatch) {
     def.lod.apron = 0.2;
     ASSERT_TRUE(rig.start(def).ok()) << rig.error;
     TerrainManager& m = *rig.manager;
-    auto frame = [&] {  // manager/run.cpp's frame
-      Status s = m.before_bodies(rig.t, rig.dt, rig.profile);
-      if (s) rig.world->step_frame(float(rig.dt), k);
-      if (s) s = m.after_bodies(rig.t, rig.dt, rig.profile);
-      rig.t += rig.dt;
-      return s;
-    };
+    auto frame = [&] { return rig.frame(k); };  // World::step with k Bullet substeps
     double asleep_at = -1;
     for (int f = 0; f < 300 && asleep_at < 0; ++f) {
       Status s = frame();

@@ -1,7 +1,7 @@
 // The terrain manager's test rig, shared by tests/manager/terrain_manager*_test.cpp and the
 // extremes suite (tests/extremes/): small procedural terrains, the small CPU manager
-// definition, sphere bodies, and a Rig that owns a heightfield, the Bullet world over it and a
-// TerrainManager over both and steps them frame by frame as manager/run.cpp does.
+// definition, sphere bodies, and a Rig over a World (manager/world.hpp), stepped frame by
+// frame by World::step as every other caller steps it.
 #pragma once
 
 #include <gtest/gtest.h>
@@ -18,6 +18,7 @@
 #include "manager/bullet_world.hpp"
 #include "manager/profile.hpp"
 #include "manager/terrain_manager.hpp"
+#include "manager/world.hpp"
 
 namespace sandpatch::test {
 
@@ -95,9 +96,8 @@ inline double last_event_time(const TerrainManager& m, PatchEventKind k) {
   return t;
 }
 
-// A heightfield, the Bullet world over it and a terrain manager over both. The world and the
-// manager hold references to the heightfield (and the manager to the world), so the rig owns
-// all three, declared in that order (destroyed manager first), and is neither copied nor moved.
+// A World over a heightfield (its Bullet world, and its terrain manager once started), with
+// short names for what tests use.
 //
 //   test::Rig rig(test::terrain_8m("flat"));       // heightfield + world (gravity -9.81 m/s² in y)
 //   ASSERT_TRUE(rig.ok()) << rig.error;
@@ -106,38 +106,34 @@ inline double last_event_time(const TerrainManager& m, PatchEventKind k) {
 //   ASSERT_TRUE(rig.frames(60).ok()) << rig.error;                         // 1 s at 1/60 s a frame
 class Rig {
  public:
-  explicit Rig(Heightfield terrain, const Eigen::Vector3f& gravity = {0, -9.81f, 0}) : hf(std::move(terrain)) {
-    auto w = BulletWorld::create(hf, gravity);
-    if (w.ok())
-      world = std::move(*w);
-    else
+  explicit Rig(Heightfield terrain, const Eigen::Vector3f& gravity = {0, -9.81f, 0}) {
+    auto w = World::create(std::move(terrain), gravity);
+    if (!w.ok()) {
       error = w.message();
+      return;
+    }
+    core = std::move(*w);
+    world = &core->bullet();
   }
   Rig(const Rig&) = delete;
   Rig& operator=(const Rig&) = delete;
 
-  bool ok() const { return world != nullptr; }
+  bool ok() const { return core != nullptr; }
 
   Result<RigidBodyId> add_sphere(float radius, float mass, const Eigen::Vector3d& position) {
-    return world->add_body(sphere_body(radius, mass, position));
+    return core->add_body(sphere_body(radius, mass, position));
   }
 
   // Makes the manager over the heightfield and the world (bodies may be added before or after).
   Status start(const TerrainManagerDef& def) {
-    auto r = TerrainManager::create(def, hf, *world);
-    if (!r.ok()) return failed(r.errors());
-    manager = std::move(*r);
+    if (Status s = core->enable_patches(def); !s) return failed(s.errors());
+    manager = core->manager();
     return Ok{};
   }
 
-  // One frame at time t, as manager/run.cpp: the manager before the bodies, Bullet one step of
-  // dt (unless step_bodies is false: tests without bodies leave Bullet out), the manager after
-  // the bodies; then t += dt.
-  Status frame() {
-    if (Status s = manager->before_bodies(t, dt, profile); !s) return failed(s.errors());
-    if (step_bodies) world->step(float(dt));
-    if (Status s = manager->after_bodies(t, dt, profile); !s) return failed(s.errors());
-    t += dt;
+  // One frame of dt (World::step: the manager's stages, `substeps` Bullet steps, the checks).
+  Status frame(int substeps = 1) {
+    if (Status s = core->step(dt, substeps); !s) return failed(s.errors());
     return Ok{};
   }
 
@@ -152,18 +148,20 @@ class Rig {
   }
 
   Status demote_all() {
-    if (Status s = manager->demote_all(t, profile); !s) return failed(s.errors());
+    if (Status s = core->demote_all(); !s) return failed(s.errors());
     return Ok{};
   }
 
-  Heightfield hf;                          // declared first: the world and the manager refer to it
-  std::unique_ptr<BulletWorld> world;      // null if its creation failed (then `error` says why)
-  std::unique_ptr<TerrainManager> manager; // made by start()
+  Heightfield& hf() { return core->heightfield(); }
+  const Heightfield& hf() const { return core->heightfield(); }
+  Profile& profile() { return core->profile(); }
+  double t() const { return core->time(); }  // s, simulated: the time of the next frame
+
+  std::unique_ptr<World> core;             // null if its creation failed (then `error` says why)
+  BulletWorld* world = nullptr;            // core's Bullet world
+  TerrainManager* manager = nullptr;       // core's terrain manager, set by start()
   std::string error;                       // message of the last failure (world, start, frame, demotion)
-  Profile profile;
-  double t = 0;                            // s, simulated: the time of the next frame
   double dt = 1.0 / 60.0;                  // s, one frame
-  bool step_bodies = true;
 
  private:
   Status failed(const std::vector<Error>& errors) {

@@ -22,7 +22,7 @@ using test::small_manager_def;
 TEST(TerrainManager, BarrelLeavesCraterAndRim) {
   test::Rig rig(test::terrain_8m("flat"));
   ASSERT_TRUE(rig.ok()) << rig.error;
-  const Heightfield& hf = rig.hf;
+  const Heightfield& hf = rig.hf();
   const Heightfield original = hf;
   BulletWorld& world = *rig.world;
   RigidBodyDef barrel;
@@ -102,14 +102,14 @@ TEST(TerrainManager, PoolExhaustionQueueDrains) {
   TerrainManager& m = *rig.manager;
   double drained_at = -1;  // s: time of the frame after which the queue was empty and every slot free
   int peak_queue = 0;
-  for (int f = 0; f < 900 && rig.t < 15.0 && drained_at < 0; ++f) {
-    const double t = rig.t;
+  for (int f = 0; f < 900 && rig.t() < 15.0 && drained_at < 0; ++f) {
+    const double t = rig.t();
     ASSERT_TRUE(rig.frame().ok()) << rig.error;
     peak_queue = std::max(peak_queue, m.queued_requests());
     const int demoted = test::count_events(m, PatchEventKind::Demoted);
     if (t > 1.0 && demoted >= 1 && m.queued_requests() == 0 && m.active_patches() == 0) drained_at = t;
   }
-  const double t = drained_at >= 0 ? drained_at : rig.t;  // s: drained, else the end of the run
+  const double t = drained_at >= 0 ? drained_at : rig.t();  // s: drained, else the end of the run
   EXPECT_GE(peak_queue, 1) << "the pool of one slot never queued a request";
   EXPECT_EQ(m.queued_requests(), 0) << "the queue drained by t = " << t << " s";
   const int promoted = test::count_events(m, PatchEventKind::Promoted);
@@ -150,7 +150,7 @@ TEST(TerrainManager, BodyDrivenAcrossPatchEdgeStaysOnParticles) {
   ASSERT_TRUE(rig.start(def).ok()) << rig.error;
   int off_particles = 0, driven = 0;
   for (int f = 0; f < 240; ++f) {
-    if (rig.t >= 1.0) {  // landed and settled: drive it
+    if (rig.t() >= 1.0) {  // landed and settled: drive it
       BodyState st = world.state(*id);
       st.linear_velocity = {0.4f, st.linear_velocity.y(), 0.0f};
       world.set_state(*id, st);

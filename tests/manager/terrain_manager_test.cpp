@@ -37,8 +37,7 @@ RoundTrip round_trip(std::uint64_t seed) {
   RoundTrip r;
   test::Rig rig(test::terrain_8m("hills"));
   EXPECT_TRUE(rig.ok()) << rig.error;
-  rig.step_bodies = false;  // no bodies
-  const Heightfield& hf = rig.hf;
+  const Heightfield& hf = rig.hf();
   const Heightfield original = hf;
   auto def = small_manager_def();
   def.seed = seed;
@@ -138,11 +137,11 @@ TEST(TerrainManager, QueueWaitsForAFreeSlot) {
   TerrainManager& m = *rig.manager;
   m.request_patch(1.0, 1.0, 2.0, 2.0, 0.0);
   m.request_patch(5.0, 5.0, 6.0, 6.0, 0.0);
-  ASSERT_TRUE(m.before_bodies(0, 1.0 / 60, rig.profile).ok());
+  ASSERT_TRUE(m.before_bodies(0, 1.0 / 60, rig.profile()).ok());
   EXPECT_EQ(m.active_patches(), 1);
   EXPECT_EQ(m.queued_requests(), 1);
-  ASSERT_TRUE(m.demote_all(0.1, rig.profile).ok());
-  ASSERT_TRUE(m.before_bodies(0.1, 1.0 / 60, rig.profile).ok());
+  ASSERT_TRUE(m.demote_all(0.1, rig.profile()).ok());
+  ASSERT_TRUE(m.before_bodies(0.1, 1.0 / 60, rig.profile()).ok());
   EXPECT_EQ(m.active_patches(), 1);
   EXPECT_EQ(m.queued_requests(), 0);
   EXPECT_EQ(m.report()["pool"]["peak_queued_requests"].get<int>(), 1);
@@ -161,14 +160,14 @@ TEST(TerrainManager, StepsPerContactReachesEverySlot) {
   TerrainManager& m = *rig.manager;
   m.request_patch(1.0, 1.0, 2.0, 2.0, 0.0);
   m.request_patch(5.0, 5.0, 6.0, 6.0, 0.0);
-  ASSERT_TRUE(m.before_bodies(0, 1.0 / 60, rig.profile).ok());
+  ASSERT_TRUE(m.before_bodies(0, 1.0 / 60, rig.profile()).ok());
   const auto live = m.patches();
   ASSERT_EQ(live.size(), 2u);
   for (const auto& p : live) EXPECT_EQ(p.steps_per_contact, 10);
   EXPECT_EQ(m.report()["pool"]["steps_per_contact"].get<int>(), 10);
   for (int bad : {1, 1001}) {
     def.steps_per_contact = bad;
-    auto r = TerrainManager::create(def, rig.hf, *rig.world);
+    auto r = TerrainManager::create(def, rig.hf(), *rig.world);
     ASSERT_FALSE(r.ok());
     EXPECT_EQ(r.error().field, "steps_per_contact");
     EXPECT_NE(r.error().allowed.find("[2, 1000]"), std::string::npos) << r.message();
@@ -183,7 +182,6 @@ TEST(TerrainManager, StepsPerContactReachesEverySlot) {
 TEST(TerrainManager, ParticleScaleByDistanceFromTheCamera) {
   test::Rig rig(test::terrain_8m("hills"));
   ASSERT_TRUE(rig.ok()) << rig.error;
-  rig.step_bodies = false;  // no bodies
   auto def = small_manager_def();
   def.slots = 2;
   def.scale_bands = {{3.0, 1.0}, {20.0, 2.0}};
@@ -257,7 +255,7 @@ TEST(TerrainManager, TooSmallSlotNamesTheCapacity) {
   def.granules_per_slot = 100;
   ASSERT_TRUE(rig.start(def).ok()) << rig.error;
   rig.manager->request_patch(1.0, 1.0, 4.0, 4.0, 0.0);
-  auto st = rig.manager->before_bodies(0, 1.0 / 60, rig.profile);
+  auto st = rig.manager->before_bodies(0, 1.0 / 60, rig.profile());
   ASSERT_FALSE(st.ok());
   EXPECT_NE(st.message().find("granules_per_slot"), std::string::npos) << st.message();
 }
@@ -270,7 +268,6 @@ TEST(TerrainManager, TooSmallSlotNamesTheCapacity) {
 TEST(TerrainManager, UntouchedPatchFallsAsleep) {
   test::Rig rig(test::terrain_8m("hills"));
   ASSERT_TRUE(rig.ok()) << rig.error;
-  rig.step_bodies = false;  // no bodies
   ASSERT_TRUE(rig.start(small_manager_def()).ok()) << rig.error;
   TerrainManager& m = *rig.manager;
   m.request_patch(3.0, 3.0, 3.6, 3.6, 0.0);

@@ -232,7 +232,7 @@ TEST(Scene, ProceduralFieldsAndDefaults) {
   EXPECT_EQ(r->terrain.soil_depth, 2.0);
   EXPECT_EQ(r->terrain.material, "sand");
   EXPECT_EQ(r->terrain.spacing_xz(33, 17)[0], 0.5);
-  const SimulationDef d;
+  const SceneSimulationDef d;
   EXPECT_TRUE(r->simulation.granular_patches);
   EXPECT_EQ(r->simulation.idle_timeout, 120.0);
   EXPECT_EQ(r->simulation.gravity, (Vec3d{0.0, -9.81, 0.0}));

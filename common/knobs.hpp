@@ -1,0 +1,97 @@
+// The one table of the terrain's knobs: every setting that both doors take (a scene file and
+// the library's TerrainDef / BodyDef), with its default, allowed range and unit. The scene
+// parser (scene/scene.cpp) and the API (api/sandpatch.cpp) validate with these entries, the
+// internal definitions (TerrainManagerDef, RigidBodyDef) and the public ones take their
+// defaults from them (the public header, which includes only the standard library, repeats
+// the numbers; tests/common/knobs_test.cpp checks that every copy agrees, and that the field
+// tables in docs/scene-format.md and docs/api.md are the ones `knob_table_markdown` prints).
+//
+// A setting only one door has is listed with the reason in `one_door`.
+#pragma once
+
+#include <array>
+#include <cmath>
+#include <string>
+
+#include "common/error.hpp"
+
+namespace sandpatch::knobs {
+
+struct Knob {
+  const char* scene;     // path in a scene file ("" = none: see one_door)
+  const char* api;       // field of the public definitions ("" = none: see one_door)
+  double def;            // default
+  double lo, hi;         // allowed range ...
+  bool lo_open, hi_open; // ... with open ends where true
+  bool integer;          // whole numbers only
+  const char* unit;      // SI unit ("" = dimensionless)
+  const char* what;      // one line for the docs
+  const char* one_door = "";  // why only one door has it
+  // True when v is finite, inside the range and (for integers) whole.
+  bool allows(double v) const {
+    if (!std::isfinite(v)) return false;
+    if (lo_open ? !(v > lo) : !(v >= lo)) return false;
+    if (hi_open ? !(v < hi) : !(v <= hi)) return false;
+    return !integer || v == std::floor(v);
+  }
+};
+
+// ---- the granular material (Bell et al. 2005 granules of 4 spheres) ----
+inline constexpr Knob kGranuleRadius{"materials[].granule_radius", "TerrainDef.material.granule_radius", 0.025, 1e-5, 10, false, false, false, "m", "radius of each of the 4 spheres of a granule"};
+inline constexpr Knob kDensity{"materials[].density", "TerrainDef.material.density", 2650, 0, 1e5, true, false, false, "kg/m^3", "density of the grain solid"};
+inline constexpr Knob kFriction{"materials[].friction", "TerrainDef.material.friction", 0.5, 0, 10, false, false, false, "", "Coulomb friction μ between spheres"};
+inline constexpr Knob kRestitution{"materials[].restitution", "TerrainDef.material.restitution", 0.3, 0, 1, true, false, false, "", "coefficient of restitution e of a sphere pair (or damping_ratio in scene files)"};
+inline constexpr Knob kStiffness{"materials[].stiffness", "TerrainDef.material.stiffness", 2.0e4, 1, 1e12, false, false, false, "N/m", "normal contact stiffness k_n"};
+inline constexpr Knob kTangentialRatio{"materials[].tangential_stiffness_ratio", "TerrainDef.material.tangential_stiffness_ratio", 2.0 / 7.0, 0, 1, false, false, false, "", "k_t / k_n"};
+
+// ---- the patches ----
+inline constexpr Knob kSlots{"simulation.pool.slots", "TerrainDef.slots", 2, 1, 1024, false, false, true, "", "simulations in the pool (patches live at once)"};
+inline constexpr Knob kGranulesPerSlot{"simulation.pool.granules_per_slot", "TerrainDef.granules_per_slot", 16384, 64, 16777216, false, false, true, "", "granule capacity of each slot"};
+inline constexpr Knob kParticleScale{"simulation.particle_scale", "TerrainDef.particle_scale", 1, 1e-3, 1e3, false, false, false, "", "world size / simulated size of granules (Leach & Marais §4.3)"};
+inline constexpr Knob kStepsPerContact{"simulation.steps_per_contact", "TerrainDef.steps_per_contact", 20, 2, 1000, false, false, true, "", "N: the DEM substeps at dt <= t_c / N (t_c the contact time)"};
+inline constexpr Knob kMaxSubsteps{"simulation.max_substeps", "TerrainDef.max_substeps", 0, 0, 100000, false, false, true, "", "most DEM substeps per frame before a frame is refused; 0 = max(64, 64 N / 20)"};
+inline constexpr Knob kPatchDepth{"terrain.patch_depth", "TerrainDef.patch_depth", 0.4, 0, 1e4, true, false, false, "m", "granules under a patch's lowest surface point (at most soil_depth)"};
+inline constexpr Knob kSoilDepth{"terrain.soil_depth", "TerrainDef.soil_depth", 2.0, 0, 1e4, true, false, false, "m", "bedrock = surface − soil_depth"};
+inline constexpr Knob kSleepSpeed{"simulation.sleep.speed_threshold", "TerrainDef.sleep_speed", 0.01, 0, 100, false, false, false, "m/s", "a patch sleeps when every granule is slower ..."};
+inline constexpr Knob kSleepTime{"simulation.sleep.hold_time", "TerrainDef.sleep_time", 0.5, 0, 1e4, false, false, false, "s", "... for this long"};
+inline constexpr Knob kIdleTimeout{"simulation.idle_timeout", "TerrainDef.idle_timeout", 120, 0, 1e6, false, false, false, "s", "asleep and untouched this long, a patch turns back into heightfield"};
+inline constexpr Knob kThreads{"simulation.threads", "TerrainDef.threads", 0, 0, 1024, false, false, true, "", "DEM threads, 0 = all hardware threads"};
+inline constexpr Knob kLodHorizon{"simulation.lod.horizon", "TerrainDef.lod_horizon", 0.5, 0, 10, true, false, false, "s", "how far ahead a body's ballistic path is checked for contact"};
+inline constexpr Knob kLodMargin{"simulation.lod.margin", "TerrainDef.lod_margin", 0.05, 0, 100, false, false, false, "m", "clearance that already counts as contact"};
+inline constexpr Knob kLodApron{"simulation.lod.apron", "TerrainDef.lod_apron", 1.0, 0, 1000, false, false, false, "m", "added around a contact's footprint on every side of a patch"};
+
+// ---- bodies ----
+inline constexpr Knob kBodyFriction{"bodies[].friction", "BodyDef.friction", 0.5, 0, 10, false, false, false, "", "Coulomb μ against the heightfield and other bodies"};
+inline constexpr Knob kBodyRestitution{"bodies[].restitution", "BodyDef.restitution", 0.1, 0, 1, false, false, false, "", "restitution against the heightfield and other bodies"};
+inline constexpr Knob kBodyRollingFriction{"bodies[].rolling_friction", "BodyDef.rolling_friction", 0.05, 0, 10, false, false, false, "", "rolling resistance (torque arm / radius)"};
+
+// Every entry, in the order of the docs' tables.
+inline constexpr std::array<const Knob*, 23> kAll = {
+    &kGranuleRadius, &kDensity, &kFriction, &kRestitution, &kStiffness, &kTangentialRatio,
+    &kSlots, &kGranulesPerSlot, &kParticleScale, &kStepsPerContact, &kMaxSubsteps, &kPatchDepth,
+    &kSoilDepth, &kSleepSpeed, &kSleepTime, &kIdleTimeout, &kThreads, &kLodHorizon, &kLodMargin,
+    &kLodApron, &kBodyFriction, &kBodyRestitution, &kBodyRollingFriction};
+
+// "(0, 1e+05] kg/m^3"; integers: "[1, 1024] (whole number)".
+inline std::string describe_range(const Knob& k) {
+  std::string s = std::string(k.lo_open ? "(" : "[") + format_number(k.lo) + ", " + format_number(k.hi) + (k.hi_open ? ")" : "]");
+  if (*k.unit) s += std::string(" ") + k.unit;
+  if (k.integer) s += " (whole number)";
+  return s;
+}
+
+// The markdown table of every knob (scene field, API field, default, range, meaning), as
+// docs/scene-format.md and docs/api.md hold it between "<!-- knobs:begin -->" and
+// "<!-- knobs:end -->" (`sandpatch info --knobs` prints it).
+inline std::string knob_table_markdown() {
+  auto cell = [](const char* field, const char* why) {
+    return *field ? std::string("`") + field + "`" : std::string("— (") + why + ")";
+  };
+  std::string t = "| scene file | library | default | allowed | meaning |\n|---|---|---|---|---|\n";
+  for (const Knob* k : kAll)
+    t += "| " + cell(k->scene, k->one_door) + " | " + cell(k->api, k->one_door) + " | " + format_number(k->def) +
+         (*k->unit ? std::string(" ") + k->unit : "") + " | " + describe_range(*k) + " | " + k->what + " |\n";
+  return t;
+}
+
+}  // namespace sandpatch::knobs

@@ -1,0 +1,69 @@
+// What `sandpatch run` writes besides the report: images of the scene (one GL context, one
+// renderer), file names from output patterns, atomic writes, the progress line.
+#pragma once
+
+#include <filesystem>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "common/error.hpp"
+#include "gl/context.hpp"
+#include "heightfield/heightfield.hpp"
+#include "heightfield/io.hpp"
+#include "manager/terrain_manager.hpp"
+#include "render/render.hpp"
+#include "scene/scene.hpp"
+
+namespace sandpatch {
+
+enum class ProgressStyle { Auto, Bar, Lines, None };
+
+// `pattern` with {frame} (6 digits), {time_ms} (8 digits), {ext} and {camera} replaced.
+std::string expand_pattern(std::string pattern, long long frame, double t, const char* ext, const std::string& camera = "");
+const char* format_ext(HeightfieldFormat f);
+// Writes `text` to `path` atomically (temporary file + rename): nothing is written half.
+Status write_atomic(const std::filesystem::path& path, const std::string& text);
+
+// Progress on stderr: a bar on a terminal, plain lines every 10 % otherwise (logs and CI).
+class ProgressPrinter {
+ public:
+  ProgressPrinter(ProgressStyle style, long long frames, double dt);
+  void update(long long frame, double wall_s, bool final = false);
+
+ private:
+  ProgressStyle style_;
+  long long frames_;
+  double dt_;
+  double last_wall_ = -1;
+  int next_pct_ = 0;
+};
+
+// Images of the run: one GL context and one scene renderer, made on the first image. With
+// the GL backend the renderer shares the simulation's context and draws the particles
+// straight from the simulation's buffers; otherwise it makes its own context.
+class FrameWriter {
+ public:
+  FrameWriter(const Heightfield& hf, const TerrainManager* manager) : hf_(hf), manager_(manager) {}
+  ~FrameWriter();
+  FrameWriter(const FrameWriter&) = delete;
+  FrameWriter& operator=(const FrameWriter&) = delete;
+  // No GL context could be made: images are skipped (why() says why).
+  bool unavailable() const { return !why_.empty(); }
+  const std::string& why() const { return why_; }
+  void heightfield_changed(const std::vector<GridRegion>& regions);
+  // Renders `view` (terrain and the live patches' granules) into `path`.
+  Status write(const render::CameraView& view, const std::string& path);
+
+ private:
+  Status write_gpu(const render::CameraView& view, const std::string& path);
+
+  const Heightfield& hf_;
+  const TerrainManager* manager_;
+  std::unique_ptr<gl::Context> ctx_;    // own context (CPU backend)
+  gl::Context* context_ = nullptr;      // the context in use (own or the manager's)
+  std::unique_ptr<render::SceneRenderer> renderer_;
+  std::string why_;
+};
+
+}  // namespace sandpatch

@@ -1,0 +1,175 @@
+#include "manager/scene_world.hpp"
+
+#include "manager/terrain.hpp"
+#include "scene/mesh.hpp"
+
+namespace sandpatch {
+namespace {
+
+Eigen::Vector3f vec3f(const Vec3d& v) { return {float(v[0]), float(v[1]), float(v[2])}; }
+
+}  // namespace
+
+// Camera pose at simulated time t: fixed, or linear between path keyframes (held outside).
+render::CameraView camera_at(const CameraDef& c, double t) {
+  render::CameraView v;
+  Eigen::Vector3d p(c.position[0], c.position[1], c.position[2]), q(c.target[0], c.target[1], c.target[2]);
+  if (!c.path.empty()) {
+    auto key = [](const CameraKeyDef& k, Eigen::Vector3d& pos, Eigen::Vector3d& tgt) {
+      pos = {k.position[0], k.position[1], k.position[2]};
+      tgt = {k.target[0], k.target[1], k.target[2]};
+    };
+    key(c.path.front(), p, q);
+    for (std::size_t k = 1; k < c.path.size(); ++k) {
+      const CameraKeyDef& a = c.path[k - 1];
+      const CameraKeyDef& b = c.path[k];
+      if (t < a.time) break;
+      if (t >= b.time) {
+        key(b, p, q);
+        continue;
+      }
+      Eigen::Vector3d pa, qa, pb, qb;
+      key(a, pa, qa);
+      key(b, pb, qb);
+      const double u = (t - a.time) / (b.time - a.time);
+      p = pa + u * (pb - pa);
+      q = qa + u * (qb - qa);
+      break;
+    }
+  }
+  v.position = p;
+  v.target = q;
+  v.fov_deg = float(c.fov_deg);
+  v.width = c.width;
+  v.height = c.height;
+  return v;
+}
+
+Result<RigidBodyDef> to_rigid_body(const SceneDef& scene, std::size_t index) {
+  const BodyDef& b = scene.bodies[index];
+  RigidBodyDef d;
+  d.name = b.name;
+  d.mass = float(b.mass_value());
+  d.position = {b.pose.position[0], b.pose.position[1], b.pose.position[2]};
+  const auto& q = b.pose.orientation;
+  d.orientation = Eigen::Quaternionf(float(q[0]), float(q[1]), float(q[2]), float(q[3])).normalized();
+  d.linear_velocity = vec3f(b.linear_velocity);
+  d.angular_velocity = vec3f(b.angular_velocity);
+  d.friction = float(b.friction);
+  d.restitution = float(b.restitution);
+  d.rolling_friction = float(b.rolling_friction);
+  const ShapeDef& s = b.shape;
+  d.shape.radius = float(s.radius);
+  d.shape.height = float(s.height);
+  d.shape.half_extents = vec3f(s.half_extents);
+  switch (s.kind) {
+    case ShapeKind::Sphere: d.shape.kind = RigidShapeKind::Sphere; break;
+    case ShapeKind::Box: d.shape.kind = RigidShapeKind::Box; break;
+    case ShapeKind::Cylinder: d.shape.kind = RigidShapeKind::Cylinder; break;
+    case ShapeKind::Capsule: d.shape.kind = RigidShapeKind::Capsule; break;
+    case ShapeKind::Mesh: {
+      d.shape.kind = RigidShapeKind::Mesh;
+      auto mesh = load_obj_mesh(s.file, s.scale);
+      if (!mesh) return mesh.errors();
+      // Bodies are centred on their centre of mass.
+      const Eigen::Vector3f c = mesh->centroid().cast<float>();
+      for (const auto& v : mesh->vertices) d.shape.vertices.push_back(v - c);
+      d.shape.triangles = mesh->triangles;
+      break;
+    }
+  }
+  return d;
+}
+
+TerrainManagerDef manager_def(const SceneDef& scene, const Heightfield& hf, int threads, const std::string& backend) {
+  const SceneSimulationDef& sim = scene.simulation;
+  const MaterialDef* mat = scene.terrain.material.empty() ? &scene.materials.front()
+                                                         : scene.find_material(scene.terrain.material);
+  TerrainManagerDef d;
+  d.material.radius = float(mat->granule_radius);
+  d.material.density = float(mat->density);
+  d.material.friction = float(mat->friction);
+  d.material.restitution = float(mat->restitution_value());
+  d.material.stiffness = float(mat->stiffness);
+  d.material.tangential_stiffness_ratio = float(mat->tangential_stiffness_ratio);
+  d.particle_scale = sim.particle_scale;
+  d.steps_per_contact = sim.steps_per_contact;
+  d.slots = sim.pool.slots;
+  d.granules_per_slot = sim.pool.granules_per_slot;
+  d.soil_depth = scene.terrain.soil_depth.value_or(knobs::kSoilDepth.def);
+  d.patch_depth = std::min(scene.terrain.patch_depth, d.soil_depth);
+  d.max_substeps = sim.max_substeps;
+  d.lod.horizon = sim.lod.horizon;
+  d.lod.margin = sim.lod.margin;
+  d.lod.apron = sim.lod.apron;
+  d.sleep_speed = sim.sleep.speed_threshold;
+  d.sleep_time = sim.sleep.hold_time;
+  d.idle_timeout = sim.idle_timeout;
+  d.gravity = {sim.gravity[0], sim.gravity[1], sim.gravity[2]};
+  d.threads = threads;
+  d.seed = sim.seed;
+  d.backend = backend;
+  // Particle scale by distance from a camera (scenario 2 of Leach & Marais §6.3): the bands,
+  // and the camera where it is at the start; the run moves it (World::set_camera).
+  if (const auto& sd = sim.scale_by_distance) {
+    for (const auto& b : sd->bands) d.scale_bands.push_back({b.max_distance, b.particle_scale});
+    d.camera = camera_at(*scene.find_camera(sd->camera), 0.0).position.cast<double>();
+  }
+  // A flat bedrock (terrain.bedrock_height) bounds the patches too (heightfield-local m).
+  if (scene.terrain.bedrock_height) d.bedrock_height = bedrock_world_height(scene, hf, 0, 0) - hf.origin_y();
+  return d;
+}
+
+Result<std::unique_ptr<World>> make_world(const SceneDef& scene, int threads, const std::string& backend,
+                                          std::string* stage) {
+  std::string unused;
+  std::string& part = stage ? *stage : unused;
+  part = "terrain";
+  auto hf_result = load_scene_terrain(scene);
+  if (!hf_result) return hf_result.errors();
+  part = "bodies";
+  const Heightfield& hf = *hf_result;
+  auto below = check_bodies_against_terrain(
+      scene, [&](double x, double z) { return float(bedrock_world_height(scene, hf, x, z)); });
+  if (!below.empty()) return below;
+  // A body whose centre starts below the terrain surface is inside the terrain: Bullet's
+  // heightfield contact pushes a body along the triangle's normal from the side its centre is
+  // on, so it would be pushed down and fall for ever. Refused, naming the body and where it is
+  // (docs/extremes.md). A body only partly in the ground (centre above the surface) is pushed
+  // out by the contact. Checked against the terrain at the start, for every body (also those
+  // spawned later).
+  std::vector<Error> inside;
+  const double w = (hf.samples_x() - 1) * double(hf.spacing()), d = (hf.samples_z() - 1) * double(hf.spacing());
+  for (std::size_t i = 0; i < scene.bodies.size(); ++i) {
+    const BodyDef& b = scene.bodies[i];
+    const double x = b.pose.position[0] - hf.origin_x(), z = b.pose.position[2] - hf.origin_z();
+    if (x < 0 || z < 0 || x > w || z > d) continue;  // no terrain under it
+    const double surface = hf.origin_y() + hf.sample(float(x), float(z));
+    if (b.pose.position[1] >= surface) continue;
+    inside.push_back(Error{scene.source_path, "bodies[" + std::to_string(i) + "].pose.position",
+                           "[" + format_number(b.pose.position[0]) + ", " + format_number(b.pose.position[1]) + ", " +
+                               format_number(b.pose.position[2]) + "]",
+                           "body '" + b.name + "' starts inside the terrain: its centre is below the surface (world y = " +
+                               format_number(surface) + " m there); it must start at or above it",
+                           "its lowest point may touch or enter the ground, its centre may not"});
+  }
+  if (!inside.empty()) return inside;
+  std::vector<RigidBodyDef> body_defs;
+  for (std::size_t i = 0; i < scene.bodies.size(); ++i) {
+    auto def = to_rigid_body(scene, i);
+    if (!def) return def.errors();
+    body_defs.push_back(std::move(*def));
+  }
+  TerrainManagerDef md;
+  if (scene.simulation.granular_patches) md = manager_def(scene, hf, threads, backend);
+  auto world = World::create(std::move(*hf_result), vec3f(scene.simulation.gravity));
+  if (!world) return world.errors();
+  if (scene.simulation.granular_patches) {
+    part = "activation";
+    if (Status s = (*world)->enable_patches(md); !s) return s.errors();
+  }
+  for (std::size_t i = 0; i < body_defs.size(); ++i) (*world)->schedule_body(body_defs[i], scene.bodies[i].spawn_time);
+  return world;
+}
+
+}  // namespace sandpatch

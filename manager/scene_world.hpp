@@ -1,0 +1,38 @@
+// A scene file's world: its heightfield, bodies and terrain manager made into a World
+// (manager/world.hpp), for `sandpatch run`, `sandpatch bench lod` and the tests. The scene's
+// definitions (scene/scene.hpp) are turned into the manager's and Bullet's here, in one place.
+#pragma once
+
+#include <memory>
+#include <string>
+
+#include "common/error.hpp"
+#include "manager/bullet_world.hpp"
+#include "manager/terrain_manager.hpp"
+#include "manager/world.hpp"
+#include "render/render.hpp"
+#include "scene/scene.hpp"
+
+namespace sandpatch {
+
+// The terrain manager's definition from a scene's terrain material and simulation section
+// (docs/scene-format.md), with the scale bands (camera at t = 0) and the flat bedrock, which
+// need the heightfield. `backend`: "cpu" or "gl".
+TerrainManagerDef manager_def(const SceneDef& scene, const Heightfield& hf, int threads, const std::string& backend);
+
+// Scene body `index` as a Bullet body definition (meshes are read again from their validated
+// OBJ, centred on their centroid).
+Result<RigidBodyDef> to_rigid_body(const SceneDef& scene, std::size_t index);
+
+// Camera pose at simulated time t: fixed, or linear between path keyframes (held outside).
+render::CameraView camera_at(const CameraDef& camera, double t);
+
+// The scene's world, ready for its first frame: the heightfield loaded, every body checked
+// against it (none may start below the bedrock or with its centre inside the terrain) and
+// scheduled at its spawn time, the terrain manager made unless the scene turns patches off.
+// Errors are bad input (they name the scene file and field) found before anything runs;
+// `stage` (if given) is set to the part that refused: terrain, bodies or activation.
+Result<std::unique_ptr<World>> make_world(const SceneDef& scene, int threads, const std::string& backend,
+                                          std::string* stage = nullptr);
+
+}  // namespace sandpatch

@@ -1,0 +1,151 @@
+// The one owner of the frame. A World holds the heightfield, the Bullet world over it and,
+// when granular patches are on, the terrain manager over both, and advances them together:
+//
+//   World::step(dt, substeps) runs, in order, each stage timed in the World's Profile:
+//     spawn      bodies scheduled for this time enter the Bullet world
+//     lod        contact prediction, patch requests            (TerrainManager::before_bodies)
+//     activation pool slots filled from the heightfield         (TerrainManager::before_bodies)
+//     dem        coupled granule substeps, forces to the bodies (TerrainManager::before_bodies)
+//     bodies     `substeps` Bullet steps of dt / substeps; the patches' forces act over all
+//     sleep      sleep / wake bookkeeping                       (TerrainManager::after_bodies)
+//     demotion   particles back to heightfield                  (TerrainManager::after_bodies)
+//   After each stage that can move a body (dem, bodies, demotion) every body's state is
+//   checked finite once; a non-finite one stops the step with an error naming the body and
+//   the stage.
+//
+// Every caller steps the terrain through this class: the public API (api/sandpatch.cpp),
+// `sandpatch run` (manager/run.cpp), the benches and the test rig. It also owns the one state
+// hash and the one report schema all of them share.
+//
+// Time: the simulated time after n steps of the same dt is t0 + n·dt (computed, not summed,
+// so it does not drift and equals frame·dt for a fixed-step run); a change of dt starts a new
+// base t0.
+#pragma once
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "common/error.hpp"
+#include "heightfield/heightfield.hpp"
+#include "manager/bullet_world.hpp"
+#include "manager/profile.hpp"
+#include "manager/terrain_manager.hpp"
+
+namespace sandpatch {
+
+class World {
+ public:
+  // Takes the heightfield; makes the Bullet world over it. No patches until enable_patches.
+  static Result<std::unique_ptr<World>> create(Heightfield terrain, const Eigen::Vector3f& gravity);
+  ~World();
+  World(const World&) = delete;
+  World& operator=(const World&) = delete;
+
+  // Makes the terrain manager (granular patches) over the heightfield and the Bullet world.
+  // At most once; bodies may be added before or after. Errors are the manager's.
+  Status enable_patches(const TerrainManagerDef& def);
+
+  // ---- bodies ----
+  // Adds a body now.
+  Result<RigidBodyId> add_body(const RigidBodyDef& def);
+  // Adopts a game's btRigidBody now (BulletWorld::adopt_body).
+  Result<RigidBodyId> adopt_body(btRigidBody* body, const std::string& name);
+  // A body that enters the world in the spawn stage of the first step that starts at or after
+  // spawn_time (s) (bodies due in the same step enter in the order they were scheduled).
+  // Returns its entry index (entry(index).id once spawned).
+  std::size_t schedule_body(const RigidBodyDef& def, double spawn_time);
+  // Every body added, adopted or scheduled, in that order (removed ones stay, marked): the
+  // report's body list.
+  struct Entry {
+    std::string name;
+    double spawn_time = 0;  // s (the time it was added, for add_body / adopt_body)
+    RigidBodyId id;         // invalid until spawned
+    bool removed = false;
+    bool spawned() const { return id.valid(); }
+  };
+  const std::vector<Entry>& entries() const { return entries_; }
+  // Removes a body. An owned body a patch may carry still has a shell in that patch's DEM,
+  // which the manager lets go of only when it sees the body leave, so it is moved far above
+  // the terrain, at rest, and leaves the Bullet world in the next step after the dem stage;
+  // to callers it is gone at once (alive() is false). An adopted body, or any body without
+  // patches, leaves at once (an adopted one is given back to the game).
+  void remove_body(RigidBodyId id);
+  // Removes a body no step has seen yet at once (a body refused right after it was added).
+  void discard_body(RigidBodyId id);
+  // Live and not being removed.
+  bool alive(RigidBodyId id) const;
+  // Live bodies (not being removed), in slot order.
+  std::vector<RigidBodyId> bodies() const;
+
+  // ---- the frame ----
+  // Moves the camera the manager's scale bands are measured from (m, world).
+  void set_camera(const Eigen::Vector3d& position);
+  // One frame of dt seconds (dt > 0, substeps >= 1): the stages above. On an error the frame
+  // is abandoned and failed_stage() names where.
+  Status step(double dt, int substeps = 1);
+  // Every live patch back into heightfield now (the final terrain of a run, a save).
+  Status demote_all();
+  const char* failed_stage() const { return failed_stage_; }
+
+  double time() const { return time_base_ + double(steps_at_dt_) * dt_; }  // s, simulated
+  long long steps() const { return steps_; }
+
+  // ---- per-frame measurements ----
+  struct FrameRecord {
+    double wall_ms = 0;    // the step, all stages (a caller's outputs are not in it)
+    bool conversion = false;  // a promotion, an upload or a demotion ran in it
+  };
+  const std::vector<FrameRecord>& frame_records() const { return frames_; }
+  int peak_granules() const { return peak_granules_; }
+
+  // ---- parts ----
+  Heightfield& heightfield() { return *hf_; }
+  const Heightfield& heightfield() const { return *hf_; }
+  BulletWorld& bullet() { return *bullet_; }
+  const BulletWorld& bullet() const { return *bullet_; }
+  TerrainManager* manager() { return manager_.get(); }           // null without patches
+  const TerrainManager* manager() const { return manager_.get(); }
+  Profile& profile() { return profile_; }
+  const Profile& profile() const { return profile_; }
+  // Heightfield regions written by demotions and not yet taken.
+  std::vector<GridRegion> take_dirty_regions();
+
+  // ---- results ----
+  // FNV-1a over the simulated time, every live body in slot order (index, position,
+  // orientation, velocities), the heightfield and every patch's DEM state: equal for two
+  // worlds made and driven the same way, whichever door (API, scene run, bench) drove them.
+  std::uint64_t state_hash() const;
+  // The report sections every caller shares: simulated_s, steps, stages, frames, bodies,
+  // patches_live, granules_live, the manager's ledger / conversions / pool / tile, terrain,
+  // final_state_hash (docs/cli.md "report.json").
+  nlohmann::ordered_json report() const;
+
+ private:
+  World() = default;
+  Status check_bodies(const char* stage);
+  Status fail(const char* stage, Status s);
+
+
+  // Declaration order is destruction order reversed: the manager refers to the Bullet world
+  // and the heightfield, the Bullet world reads the heightfield's tiles in place.
+  std::unique_ptr<Heightfield> hf_;
+  std::unique_ptr<BulletWorld> bullet_;
+  std::unique_ptr<TerrainManager> manager_;
+  Profile profile_;
+  std::vector<Entry> entries_;
+  std::vector<std::pair<std::size_t, RigidBodyDef>> pending_;  // scheduled, not yet spawned (entry, definition)
+  std::vector<RigidBodyId> removing_;  // removed, leaving the Bullet world in the next step
+  std::vector<GridRegion> dirty_;
+  std::vector<FrameRecord> frames_;
+  int filling_ = 0;                    // patches promoted and not yet ready
+  int peak_granules_ = 0;
+  double time_base_ = 0, dt_ = 0;      // s
+  long long steps_at_dt_ = 0, steps_ = 0;
+  const char* failed_stage_ = "";
+};
+
+}  // namespace sandpatch

@@ -1,0 +1,257 @@
+// The knob table (common/knobs.hpp) against every copy of a default and every door: scene
+// files, the public API, the internal definitions, the docs' field tables.
+#include "common/knobs.hpp"
+
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <functional>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <sstream>
+#include <string>
+
+#include "manager/bullet_world.hpp"
+#include "manager/lod.hpp"
+#include "manager/scene_world.hpp"
+#include "manager/terrain_manager.hpp"
+#include "sandpatch/sandpatch.hpp"
+#include "scene/scene.hpp"
+
+namespace sandpatch {
+namespace {
+
+using json = nlohmann::json;
+
+// A small valid scene; each case below sets one field of it.
+json base_scene() {
+  return json::parse(R"({
+    "name": "knobs",
+    "terrain": {"source": {"type": "procedural", "kind": "flat", "samples_x": 17, "samples_z": 17}, "spacing": 0.5},
+    "materials": [{"name": "sand", "restitution": 0.3}],
+    "bodies": [{"name": "ball", "shape": {"type": "sphere", "radius": 0.2}, "mass": 5.0, "pose": {"position": [4.0, 1.0, 4.0]}}],
+    "simulation": {"duration": 1.0}
+  })");
+}
+
+// One knob: where it lives in a scene file, in the public definitions, and what each door
+// and internal definition made from them holds.
+struct Case {
+  const knobs::Knob* knob;
+  std::function<void(json&, double)> set_scene;                           // write v into a scene
+  std::function<double(const SceneDef&)> scene_value;                     // what the parser read
+  std::function<void(api::TerrainDef&, api::BodyDef&, double)> set_api;   // write v into the API's definitions
+  double api_default;                                                     // the public header's default
+  std::function<double(const SceneDef&)> internal_value;                  // what the World is made with
+};
+
+double manager_field(const SceneDef& s, const std::function<double(const TerrainManagerDef&)>& f) {
+  HeightfieldDef g;
+  g.samples_x = g.samples_z = 2;
+  return f(manager_def(s, Heightfield::create(g).value(), 1, "cpu"));
+}
+double body_field(const SceneDef& s, const std::function<double(const RigidBodyDef&)>& f) {
+  return f(to_rigid_body(s, 0).value());
+}
+
+std::vector<Case> cases() {
+  const api::TerrainDef td;
+  const api::BodyDef bd;
+  auto mat = [](const char* k) { return [k](json& j, double v) { j["materials"][0][k] = v; }; };
+  auto sim = [](const char* k) { return [k](json& j, double v) { j["simulation"][k] = v; }; };
+  auto sim2 = [](const char* a, const char* b) { return [a, b](json& j, double v) { j["simulation"][a][b] = v; }; };
+  auto ter = [](const char* k) { return [k](json& j, double v) { j["terrain"][k] = v; }; };
+  auto body = [](const char* k) { return [k](json& j, double v) { j["bodies"][0][k] = v; }; };
+  using S = const SceneDef&;
+  using M = const TerrainManagerDef&;
+  using B = const RigidBodyDef&;
+  using T = api::TerrainDef&;
+  using D = api::BodyDef&;
+  return {
+      {&knobs::kGranuleRadius, mat("granule_radius"), [](S s) { return s.materials[0].granule_radius; },
+       [](T t, D, double v) { t.material.granule_radius = v; }, td.material.granule_radius,
+       [](S s) { return manager_field(s, [](M m) { return double(m.material.radius); }); }},
+      {&knobs::kDensity, mat("density"), [](S s) { return s.materials[0].density; },
+       [](T t, D, double v) { t.material.density = v; }, td.material.density,
+       [](S s) { return manager_field(s, [](M m) { return double(m.material.density); }); }},
+      {&knobs::kFriction, mat("friction"), [](S s) { return s.materials[0].friction; },
+       [](T t, D, double v) { t.material.friction = v; }, td.material.friction,
+       [](S s) { return manager_field(s, [](M m) { return double(m.material.friction); }); }},
+      {&knobs::kRestitution, mat("restitution"), [](S s) { return s.materials[0].restitution_value(); },
+       [](T t, D, double v) { t.material.restitution = v; }, td.material.restitution,
+       [](S s) { return manager_field(s, [](M m) { return double(m.material.restitution); }); }},
+      {&knobs::kStiffness, mat("stiffness"), [](S s) { return s.materials[0].stiffness; },
+       [](T t, D, double v) { t.material.stiffness = v; }, td.material.stiffness,
+       [](S s) { return manager_field(s, [](M m) { return double(m.material.stiffness); }); }},
+      {&knobs::kTangentialRatio, mat("tangential_stiffness_ratio"), [](S s) { return s.materials[0].tangential_stiffness_ratio; },
+       [](T t, D, double v) { t.material.tangential_stiffness_ratio = v; }, td.material.tangential_stiffness_ratio,
+       [](S s) { return manager_field(s, [](M m) { return double(m.material.tangential_stiffness_ratio); }); }},
+      {&knobs::kSlots, sim2("pool", "slots"), [](S s) { return double(s.simulation.pool.slots); },
+       [](T t, D, double v) { t.slots = int(v); }, double(td.slots),
+       [](S s) { return manager_field(s, [](M m) { return double(m.slots); }); }},
+      {&knobs::kGranulesPerSlot, sim2("pool", "granules_per_slot"), [](S s) { return double(s.simulation.pool.granules_per_slot); },
+       [](T t, D, double v) { t.granules_per_slot = int(v); }, double(td.granules_per_slot),
+       [](S s) { return manager_field(s, [](M m) { return double(m.granules_per_slot); }); }},
+      {&knobs::kParticleScale, sim("particle_scale"), [](S s) { return s.simulation.particle_scale; },
+       [](T t, D, double v) { t.particle_scale = v; }, td.particle_scale,
+       [](S s) { return manager_field(s, [](M m) { return m.particle_scale; }); }},
+      {&knobs::kStepsPerContact, sim("steps_per_contact"), [](S s) { return double(s.simulation.steps_per_contact); },
+       [](T t, D, double v) { t.steps_per_contact = int(v); }, double(td.steps_per_contact),
+       [](S s) { return manager_field(s, [](M m) { return double(m.steps_per_contact); }); }},
+      {&knobs::kMaxSubsteps, sim("max_substeps"), [](S s) { return double(s.simulation.max_substeps); },
+       [](T t, D, double v) { t.max_substeps = int(v); }, double(td.max_substeps),
+       [](S s) { return manager_field(s, [](M m) { return double(m.max_substeps); }); }},
+      {&knobs::kPatchDepth, ter("patch_depth"), [](S s) { return s.terrain.patch_depth; },
+       [](T t, D, double v) { t.patch_depth = v; }, td.patch_depth,
+       [](S s) { return manager_field(s, [](M m) { return m.patch_depth; }); }},
+      {&knobs::kSoilDepth, ter("soil_depth"), [](S s) { return s.terrain.soil_depth.value_or(-1); },
+       [](T t, D, double v) { t.soil_depth = v; }, td.soil_depth,
+       [](S s) { return manager_field(s, [](M m) { return m.soil_depth; }); }},
+      {&knobs::kSleepSpeed, sim2("sleep", "speed_threshold"), [](S s) { return s.simulation.sleep.speed_threshold; },
+       [](T t, D, double v) { t.sleep_speed = v; }, td.sleep_speed,
+       [](S s) { return manager_field(s, [](M m) { return m.sleep_speed; }); }},
+      {&knobs::kSleepTime, sim2("sleep", "hold_time"), [](S s) { return s.simulation.sleep.hold_time; },
+       [](T t, D, double v) { t.sleep_time = v; }, td.sleep_time,
+       [](S s) { return manager_field(s, [](M m) { return m.sleep_time; }); }},
+      {&knobs::kIdleTimeout, sim("idle_timeout"), [](S s) { return s.simulation.idle_timeout; },
+       [](T t, D, double v) { t.idle_timeout = v; }, td.idle_timeout,
+       [](S s) { return manager_field(s, [](M m) { return m.idle_timeout; }); }},
+      {&knobs::kThreads, sim("threads"), [](S s) { return double(s.simulation.threads); },
+       [](T t, D, double v) { t.threads = int(v); }, double(td.threads),
+       [](S s) { return double(s.simulation.threads); }},  // the run picks the thread count (RunOptions)
+      {&knobs::kLodHorizon, sim2("lod", "horizon"), [](S s) { return s.simulation.lod.horizon; },
+       [](T t, D, double v) { t.lod_horizon = v; }, td.lod_horizon,
+       [](S s) { return manager_field(s, [](M m) { return m.lod.horizon; }); }},
+      {&knobs::kLodMargin, sim2("lod", "margin"), [](S s) { return s.simulation.lod.margin; },
+       [](T t, D, double v) { t.lod_margin = v; }, td.lod_margin,
+       [](S s) { return manager_field(s, [](M m) { return m.lod.margin; }); }},
+      {&knobs::kLodApron, sim2("lod", "apron"), [](S s) { return s.simulation.lod.apron; },
+       [](T t, D, double v) { t.lod_apron = v; }, td.lod_apron,
+       [](S s) { return manager_field(s, [](M m) { return m.lod.apron; }); }},
+      {&knobs::kBodyFriction, body("friction"), [](S s) { return s.bodies[0].friction; },
+       [](T, D b, double v) { b.friction = v; }, bd.friction,
+       [](S s) { return body_field(s, [](B b) { return double(b.friction); }); }},
+      {&knobs::kBodyRestitution, body("restitution"), [](S s) { return s.bodies[0].restitution; },
+       [](T, D b, double v) { b.restitution = v; }, bd.restitution,
+       [](S s) { return body_field(s, [](B b) { return double(b.restitution); }); }},
+      {&knobs::kBodyRollingFriction, body("rolling_friction"), [](S s) { return s.bodies[0].rolling_friction; },
+       [](T, D b, double v) { b.rolling_friction = v; }, bd.rolling_friction,
+       [](S s) { return body_field(s, [](B b) { return double(b.rolling_friction); }); }},
+  };
+}
+
+// A value inside the range other than the default (integers whole).
+double other_value(const knobs::Knob& k) {
+  double v = k.def > 0 ? k.def * 0.5 : (k.lo + k.hi) * 0.5;
+  if (k.integer) v = std::floor(v);
+  if (v == k.def) v = k.def + 1;
+  return v;
+}
+// A value outside the range.
+double bad_value(const knobs::Knob& k) { return k.hi_open ? k.hi : k.hi * 10 + 1; }
+
+TEST(Knobs, EveryKnobHasACaseAndBothDoors) {
+  const auto cs = cases();
+  ASSERT_EQ(cs.size(), knobs::kAll.size());
+  for (std::size_t i = 0; i < cs.size(); ++i) {
+    EXPECT_EQ(cs[i].knob, knobs::kAll[i]) << "cases() in the order of kAll";
+    EXPECT_TRUE(*cs[i].knob->scene || *cs[i].knob->one_door) << cs[i].knob->api << ": no scene field and no reason";
+    EXPECT_TRUE(*cs[i].knob->api || *cs[i].knob->one_door) << cs[i].knob->scene << ": no API field and no reason";
+    EXPECT_TRUE(cs[i].knob->allows(cs[i].knob->def)) << cs[i].knob->scene << ": the default is outside its range";
+  }
+}
+
+// The default agrees in the table, a scene that leaves the field out, the public header and
+// the internal definition the World is made with.
+TEST(Knobs, DefaultsAgreeEverywhere) {
+  auto scene = parse_scene(base_scene().dump(), "knobs.json", "");
+  ASSERT_TRUE(scene.ok()) << scene.message();
+  for (const Case& c : cases()) {
+    SCOPED_TRACE(c.knob->scene);
+    if (c.knob == &knobs::kRestitution) continue;  // a material must give restitution or damping_ratio
+    EXPECT_DOUBLE_EQ(c.scene_value(*scene), c.knob->def) << "scene file";
+    EXPECT_DOUBLE_EQ(c.api_default, c.knob->def) << "include/sandpatch/sandpatch.hpp";
+    EXPECT_FLOAT_EQ(float(c.internal_value(*scene)), float(c.knob->def)) << "the internal definition";
+  }
+  // Internal definitions made without a scene.
+  const TerrainManagerDef m;
+  EXPECT_FLOAT_EQ(m.material.restitution, float(knobs::kRestitution.def));
+  EXPECT_EQ(m.sleep_time, knobs::kSleepTime.def);
+  const RigidBodyDef b;
+  EXPECT_FLOAT_EQ(b.restitution, float(knobs::kBodyRestitution.def));
+  const LodDef l;
+  EXPECT_EQ(l.apron, knobs::kLodApron.def);
+}
+
+// A value other than the default written in a scene reaches the World's definitions.
+TEST(Knobs, SceneValuesReachTheWorld) {
+  for (const Case& c : cases()) {
+    SCOPED_TRACE(c.knob->scene);
+    json j = base_scene();
+    const double v = other_value(*c.knob);
+    c.set_scene(j, v);
+    auto scene = parse_scene(j.dump(), "knobs.json", "");
+    ASSERT_TRUE(scene.ok()) << scene.message();
+    EXPECT_DOUBLE_EQ(c.scene_value(*scene), v);
+    EXPECT_FLOAT_EQ(float(c.internal_value(*scene)), float(v));
+  }
+}
+
+// A value outside the range is refused by both doors, naming the field.
+TEST(Knobs, BothDoorsRefuseTheSameRange) {
+  for (const Case& c : cases()) {
+    SCOPED_TRACE(c.knob->scene);
+    const double v = bad_value(*c.knob);
+    json j = base_scene();
+    c.set_scene(j, v);
+    auto scene = parse_scene(j.dump(), "knobs.json", "");
+    ASSERT_FALSE(scene.ok()) << "scene file accepted " << v;
+    std::string path = c.knob->scene;
+    for (std::size_t p; (p = path.find("[]")) != std::string::npos;) path.replace(p, 2, "[0]");
+    EXPECT_NE(scene.message().find(path), std::string::npos) << scene.message();
+
+    api::TerrainDef t;
+    t.procedural = "flat";
+    t.samples_x = t.samples_z = 9;
+    t.granular_patches = false;
+    api::BodyDef b;
+    b.position = {4.0, 2.0, 4.0};
+    c.set_api(t, b, v);
+    const bool body = std::string(c.knob->api).starts_with("BodyDef.");
+    if (!body) {
+      auto r = api::Terrain::create(t);
+      ASSERT_FALSE(r.ok()) << "TerrainDef accepted " << v;
+      EXPECT_NE(r.message().find(c.knob->api), std::string::npos) << r.message();
+    } else {
+      auto terrain = api::Terrain::create(t);
+      ASSERT_TRUE(terrain.ok()) << terrain.message();
+      auto h = terrain->add_body(b);
+      ASSERT_FALSE(h.ok()) << "BodyDef accepted " << v;
+      EXPECT_NE(h.message().find(c.knob->api), std::string::npos) << h.message();
+    }
+  }
+}
+
+std::string read_file(const std::string& path) {
+  std::ifstream f(path);
+  std::stringstream ss;
+  ss << f.rdbuf();
+  return ss.str();
+}
+
+// docs/scene-format.md and docs/api.md hold the table knob_table_markdown() prints.
+TEST(Knobs, DocsHoldTheTable) {
+  for (const char* doc : {"docs/scene-format.md", "docs/api.md"}) {
+    SCOPED_TRACE(doc);
+    const std::string text = read_file(std::string(SANDPATCH_SOURCE_DIR) + "/" + doc);
+    const std::string begin = "<!-- knobs:begin -->\n", end = "<!-- knobs:end -->";
+    const auto a = text.find(begin), b = text.find(end);
+    ASSERT_NE(a, std::string::npos) << "no " << begin;
+    ASSERT_NE(b, std::string::npos) << "no " << end;
+    EXPECT_EQ(text.substr(a + begin.size(), b - a - begin.size()), knobs::knob_table_markdown())
+        << "regenerate the block with `sandpatch info --knobs`";
+  }
+}
+
+}  // namespace
+}  // namespace sandpatch

@@ -1,0 +1,141 @@
+// The frame owner (manager/world.hpp): one step for every caller, one state hash, the checks.
+#include "manager/world.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <limits>
+
+#include "manager/run.hpp"
+#include "rig.hpp"
+#include "sandpatch/sandpatch.hpp"
+#include "scene/scene.hpp"
+
+namespace sandpatch {
+namespace {
+
+std::unique_ptr<World> flat_world(bool patches) {
+  auto w = World::create(test::terrain_8m("flat"), {0, -9.81f, 0});
+  EXPECT_TRUE(w.ok()) << (w.ok() ? "" : w.message());
+  if (patches) EXPECT_TRUE((*w)->enable_patches(test::small_manager_def()).ok());
+  return std::move(*w);
+}
+
+// Time after n steps of one dt is n·dt exactly (not a sum that drifts), and a change of dt
+// starts from the time reached.
+TEST(World, TimeIsStepsTimesDt) {
+  auto w = flat_world(false);
+  const double dt = 1.0 / 60.0;
+  for (int k = 0; k < 600; ++k) ASSERT_TRUE(w->step(dt).ok());
+  EXPECT_EQ(w->time(), 600 * dt);
+  EXPECT_EQ(w->steps(), 600);
+  ASSERT_TRUE(w->step(0.01).ok());
+  EXPECT_EQ(w->time(), 600 * dt + 0.01);
+  EXPECT_FALSE(w->step(0.0).ok());
+  EXPECT_FALSE(w->step(std::numeric_limits<double>::quiet_NaN()).ok());
+  EXPECT_FALSE(w->step(dt, 0).ok());
+}
+
+// A scheduled body enters in the spawn stage of the first step starting at or after its time.
+TEST(World, ScheduledBodiesSpawnOnTime) {
+  auto w = flat_world(false);
+  const std::size_t k = w->schedule_body(test::sphere_body(0.1f, 1.0f, {4.0, 2.0, 4.0}), 0.1);
+  const double dt = 0.05;
+  ASSERT_TRUE(w->step(dt).ok());  // starts at 0
+  EXPECT_FALSE(w->entries()[k].spawned());
+  ASSERT_TRUE(w->step(dt).ok());  // starts at 0.05
+  EXPECT_FALSE(w->entries()[k].spawned());
+  ASSERT_TRUE(w->step(dt).ok());  // starts at 0.1
+  ASSERT_TRUE(w->entries()[k].spawned());
+  EXPECT_TRUE(w->alive(w->entries()[k].id));
+  EXPECT_EQ(w->report()["counts"]["bodies_spawned"], 1);
+}
+
+// A body whose state becomes non-finite stops the step at the stage that made it, naming it.
+TEST(World, NonFiniteBodyStopsTheStepNamingItAndTheStage) {
+  auto w = flat_world(false);
+  auto def = test::sphere_body(0.1f, 1.0f, {4.0, 2.0, 4.0});
+  def.name = "ball";
+  auto id = w->add_body(def);
+  ASSERT_TRUE(id.ok());
+  BodyState st = w->bullet().state(*id);
+  st.angular_velocity.x() = std::numeric_limits<float>::quiet_NaN();  // the old CLI loop did not check this one
+  w->bullet().set_state(*id, st);
+  Status s = w->step(1.0 / 60.0);
+  ASSERT_FALSE(s.ok());
+  EXPECT_STREQ(w->failed_stage(), "bodies");
+  EXPECT_NE(s.message().find("'ball'"), std::string::npos) << s.message();
+  EXPECT_NE(s.message().find("bodies stage"), std::string::npos) << s.message();
+}
+
+// With patches a removed body is gone at once to callers and leaves the Bullet world in the
+// next step; the report and the hash no longer see it.
+TEST(World, RemovedBodyLeavesAfterTheNextStep) {
+  auto w = flat_world(true);
+  auto id = w->add_body(test::sphere_body(0.1f, 1.0f, {4.0, 1.3, 4.0}));
+  ASSERT_TRUE(id.ok());
+  for (int k = 0; k < 10; ++k) ASSERT_TRUE(w->step(1.0 / 60.0).ok());
+  w->remove_body(*id);
+  EXPECT_FALSE(w->alive(*id));
+  EXPECT_TRUE(w->bodies().empty());
+  EXPECT_TRUE(w->bullet().alive(*id)) << "still in Bullet until the dem stage lets go of it";
+  ASSERT_TRUE(w->step(1.0 / 60.0).ok());
+  EXPECT_FALSE(w->bullet().alive(*id));
+  EXPECT_EQ(w->report()["counts"]["bodies"], 0);
+}
+
+// The same scene through the public API and through `sandpatch run` gives the same final
+// state hash: both step a World made from the same definitions.
+TEST(World, ApiAndSceneRunGiveTheSameHash) {
+  const char* text = R"({
+    "name": "two_doors",
+    "terrain": {"source": {"type": "procedural", "kind": "flat", "height": 1.0, "samples_x": 41, "samples_z": 41},
+                "spacing": 0.1, "soil_depth": 1.0, "patch_depth": 0.25},
+    "materials": [{"name": "sand", "restitution": 0.3, "granule_radius": 0.025, "stiffness": 2e4}],
+    "bodies": [{"name": "ball", "shape": {"type": "sphere", "radius": 0.1}, "mass": 5.0,
+                "pose": {"position": [2.0, 1.3, 2.0]}}],
+    "simulation": {"dt": 0.016666666666666666, "duration": 0.5, "threads": 1,
+                   "pool": {"slots": 1, "granules_per_slot": 6000}, "lod": {"apron": 0.3}},
+    "outputs": {"report": false}
+  })";
+  auto scene = parse_scene(text, "two_doors.json", "");
+  ASSERT_TRUE(scene.ok()) << scene.message();
+  RunOptions opt;
+  opt.out_dir = (std::filesystem::temp_directory_path() / "sandpatch_world_test").string();
+  opt.progress = ProgressStyle::None;
+  const RunResult run = run_scene(*scene, opt);
+  ASSERT_EQ(run.code, ExitCode::Ok) << run.stage << ": " << run.message;
+  ASSERT_GT(run.report["counts"]["peak_granules"].get<int>(), 0)
+      << "a patch must have lived for the comparison to mean anything";
+
+  api::TerrainDef t;
+  t.procedural = "flat";
+  t.base_height = 1.0f;
+  t.samples_x = t.samples_z = 41;
+  t.spacing = 0.1;
+  t.soil_depth = 1.0;
+  t.patch_depth = 0.25;
+  t.material.restitution = 0.3;
+  t.slots = 1;
+  t.granules_per_slot = 6000;
+  t.lod_apron = 0.3;
+  t.threads = 1;
+  t.gl_depth_render = true;  // as a scene run: the GL depth render when a context exists, else the CPU one
+  auto terrain = api::Terrain::create(t);
+  ASSERT_TRUE(terrain.ok()) << terrain.message();
+  api::BodyDef b;
+  b.name = "ball";
+  b.shape.radius = 0.1;
+  b.mass = 5.0;
+  b.position = {2.0, 1.3, 2.0};
+  ASSERT_TRUE(terrain->add_body(b).ok());
+  for (int k = 0; k < 30; ++k) ASSERT_TRUE(terrain->step(scene->simulation.dt).ok());
+  ASSERT_TRUE(terrain->demote_all().ok());
+  char hex[17];
+  std::snprintf(hex, sizeof hex, "%016llx", static_cast<unsigned long long>(terrain->state_hash()));
+  EXPECT_EQ(run.report["final_state_hash"].get<std::string>(), hex);
+}
+
+}  // namespace
+}  // namespace sandpatch
