@@ -136,7 +136,8 @@ TEST(Scene, EveryFieldOfTheFullSceneIsParsed) {
   EXPECT_NEAR(crate.pose.orientation[0], h, 1e-12);
   EXPECT_NEAR(crate.pose.orientation[2], h, 1e-12);
   EXPECT_EQ(crate.friction, 0.5);  // defaults
-  EXPECT_EQ(crate.restitution, 0.2);
+  EXPECT_EQ(crate.restitution, knobs::kBodyRestitution.def);
+  EXPECT_EQ(crate.rolling_friction, knobs::kBodyRollingFriction.def);
   EXPECT_EQ(crate.spawn_time, 0.0);
 
   const auto& can = s.bodies[2];
