@@ -27,8 +27,8 @@ int layer_index(Layer l) {
 }  // namespace
 
 const char* layer_name(Layer l) {
-  static const char* const names[kLayerCount] = {"elevation", "bedrock",   "compaction", "material0",
-                                                 "material1", "material2", "material3"};
+  static const char* const names[kLayerCount] = {"elevation", "material0", "material1", "material2",
+                                                 "material3"};
   return names[layer_index(l)];
 }
 
@@ -74,7 +74,7 @@ Result<Heightfield> Heightfield::create(const HeightfieldDef& def) {
   hf.tiles_z_ = (hf.nz_ - 1 + hf.cells_ - 1) / hf.cells_;
   hf.spacing_ = def.spacing;
   hf.origin_ = {def.origin_x, def.origin_y, def.origin_z};
-  hf.defaults_ = {def.initial_height, kNoBedrock, 0.0f, 1.0f, 0.0f, 0.0f, 0.0f};
+  hf.defaults_ = {def.initial_height, 1.0f, 0.0f, 0.0f, 0.0f};
 
   // ---- tiles: Elevation allocated now, other layers on first write ----
   const std::size_t ntiles = std::size_t(hf.tiles_x_) * hf.tiles_z_;

@@ -52,14 +52,10 @@ struct HeightfieldDef {
   float initial_height = 0.0f; // m, local (finite)
 };
 
-// Bedrock: floor height (m, local) particles cannot go below; Material0..3: blend weights
-// in [0,1]; Compaction: dimensionless.
-enum class Layer { Elevation, Bedrock, Compaction, Material0, Material1, Material2, Material3 };
-inline constexpr int kLayerCount = 7;
-const char* layer_name(Layer l);  // "elevation", "bedrock", ...
-
-// Bedrock value meaning "no floor" (m, local): finite so that interpolation stays finite.
-inline constexpr float kNoBedrock = -1.0e30f;
+// Elevation: surface height (m, local); Material0..3: blend weights in [0,1].
+enum class Layer { Elevation, Material0, Material1, Material2, Material3 };
+inline constexpr int kLayerCount = 5;
+const char* layer_name(Layer l);  // "elevation", "material0", ...
 
 // GridRegion: samples [i0, i0+ni) x [j0, j0+nj).
 struct GridRegion {
@@ -75,7 +71,7 @@ class Heightfield {
   static Result<Heightfield> create(const HeightfieldDef& def);
 
   // Value of an unwritten sample of layer l: Elevation = def.initial_height,
-  // Bedrock = kNoBedrock, Compaction = 0, Material0 = 1, Material1..3 = 0.
+  // Material0 = 1, Material1..3 = 0.
   float layer_default(Layer l) const;
 
   int samples_x() const { return nx_; }

@@ -451,10 +451,15 @@ Result<Heightfield> load_esri_ascii(const std::string& path, const HeightmapImpo
                       "more values than nrows * ncols = " + std::to_string(v.size()));
 
   // ---- geometry: sample (0,0) is the centre of the south-west cell ----
+  // xllcorner / yllcorner is the outer edge of the grid; the half-cell step inward uses the
+  // spacing actually used (the override when given, else cellsize), so the grid's edge stays
+  // on the corner whatever the spacing. xllcenter / yllcenter names sample (0,0) itself: no
+  // step. The corner / centre value itself is taken as is (m), not rescaled by the override.
   HeightmapImport im = import;
   if (!import.override_spacing) im.spacing = static_cast<float>(cellsize);
-  im.origin_x = import.origin_x + xll + (x_corner ? cellsize / 2 : 0.0);
-  im.origin_z = import.origin_z + yll + (y_corner ? cellsize / 2 : 0.0);
+  const double half = double(im.spacing) / 2;
+  im.origin_x = import.origin_x + xll + (x_corner ? half : 0.0);
+  im.origin_z = import.origin_z + yll + (y_corner ? half : 0.0);
   im.vertical_offset = 0;  // already applied above
   im.vertical_scale = 1;
   return build(path, def_from(im, nc, nr), im,

@@ -5,7 +5,8 @@
 //     the first row of the file is z = 0.
 //   ESRI ASCII: the first data row is the northernmost, and north is +z: data row r ->
 //     j = nrows - 1 - r, column c -> i = c. (x, z) of sample (0, 0) is the centre of the
-//     south-west cell: xllcenter / yllcenter, or xllcorner / yllcorner + cellsize / 2.
+//     south-west cell: xllcenter / yllcenter, or xllcorner / yllcorner + spacing / 2 (the
+//     spacing used: the file's cellsize, or `spacing` with override_spacing).
 //   Heights are local (relative to origin_y) in every format; origin_y is never stored.
 //
 // Saves are atomic: the file is written to a temporary file in the same directory and

@@ -19,9 +19,11 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <functional>
 #include <iostream>
 #include <nlohmann/json.hpp>
 #include <string>
+#include <vector>
 
 #include "bench/bench.hpp"
 #include "bench/bench_tradeoff.hpp"
@@ -67,49 +69,140 @@ int cmd_info() {
   return code(ExitCode::Ok);
 }
 
-}  // namespace
+// ---- run and render: a scene run to the end (run) or to time T with a picture (render) ----
 
-int main(int argc, char** argv) {
-  CLI::App app{"Sandpatch: real-time granular terrain (hybrid heightfield / DEM level of detail)", "sandpatch"};
-  app.require_subcommand(1);
-  app.set_version_flag("--version", std::string("sandpatch ") + SANDPATCH_VERSION);
-
-  std::string scene_path, out_dir, backend;
+struct RunCli {
+  std::string scene, out_dir, backend;
   double seconds = -1;
   long long frames = -1;
   int threads = -1;
   bool quiet = false;
+};
+
+void add_run(CLI::App& app, RunCli& a) {
   auto* run = app.add_subcommand("run", "Run a scene headless and write DIR/report.json (default scene if none given)");
-  run->add_option("scene", scene_path, "Scene file (JSON, docs/scene-format.md); omitted = the embedded default");
-  run->add_option("--out", out_dir, "Output directory (default: out/<scene name>)");
-  auto* o_sec = run->add_option("--seconds", seconds, "Simulated seconds (overrides simulation.duration)")
+  run->add_option("scene", a.scene, "Scene file (JSON, docs/scene-format.md); omitted = the embedded default");
+  run->add_option("--out", a.out_dir, "Output directory (default: out/<scene name>)");
+  auto* o_sec = run->add_option("--seconds", a.seconds, "Simulated seconds (overrides simulation.duration)")
                     ->check(CLI::PositiveNumber);
-  auto* o_frames = run->add_option("--frames", frames, "Number of fixed steps to run")->check(CLI::PositiveNumber);
+  auto* o_frames = run->add_option("--frames", a.frames, "Number of fixed steps to run")->check(CLI::PositiveNumber);
   o_sec->excludes(o_frames);
-  run->add_option("--backend", backend, "DEM backend")->check(CLI::IsMember({"cpu", "gl"}));
-  run->add_option("--threads", threads, "Worker threads (0 = all)")->check(CLI::NonNegativeNumber);
-  run->add_flag("--quiet", quiet, "No progress output");
+  run->add_option("--backend", a.backend, "DEM backend")->check(CLI::IsMember({"cpu", "gl"}));
+  run->add_option("--threads", a.threads, "Worker threads (0 = all)")->check(CLI::NonNegativeNumber);
+  run->add_flag("--quiet", a.quiet, "No progress output");
+}
 
-  std::string render_scene, render_image, render_camera, render_out;
-  double render_at = 0;
+struct RenderCli {
+  std::string scene, image, camera, out_dir;
+  double at = 0;
+};
+
+void add_render(CLI::App& app, RenderCli& a) {
   auto* rend = app.add_subcommand("render", "Run a scene to time T and write one picture (PNG)");
-  rend->add_option("scene", render_scene, "Scene file; omitted = the embedded default");
-  rend->add_option("--at", render_at, "Simulated time of the picture (s)")->required()->check(CLI::NonNegativeNumber);
-  rend->add_option("--camera", render_camera, "Camera of the scene (default: its first, or a view of the whole terrain)");
-  rend->add_option("--image", render_image, "PNG to write (default: DIR/render_<ms>.png)");
-  rend->add_option("--out", render_out, "Output directory for the report (default: out/<scene name>)");
+  rend->add_option("scene", a.scene, "Scene file; omitted = the embedded default");
+  rend->add_option("--at", a.at, "Simulated time of the picture (s)")->required()->check(CLI::NonNegativeNumber);
+  rend->add_option("--camera", a.camera, "Camera of the scene (default: its first, or a view of the whole terrain)");
+  rend->add_option("--image", a.image, "PNG to write (default: DIR/render_<ms>.png)");
+  rend->add_option("--out", a.out_dir, "Output directory for the report (default: out/<scene name>)");
+}
 
-  std::string check_path;
+// Loads the scene (the embedded default when scene_path is empty), runs it with the options
+// make_options gives for it and prints the summary.
+int run_and_report(const std::string& scene_path, const std::function<RunOptions(const SceneDef&)>& make_options,
+                   int argc, char** argv) {
+  auto scene = load(scene_path);
+  if (!scene) {
+    print_errors((scene_path.empty() ? std::string("<embedded default>") : scene_path) + ": invalid scene (" +
+                     std::to_string(scene.errors().size()) + " error(s))",
+                 scene.message());
+    return code(ExitCode::BadInput);
+  }
+  RunOptions opt = make_options(*scene);
+  for (int i = 0; i < argc; ++i) opt.command_line += (i ? " " : "") + std::string(argv[i]);
+  RunResult r = run_scene(*scene, opt);
+  if (r.code != ExitCode::Ok) {
+    print_errors(r.code == ExitCode::BadInput ? "bad input (stage " + r.stage + ")"
+                                              : "run failed in stage '" + r.stage + "'",
+                 r.message);
+    return code(r.code);
+  }
+  const auto& rep = r.report;
+  std::printf("scene '%s': %lld frames, %.2f s simulated in %.2f s (real-time factor %.2fx), final state %s\n",
+              scene->name.c_str(), rep["frame_count"].get<long long>(), rep["simulated_s"].get<double>(),
+              rep["wall_s"].get<double>(), rep["real_time_factor"].get<double>(),
+              rep["final_state_hash"].get<std::string>().c_str());
+  std::printf("stages (total ms):");
+  for (const auto& [name, t] : rep["stages"].items()) std::printf(" %s %.1f", name.c_str(), t["total_ms"].get<double>());
+  std::printf("\n");
+  for (const auto& w : rep["warnings"]) std::printf("warning: %s\n", w.get<std::string>().c_str());
+  if (!r.report_path.empty()) std::printf("report: %s\n", r.report_path.c_str());
+  return code(ExitCode::Ok);
+}
+
+int cmd_run(const RunCli& a, int argc, char** argv) {
+  return run_and_report(a.scene, [&](const SceneDef&) {
+    RunOptions opt;
+    opt.out_dir = a.out_dir;
+    opt.seconds = a.seconds;
+    opt.frames = a.frames;
+    opt.backend = a.backend;
+    opt.threads = a.threads;
+    opt.progress = a.quiet ? ProgressStyle::None : ProgressStyle::Auto;
+    return opt;
+  }, argc, argv);
+}
+
+int cmd_render(const RenderCli& a, int argc, char** argv) {
+  return run_and_report(a.scene, [&](const SceneDef& scene) {
+    RunOptions opt;
+    opt.out_dir = a.out_dir;
+    opt.progress = ProgressStyle::Auto;
+    opt.seconds = a.at;
+    opt.frames = a.at > 0 ? -1 : 1;
+    opt.final_camera = a.camera;
+    char ms[32];
+    std::snprintf(ms, sizeof ms, "%08lld", static_cast<long long>(std::llround(a.at * 1000)));
+    opt.final_image = !a.image.empty() ? a.image
+                      : (a.out_dir.empty() ? "out/" + scene.name : a.out_dir) + "/render_" + ms + ".png";
+    return opt;
+  }, argc, argv);
+}
+
+// ---- check ----
+
+void add_check(CLI::App& app, std::string& path) {
   auto* check = app.add_subcommand("check", "Validate a scene file and exit (0 valid, 2 invalid)");
-  check->add_option("scene", check_path, "Scene file")->required();
+  check->add_option("scene", path, "Scene file")->required();
+}
 
-  bool info_knobs = false;
-  auto* info = app.add_subcommand("info", "Print versions, thread count and the OpenGL renderer EGL finds");
-  info->add_flag("--knobs", info_knobs, "Print the table of settings (scene field, library field, default, range) as markdown");
+int cmd_check(const std::string& path) {
+  auto scene = load_scene_file(path);
+  if (!scene) {
+    print_errors(path + ": invalid scene (" + std::to_string(scene.errors().size()) + " error(s))", scene.message());
+    return code(ExitCode::BadInput);
+  }
+  std::printf("%s: valid scene '%s' (hash %s): %zu bodies, %zu materials\n", path.c_str(), scene->name.c_str(),
+              scene->hash.c_str(), scene->bodies.size(), scene->materials.size());
+  return code(ExitCode::Ok);
+}
 
-  auto* bench = app.add_subcommand("bench", "Benchmarks (programs, not tests; docs/BENCHMARKS.md)");
-  bench->require_subcommand(1);
+// ---- bench ----
+
+struct BenchCli {
+  CLI::App* bench = nullptr;
   BenchDemArgs dem;
+  render::BenchRenderArgs render;
+  BenchLodArgs lod;
+  std::string lod_sizes;
+  BenchTradeoffArgs tradeoff;
+  bool trade_quick = false, trade_full = false, trade_no_gl = false, trade_no_plot = false;
+};
+
+void add_bench(CLI::App& app, BenchCli& a) {
+  auto* bench = app.add_subcommand("bench", "Benchmarks (programs, not tests; docs/BENCHMARKS.md)");
+  a.bench = bench;
+  bench->require_subcommand(1);
+  BenchDemArgs& dem = a.dem;
   auto* bdem = bench->add_subcommand("dem", "Granule DEM throughput on a settled bed (sphere-steps/s)");
   bdem->add_option("--granules", dem.granules, "Granules in the bed (4 spheres each)")->check(CLI::PositiveNumber);
   bdem->add_option("--steps", dem.steps, "Timed steps")->check(CLI::PositiveNumber);
@@ -121,7 +214,7 @@ int main(int argc, char** argv) {
                    "Run every second block with this many threads (scaling on one bed); needs --repeat >= 2")
       ->check(CLI::Range(1, 1024));
   bdem->add_flag("--json", dem.json, "Print one JSON object on the last line");
-  render::BenchRenderArgs brend;
+  render::BenchRenderArgs& brend = a.render;
   auto* bren = bench->add_subcommand("render", "Clipmap vs full-grid triangles and frame time per terrain size");
   bren->add_option("--terrain", brend.terrains, "Terrain size N (N x N samples); repeat for several (default 1024..8192)")
       ->check(CLI::Range(64, 16384));
@@ -129,32 +222,86 @@ int main(int argc, char** argv) {
   bren->add_option("--width", brend.width, "Image width (px)")->check(CLI::Range(16, 8192));
   bren->add_option("--height", brend.height, "Image height (px)")->check(CLI::Range(16, 8192));
   bren->add_flag("--json", brend.json, "Print one JSON object on the last line");
-  BenchLodArgs blod;
-  std::string lod_sizes;
+  BenchLodArgs& blod = a.lod;
   auto* blodc = bench->add_subcommand("lod", "Wall time per simulated second against terrain size; LOD off estimate; idle and sleeping cost");
-  blodc->add_option("--sizes", lod_sizes, "Terrain sizes in cells per side, ascending, comma-separated (default 512,1024,2048,4096,8192)");
+  blodc->add_option("--sizes", a.lod_sizes, "Terrain sizes in cells per side, ascending, comma-separated (default 512,1024,2048,4096,8192)");
   blodc->add_option("--seconds", blod.seconds, "Simulated seconds per terrain size (default 1)");
   blodc->add_option("--threads", blod.threads, "Worker threads (0 = all)");
   blodc->add_option("--window", blod.window, "Simulated seconds per size per turn (default 0.025)");
   blodc->add_flag("--quick", blod.quick, "No full-terrain checks, no sleeping patch (tests)");
   blodc->add_flag("--json", blod.json, "Print one JSON object on the last line");
 
-  BenchTradeoffArgs btrade;
-  bool trade_quick = false, trade_full = false, trade_no_gl = false, trade_no_plot = false;
+  BenchTradeoffArgs& btrade = a.tradeoff;
   auto* btradec = bench->add_subcommand("tradeoff", "Cost and error of the knobs (particle scale, dt / t_c, patch size, "
                                                     "backend, substeps, slot capacity, LOD on/off) on a poured pile, a "
                                                     "crater and a drop through the terrain manager; Pareto front; CSV + PNG");
-  auto* o_quick = btradec->add_flag("--quick", trade_quick, "Small sweep (seconds; used by the tests)");
-  auto* o_full = btradec->add_flag("--full", trade_full, "Finer sweep (finer scales, t_c/100; long: see docs/tradeoff.md)");
+  auto* o_quick = btradec->add_flag("--quick", a.trade_quick, "Small sweep (seconds; used by the tests)");
+  auto* o_full = btradec->add_flag("--full", a.trade_full, "Finer sweep (finer scales, t_c/100; long: see docs/tradeoff.md)");
   o_quick->excludes(o_full);
   btradec->add_option("--threads", btrade.threads, "Worker threads (0 = all)")->check(CLI::NonNegativeNumber);
   btradec->add_option("--out", btrade.out_dir, "Output directory (default: out/bench_tradeoff_<sweep>)");
-  btradec->add_flag("--no-gl", trade_no_gl, "Skip the gl backend settings");
-  btradec->add_flag("--no-plot", trade_no_plot, "Write the data only (no python3/matplotlib plot)");
+  btradec->add_flag("--no-gl", a.trade_no_gl, "Skip the gl backend settings");
+  btradec->add_flag("--no-plot", a.trade_no_plot, "Write the data only (no python3/matplotlib plot)");
   btradec->add_flag("--json", btrade.json, "Print one JSON object on the last line");
+}
 
-  StressArgs stress;
-  bool stress_no_plot = false;
+// "512,1024,..." into sizes; false (with the message on stderr) when an item is not an integer.
+bool parse_lod_sizes(const std::string& lod_sizes, std::vector<int>& sizes) {
+  sizes.clear();
+  std::size_t p = 0;
+  while (p <= lod_sizes.size()) {
+    const std::size_t q = std::min(lod_sizes.find(',', p), lod_sizes.size());
+    const std::string item = lod_sizes.substr(p, q - p);
+    std::size_t used = 0;
+    int n = 0;
+    try {
+      n = std::stoi(item, &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    if (item.empty() || used != item.size()) {
+      std::fprintf(stderr, "bench lod: --sizes = %s: '%s' is not an integer; give cell counts in [64, 16384], "
+                           "ascending, comma-separated (e.g. 512,1024,2048)\n",
+                   lod_sizes.c_str(), item.c_str());
+      return false;
+    }
+    sizes.push_back(n);
+    p = q + 1;
+  }
+  return true;
+}
+
+int cmd_bench(BenchCli& a) {
+  CLI::App* bench = a.bench;
+  if (bench->got_subcommand("dem")) {
+    // GL: the same bed on the compute-shader backend, timed beside the CPU backend.
+    if (a.dem.backend == "gl") return gpu::run_bench_dem_gl(a.dem.granules, a.dem.steps, a.dem.json);
+    return run_bench_dem(a.dem);
+  }
+  if (bench->got_subcommand("render")) return render::run_bench_render(a.render);
+  if (bench->got_subcommand("tradeoff")) {
+    BenchTradeoffArgs& btrade = a.tradeoff;
+    btrade.sweep = a.trade_quick ? TradeoffSweep::Quick : a.trade_full ? TradeoffSweep::Full : TradeoffSweep::Default;
+    btrade.gl = !a.trade_no_gl;
+    if (!a.trade_no_plot) btrade.plot_script = std::string(SANDPATCH_SOURCE_DIR) + "/scripts/plot_tradeoff.py";
+    return run_bench_tradeoff(btrade);
+  }
+  if (bench->got_subcommand("lod")) {
+    if (!a.lod_sizes.empty() && !parse_lod_sizes(a.lod_sizes, a.lod.sizes)) return code(ExitCode::BadInput);
+    return run_bench_lod(a.lod);
+  }
+  return code(ExitCode::BadInput);
+}
+
+// ---- stress ----
+
+struct StressCli {
+  StressArgs args;
+  bool no_plot = false;
+};
+
+void add_stress(CLI::App& app, StressCli& a) {
+  StressArgs& stress = a.args;
   auto* st = app.add_subcommand("stress", "Many simulations sharing the pool: frame time against time, live simulations, plots");
   st->add_option("scene", stress.scene, "Scene file: its terrain, material and first body (copied --sims times)")->required();
   st->add_option("--sims", stress.sims, "Simulations (copies of the first body, pool slots) (default 4)");
@@ -163,8 +310,36 @@ int main(int argc, char** argv) {
   st->add_option("--windows", stress.windows, "Deprecated, ignored: frame times are measured per frame");
   st->add_option("--threads", stress.threads, "Worker threads (0 = all)");
   st->add_option("--out", stress.out_dir, "Output directory (default: out/<scene>_stress_<sims>)");
-  st->add_flag("--no-plot", stress_no_plot, "Write the data only (no python3/matplotlib plot)");
+  st->add_flag("--no-plot", a.no_plot, "Write the data only (no python3/matplotlib plot)");
   st->add_flag("--json", stress.json, "Print one JSON object on the last line");
+}
+
+int cmd_stress(StressCli& a) {
+  if (!a.no_plot) a.args.plot_script = std::string(SANDPATCH_SOURCE_DIR) + "/scripts/plot_frames.py";
+  return run_stress(a.args);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"Sandpatch: real-time granular terrain (hybrid heightfield / DEM level of detail)", "sandpatch"};
+  app.require_subcommand(1);
+  app.set_version_flag("--version", std::string("sandpatch ") + SANDPATCH_VERSION);
+
+  // Subcommands in the order --help lists them.
+  RunCli run;
+  RenderCli render;
+  std::string check_path;
+  BenchCli bench;
+  StressCli stress;
+  add_run(app, run);
+  add_render(app, render);
+  add_check(app, check_path);
+  bool info_knobs = false;
+  app.add_subcommand("info", "Print versions, thread count and the OpenGL renderer EGL finds")
+      ->add_flag("--knobs", info_knobs, "Print the table of settings (scene field, library field, default, range) as markdown");
+  add_bench(app, bench);
+  add_stress(app, stress);
 
   try {
     app.parse(argc, argv);
@@ -174,119 +349,14 @@ int main(int argc, char** argv) {
   }
 
   if (app.got_subcommand("info")) {
-    if (info_knobs) {
-      std::fputs(knobs::knob_table_markdown().c_str(), stdout);
-      return code(ExitCode::Ok);
-    }
-    return cmd_info();
-  }
-
-  if (app.got_subcommand("check")) {
-    auto scene = load_scene_file(check_path);
-    if (!scene) {
-      print_errors(check_path + ": invalid scene (" + std::to_string(scene.errors().size()) + " error(s))",
-                   scene.message());
-      return code(ExitCode::BadInput);
-    }
-    std::printf("%s: valid scene '%s' (hash %s): %zu bodies, %zu materials\n", check_path.c_str(),
-                scene->name.c_str(), scene->hash.c_str(), scene->bodies.size(), scene->materials.size());
+    if (!info_knobs) return cmd_info();
+    std::fputs(knobs::knob_table_markdown().c_str(), stdout);  // docs/scene-format.md, docs/api.md
     return code(ExitCode::Ok);
   }
-
-  if (app.got_subcommand("stress")) {
-    if (!stress_no_plot) stress.plot_script = std::string(SANDPATCH_SOURCE_DIR) + "/scripts/plot_frames.py";
-    return run_stress(stress);
-  }
-
-  if (app.got_subcommand("bench")) {
-    if (bench->got_subcommand("dem")) {
-      // GL: the same bed on the compute-shader backend, timed beside the CPU backend.
-      if (dem.backend == "gl") return gpu::run_bench_dem_gl(dem.granules, dem.steps, dem.json);
-      return run_bench_dem(dem);
-    }
-    if (bench->got_subcommand("render")) return render::run_bench_render(brend);
-    if (bench->got_subcommand("tradeoff")) {
-      btrade.sweep = trade_quick ? TradeoffSweep::Quick : trade_full ? TradeoffSweep::Full : TradeoffSweep::Default;
-      btrade.gl = !trade_no_gl;
-      if (!trade_no_plot) btrade.plot_script = std::string(SANDPATCH_SOURCE_DIR) + "/scripts/plot_tradeoff.py";
-      return run_bench_tradeoff(btrade);
-    }
-    if (bench->got_subcommand("lod")) {
-      if (!lod_sizes.empty()) {
-        blod.sizes.clear();
-        std::size_t p = 0;
-        while (p <= lod_sizes.size()) {
-          const std::size_t q = std::min(lod_sizes.find(',', p), lod_sizes.size());
-          const std::string item = lod_sizes.substr(p, q - p);
-          std::size_t used = 0;
-          int n = 0;
-          try {
-            n = std::stoi(item, &used);
-          } catch (const std::exception&) {
-            used = 0;
-          }
-          if (item.empty() || used != item.size()) {
-            std::fprintf(stderr, "bench lod: --sizes = %s: '%s' is not an integer; give cell counts in [64, 16384], "
-                                 "ascending, comma-separated (e.g. 512,1024,2048)\n",
-                         lod_sizes.c_str(), item.c_str());
-            return code(ExitCode::BadInput);
-          }
-          blod.sizes.push_back(n);
-          p = q + 1;
-        }
-      }
-      return run_bench_lod(blod);
-    }
-  }
-
-  const bool rendering = app.got_subcommand("render");
-  if (rendering) {
-    scene_path = render_scene;
-    out_dir = render_out;
-  }
-  if (app.got_subcommand("run") || rendering) {
-    auto scene = load(scene_path);
-    if (!scene) {
-      print_errors((scene_path.empty() ? std::string("<embedded default>") : scene_path) + ": invalid scene (" +
-                       std::to_string(scene.errors().size()) + " error(s))",
-                   scene.message());
-      return code(ExitCode::BadInput);
-    }
-    RunOptions opt;
-    opt.out_dir = out_dir;
-    opt.seconds = seconds;
-    opt.frames = frames;
-    opt.backend = backend;
-    opt.threads = threads;
-    opt.progress = quiet ? ProgressStyle::None : ProgressStyle::Auto;
-    if (rendering) {
-      opt.seconds = render_at;
-      opt.frames = render_at > 0 ? -1 : 1;
-      opt.final_camera = render_camera;
-      char ms[32];
-      std::snprintf(ms, sizeof ms, "%08lld", static_cast<long long>(std::llround(render_at * 1000)));
-      opt.final_image = !render_image.empty() ? render_image
-                        : (out_dir.empty() ? "out/" + scene->name : out_dir) + "/render_" + ms + ".png";
-    }
-    for (int i = 0; i < argc; ++i) opt.command_line += (i ? " " : "") + std::string(argv[i]);
-    RunResult r = run_scene(*scene, opt);
-    if (r.code != ExitCode::Ok) {
-      print_errors(r.code == ExitCode::BadInput ? "bad input (stage " + r.stage + ")"
-                                                : "run failed in stage '" + r.stage + "'",
-                   r.message);
-      return code(r.code);
-    }
-    const auto& rep = r.report;
-    std::printf("scene '%s': %lld frames, %.2f s simulated in %.2f s (real-time factor %.2fx), final state %s\n",
-                scene->name.c_str(), rep["frame_count"].get<long long>(), rep["simulated_s"].get<double>(),
-                rep["wall_s"].get<double>(), rep["real_time_factor"].get<double>(),
-                rep["final_state_hash"].get<std::string>().c_str());
-    std::printf("stages (total ms):");
-    for (const auto& [name, t] : rep["stages"].items()) std::printf(" %s %.1f", name.c_str(), t["total_ms"].get<double>());
-    std::printf("\n");
-    for (const auto& w : rep["warnings"]) std::printf("warning: %s\n", w.get<std::string>().c_str());
-    if (!r.report_path.empty()) std::printf("report: %s\n", r.report_path.c_str());
-    return code(ExitCode::Ok);
-  }
+  if (app.got_subcommand("check")) return cmd_check(check_path);
+  if (app.got_subcommand("stress")) return cmd_stress(stress);
+  if (app.got_subcommand("bench")) return cmd_bench(bench);
+  if (app.got_subcommand("render")) return cmd_render(render, argc, argv);
+  if (app.got_subcommand("run")) return cmd_run(run, argc, argv);
   return code(ExitCode::BadInput);
 }

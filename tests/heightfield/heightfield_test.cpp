@@ -222,10 +222,8 @@ TEST(HeightfieldLayers, DefaultsAndLazyAllocationPerTile) {
   Heightfield hf = make(33, 33, 1, 8, 2.0f);
   const std::size_t elevation_bytes = hf.memory_bytes();
   EXPECT_EQ(elevation_bytes, std::size_t(4 * 4) * 9 * 9 * sizeof(float));
-  EXPECT_FALSE(hf.layer_allocated(Layer::Bedrock));
+  EXPECT_FALSE(hf.layer_allocated(Layer::Material2));
   EXPECT_EQ(hf.layer(Layer::Elevation, 3, 3), 2.0f);
-  EXPECT_EQ(hf.layer(Layer::Bedrock, 3, 3), kNoBedrock);
-  EXPECT_EQ(hf.layer(Layer::Compaction, 3, 3), 0.0f);
   EXPECT_EQ(hf.layer(Layer::Material0, 3, 3), 1.0f);
   EXPECT_EQ(hf.layer(Layer::Material3, 3, 3), 0.0f);
   const std::uint64_t before = hf.hash();
@@ -239,7 +237,7 @@ TEST(HeightfieldLayers, DefaultsAndLazyAllocationPerTile) {
   EXPECT_EQ(hf.layer(Layer::Material1, 3, 3), 0.25f);
   // Bilinear on a layer: halfway between 0.25 and the default 0.
   EXPECT_FLOAT_EQ(hf.sample_layer(Layer::Material1, 3.5f, 3.0f), 0.125f);
-  EXPECT_FLOAT_EQ(hf.sample_layer(Layer::Bedrock, 3.5f, 3.0f), kNoBedrock);
+  EXPECT_FLOAT_EQ(hf.sample_layer(Layer::Material2, 3.5f, 3.0f), 0.0f);
   // Region read of an unallocated layer returns defaults.
   std::vector<float> out(4);
   hf.read({20, 20, 2, 2}, out.data(), Layer::Material0);
@@ -255,7 +253,7 @@ TEST(HeightfieldLayers, HugeGridIsCreatableWithElevationOnly) {
   Heightfield& hf = *r;
   EXPECT_EQ(hf.tiles_x(), 32);
   EXPECT_EQ(hf.memory_bytes(), std::size_t(32 * 32) * 257 * 257 * sizeof(float));
-  hf.set_layer(Layer::Compaction, 4000, 5000, 0.5f);  // inside one tile
+  hf.set_layer(Layer::Material2, 4000, 5000, 0.5f);  // inside one tile
   EXPECT_EQ(hf.memory_bytes(), std::size_t(32 * 32 + 1) * 257 * 257 * sizeof(float));
   hf.set_height(8192, 8192, 7.0f);
   EXPECT_EQ(hf.sample(1e9f, 1e9f), 7.0f);

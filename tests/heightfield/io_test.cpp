@@ -320,6 +320,31 @@ TEST_F(HeightfieldIo, EsriAxisMappingNorthIsPlusZ) {
   EXPECT_EQ(r->spacing(), 1.0f);
 }
 
+TEST_F(HeightfieldIo, EsriOverrideSpacingMovesTheHalfCellNotTheCorner) {
+  // A 10 m-cell DEM made into a 0.6 m-spaced sand table: the grid's edge stays on the
+  // corner, and sample (0,0) sits half of the spacing used (not of cellsize) inside it.
+  // A centre-registered axis takes its value as is, whatever the spacing.
+  write_text(path("o.asc"),
+             "ncols 3\nnrows 2\nxllcorner 100\nyllcenter 200\ncellsize 10\n1 2 3\n4 5 6\n");
+  HeightmapImport im;
+  im.origin_x = -3;
+  im.origin_z = 7;
+  im.override_spacing = true;
+  im.spacing = 0.6f;
+  auto r = load_esri_ascii(path("o.asc"), im);
+  ASSERT_TRUE(r.ok()) << r.message();
+  EXPECT_EQ(r->spacing(), 0.6f);
+  EXPECT_DOUBLE_EQ(r->origin_x(), im.origin_x + 100 + double(im.spacing) / 2);
+  EXPECT_DOUBLE_EQ(r->origin_z(), im.origin_z + 200);
+  // Without the override the file's cellsize is the spacing and sets the half cell.
+  im.override_spacing = false;
+  r = load_esri_ascii(path("o.asc"), im);
+  ASSERT_TRUE(r.ok()) << r.message();
+  EXPECT_EQ(r->spacing(), 10.0f);
+  EXPECT_DOUBLE_EQ(r->origin_x(), im.origin_x + 100 + 10.0 / 2);
+  EXPECT_DOUBLE_EQ(r->origin_z(), im.origin_z + 200);
+}
+
 TEST_F(HeightfieldIo, EsriBadInputIsAnErrorNamingFileAndProblem) {
   struct Case {
     const char* name;
