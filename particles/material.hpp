@@ -65,15 +65,6 @@ double normal_damping(const Material& m, double m_eff);
 // Geometric contact time (s) of the clamped law for reduced mass m_eff (kg).
 double clamped_contact_time(const Material& m, double m_eff);
 
-// ---- The textbook law of DESIGN.md (a force allowed to turn attractive), zeta < 1 ----
-// Kept for the peer comparison only: the LAMMPS peer's gamma_n (../shared/peers/in.lammps_bed)
-// was derived with it, and tests check the clamped law against it where both agree.
-//   e = exp(-pi zeta / sqrt(1 - zeta^2)),  zeta = -ln e / sqrt(pi^2 + ln^2 e),
-//   t_c = pi / (w0 sqrt(1 - zeta^2))  (s; +inf for zeta >= 1)
-double textbook_damping_ratio(double e);
-double textbook_restitution(double zeta);
-double textbook_contact_time(double zeta, double k_n, double m_eff);
-
 // Validates the material; errors name "<prefix>.field".
 Status validate(const Material& m, const std::string& prefix);
 

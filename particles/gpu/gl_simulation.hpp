@@ -45,7 +45,7 @@ struct GlOptions {
   // 0 = everything. Bodies not uploaded yet are not simulated (their queries return the
   // values they were added with).
   std::size_t upload_bytes_per_step = 0;
-  bool upload_in_step = true;  // false: only upload() uploads (GlPool budgets its frames)
+  bool upload_in_step = true;  // false: only upload() uploads (the caller budgets its frames)
   bool profile = false;        // time every dispatch (glFinish around it; slows the step)
 };
 
@@ -82,7 +82,7 @@ class GlSimulation {
 
   // Empties the simulation and takes a new definition that must fit the capacities it was
   // created with (max_bodies, max_particles, grid cells); errors name the capacity to raise
-  // as capacity_prefix + field (e.g. "GlPoolDef.capacity."). GPU memory is kept.
+  // as capacity_prefix + field (default "SimulationDef."). GPU memory is kept.
   Status reset(const SimulationDef& def, const char* capacity_prefix = "SimulationDef.");
 
   // Advances dt_frame in substeps_for(dt_frame) equal substeps (the CPU backend's guard).

@@ -11,6 +11,7 @@
 
 #include "particles/dem.hpp"
 #include "tests/particles/head_on.hpp"
+#include "tests/particles/textbook_law.hpp"
 
 namespace sandpatch {
 namespace {
@@ -131,7 +132,7 @@ TEST_P(HeadOn, RestitutionAndContactTime) {
   RecordProperty("e_measured_max", std::to_string(h.e_hi));
   std::printf("%s e %.2f, dt = t_clamped/%d: zeta %.4f (textbook %.4f); measured e %.4f..%.4f (%+.2f%%..%+.2f%%), "
               "contact %.4f..%.4f/w0 (clamped theory %.4f/w0, %+.2f%%..%+.2f%%; textbook t_c %.4f/w0)\n",
-              c.floor ? "floor" : "pair ", c.e, c.steps_per_contact, zeta, textbook_damping_ratio(c.e), h.e_lo, h.e_hi,
+              c.floor ? "floor" : "pair ", c.e, c.steps_per_contact, zeta, testutil::textbook_damping_ratio(c.e), h.e_lo, h.e_hi,
               100 * (h.e_lo / c.e - 1), 100 * (h.e_hi / c.e - 1), h.t_lo / h.t_unit, h.t_hi / h.t_unit,
               h.t_clamped / h.t_unit, 100 * (h.t_lo / h.t_clamped - 1), 100 * (h.t_hi / h.t_clamped - 1),
               tc_textbook / h.t_unit);
