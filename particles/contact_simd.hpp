@@ -1,7 +1,8 @@
 // A batch of 8 touching sphere-sphere pairs for the SpringHistory contact law, evaluated 8
 // lanes at a time (AVX2) by particles/contact_avx2.cpp. Used by the pair pass of
-// particles/dem.cpp when the CPU has AVX2; the scalar contact_force (contact.hpp) is the
-// reference and the fallback.
+// particles/dem.cpp when the CPU has AVX2; the scalar contact_force (shaders/dem/
+// physics_common.glsl, shared with the GL kernels, through contact.hpp) is the reference and
+// the fallback; tests/particles/contact_avx2_test.cpp checks the kernel against it.
 //
 // Same results, bit for bit: every lane performs the float operations of contact_force (and of
 // the pair pass around it) in the same order, with the same roundings (mul and add kept

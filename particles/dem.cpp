@@ -18,6 +18,7 @@
 #include "common/hash.hpp"
 #include "particles/contact.hpp"
 #include "particles/contact_simd.hpp"
+#include "particles/dem_physics.hpp"
 #include "particles/fields.hpp"
 
 namespace sandpatch {
@@ -112,23 +113,9 @@ bool simd::use_avx2_pair_kernel() {
 
 // ---------------------------------------------------------------------------------------
 // Terrain grid
-float TerrainGrid::height(float x, float z) const {
-  float fx = std::clamp((x - x0) / spacing, 0.0f, float(nx - 1));
-  float fz = std::clamp((z - z0) / spacing, 0.0f, float(nz - 1));
-  int ix = std::min(int(fx), nx - 2 < 0 ? 0 : nx - 2), iz = std::min(int(fz), nz - 2 < 0 ? 0 : nz - 2);
-  int ix1 = std::min(ix + 1, nx - 1), iz1 = std::min(iz + 1, nz - 1);
-  float tx = fx - float(ix), tz = fz - float(iz);
-  auto h = [&](int i, int k) { return heights[std::size_t(k) * nx + i]; };
-  return (1 - tz) * ((1 - tx) * h(ix, iz) + tx * h(ix1, iz)) + tz * ((1 - tx) * h(ix, iz1) + tx * h(ix1, iz1));
-}
-
-Vec3 TerrainGrid::normal(float x, float z) const {
-  float e = 0.5f * spacing;
-  float dhdx = (height(x + e, z) - height(x - e, z)) / (2 * e);
-  float dhdz = (height(x, z + e) - height(x, z - e)) / (2 * e);
-  Vec3 n{-dhdx, 1.0f, -dhdz};
-  return n * (1.0f / length(n));
-}
+// (shaders/dem/physics_common.glsl, shared with the GL force kernel)
+float TerrainGrid::height(float x, float z) const { return physics::terrain_height(*this, x, z); }
+Vec3 TerrainGrid::normal(float x, float z) const { return physics::terrain_normal(*this, x, z); }
 
 // ---------------------------------------------------------------------------------------
 struct Simulation::Impl {
@@ -509,14 +496,13 @@ struct Simulation::Impl {
 
   // ---- contact stage, pair pass: each pair is computed once, by its owner's entry, and added
   // to both spheres' sums (acc; read by gather_sphere in the body stage), slab by slab
-  template <bool kBell>
   void contacts(float dt) {
     const Material& mat = def.material;
     const float kn = mat.normal_stiffness;
     const float cn0 = float(2.0 * zeta * std::sqrt(double(mat.normal_stiffness)));  // c_n = cn0 sqrt(m_eff)
     const float kt = mat.normal_stiffness * mat.tangential_stiffness_ratio;
     const float ctr = mat.tangential_damping_ratio;
-    const float mu = mat.friction, kb = mat.bell_shear_viscosity;
+    const float mu = mat.friction;
     const float* P = p.pos.data();
     const float* V = p.vel.data();
     const float* W = p.omega.data();
@@ -529,7 +515,7 @@ struct Simulation::Impl {
     std::uint8_t* TCH = ntouch.data();
     std::int64_t npairs = 0;
     const int n = np;
-    law = {kn, cn0, kt, ctr, mu, kb};  // for gather_sphere
+    law = {kn, cn0, kt, ctr, mu};  // for gather_sphere
 
     // not touching: the spring is forgotten
     auto part = [&](int e, float* xe) __attribute__((always_inline)) {
@@ -548,7 +534,7 @@ struct Simulation::Impl {
     };
 #pragma omp parallel num_threads(threads) if (n > 4096)
     {
-    if (!kBell && simd_pairs) {
+    if (simd_pairs) {
     // pair pass, AVX2: the same walk; touching pairs are collected per thread into batches of
     // 8 and evaluated by the kernel (same results, contact_simd.hpp), then added to the sums in
     // pair order (the pass reads no sum, so the additions are those of the scalar pass). A
@@ -649,9 +635,9 @@ struct Simulation::Impl {
         const Vec3 nrm{dx * inv, dy * inv, dz * inv};
         const Vec3 uj{V[4 * j], V[4 * j + 1], V[4 * j + 2]};
         const Vec3 rwj = rj * Vec3{W[4 * j], W[4 * j + 1], W[4 * j + 2]};
-        // contact-point velocity: (u_i + w_i x (-r_i n)) - (u_j + w_j x (r_j n)); the spheres'
-        // velocities are the bodies' predicted to this substep's time (`bodies`)
-        const Vec3 v = (ui - uj) + cross(nrm, rwi + rwj);
+        // contact-point velocity (physics_common.glsl); the spheres' velocities are the
+        // bodies' predicted to this substep's time (`bodies`)
+        const Vec3 v = physics::pair_contact_velocity(ui, uj, nrm, rwi + rwj);
         // c_n = 2 zeta sqrt(k_n m_eff); granule beds repeat the same mass pair, so the
         // last value is reused when the partner's inverse mass is the same
         const float invm_j = V[4 * j + 3];
@@ -661,8 +647,7 @@ struct Simulation::Impl {
         }
         const float cn = last_cn;
         Vec3 xi{xe[0], xe[1], xe[2]};  // zero for a new contact; carried over on rebuilds
-        ContactParams cp{kn, cn, kt, ctr * cn, mu, kb, dt, kBell};
-        cp.new_contact = first_law && TCH[e] == 0;  // first substep of this contact
+        const ContactParams cp{kn, cn, kt, ctr * cn, mu, dt, first_law && TCH[e] == 0};  // new_contact: first substep
         TCH[e] = 1;
         ContactForce cf = contact_force(cp, nrm, rs - dist, v, xi);
         xe[0] = xi.x;
@@ -684,7 +669,7 @@ struct Simulation::Impl {
   // torque (the body stage sums them straight into the body: the particle fields force/torque
   // are the GL backend's).
   struct LawConstants {
-    float kn, cn0, kt, ctr, mu, kb;  // N/m, c_n = cn0 / sqrt(1/m_i + 1/m_j), N/m, c_t/c_n, -, N s/m
+    float kn, cn0, kt, ctr, mu;  // N/m, c_n = cn0 / sqrt(1/m_i + 1/m_j), N/m, c_t/c_n, -
   } law{};
   struct SphereSum {
     Vec3 F, T;  // N, N m (about the sphere centre)
@@ -699,9 +684,9 @@ struct Simulation::Impl {
     float* ACC;
     float* WX;
     std::uint32_t* WM;
-    Vec3 bmin, bmax;
+    physics::Boundaries bounds;
     float floor_y;
-    bool walls, terrain, first_law;
+    bool first_law;
     // A sphere with x0 + r <= x <= x1 - r, z0 + r <= z <= z1 - r and y >= floor_y + r touches
     // no boundary (m): the side walls' or the fill rectangle's sides (the terrain), +-inf
     // without either; boundary_contacts is only called for the others.
@@ -718,11 +703,10 @@ struct Simulation::Impl {
     }
     return {law, p.pos.data(), p.vel.data(), p.omega.data(), const_cast<float*>(acc.data()->v),
             const_cast<float*>(wxi.data()), const_cast<std::uint32_t*>(wmask.data()),
-            def.bounds_min, def.bounds_max, def.floor_height, def.side_walls, !def.terrain.empty(), first_law,
-            x0, x1, z0, z1};
+            physics::Boundaries{def.floor_height, def.side_walls, !def.terrain.empty(), def.bounds_min, def.bounds_max},
+            def.floor_height, first_law, x0, x1, z0, z1};
   }
   // Sphere i's force F4 and torque T4 about its centre (lane 3 = 0); returns its centre (lane 3 = 0).
-  template <bool kBell>
   __attribute__((always_inline)) __m128 gather_sphere4(const GatherCtx& g, const int i, const float dt,
                                                        std::int64_t& nwall, __m128& F4, __m128& T4) {
     const float* P = g.P;
@@ -740,7 +724,7 @@ struct Simulation::Impl {
       const float px = P[4 * i], py = P[4 * i + 1], pz = P[4 * i + 2];
       if (py - g.floor_y < ri || px - g.x0 < ri || g.x1 - px < ri || pz - g.z0 < ri || g.z1 - pz < ri) {
         Vec3 F = to_vec3(F4), T = to_vec3(T4);
-        boundary_contacts<kBell>(g, i, dt, F, T, nwall);
+        boundary_contacts(g, i, dt, F, T, nwall);
         F4 = from_vec3(F), T4 = from_vec3(T);
       } else if (g.WM[i] != 0) {
         g.WM[i] = 0;
@@ -748,99 +732,59 @@ struct Simulation::Impl {
     }
     return xyz0(P4);
   }
-  template <bool kBell>
   __attribute__((always_inline)) SphereSum gather_sphere(const GatherCtx& g, const int i, const float dt,
                                                          std::int64_t& nwall) {
     __m128 F4, T4;
-    const __m128 x4 = gather_sphere4<kBell>(g, i, dt, nwall, F4, T4);
+    const __m128 x4 = gather_sphere4(g, i, dt, nwall, F4, T4);
     return {to_vec3(F4), to_vec3(T4), to_vec3(x4)};
   }
-  // Boundaries of sphere i (dynamic): static planes (floor, side walls) and the terrain outside
-  // the fill; adds their force and torque (about the sphere centre) to F, T. WM[i] has bit k
-  // set while plane k touched the sphere at the last substep; a plane contact that was not in
-  // the mask starts with a fresh spring. Out of line: 4 % of sphere-steps reach it in a bed.
-  template <bool kBell>
+  // Boundaries of sphere i (dynamic): the planes of physics::boundary_plane (floor, side walls,
+  // the terrain outside the fill and the fill's sides; shaders/dem/physics_common.glsl, shared
+  // with the GL force kernel) in slot order; adds their force and torque (about the sphere
+  // centre) to F, T. WM[i] has bit k set while plane k touched the sphere at the last substep;
+  // a plane contact that was not in the mask starts with a fresh spring. Out of line: 4 % of
+  // sphere-steps reach it in a bed.
   __attribute__((noinline)) void boundary_contacts(const GatherCtx& g, const int i, const float dt, Vec3& F, Vec3& T,
                                                    std::int64_t& nwall) {
-    const float kn = g.law.kn, cn0 = g.law.cn0, kt = g.law.kt, ctr = g.law.ctr, mu = g.law.mu, kb = g.law.kb;
+    const float kn = g.law.kn, cn0 = g.law.cn0, kt = g.law.kt, ctr = g.law.ctr, mu = g.law.mu;
     const float* P = g.P;
     const float* V = g.V;
     const float* W = g.W;
-    float* WX = g.WX;
-    std::uint32_t* WM = g.WM;
-    const Vec3 bmin = g.bmin, bmax = g.bmax;
-    const float floor_y = g.floor_y;
-    const bool walls = g.walls, terrain = g.terrain;
     const Vec3 pi{P[4 * i], P[4 * i + 1], P[4 * i + 2]};
     const float ri = P[4 * i + 3];
     const Vec3 ui{V[4 * i], V[4 * i + 1], V[4 * i + 2]};
     const float invm_i = V[4 * i + 3];
     const Vec3 wi{W[4 * i], W[4 * i + 1], W[4 * i + 2]};
-    float* wx = WX + std::size_t(i) * 3 * kWallSlots;
-    const std::uint32_t old_mask = WM[i];
+    float* wx = g.WX + std::size_t(i) * 3 * kWallSlots;
+    const std::uint32_t old_mask = g.WM[i];
     std::uint32_t mask = 0;
-    auto plane = [&](int slot, Vec3 nrm, float dist) __attribute__((always_inline)) {
+    for (int slot = 0; slot < kWallSlots; ++slot) {
+      Vec3 nrm;
+      float dist;
+      if (!physics::boundary_plane(g.bounds, def.terrain, slot, pi, ri, nrm, dist)) continue;
       float* xe = wx + 3 * slot;
       ++nwall;
       mask |= 1u << slot;
-      const Vec3 v = ui + cross(wi, nrm * (-ri));
+      const Vec3 v = physics::plane_contact_velocity(ui, wi, nrm, ri);
+      const bool fresh = !(old_mask & (1u << slot));
       Vec3 xi{};
-      if (old_mask & (1u << slot)) xi = {xe[0], xe[1], xe[2]};
+      if (!fresh) xi = {xe[0], xe[1], xe[2]};
       const float cnw = cn0 / std::sqrt(invm_i);
-      ContactParams cp{kn, cnw, kt, ctr * cnw, mu, kb, dt, kBell};
-      cp.new_contact = g.first_law && !(old_mask & (1u << slot));  // first substep of this plane contact
-      ContactForce cf = contact_force(cp, nrm, ri - dist, v, xi);
+      // new_contact: the first substep of this plane contact
+      const ContactParams cp{kn, cnw, kt, ctr * cnw, mu, dt, g.first_law && fresh};
+      const ContactForce cf = contact_force(cp, nrm, ri - dist, v, xi);
       xe[0] = xi.x;
       xe[1] = xi.y;
       xe[2] = xi.z;
       F = F + cf.f;
       T = T + cross(nrm * (-ri), cf.ft);
-    };
-    if (pi.y - floor_y < ri) plane(0, {0, 1, 0}, pi.y - floor_y);
-    if (walls) {
-      if (pi.x - bmin.x < ri) plane(1, {1, 0, 0}, pi.x - bmin.x);
-      if (bmax.x - pi.x < ri) plane(2, {-1, 0, 0}, bmax.x - pi.x);
-      if (pi.z - bmin.z < ri) plane(3, {0, 0, 1}, pi.z - bmin.z);
-      if (bmax.z - pi.z < ri) plane(4, {0, 0, -1}, bmax.z - pi.z);
     }
-    if (terrain) {
-      // The terrain outside the filled rectangle is solid up to its surface h(x, z):
-      // outside, a sphere rests on the surface; inside, the rectangle's sides are walls
-      // up to the outside surface, so the granules of a patch are held by the soil
-      // around them and can still spill over the top onto the terrain.
-      const TerrainGrid& tg = def.terrain;
-      if (pi.x < tg.fill_min_x || pi.x > tg.fill_max_x || pi.z < tg.fill_min_z || pi.z > tg.fill_max_z) {
-        const float hh = tg.height(pi.x, pi.z);
-        const Vec3 tn = tg.normal(pi.x, pi.z);
-        const float dist = (pi.y - hh) * tn.y;
-        if (dist < ri) plane(5, tn, dist);
-      } else if (!walls) {
-        // A side of the rectangle: below the outside surface h it is a wall; above h the
-        // closest point of the outside solid is its top edge, so the contact turns
-        // continuously from the wall to the edge as a sphere rises past h. (A wall that
-        // simply ended at h started contacts at full overlap when a sphere sank past h,
-        // and kept surface granules along the sides rattling at 0.02-0.05 m/s: a patch
-        // never fell asleep.) shaders/dem/force.comp does the same.
-        auto side = [&](int slot, Vec3 inward, float gap, float top) __attribute__((always_inline)) {
-          if (!(gap < ri)) return;
-          const float dy = pi.y - top;
-          if (dy <= 0.0f) return plane(slot, inward, gap);
-          const float dist = std::sqrt(gap * gap + dy * dy);
-          if (dist < ri && dist > 0.0f) plane(slot, (inward * gap + Vec3{0.0f, dy, 0.0f}) * (1.0f / dist), dist);
-        };
-        side(1, {1, 0, 0}, pi.x - tg.fill_min_x, tg.height(tg.fill_min_x - ri, pi.z));
-        side(2, {-1, 0, 0}, tg.fill_max_x - pi.x, tg.height(tg.fill_max_x + ri, pi.z));
-        side(3, {0, 0, 1}, pi.z - tg.fill_min_z, tg.height(pi.x, tg.fill_min_z - ri));
-        side(4, {0, 0, -1}, tg.fill_max_z - pi.z, tg.height(pi.x, tg.fill_max_z + ri));
-      }
-    }
-    if (mask != old_mask) WM[i] = mask;
+    if (mask != old_mask) g.WM[i] = mask;
   }
 
   // The body stage for granule i (dynamic, isotropic inertia): the formulas of the general
   // path below in 4-wide SSE2 registers, each lane doing the scalar code's float operations in
   // its order (the same results bit for bit, ~1/3 fewer instructions).
-  template <bool kBell>
   __attribute__((always_inline)) void granule_update(const GatherCtx& gctx, const int i, const float dt,
                                                      std::int64_t& nwall, float& d2max, float& vmax, int& bad) {
     float* const BP = &b.pos[4 * std::size_t(i)];
@@ -851,7 +795,7 @@ struct Simulation::Impl {
     __m128 F = _mm_setzero_ps(), T = _mm_setzero_ps();
     for (int k = 0, first = b.first[i], cnt = b.count[i]; k < cnt; ++k) {
       __m128 Fs, Ts;
-      const __m128 xs = gather_sphere4<kBell>(gctx, slot_of[first + k], dt, nwall, Fs, Ts);
+      const __m128 xs = gather_sphere4(gctx, slot_of[first + k], dt, nwall, Fs, Ts);
       F = _mm_add_ps(F, Fs);
       T = _mm_add_ps(_mm_add_ps(T, Ts), cross4(_mm_sub_ps(xs, x), Fs));  // T + T_s + (x_s - x) x F_s
     }
@@ -884,7 +828,6 @@ struct Simulation::Impl {
 
   // ---- body stage: gather each sphere (gather_sphere), sum the spheres' forces in id order,
   // integrate, rebuild the spheres
-  template <bool kBell>
   bool bodies(float dt, float* d2max_out) {
     const Vec3 g = gravity;
     const float reach = shape.centre_distance + shape.radius;
@@ -909,12 +852,12 @@ struct Simulation::Impl {
         continue;
       }
       if (fl & kBodyGranule) {  // (granules are dynamic)
-        granule_update<kBell>(gctx, i, dt, nwall, d2max, vmax, bad);
+        granule_update(gctx, i, dt, nwall, d2max, vmax, bad);
         continue;
       }
       for (int k = 0, first = b.first[i], cnt = b.count[i]; k < cnt; ++k) {
         const int s = slot_of[first + k];
-        const SphereSum ss = gather_sphere<kBell>(gctx, s, dt, nwall);
+        const SphereSum ss = gather_sphere(gctx, s, dt, nwall);
         const Vec3 f = ss.F;
         F = F + f;
         T = T + ss.T + cross(ss.x - x, f);
@@ -977,15 +920,11 @@ struct Simulation::Impl {
       stats.sort_seconds += since(t0);
       t0 = Clock::now();
     }
-    const bool bell = def.material.shear == ShearLaw::BellVelocityCapped;
-    if (bell)
-      contacts<true>(dt);
-    else
-      contacts<false>(dt);
+    contacts(dt);
     stats.pair_seconds += since(t0);
     t0 = Clock::now();
     float d2max = 0;
-    const bool finite = bell ? bodies<true>(dt, &d2max) : bodies<false>(dt, &d2max);
+    const bool finite = bodies(dt, &d2max);
     stats.body_seconds += since(t0);
     if (!finite)
       return Error{"", "step", "NaN", "a body state became non-finite in the integrate stage",
@@ -1462,7 +1401,7 @@ double Simulation::potential_energy() const {
         plane(s.def.bounds_max.z - pi.z);
       }
     }
-    if (m.shear == ShearLaw::SpringHistory && i < int(s.nstart.size()) - 1) {
+    if (i < int(s.nstart.size()) - 1) {
       for (int k = s.nstart[i]; k < s.nstart[i + 1]; ++k) {  // one entry per pair
         const float* x = &s.nxi[3 * std::size_t(k)];
         e += 0.5 * kt * (double(x[0]) * x[0] + double(x[1]) * x[1] + double(x[2]) * x[2]);

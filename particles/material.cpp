@@ -77,7 +77,6 @@ Status validate(const Material& m, const std::string& p) {
         "must be > 0 (k_t / k_n)");
   check(m.tangential_damping_ratio >= 0, "tangential_damping_ratio", m.tangential_damping_ratio,
         "must be >= 0 (c_t / c_n)");
-  check(m.bell_shear_viscosity >= 0, "bell_shear_viscosity", m.bell_shear_viscosity, "must be >= 0 (N s/m)");
   if (!es.empty()) return es;
   return Ok{};
 }

@@ -8,12 +8,14 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstddef>
 #include <cstdio>
 #include <cstring>
 #include <limits>
 
 #include "common/hash.hpp"
 #include "gl/program.hpp"
+#include "particles/dem_physics.hpp"
 #include "particles/fields.hpp"
 #include "particles/gpu/layout.hpp"
 #include "shaders/shaders.hpp"
@@ -25,13 +27,12 @@ namespace {
 // Buffer bindings (shaders/dem/common.glsl lists the same).
 enum Binding : GLuint { kBindP = 0, kBindPn = 1, kBindB = 2, kBindG = 3, kBindSIn = 4, kBindSOut = 5, kBindW = 6, kBindS = 7 };
 
-constexpr int kStatusWords = 32;  // 8 status words + 8 x 3 dispatch-indirect arguments
 constexpr int kWallSlots = 6;  // per sphere: floor, walls x0, x1, z0, z1, terrain
 constexpr int kScanBlock = 1024;  // cells per workgroup of scan_blocks.comp
 
 // The kernels, in the order of a substep (rebuild is bodies.comp in mode 1). The grid
 // kernels kGridCount..kGridCopyBack run by glDispatchComputeIndirect with the arguments
-// grid_decide.comp wrote (status words 8 + 3 (k - kGridCount)).
+// grid_decide.comp wrote (DemStatus::grid_dispatch[3 (k - kGridCount) ..]).
 enum Kernel {
   kGridDecide, kGridCount, kScanBlocks, kScanTop, kScanAdd, kGridScatter, kGridCellSort, kGridGather, kGridCopyBack,
   kForce, kBodies, kKinematicTouch, kKernelCount
@@ -139,7 +140,7 @@ struct GlSimulation::Impl {
   std::size_t poff(int f) const { return std430_offset(kParticleFields, f, std::size_t(cap_p)); }
   std::size_t boff(int f) const { return std430_offset(kBodyFields, f, std::size_t(cap_b)); }
   // Byte offsets inside the other blocks (common.glsl's declarations).
-  std::size_t g_cell_start() const { return 4 * kStatusWords; }
+  std::size_t g_cell_start() const { return sizeof(physics::DemStatus); }
   std::size_t s_slot_of() const { return 0; }
   std::size_t sort_terrain_offset() const { return round_up(12 * std::size_t(cap_p), 16) + 16 * std::size_t(cap_p); }
 
@@ -162,7 +163,6 @@ struct GlSimulation::Impl {
     s += "#define SP_SCAN_BLOCKS " + std::to_string(scan_blocks_cap) + "\n";
     s += "#define SP_K " + std::to_string(K) + "\n";
     s += "#define SP_WG " + std::to_string(wg) + "\n";
-    s += "#define SP_STATUS_WORDS " + std::to_string(kStatusWords) + "\n";
     s += "#define SP_BODY_GRANULE " + std::to_string(unsigned(kBodyGranule)) + "u\n";
     s += "#define SP_BODY_STATIC " + std::to_string(unsigned(kBodyStatic)) + "u\n";
     s += "#define SP_BODY_KINEMATIC " + std::to_string(unsigned(kBodyKinematic)) + "u\n";
@@ -215,8 +215,6 @@ struct GlSimulation::Impl {
       glProgramUniform1f(id, loc("u_kt"), m.normal_stiffness * m.tangential_stiffness_ratio);
       glProgramUniform1f(id, loc("u_ctr"), m.tangential_damping_ratio);
       glProgramUniform1f(id, loc("u_mu"), m.friction);
-      glProgramUniform1f(id, loc("u_kb"), m.bell_shear_viscosity);
-      glProgramUniform1i(id, loc("u_bell"), m.shear == ShearLaw::BellVelocityCapped ? 1 : 0);
       glProgramUniform1f(id, loc("u_floor_y"), def.floor_height);
       glProgramUniform1i(id, loc("u_walls"), def.side_walls ? 1 : 0);
       glProgramUniform3f(id, loc("u_gravity"), gravity.x, gravity.y, gravity.z);
@@ -268,7 +266,7 @@ struct GlSimulation::Impl {
       t0 = std::chrono::steady_clock::now();
     }
     glUseProgram(prog[k].id());
-    glDispatchComputeIndirect(GLintptr(4 * (8 + 3 * (k - kGridCount))));
+    glDispatchComputeIndirect(GLintptr(offsetof(physics::DemStatus, grid_dispatch) + 12 * std::size_t(k - kGridCount)));
     glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
     if (opt.profile) {
       glFinish();
@@ -276,6 +274,11 @@ struct GlSimulation::Impl {
     }
   }
 
+  // One word of the status block (physics::DemStatus, at the start of the grid buffer).
+  void set_status_word(std::size_t offset, std::uint32_t v) {
+    glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
+    write(kG, offset, 4, &v);
+  }
   void write(Buf b, std::size_t offset, std::size_t bytes, const void* data) {
     if (bytes == 0) return;
     glBindBuffer(GL_COPY_WRITE_BUFFER, buf[b]);
@@ -328,8 +331,7 @@ struct GlSimulation::Impl {
     std::vector<std::int32_t> slot(pn);
     for (std::size_t k = 0; k < pn; ++k) slot[k] = std::int32_t(p0 + k);
     write(kSort, s_slot_of() + p0 * 4, pn * 4, slot.data());
-    const std::uint32_t one = 1;  // the new spheres are in no cell yet: re-sort
-    write(kG, 4 * 5, 4, &one);
+    set_status_word(offsetof(physics::DemStatus, resort), 1);  // the new spheres are in no cell yet: re-sort
     // drop the uploaded part of the staging arrays
 #define SP_DROP_P(type, name, n, hashed, unit) pst.name.erase(pst.name.begin(), pst.name.begin() + pn * (n));
     SANDPATCH_PARTICLE_FIELDS(SP_DROP_P)
@@ -382,9 +384,7 @@ struct GlSimulation::Impl {
     glProgramUniform1ui(bp, glGetUniformLocation(bp, "u_nb"), GLuint(nb_gpu));
     glProgramUniform1i(bp, glGetUniformLocation(bp, "u_mode"), 0);
     glUseProgram(0);
-    const std::uint32_t one = 1;
-    glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
-    write(kG, 4 * 5, 4, &one);
+    set_status_word(offsetof(physics::DemStatus, resort), 1);
   }
 
   void substep(float dt) {
@@ -606,7 +606,7 @@ Result<GlSimulation> GlSimulation::create(const SimulationDef& d, const GlOption
   const std::size_t P = std::size_t(s.cap_p);
   s.buf_bytes[Impl::kP0] = s.buf_bytes[Impl::kP1] = std430_size(kParticleFields, P);
   s.buf_bytes[Impl::kB] = std430_size(kBodyFields, std::size_t(s.cap_b));
-  s.buf_bytes[Impl::kG] = 4 * (kStatusWords + std::size_t(s.cap_cells) + 1 + std::size_t(s.cap_cells) + s.scan_blocks_cap);
+  s.buf_bytes[Impl::kG] = sizeof(physics::DemStatus) + 4 * (std::size_t(s.cap_cells) + 1 + std::size_t(s.cap_cells) + s.scan_blocks_cap);
   s.buf_bytes[Impl::kS0] = s.buf_bytes[Impl::kS1] = round_up(4 * P, 16) + 16 * P * std::size_t(s.K);
   s.buf_bytes[Impl::kW] = round_up(4 * P, 16) + 16 * P * kWallSlots;
   s.buf_bytes[Impl::kSort] = s.sort_terrain_offset() + 4 * std::max<std::size_t>(s.cap_terrain, 1);
@@ -624,8 +624,10 @@ Result<GlSimulation> GlSimulation::create(const SimulationDef& d, const GlOption
                    "must fit the driver's GL_MAX_SHADER_STORAGE_BLOCK_SIZE = " + format_number(double(max_block)) + " bytes",
                    "lower the capacity named"};
 
-  // programs: generated preamble + common.glsl + kernel
-  const std::string pre = s.preamble() + std::string(shaders::source("dem/common.glsl")) + "\n#line 1 2\n";
+  // programs: generated preamble + physics_common.glsl (the physics shared with the CPU
+  // backend, and the status block) + common.glsl + kernel
+  const std::string pre = s.preamble() + std::string(shaders::source("dem/physics_common.glsl")) + "\n#line 1 2\n" +
+                          std::string(shaders::source("dem/common.glsl")) + "\n#line 1 3\n";
   for (int k = 0; k < kKernelCount; ++k) {
     std::string_view src = shaders::source(kKernelFile[k]);
     if (src.empty()) return Error{"", std::string("shaders/") + kKernelFile[k], "missing", "must be embedded", ""};
@@ -796,15 +798,13 @@ Status GlSimulation::step(double dt_frame) {
     // only the kinematic shells move and time advances; if so, wake and step.
     bool touch = false;
     if (s.has_moving_kinematic && s.np_gpu > 0) {
-      const std::uint32_t zero = 0;
-      glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
-      s.write(Impl::kG, 4 * 7, 4, &zero);
+      s.set_status_word(offsetof(physics::DemStatus, kinematic_touch), 0);
       s.bind_all();
       const GLuint tp = s.prog[kKinematicTouch].id();
       glProgramUniform1f(tp, glGetUniformLocation(tp, "u_dt"), float(dt_frame));
       s.dispatch(kKinematicTouch, s.np_gpu, s.wg);
       std::uint32_t flag = 0;
-      s.read(Impl::kG, 4 * 7, 4, &flag);
+      s.read(Impl::kG, offsetof(physics::DemStatus, kinematic_touch), 4, &flag);
       touch = flag != 0;
       if (!touch) {
         const GLuint bp = s.prog[kBodies].id();
@@ -828,37 +828,38 @@ Status GlSimulation::step(double dt_frame) {
     s.time += dt_frame;
     return Ok{};
   }
-  std::uint32_t status[8] = {};
+  // the status block's counters (physics::DemStatus): zeroed for this frame, except the re-sort
+  // flag, which carries over
+  physics::DemStatus status{};
   glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
-  s.write(Impl::kG, 0, 5 * 4, status);  // words 0-4; word 5 (re-sort flag) carries over
-  s.write(Impl::kG, 6 * 4, 4, status);
+  s.write(Impl::kG, 0, offsetof(physics::DemStatus, resort), &status);
+  s.write(Impl::kG, offsetof(physics::DemStatus, grid_rebuilds), 4, &status.grid_rebuilds);
   const float dt = float(dt_frame / *ns);
   for (int k = 0; k < *ns; ++k) {
     if (k + 1 == *ns) {  // the counters describe the last substep, as on the CPU
       glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
-      const std::uint32_t z[3] = {0, 0, 0};
-      s.write(Impl::kG, 8, 12, z);
-      std::uint32_t z0 = 0;
-      s.write(Impl::kG, 0, 4, &z0);
+      constexpr std::size_t first = offsetof(physics::DemStatus, max_partners);
+      s.write(Impl::kG, first, offsetof(physics::DemStatus, resort) - first, &status.max_partners);
+      s.write(Impl::kG, offsetof(physics::DemStatus, max_granule_speed), 4, &status.max_granule_speed);
     }
     s.substep(dt);
     s.time += dt;
   }
   glUseProgram(0);
-  s.read(Impl::kG, 0, sizeof status, status);
+  s.read(Impl::kG, 0, offsetof(physics::DemStatus, grid_dispatch), &status);
   float vmax;
-  std::memcpy(&vmax, &status[0], 4);
+  std::memcpy(&vmax, &status.max_granule_speed, 4);
   s.last_vmax = vmax;
-  s.stats.contacts = status[3];
-  s.stats.wall_contacts = status[4];
-  s.stats.resorts = int(status[6]);
-  if (status[1] > 0)
-    return Error{"", "step", "NaN", std::to_string(status[1]) + " bodies became non-finite in the integrate stage",
+  s.stats.contacts = status.contacts;
+  s.stats.wall_contacts = status.plane_contacts;
+  s.stats.resorts = int(status.grid_rebuilds);
+  if (status.nonfinite_bodies > 0)
+    return Error{"", "step", "NaN", std::to_string(status.nonfinite_bodies) + " bodies became non-finite in the integrate stage",
                  "reduce the frame dt or material.normal_stiffness, or check the inputs"};
-  // (the slots hold the springs and, with either law, which contacts are not new: force.comp)
-  if (int(status[2]) > s.K)
+  // (the slots hold the springs and which contacts are not new: force.comp)
+  if (int(status.max_partners) > s.K)
     return Error{"", "GlOptions.max_contacts_per_sphere", std::to_string(s.K),
-                 "is full: a sphere touched " + std::to_string(status[2]) + " partners at once; raise max_contacts_per_sphere",
+                 "is full: a sphere touched " + std::to_string(status.max_partners) + " partners at once; raise max_contacts_per_sphere",
                  "the springs beyond the capacity restarted from zero this frame, and those contacts were "
                  "treated as new (first-substep dashpot)"};
   if (vmax < s.def.sleep_speed) {

@@ -36,7 +36,7 @@ namespace sandpatch::gpu {
 
 struct GlOptions {
   // Contact slots per sphere (partners touching at once): the tangential spring, and which
-  // contacts are not new (the first-substep dashpot, either shear law). 12 equal spheres can
+  // contacts are not new (the first-substep dashpot). 12 equal spheres can
   // touch one (kissing number); a granule's own 3 are not contacts. More simultaneous
   // contacts than this are reported by step() as an Error naming this field.
   int max_contacts_per_sphere = 16;

@@ -55,7 +55,7 @@ void main() {
     B.pos[b].xyz = xk;
     B.quat[b] = q;
     rebuild(b, xk, q, v, w, invm);
-    atomicOr(G.status[5], 1u);  // moved: re-sort when awake
+    atomicOr(G.status.resort, 1u);  // moved: re-sort when awake
     return;
   }
   vec3 F = vec3(0.0), T = vec3(0.0);
@@ -84,14 +84,14 @@ void main() {
     B.vel[b].xyz = v;
     B.omega[b].xyz = w;
     if ((fl & SP_BODY_GRANULE) != 0u)
-      atomicMax(G.status[0], floatBitsToUint(sqrt(dot(v, v)) + sqrt(dot(w, w)) * u_reach));
+      atomicMax(G.status.max_granule_speed, floatBitsToUint(sqrt(dot(v, v)) + sqrt(dot(w, w)) * u_reach));
   }
   const vec3 xn = x + u_dt * v;
   const vec4 qd = quat_mul(vec4(w, 0.0), q);
   q = quat_normalized(q + 0.5 * u_dt * qd);
   const float chk = xn.x + xn.y + xn.z + v.x + v.y + v.z + w.x + w.y + w.z + q.w;
-  if (isnan(chk) || isinf(chk)) atomicAdd(G.status[1], 1u);
+  if (isnan(chk) || isinf(chk)) atomicAdd(G.status.nonfinite_bodies, 1u);
   B.pos[b].xyz = xn;
   B.quat[b] = q;
-  if (rebuild(b, xn, q, v + u_pred * (v - v_old), w, invm) > u_resort_d2) atomicOr(G.status[5], 1u);
+  if (rebuild(b, xn, q, v + u_pred * (v - v_old), w, invm) > u_resort_d2) atomicOr(G.status.resort, 1u);
 }
