@@ -31,26 +31,49 @@ constexpr int kWallSlots = 6;
 // the sum of n x f_t (N) in 4-6 (the torque about the centre is -r times it); 3 and 7 stay 0.
 constexpr std::size_t kAcc = 8;
 
-// Structure-of-arrays generated from fields.hpp: a field of n components is (cap x n).
+// Structure-of-arrays generated from fields.hpp, the CPU's fields only (the GL backend's
+// per-sphere force sums are neither allocated nor sorted here): a field of n components is
+// (cap x n). The particle arrays include the per-sphere contact history (the boundary-plane
+// springs), so the sort permutes it with them.
 struct ParticleArrays {
-#define SP_DECL(type, name, n, hashed, unit) std::vector<type> name;
+#define SP_DECL(type, name, n, hashed, backend, unit) SANDPATCH_FIELD_ON(CPU, backend, std::vector<type> name;)
   SANDPATCH_PARTICLE_FIELDS(SP_DECL)
+  SANDPATCH_SPHERE_CONTACT_FIELDS(SP_DECL)
 #undef SP_DECL
   void resize(std::size_t cap) {
-#define SP_RESIZE(type, name, n, hashed, unit) name.assign(cap * (n), type{});
+#define SP_RESIZE(type, name, n, hashed, backend, unit) SANDPATCH_FIELD_ON(CPU, backend, name.assign(cap * (n), type{});)
     SANDPATCH_PARTICLE_FIELDS(SP_RESIZE)
+    SANDPATCH_SPHERE_CONTACT_FIELDS(SP_RESIZE)
 #undef SP_RESIZE
   }
 };
 
 struct BodyArrays {
-#define SP_DECL(type, name, n, hashed, unit) std::vector<type> name;
+#define SP_DECL(type, name, n, hashed, backend, unit) SANDPATCH_FIELD_ON(CPU, backend, std::vector<type> name;)
   SANDPATCH_BODY_FIELDS(SP_DECL)
 #undef SP_DECL
   void resize(std::size_t cap) {
-#define SP_RESIZE(type, name, n, hashed, unit) name.assign(cap * (n), type{});
+#define SP_RESIZE(type, name, n, hashed, backend, unit) SANDPATCH_FIELD_ON(CPU, backend, name.assign(cap * (n), type{});)
     SANDPATCH_BODY_FIELDS(SP_RESIZE)
 #undef SP_RESIZE
+  }
+};
+
+// The contact history of the neighbour list, one element per list entry (fields.hpp
+// SANDPATCH_PAIR_CONTACT_FIELDS), carried over by partner id when the list is rebuilt.
+struct PairArrays {
+#define SP_DECL(type, name, n, hashed, backend, unit) SANDPATCH_FIELD_ON(CPU, backend, std::vector<type> name;)
+  SANDPATCH_PAIR_CONTACT_FIELDS(SP_DECL)
+#undef SP_DECL
+  void assign(std::size_t entries) {
+#define SP_RESIZE(type, name, n, hashed, backend, unit) SANDPATCH_FIELD_ON(CPU, backend, name.assign(entries * (n), type{});)
+    SANDPATCH_PAIR_CONTACT_FIELDS(SP_RESIZE)
+#undef SP_RESIZE
+  }
+  void swap(PairArrays& o) {
+#define SP_SWAP(type, name, n, hashed, backend, unit) SANDPATCH_FIELD_ON(CPU, backend, name.swap(o.name);)
+    SANDPATCH_PAIR_CONTACT_FIELDS(SP_SWAP)
+#undef SP_SWAP
   }
 };
 
@@ -152,10 +175,10 @@ struct Simulation::Impl {
   std::vector<std::int32_t> nstart;    // np + 1
   std::vector<std::int32_t> nbr;       // sorted index of the partner
   std::vector<std::int32_t> nbr_id;    // stable id of the partner (history carry-over)
-  std::vector<float> nxi;              // 3 per entry, m
-  // 1 per entry: the pair touched at the last substep (carried over on rebuilds like nxi). A
-  // touching pair without it is in its first substep (new_contact).
-  std::vector<std::uint8_t> ntouch;
+  // The pairs' contact history (fields.hpp): xi, the tangential spring (3 per entry, m), and
+  // touch, 1 if the pair touched at the last substep (a touching pair without it is in its
+  // first substep, new_contact).
+  PairArrays pairs;
   // The pair pass computes each pair once and adds its result to both spheres' sums in acc
   // (kAcc per sphere, sorted order; the body stage reads and zeroes them). No atomics and the
   // same order of additions for any thread count: the spheres are split into slabs of two
@@ -171,8 +194,7 @@ struct Simulation::Impl {
   };
   std::vector<SphereSums> acc;  // one per sphere, 32-byte aligned: one cache line holds it
   std::vector<std::int32_t> chunk_start;  // slabs + 1: sorted index where each slab begins
-  std::vector<float> wxi;              // 3 per boundary plane (kWallSlots) per sphere, sorted order
-  std::vector<std::uint32_t> wmask;    // per sphere: bit k = plane k touched at the last substep
+  // (the boundary-plane springs are particle arrays: p.wall_xi, p.wall_mask, fields.hpp)
 
   // grid
   float r_max = 0, h = 0, inv_h = 0, skin = 0;
@@ -287,11 +309,10 @@ struct Simulation::Impl {
         for (int k = 0; k < n; ++k) tmp[std::size_t(dest[s]) * n + k] = arr[std::size_t(s) * n + k];
       arr.swap(tmp);
     };
-#define SP_PERMUTE(type, name, n, hashed, unit) permute(p.name, n);
+#define SP_PERMUTE(type, name, n, hashed, backend, unit) SANDPATCH_FIELD_ON(CPU, backend, permute(p.name, n);)
     SANDPATCH_PARTICLE_FIELDS(SP_PERMUTE)
+    SANDPATCH_SPHERE_CONTACT_FIELDS(SP_PERMUTE)
 #undef SP_PERMUTE
-    permute(wxi, 3 * kWallSlots);
-    permute(wmask, 1);
     cell.resize(np);
     for (int s = 0; s < np; ++s) cell[dest[s]] = c[s];
     for (int s = 0; s < np; ++s) slot_of[p.id[s]] = s;
@@ -349,12 +370,10 @@ struct Simulation::Impl {
   // pair's spring over from the old list (found by partner id).
   void build_list(const std::vector<std::int32_t>& old_slot) {
     std::vector<std::int32_t> ostart, onbr_id;
-    std::vector<float> oxi;
-    std::vector<std::uint8_t> otouch;
+    PairArrays old;
     ostart.swap(nstart);
     onbr_id.swap(nbr_id);
-    oxi.swap(nxi);
-    otouch.swap(ntouch);
+    old.swap(pairs);
     const int n = np;
     const int old_np = ostart.empty() ? 0 : int(ostart.size()) - 1;
     nstart.assign(n + 1, 0);
@@ -370,8 +389,7 @@ struct Simulation::Impl {
     for (int i = 0; i < n; ++i) nstart[i + 1] += nstart[i];
     nbr.resize(nstart[n]);
     nbr_id.resize(nstart[n]);
-    nxi.assign(std::size_t(nstart[n]) * 3, 0.0f);
-    ntouch.assign(std::size_t(nstart[n]), 0);
+    pairs.assign(std::size_t(nstart[n]));
 #pragma omp parallel for num_threads(threads) schedule(dynamic, 256) if (n > 4096)
     for (int i = 0; i < n; ++i) {
       if (b.flags[p.body[i]] & kBodyStatic) continue;
@@ -386,10 +404,10 @@ struct Simulation::Impl {
         if (has_old)
           for (int k = ostart[oi]; k < ostart[oi + 1]; ++k)
             if (onbr_id[k] == p.id[j]) {
-              nxi[3 * e] = oxi[3 * k];
-              nxi[3 * e + 1] = oxi[3 * k + 1];
-              nxi[3 * e + 2] = oxi[3 * k + 2];
-              ntouch[e] = otouch[k];
+              pairs.xi[3 * e] = old.xi[3 * k];
+              pairs.xi[3 * e + 1] = old.xi[3 * k + 1];
+              pairs.xi[3 * e + 2] = old.xi[3 * k + 2];
+              pairs.touch[e] = old.touch[k];
               break;
             }
         ++e;
@@ -510,9 +528,9 @@ struct Simulation::Impl {
     const std::int32_t* NB = nbr.data();
     const std::int32_t* CS = chunk_start.data();
     const int nchunks = int(chunk_start.size()) - 1;
-    float* XI = nxi.data();
+    float* XI = pairs.xi.data();
     float* ACC = acc.data()->v;
-    std::uint8_t* TCH = ntouch.data();
+    std::uint8_t* TCH = pairs.touch.data();
     std::int64_t npairs = 0;
     const int n = np;
     law = {kn, cn0, kt, ctr, mu};  // for gather_sphere
@@ -702,7 +720,7 @@ struct Simulation::Impl {
       z0 = std::max(z0, tg.fill_min_z), z1 = std::min(z1, tg.fill_max_z);
     }
     return {law, p.pos.data(), p.vel.data(), p.omega.data(), const_cast<float*>(acc.data()->v),
-            const_cast<float*>(wxi.data()), const_cast<std::uint32_t*>(wmask.data()),
+            const_cast<float*>(p.wall_xi.data()), const_cast<std::uint32_t*>(p.wall_mask.data()),
             physics::Boundaries{def.floor_height, def.side_walls, !def.terrain.empty(), def.bounds_min, def.bounds_max},
             def.floor_height, first_law, x0, x1, z0, z1};
   }
@@ -1034,8 +1052,8 @@ struct Simulation::Impl {
       st3(p.offset, s, offsets[k]);
       p.pos[4 * s + 3] = one_radius ? radii[0] : radii[k];
       for (int c = 0; c < 3; ++c) pos_at_sort[4 * s + c] = std::numeric_limits<float>::infinity();
-      for (int kk = 0; kk < 3 * kWallSlots; ++kk) wxi[std::size_t(s) * 3 * kWallSlots + kk] = 0.0f;
-      wmask[s] = 0;
+      for (int kk = 0; kk < 3 * kWallSlots; ++kk) p.wall_xi[std::size_t(s) * 3 * kWallSlots + kk] = 0.0f;
+      p.wall_mask[s] = 0;
     }
     rebuild_body(i);
     need_sort = true;
@@ -1140,8 +1158,6 @@ Result<Simulation> Simulation::create(const SimulationDef& d) {
   s.slot_of.assign(d.max_particles, -1);
   s.cell.assign(d.max_particles, 0);
   s.pos_at_sort.assign(std::size_t(d.max_particles) * 4, 0.0f);
-  s.wxi.assign(std::size_t(d.max_particles) * 3 * kWallSlots, 0.0f);
-  s.wmask.assign(d.max_particles, 0u);
   s.acc.assign(std::size_t(d.max_particles), Impl::SphereSums{});
   s.guard_pt_mass.assign(d.max_bodies, 0.0f);
   s.guard_arm.assign(d.max_bodies, 0.0f);
@@ -1403,12 +1419,12 @@ double Simulation::potential_energy() const {
     }
     if (i < int(s.nstart.size()) - 1) {
       for (int k = s.nstart[i]; k < s.nstart[i + 1]; ++k) {  // one entry per pair
-        const float* x = &s.nxi[3 * std::size_t(k)];
+        const float* x = &s.pairs.xi[3 * std::size_t(k)];
         e += 0.5 * kt * (double(x[0]) * x[0] + double(x[1]) * x[1] + double(x[2]) * x[2]);
       }
       for (int k = 0; k < kWallSlots; ++k) {
-        if (!(s.wmask[i] & (1u << k))) continue;
-        const float* x = &s.wxi[(std::size_t(i) * kWallSlots + k) * 3];
+        if (!(s.p.wall_mask[i] & (1u << k))) continue;
+        const float* x = &s.p.wall_xi[(std::size_t(i) * kWallSlots + k) * 3];
         e += 0.5 * kt * (double(x[0]) * x[0] + double(x[1]) * x[1] + double(x[2]) * x[2]);
       }
     }
@@ -1421,14 +1437,21 @@ std::uint64_t Simulation::state_hash() const {
   Hasher h;
   h.pod(s.nb);
   h.pod(s.np);
-#define SP_HASH_B(type, name, n, hashed, unit) \
-  if (hashed) h.bytes(s.b.name.data(), sizeof(type) * std::size_t(n) * s.nb);
+#define SP_HASH_B(type, name, n, hashed, backend, unit) \
+  SANDPATCH_FIELD_ON(CPU, backend, if (hashed) h.bytes(s.b.name.data(), sizeof(type) * std::size_t(n) * s.nb);)
   SANDPATCH_BODY_FIELDS(SP_HASH_B)
 #undef SP_HASH_B
-#define SP_HASH_P(type, name, n, hashed, unit) \
-  if (hashed) h.bytes(s.p.name.data(), sizeof(type) * std::size_t(n) * s.np);
+#define SP_HASH_P(type, name, n, hashed, backend, unit) \
+  SANDPATCH_FIELD_ON(CPU, backend, if (hashed) h.bytes(s.p.name.data(), sizeof(type) * std::size_t(n) * s.np);)
   SANDPATCH_PARTICLE_FIELDS(SP_HASH_P)
+  SANDPATCH_SPHERE_CONTACT_FIELDS(SP_HASH_P)
 #undef SP_HASH_P
+  // the pairs' contact history, in list order (the list is the same for any thread count)
+  const std::size_t entries = s.nstart.empty() ? 0 : std::size_t(s.nstart[s.np]);
+#define SP_HASH_C(type, name, n, hashed, backend, unit) \
+  SANDPATCH_FIELD_ON(CPU, backend, if (hashed) h.bytes(s.pairs.name.data(), sizeof(type) * std::size_t(n) * entries);)
+  SANDPATCH_PAIR_CONTACT_FIELDS(SP_HASH_C)
+#undef SP_HASH_C
   return h.value();
 }
 

@@ -44,32 +44,32 @@ constexpr const char* kKernelFile[kKernelCount] = {
 
 // CPU staging of bodies/particles added since the last upload (generated SoA, as dem.cpp).
 struct ParticleStage {
-#define SP_DECL(type, name, n, hashed, unit) std::vector<type> name;
+#define SP_DECL(type, name, n, hashed, backend, unit) SANDPATCH_FIELD_ON(GL, backend, std::vector<type> name;)
   SANDPATCH_PARTICLE_FIELDS(SP_DECL)
 #undef SP_DECL
   void clear() {
-#define SP_CLR(type, name, n, hashed, unit) name.clear();
+#define SP_CLR(type, name, n, hashed, backend, unit) SANDPATCH_FIELD_ON(GL, backend, name.clear();)
     SANDPATCH_PARTICLE_FIELDS(SP_CLR)
 #undef SP_CLR
   }
   void push_zero() {
-#define SP_PUSH(type, name, n, hashed, unit) name.resize(name.size() + (n), type{});
+#define SP_PUSH(type, name, n, hashed, backend, unit) SANDPATCH_FIELD_ON(GL, backend, name.resize(name.size() + (n), type{});)
     SANDPATCH_PARTICLE_FIELDS(SP_PUSH)
 #undef SP_PUSH
   }
   std::size_t size() const { return id.size(); }
 };
 struct BodyStage {
-#define SP_DECL(type, name, n, hashed, unit) std::vector<type> name;
+#define SP_DECL(type, name, n, hashed, backend, unit) SANDPATCH_FIELD_ON(GL, backend, std::vector<type> name;)
   SANDPATCH_BODY_FIELDS(SP_DECL)
 #undef SP_DECL
   void clear() {
-#define SP_CLR(type, name, n, hashed, unit) name.clear();
+#define SP_CLR(type, name, n, hashed, backend, unit) SANDPATCH_FIELD_ON(GL, backend, name.clear();)
     SANDPATCH_BODY_FIELDS(SP_CLR)
 #undef SP_CLR
   }
   void push_zero() {
-#define SP_PUSH(type, name, n, hashed, unit) name.resize(name.size() + (n), type{});
+#define SP_PUSH(type, name, n, hashed, backend, unit) SANDPATCH_FIELD_ON(GL, backend, name.resize(name.size() + (n), type{});)
     SANDPATCH_BODY_FIELDS(SP_PUSH)
 #undef SP_PUSH
   }
@@ -320,12 +320,12 @@ struct GlSimulation::Impl {
     glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
     const std::size_t p0 = std::size_t(np_gpu), b0 = std::size_t(nb_gpu);
     // new particles take sorted places np_gpu.. (their ids), until the next grid build
-#define SP_UP_P(type, name, n, hashed, unit) \
-  write(pcur(), poff(kParticle_##name) + p0 * 4 * (n), pn * 4 * (n), pst.name.data());
+#define SP_UP_P(type, name, n, hashed, backend, unit) \
+  SANDPATCH_FIELD_ON(GL, backend, write(pcur(), poff(kParticle_##name) + p0 * 4 * (n), pn * 4 * (n), pst.name.data());)
     SANDPATCH_PARTICLE_FIELDS(SP_UP_P)
 #undef SP_UP_P
-#define SP_UP_B(type, name, n, hashed, unit) \
-  write(kB, boff(kBody_##name) + b0 * 4 * (n), bn * 4 * (n), bst.name.data());
+#define SP_UP_B(type, name, n, hashed, backend, unit) \
+  SANDPATCH_FIELD_ON(GL, backend, write(kB, boff(kBody_##name) + b0 * 4 * (n), bn * 4 * (n), bst.name.data());)
     SANDPATCH_BODY_FIELDS(SP_UP_B)
 #undef SP_UP_B
     std::vector<std::int32_t> slot(pn);
@@ -333,10 +333,10 @@ struct GlSimulation::Impl {
     write(kSort, s_slot_of() + p0 * 4, pn * 4, slot.data());
     set_status_word(offsetof(physics::DemStatus, resort), 1);  // the new spheres are in no cell yet: re-sort
     // drop the uploaded part of the staging arrays
-#define SP_DROP_P(type, name, n, hashed, unit) pst.name.erase(pst.name.begin(), pst.name.begin() + pn * (n));
+#define SP_DROP_P(type, name, n, hashed, backend, unit) SANDPATCH_FIELD_ON(GL, backend, pst.name.erase(pst.name.begin(), pst.name.begin() + pn * (n));)
     SANDPATCH_PARTICLE_FIELDS(SP_DROP_P)
 #undef SP_DROP_P
-#define SP_DROP_B(type, name, n, hashed, unit) bst.name.erase(bst.name.begin(), bst.name.begin() + bn * (n));
+#define SP_DROP_B(type, name, n, hashed, backend, unit) SANDPATCH_FIELD_ON(GL, backend, bst.name.erase(bst.name.begin(), bst.name.begin() + bn * (n));)
     SANDPATCH_BODY_FIELDS(SP_DROP_B)
 #undef SP_DROP_B
     np_gpu += int(pn);
@@ -922,26 +922,44 @@ std::uint64_t GlSimulation::state_hash() const {
   Hasher h;
   h.pod(s.nb);
   h.pod(s.np);
-#define SP_HASH_B(type, name, n, hashed, unit)                                                  \
-  if (hashed) {                                                                                 \
+#define SP_HASH_B(type, name, n, hashed, backend, unit)                                         \
+  SANDPATCH_FIELD_ON(GL, backend, if (hashed) {                                                  \
     std::vector<type> a(std::size_t(s.nb) * (n));                                               \
     s.read(Impl::kB, s.boff(kBody_##name), a.size() * sizeof(type), a.data());                  \
     h.bytes(a.data(), a.size() * sizeof(type));                                                 \
-  }
+  })
   SANDPATCH_BODY_FIELDS(SP_HASH_B)
 #undef SP_HASH_B
   std::vector<std::int32_t> slot(s.np);
   s.read(Impl::kSort, s.s_slot_of(), slot.size() * 4, slot.data());
-#define SP_HASH_P(type, name, n, hashed, unit)                                                  \
-  if (hashed) {                                                                                 \
+#define SP_HASH_P(type, name, n, hashed, backend, unit)                                         \
+  SANDPATCH_FIELD_ON(GL, backend, if (hashed) {                                                  \
     std::vector<type> a(std::size_t(s.np) * (n)), b(a.size());                                  \
     s.read(s.pcur(), s.poff(kParticle_##name), a.size() * sizeof(type), a.data());              \
     for (int id = 0; id < s.np; ++id)                                                           \
       for (int c = 0; c < (n); ++c) b[std::size_t(id) * (n) + c] = a[std::size_t(slot[id]) * (n) + c]; \
     h.bytes(b.data(), b.size() * sizeof(type));                                                 \
-  }
+  })
   SANDPATCH_PARTICLE_FIELDS(SP_HASH_P)
 #undef SP_HASH_P
+  // The contact history (fields.hpp: the GL keeps it by particle id in buffers of its own
+  // layout, common.glsl): each sphere's plane mask and 6 plane springs, then its pair springs
+  // (count, and the slots in use: xi bits and partner id) as the next substep reads them.
+  {
+    const std::size_t n = std::size_t(s.np), head = round_up(4 * std::size_t(s.cap_p), 16);
+    std::vector<std::uint32_t> mask(n), wxi(n * 4 * kWallSlots), count(n), slots(n * 4 * std::size_t(s.K));
+    s.read(Impl::kW, 0, mask.size() * 4, mask.data());
+    s.read(Impl::kW, head, wxi.size() * 4, wxi.data());
+    h.bytes(mask.data(), mask.size() * 4);
+    h.bytes(wxi.data(), wxi.size() * 4);
+    const Impl::Buf springs = Impl::Buf(Impl::kS0 + s.cur_s);
+    s.read(springs, 0, count.size() * 4, count.data());
+    s.read(springs, head, slots.size() * 4, slots.data());
+    for (std::size_t id = 0; id < n; ++id) {
+      h.pod(count[id]);
+      h.bytes(&slots[id * 4 * std::size_t(s.K)], 16 * std::size_t(count[id]));
+    }
+  }
   return h.value();
 }
 
