@@ -18,6 +18,7 @@
 #include "common/hash.hpp"
 #include "particles/contact.hpp"
 #include "particles/contact_simd.hpp"
+#include "particles/dem_control.hpp"
 #include "particles/dem_physics.hpp"
 #include "particles/fields.hpp"
 
@@ -1315,13 +1316,7 @@ Status Simulation::step(double dt_frame) {
   const float dt = float(dt_frame / *ns);
   for (int k = 0; k < *ns; ++k)
     if (auto st = s.substep(dt); !st) return st;
-  // sleep bookkeeping
-  if (s.granule_vmax < s.def.sleep_speed) {
-    s.below_time += dt_frame;
-    if (s.below_time >= s.def.sleep_time && s.def.sleep_time > 0) s.asleep = true;
-  } else {
-    s.below_time = 0;
-  }
+  update_sleep(s.def, s.granule_vmax, dt_frame, s.below_time, s.asleep);  // dem_control.hpp
   return Ok{};
 }
 
@@ -1493,18 +1488,15 @@ Status Simulation::set_body_enabled(BodyId id, bool enabled) {
   if (id.index < 0 || id.index >= s.nb)
     return Error{"", "set_body_enabled.body", std::to_string(id.index), "must be a body of this simulation", ""};
   std::uint32_t& f = s.b.flags[id.index];
-  const std::uint32_t motion = kBodyStatic | kBodyKinematic | kBodyDynamic;
   const bool parked = f & kBodyParked;
   if (enabled == !parked) return Ok{};
   if (!enabled) {
-    f = (f & ~motion) | kBodyStatic | kBodyParked | ((f & motion) << 8);
-    const Vec3 far{0.5f * (s.def.bounds_min.x + s.def.bounds_max.x), s.def.bounds_max.y + 1000.0f,
-                   0.5f * (s.def.bounds_min.z + s.def.bounds_max.z)};
-    st3(s.b.pos, id.index, far);
+    f = parked_flags(f);  // dem_control.hpp, as the GL backend
+    st3(s.b.pos, id.index, parking_position(s.def));
     st3(s.b.vel, id.index, Vec3{});
     st3(s.b.omega, id.index, Vec3{});
   } else {
-    f = (f & ~(motion | kBodyParked | (motion << 8))) | ((f >> 8) & motion);
+    f = unparked_flags(f);
   }
   s.rebuild_body(id.index);
   s.need_sort = true;

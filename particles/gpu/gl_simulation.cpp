@@ -15,6 +15,7 @@
 
 #include "common/hash.hpp"
 #include "gl/program.hpp"
+#include "particles/dem_control.hpp"
 #include "particles/dem_physics.hpp"
 #include "particles/fields.hpp"
 #include "particles/gpu/layout.hpp"
@@ -749,20 +750,18 @@ Status GlSimulation::set_body_enabled(BodyId id, bool enabled) {
   if (id.index < 0 || id.index >= s.nb)
     return Error{"", "set_body_enabled.body", std::to_string(id.index), "must be a body of this simulation", ""};
   std::uint32_t f = s.body_flags(id.index);
-  const std::uint32_t motion = kBodyStatic | kBodyKinematic | kBodyDynamic;
   const bool parked = f & kBodyParked;
   if (enabled == !parked) return Ok{};
   if (!enabled) {
-    f = (f & ~motion) | kBodyStatic | kBodyParked | ((f & motion) << 8);
-    const SimulationDef& d = s.def;
-    const float far[3] = {0.5f * (d.bounds_min.x + d.bounds_max.x), d.bounds_max.y + 1000.0f,
-                          0.5f * (d.bounds_min.z + d.bounds_max.z)};
+    f = parked_flags(f);  // dem_control.hpp, as the CPU backend
+    const Vec3 pk = parking_position(s.def);
+    const float far[3] = {pk.x, pk.y, pk.z};
     const float zero[3] = {0, 0, 0};
     s.set_body_vec(kBody_pos, id.index, far, 3);
     s.set_body_vec(kBody_vel, id.index, zero, 3);
     s.set_body_vec(kBody_omega, id.index, zero, 3);
   } else {
-    f = (f & ~(motion | kBodyParked | (motion << 8))) | ((f >> 8) & motion);
+    f = unparked_flags(f);
   }
   s.host_flags[std::size_t(id.index)] = f;
   if (id.index >= s.nb_gpu) {
@@ -862,12 +861,7 @@ Status GlSimulation::step(double dt_frame) {
                  "is full: a sphere touched " + std::to_string(status.max_partners) + " partners at once; raise max_contacts_per_sphere",
                  "the springs beyond the capacity restarted from zero this frame, and those contacts were "
                  "treated as new (first-substep dashpot)"};
-  if (vmax < s.def.sleep_speed) {
-    s.below_time += dt_frame;
-    if (s.below_time >= s.def.sleep_time && s.def.sleep_time > 0) s.asleep = true;
-  } else {
-    s.below_time = 0;
-  }
+  update_sleep(s.def, vmax, dt_frame, s.below_time, s.asleep);  // dem_control.hpp, as the CPU backend
   return Ok{};
 }
 
