@@ -3,7 +3,7 @@
 // inside namespace sandpatch::physics after a small prelude that maps the GLSL subset it is
 // written in to C++: vec3 -> Vec3 (math.hpp), uint -> std::uint32_t, the GLSL built-ins to
 // the <cmath>/<algorithm> functions of the same float operations, inout/out -> references.
-// The GL backend compiles the same text as GLSL (particles/gpu/gl_simulation.cpp).
+// The GL backend compiles the same text as GLSL (particles/gpu/gl_programs.cpp).
 #pragma once
 
 #include <algorithm>

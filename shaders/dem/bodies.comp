@@ -1,12 +1,12 @@
-// Body stage (dem.cpp `bodies`): each body sums its own spheres' forces and torques in
+// Body stage (dem_bodies.cpp `bodies`): each body sums its own spheres' forces and torques in
 // sphere-id order, integrates (symplectic Euler; normalised quaternion), and rebuilds its
 // spheres' positions and velocities. u_mode = 1 only rebuilds the spheres of bodies
 // [u_first_body, u_nb) (after an upload); u_mode = 2 only moves the kinematic bodies by u_dt
-// (an asleep frame, dem.cpp move_kinematic).
+// (an asleep frame, dem_bodies.cpp move_kinematic).
 //   v += dt (F/m + g);  w += dt I^-1 (T - w x I w) (body frame; isotropic granules skip
 //   the gyroscopic term);  x += dt v;  q += dt/2 (w, 0) q, normalised
 // The spheres get the velocity predicted to the next contact stage's time, v + u_pred dt a
-// with a = (v - v_old)/dt this substep's acceleration, translation only (dem.cpp `bodies`;
+// with a = (v - v_old)/dt this substep's acceleration, translation only (dem_bodies.cpp `bodies`;
 // u_pred = Simulation::velocity_predictor_gain; zero when a body is only rebuilt, modes 1, 2).
 layout(local_size_x = SP_WG) in;
 

@@ -1,5 +1,5 @@
 // Shared helpers of the granule DEM kernels (shaders/dem/*.comp). Prepended after the
-// generated preamble (particles/gpu/gl_simulation.cpp: #version, capacities, the std430
+// generated preamble (particles/gpu/gl_programs.cpp: #version, capacities, the std430
 // blocks generated from particles/fields.hpp, BodyFlags) and physics_common.glsl (the
 // physics shared with the CPU backend, and the status block), before each kernel.
 //
@@ -44,7 +44,7 @@ uniform vec3 u_bmin;        // bounds_min (m)
 uniform vec3 u_bmax;        // bounds_max (m)
 uniform float u_inv_h;      // 1 / cell size (1/m)
 
-// Cell coordinate of one axis, clamped to the grid (dem.cpp cell_coord).
+// Cell coordinate of one axis, clamped to the grid (dem_impl.hpp cell_coord).
 int cell_coord(float v, float lo, int n) {
   int c = int(floor((v - lo) * u_inv_h));
   return c < 0 ? 0 : (c >= n ? n - 1 : c);

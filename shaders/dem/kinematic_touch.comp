@@ -1,4 +1,4 @@
-// Asleep simulations (dem.cpp kinematic_touch): would a moving kinematic sphere, moved by
+// Asleep simulations (dem_grid.cpp kinematic_touch): would a moving kinematic sphere, moved by
 // the frame's dt, come within contact range + skin/2 of a dynamic sphere? Then status.kinematic_touch = 1
 // and the simulation wakes. The grid is still valid: the dynamic spheres have not moved
 // since it was built (less than skin/2), so the 27 cells around the moved sphere hold them.

@@ -2,8 +2,8 @@
 // structs between C++ and HLSL): the contact law, the terrain sampling, the boundary planes
 // and the GL status block. Compiled
 //   as C++:  particles/dem_physics.hpp includes it inside namespace sandpatch::physics after
-//            a prelude; the CPU backend (particles/dem.cpp) calls these functions;
-//   as GLSL: particles/gpu/gl_simulation.cpp prepends it (before common.glsl) to every kernel of
+//            a prelude; the CPU backend (particles/dem_contacts.cpp, dem_boundaries.cpp) calls them;
+//   as GLSL: particles/gpu/gl_programs.cpp prepends it (before common.glsl) to every kernel of
 //            shaders/dem/; force.comp calls these functions.
 // So it is written in the common subset of C++20 and GLSL 4.30:
 //   - types vec3, uint and the built-ins dot, cross, sqrt, abs, min, clamp: GLSL's own; the
@@ -43,9 +43,10 @@ float terrain_sample(int k);  // heights[k], m (common.glsl: the Sort block's te
 #endif
 
 // ---- GL status block (buffer binding 3, first member; std430) -------------------------------
-// Written by the kernels, read back once per frame by particles/gpu/gl_simulation.cpp.
+// Written by the kernels, read back once per frame by GlSimulation::step
+// (particles/gpu/gl_simulation.cpp).
 // C++ checks its size and offsets with static_asserts (particles/dem_physics.hpp).
-#define SP_GRID_KERNELS 8  // grid kernels run by indirect dispatch (particles/gpu/gl_simulation.cpp: kGridCount..)
+#define SP_GRID_KERNELS 8  // grid kernels run by indirect dispatch (particles/gpu/gl_impl.hpp: kGridCount..)
 struct DemStatus {
   uint max_granule_speed;  // float bits of max |v| + |w| (d + r) over granules (m/s; >= 0 orders like its bits)
   uint nonfinite_bodies;   // bodies whose state became non-finite

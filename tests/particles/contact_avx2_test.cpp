@@ -1,6 +1,6 @@
 // tests particles/contact_avx2.cpp: the 8-lane AVX2 copy of the contact law against the shared
 // scalar law (shaders/dem/physics_common.glsl through particles/contact.hpp) and the scalar
-// pair pass's geometry around it (particles/dem.cpp), on random touching pairs.
+// pair pass's geometry around it (particles/dem_contacts.cpp), on random touching pairs.
 //
 // Tolerance: each output vector (force on sphere i, n x f_t, the updated spring xi) within
 // 1e-6 of its magnitude plus 1e-12 (N or m) of the scalar one. The kernel is written to give
@@ -24,7 +24,7 @@ struct Lane {
   Vec3 f, c, xi;
 };
 
-// The scalar pair pass for one lane of the batch (as particles/dem.cpp).
+// The scalar pair pass for one lane of the batch (as particles/dem_contacts.cpp).
 Lane scalar_lane(const simd::PairLaw& law, const simd::PairBatch& b, int k) {
   const float inv = 1.0f / std::sqrt(b.d2[k]);
   const float dist = b.d2[k] * inv;
