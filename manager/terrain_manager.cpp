@@ -1254,7 +1254,7 @@ int TerrainManager::asleep_patches() const {
 
 std::int64_t TerrainManager::pool_bytes() const {
   // Bytes per particle / per body: components × 4 bytes summed over the field lists.
-#define SANDPATCH_FIELD_BYTES(type, name, n, hashed, unit) +std::int64_t(n) * std::int64_t(sizeof(type))
+#define SANDPATCH_FIELD_BYTES(type, name, n, hashed, backend, unit) +std::int64_t(n) * std::int64_t(sizeof(type))
   constexpr std::int64_t particle_bytes = 0 SANDPATCH_PARTICLE_FIELDS(SANDPATCH_FIELD_BYTES);
   constexpr std::int64_t body_bytes = 0 SANDPATCH_BODY_FIELDS(SANDPATCH_FIELD_BYTES);
 #undef SANDPATCH_FIELD_BYTES

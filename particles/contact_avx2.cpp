@@ -1,8 +1,8 @@
-// The SpringHistory contact law of contact.hpp for 8 touching pairs at once (AVX2), see
-// contact_simd.hpp. Compiled with -mavx2 -ffp-contract=off (particles/CMakeLists.txt) and
+// The contact law of shaders/dem/physics_common.glsl (contact.hpp) for 8 touching pairs at
+// once (AVX2), see contact_simd.hpp. Compiled with -mavx2 -ffp-contract=off (particles/CMakeLists.txt) and
 // called only after a cpuid check, so the library still runs on baseline x86-64.
 //
-// Each line below is the line of contact_force (or of dem.cpp's pair pass) with the same name,
+// Each line below is the line of contact_force (or of dem_contacts.cpp's pair pass) with the same name,
 // in the same operation order; `sel(m, a, b)` is the lane-wise `m ? a : b`.
 #include "particles/contact_simd.hpp"
 
@@ -41,7 +41,7 @@ void spring_pairs_avx2(const PairLaw& law, PairBatch& b) {
   const V kn = set1(law.kn), kt = set1(law.kt), mkt = set1(-law.kt), mu = set1(law.mu), dt = set1(law.dt);
   const V sign = set1(-0.0f);
 
-  // pair geometry (dem.cpp): inv = 1/sqrt(d2), dist = d2 inv, n = d inv
+  // pair geometry (dem_contacts.cpp): inv = 1/sqrt(d2), dist = d2 inv, n = d inv
   const V d2 = ld(b.d2);
   const V inv = dvd(one, sqr(d2));
   const V dist = mul(d2, inv);
@@ -56,11 +56,11 @@ void spring_pairs_avx2(const PairLaw& law, PairBatch& b) {
   const V ct = mul(set1(law.ctr), cn);
   const V delta = sub(ld(b.rs), dist);
 
-  // contact_force, SpringHistory
+  // contact_force
   const V vn = dot3(vx, vy, vz, nx, ny, nz);
   V fd = mul(cn, vn);
   {
-    // first substep of a contact (contact.hpp): |fd| = c_n (min(delta/dt, |vn|) + |vn|/2)
+    // first substep of a contact (physics_common.glsl): |fd| = c_n (min(delta/dt, |vn|) + |vn|/2)
     // with the sign of vn, lane by lane in contact_force's order
     const V m = gt(ld(b.newc), zero);
     if (any(m)) {

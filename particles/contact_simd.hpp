@@ -1,14 +1,15 @@
-// A batch of 8 touching sphere-sphere pairs for the SpringHistory contact law, evaluated 8
+// A batch of 8 touching sphere-sphere pairs for the contact law, evaluated 8
 // lanes at a time (AVX2) by particles/contact_avx2.cpp. Used by the pair pass of
-// particles/dem.cpp when the CPU has AVX2; the scalar contact_force (contact.hpp) is the
-// reference and the fallback.
+// particles/dem_contacts.cpp when the CPU has AVX2; the scalar contact_force (shaders/dem/
+// physics_common.glsl, shared with the GL kernels, through contact.hpp) is the reference and
+// the fallback; tests/particles/contact_avx2_test.cpp checks the kernel against it.
 //
 // Same results, bit for bit: every lane performs the float operations of contact_force (and of
 // the pair pass around it) in the same order, with the same roundings (mul and add kept
 // separate: the kernel's file is compiled with -ffp-contract=off, sqrt and div are IEEE in both
 // paths); branches become per-lane selects of the same values. So a bed's state hash does not
 // depend on the path (checked by comparing the two paths' hashes; tests run on both through
-// SANDPATCH_DEM_KERNEL, see dem.cpp).
+// SANDPATCH_DEM_KERNEL, see dem_contacts.cpp).
 //
 // This header holds data only (no inline functions): the kernel's file is compiled for AVX2,
 // and an inline function it shared with the baseline code could be emitted in its AVX2 form
@@ -41,7 +42,7 @@ struct alignas(32) PairBatch {
   int count = 0;                                          // lanes in use
 };
 
-// The material constants of the pair pass (see dem.cpp `contacts`).
+// The material constants of the pair pass (see dem_contacts.cpp `contacts`).
 struct PairLaw {
   float kn;   // N/m
   float cn0;  // c_n = cn0 / sqrt(1/m_i + 1/m_j), N s/m
@@ -58,7 +59,7 @@ void spring_pairs_avx2(const PairLaw& law, PairBatch& b);
 // True if this CPU runs the AVX2 kernel (checked once, cpuid).
 bool avx2_available();
 
-// The choice Simulation::create makes (particles/dem.cpp): the AVX2 kernel if this build has
+// The choice Simulation::create makes (particles/dem_contacts.cpp): the AVX2 kernel if this build has
 // it, the CPU has AVX2 and the environment variable SANDPATCH_DEM_KERNEL is not "scalar".
 bool use_avx2_pair_kernel();
 

@@ -64,21 +64,6 @@ double clamped_contact_time(const Material& m, double m_eff) {
   return clamped_contact_time_w0(damping_ratio_from_restitution(m.restitution)) * std::sqrt(m_eff / m.normal_stiffness);
 }
 
-double textbook_damping_ratio(double e) {
-  if (e >= 1.0) return 0.0;
-  double l = std::log(e);
-  return -l / std::sqrt(std::numbers::pi * std::numbers::pi + l * l);
-}
-
-double textbook_restitution(double zeta) {
-  return std::exp(-std::numbers::pi * zeta / std::sqrt(1.0 - zeta * zeta));
-}
-
-double textbook_contact_time(double zeta, double k_n, double m_eff) {
-  if (zeta >= 1.0) return std::numeric_limits<double>::infinity();
-  return std::numbers::pi * std::sqrt(m_eff / k_n) / std::sqrt(1.0 - zeta * zeta);
-}
-
 Status validate(const Material& m, const std::string& p) {
   std::vector<Error> es;
   auto check = [&](bool ok, const char* f, double v, const char* allowed) {
@@ -92,7 +77,6 @@ Status validate(const Material& m, const std::string& p) {
         "must be > 0 (k_t / k_n)");
   check(m.tangential_damping_ratio >= 0, "tangential_damping_ratio", m.tangential_damping_ratio,
         "must be >= 0 (c_t / c_n)");
-  check(m.bell_shear_viscosity >= 0, "bell_shear_viscosity", m.bell_shear_viscosity, "must be >= 0 (N s/m)");
   if (!es.empty()) return es;
   return Ok{};
 }

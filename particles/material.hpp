@@ -24,11 +24,9 @@ namespace sandpatch {
 enum class ShearLaw {
   // Cundall-Strack: per-contact tangential spring xi (m) with history, rotated into the
   // tangent plane every substep, f_t = -k_t xi - c_t v_t, capped at mu f_n (the default).
+  // The only law (Bell et al. 2005's velocity-capped shear was removed: it cannot hold a bed
+  // at rest, docs/dem.md). The enum stays: manager/granule_tile.cpp hashes it into tile keys.
   SpringHistory,
-  // Bell et al. 2005: velocity-capped shear f_t = -min(mu f_n, k_t |v_t|) v_t/|v_t| with
-  // k_t = bell_shear_viscosity (N s/m). Kept as an option; it cannot hold a bed at rest
-  // (docs/dem.md has the measurement).
-  BellVelocityCapped,
 };
 
 struct Material {
@@ -39,7 +37,6 @@ struct Material {
   ShearLaw shear = ShearLaw::SpringHistory;
   float tangential_stiffness_ratio = 2.0f / 7.0f;  // k_t / k_n (SpringHistory)
   float tangential_damping_ratio = 0.5f;           // c_t / c_n (SpringHistory)
-  float bell_shear_viscosity = 2.0f;               // N s/m, the k_t of Bell's law
 };
 
 // ---- The clamped law (what the simulation does), zeta in [0, inf) ----
@@ -64,15 +61,6 @@ double damping_ratio_from_restitution(double e);
 double normal_damping(const Material& m, double m_eff);
 // Geometric contact time (s) of the clamped law for reduced mass m_eff (kg).
 double clamped_contact_time(const Material& m, double m_eff);
-
-// ---- The textbook law of DESIGN.md (a force allowed to turn attractive), zeta < 1 ----
-// Kept for the peer comparison only: the LAMMPS peer's gamma_n (../shared/peers/in.lammps_bed)
-// was derived with it, and tests check the clamped law against it where both agree.
-//   e = exp(-pi zeta / sqrt(1 - zeta^2)),  zeta = -ln e / sqrt(pi^2 + ln^2 e),
-//   t_c = pi / (w0 sqrt(1 - zeta^2))  (s; +inf for zeta >= 1)
-double textbook_damping_ratio(double e);
-double textbook_restitution(double zeta);
-double textbook_contact_time(double zeta, double k_n, double m_eff);
 
 // Validates the material; errors name "<prefix>.field".
 Status validate(const Material& m, const std::string& prefix);

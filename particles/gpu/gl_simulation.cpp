@@ -1,498 +1,41 @@
-// Granule DEM on the GPU (GL compute shaders); see gl_simulation.hpp and docs/dem-gpu.md.
-// The kernels are shaders/dem/*.comp; this file builds their generated preamble (the
-// std430 blocks of fields.hpp), owns the buffers, uploads bodies and sequences the stages.
+// Granule DEM on the GPU (GL compute shaders): GlSimulation's methods and the substep that
+// sequences the stages (gl_simulation.hpp, docs/dem-gpu.md). The backend's state and its other
+// files are listed in gl_impl.hpp; the kernels are shaders/dem/*.comp.
 #include "particles/gpu/gl_simulation.hpp"
 
 #include <GL/glcorearb.h>
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
-#include <cstdio>
+#include <cstddef>
 #include <cstring>
 #include <limits>
 
 #include "common/hash.hpp"
-#include "gl/program.hpp"
-#include "particles/fields.hpp"
-#include "particles/gpu/layout.hpp"
-#include "shaders/shaders.hpp"
+#include "particles/dem_control.hpp"
+#include "particles/gpu/gl_impl.hpp"
 
 namespace sandpatch::gpu {
 
-namespace {
-
-// Buffer bindings (shaders/dem/common.glsl lists the same).
-enum Binding : GLuint { kBindP = 0, kBindPn = 1, kBindB = 2, kBindG = 3, kBindSIn = 4, kBindSOut = 5, kBindW = 6, kBindS = 7 };
-
-constexpr int kStatusWords = 32;  // 8 status words + 8 x 3 dispatch-indirect arguments
-constexpr int kWallSlots = 6;  // per sphere: floor, walls x0, x1, z0, z1, terrain
-constexpr int kScanBlock = 1024;  // cells per workgroup of scan_blocks.comp
-
-// The kernels, in the order of a substep (rebuild is bodies.comp in mode 1). The grid
-// kernels kGridCount..kGridCopyBack run by glDispatchComputeIndirect with the arguments
-// grid_decide.comp wrote (status words 8 + 3 (k - kGridCount)).
-enum Kernel {
-  kGridDecide, kGridCount, kScanBlocks, kScanTop, kScanAdd, kGridScatter, kGridCellSort, kGridGather, kGridCopyBack,
-  kForce, kBodies, kKinematicTouch, kKernelCount
-};
-constexpr const char* kKernelFile[kKernelCount] = {
-    "dem/grid_decide.comp",   "dem/grid_count.comp",    "dem/scan_blocks.comp", "dem/scan_top.comp",
-    "dem/scan_add.comp",      "dem/grid_scatter.comp",  "dem/grid_cellsort.comp", "dem/grid_gather.comp",
-    "dem/grid_copyback.comp", "dem/force.comp",         "dem/bodies.comp",        "dem/kinematic_touch.comp"};
-
-// CPU staging of bodies/particles added since the last upload (generated SoA, as dem.cpp).
-struct ParticleStage {
-#define SP_DECL(type, name, n, hashed, unit) std::vector<type> name;
-  SANDPATCH_PARTICLE_FIELDS(SP_DECL)
-#undef SP_DECL
-  void clear() {
-#define SP_CLR(type, name, n, hashed, unit) name.clear();
-    SANDPATCH_PARTICLE_FIELDS(SP_CLR)
-#undef SP_CLR
-  }
-  void push_zero() {
-#define SP_PUSH(type, name, n, hashed, unit) name.resize(name.size() + (n), type{});
-    SANDPATCH_PARTICLE_FIELDS(SP_PUSH)
-#undef SP_PUSH
-  }
-  std::size_t size() const { return id.size(); }
-};
-struct BodyStage {
-#define SP_DECL(type, name, n, hashed, unit) std::vector<type> name;
-  SANDPATCH_BODY_FIELDS(SP_DECL)
-#undef SP_DECL
-  void clear() {
-#define SP_CLR(type, name, n, hashed, unit) name.clear();
-    SANDPATCH_BODY_FIELDS(SP_CLR)
-#undef SP_CLR
-  }
-  void push_zero() {
-#define SP_PUSH(type, name, n, hashed, unit) name.resize(name.size() + (n), type{});
-    SANDPATCH_BODY_FIELDS(SP_PUSH)
-#undef SP_PUSH
-  }
-};
-
-void put3(std::vector<float>& a, std::size_t i, Vec3 v, float w = 0.0f) {
-  a[4 * i] = v.x;
-  a[4 * i + 1] = v.y;
-  a[4 * i + 2] = v.z;
-  a[4 * i + 3] = w;
+void GlSimulation::Impl::substep(float dt) {
+  bind_all();
+  // grid: decided on the GPU, then the counting sort by indirect dispatches
+  dispatch(kGridDecide, 1, 1);
+  glMemoryBarrier(GL_COMMAND_BARRIER_BIT);
+  glBindBuffer(GL_DISPATCH_INDIRECT_BUFFER, buf[kG]);
+  for (int k = kGridCount; k <= kGridCopyBack; ++k) dispatch_indirect(Kernel(k));
+  glBindBuffer(GL_DISPATCH_INDIRECT_BUFFER, 0);
+  glProgramUniform1f(prog[kForce].id(), glGetUniformLocation(prog[kForce].id(), "u_dt"), dt);
+  glProgramUniform1i(prog[kForce].id(), glGetUniformLocation(prog[kForce].id(), "u_first_law"),
+                     guard->contact_timing_on(dt) ? 1 : 0);
+  dispatch(kForce, np_gpu, wg);
+  cur_s = 1 - cur_s;  // the springs written become the ones read next substep
+  bind_all();
+  glProgramUniform1f(prog[kBodies].id(), glGetUniformLocation(prog[kBodies].id(), "u_dt"), dt);
+  glProgramUniform1f(prog[kBodies].id(), glGetUniformLocation(prog[kBodies].id(), "u_pred"),
+                     float(guard->velocity_predictor_gain(dt)));
+  dispatch(kBodies, nb_gpu, wg);
 }
-
-// Bytes per element summed over a block's fields (one body / one particle).
-template <std::size_t N>
-constexpr std::size_t sum_strides(const std::array<Std430Field, N>& fields) {
-  std::size_t n = 0;
-  for (const auto& f : fields) n += f.stride;
-  return n;
-}
-
-}  // namespace
-
-struct GlSimulation::Impl {
-  SimulationDef def;
-  GlOptions opt;
-  GranuleShape shape;
-  Vec3 gravity;
-  float zeta = 0;
-
-  // Stability guard: a CPU Simulation of capacity 1 with the same definition, holding (at
-  // most) one single-sphere dynamic shell with the lightest point mass of our dynamic
-  // shells, so substeps_for / contact_time / max_substep_dt are the CPU backend's own.
-  std::unique_ptr<Simulation> guard;
-  double guard_point_mass = std::numeric_limits<double>::infinity();
-
-  // capacities and live counts
-  int cap_p = 0, cap_b = 0, cap_cells = 0, scan_blocks_cap = 0, K = 16, wg = 64;
-  std::size_t cap_terrain = 0;  // terrain height samples (fixed at creation)
-  int np = 0, nb = 0, np_gpu = 0, nb_gpu = 0;  // *_gpu: uploaded
-  ParticleStage pst;
-  BodyStage bst;
-  std::vector<std::uint32_t> host_flags;  // every body's flags (only the host changes them): no read-back
-
-  // grid (sized as the CPU's: cell = 2 r_max + skin)
-  float r_max = 0, skin = 0, h = 0;
-  int gx = 1, gy = 1, gz = 1;
-
-  // GL objects
-  enum Buf { kP0, kP1, kB, kG, kS0, kS1, kW, kSort, kBufCount };
-  GLuint buf[kBufCount] = {};
-  std::size_t buf_bytes[kBufCount] = {};
-  gl::Program prog[kKernelCount];
-  int cur_p = 0;  // P is buffer kP0 + cur_p, the grid's scratch copy the other (cur_p stays 0:
-                  // grid_copyback.comp copies the sorted particles back)
-  int cur_s = 0;  // springs read this substep: kS0 + cur_s; written: the other
-
-  // state
-  double time = 0;
-  bool asleep = false;
-  double below_time = 0;
-  bool has_moving_kinematic = false;
-  float last_vmax = 0;
-  StepStats stats;
-  double kernel_seconds[kKernelCount] = {};  // GlOptions::profile
-
-  Status configure(const SimulationDef& d, const char* cap_prefix);
-
-  std::size_t poff(int f) const { return std430_offset(kParticleFields, f, std::size_t(cap_p)); }
-  std::size_t boff(int f) const { return std430_offset(kBodyFields, f, std::size_t(cap_b)); }
-  // Byte offsets inside the other blocks (common.glsl's declarations).
-  std::size_t g_cell_start() const { return 4 * kStatusWords; }
-  std::size_t s_slot_of() const { return 0; }
-  std::size_t sort_terrain_offset() const { return round_up(12 * std::size_t(cap_p), 16) + 16 * std::size_t(cap_p); }
-
-  ~Impl() {
-    // a program in use is only flagged for deletion: release ours so the names really go
-    GLint current = 0;
-    glGetIntegerv(GL_CURRENT_PROGRAM, &current);
-    for (const auto& p : prog)
-      if (p.id() != 0 && GLuint(current) == p.id()) glUseProgram(0);
-    bool any = false;
-    for (GLuint b : buf) any = any || b != 0;
-    if (any) glDeleteBuffers(kBufCount, buf);
-  }
-
-  std::string preamble() const {
-    std::string s = "#version 430\n";
-    s += "#define SP_PARTICLES " + std::to_string(cap_p) + "\n";
-    s += "#define SP_BODIES " + std::to_string(cap_b) + "\n";
-    s += "#define SP_CELLS " + std::to_string(cap_cells) + "\n";
-    s += "#define SP_SCAN_BLOCKS " + std::to_string(scan_blocks_cap) + "\n";
-    s += "#define SP_K " + std::to_string(K) + "\n";
-    s += "#define SP_WG " + std::to_string(wg) + "\n";
-    s += "#define SP_STATUS_WORDS " + std::to_string(kStatusWords) + "\n";
-    s += "#define SP_BODY_GRANULE " + std::to_string(unsigned(kBodyGranule)) + "u\n";
-    s += "#define SP_BODY_STATIC " + std::to_string(unsigned(kBodyStatic)) + "u\n";
-    s += "#define SP_BODY_KINEMATIC " + std::to_string(unsigned(kBodyKinematic)) + "u\n";
-    s += "#define SP_BODY_DYNAMIC " + std::to_string(unsigned(kBodyDynamic)) + "u\n";
-    s += "// generated from particles/fields.hpp (particles/gpu/layout.hpp)\n";
-    s += glsl_block(kParticleFields, "ParticlesA", "P", kBindP, std::size_t(cap_p));
-    s += glsl_block(kParticleFields, "ParticlesB", "Pn", kBindPn, std::size_t(cap_p));
-    s += glsl_block(kBodyFields, "Bodies", "B", kBindB, std::size_t(cap_b));
-    s += "#define SP_COPY_PARTICLE(to, dst, from, src) " + glsl_copy_all(kParticleFields, "to", "dst", "from", "src") + "\n";
-    s += "#line 1 1\n";
-    return s;
-  }
-
-  void size_grid() {
-    h = 2.0f * r_max + skin;
-    const float inv_h = 1.0f / h;
-    Vec3 ext = def.bounds_max - def.bounds_min;
-    gx = std::max(1, int(std::ceil(ext.x * inv_h)));
-    gy = std::max(1, int(std::ceil(ext.y * inv_h)));
-    gz = std::max(1, int(std::ceil(ext.z * inv_h)));
-  }
-  int cells() const { return gx * gy * gz; }
-
-  void bind_all() {
-    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, kBindP, buf[kP0 + cur_p]);
-    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, kBindPn, buf[kP0 + 1 - cur_p]);
-    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, kBindB, buf[kB]);
-    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, kBindG, buf[kG]);
-    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, kBindSIn, buf[kS0 + cur_s]);
-    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, kBindSOut, buf[kS0 + 1 - cur_s]);
-    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, kBindW, buf[kW]);
-    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, kBindS, buf[kSort]);
-  }
-
-  // Uniforms that change only with the grid or never: set on every program.
-  void set_static_uniforms() {
-    const Material& m = def.material;
-    const float cn0 = float(2.0 * double(zeta) * std::sqrt(double(m.normal_stiffness)));
-    for (auto& p : prog) {
-      GLuint id = p.id();
-      auto loc = [&](const char* n) { return glGetUniformLocation(id, n); };
-      glProgramUniform1ui(id, loc("u_cells"), GLuint(cells()));
-      glProgramUniform3i(id, loc("u_grid"), gx, gy, gz);
-      glProgramUniform3f(id, loc("u_bmin"), def.bounds_min.x, def.bounds_min.y, def.bounds_min.z);
-      glProgramUniform3f(id, loc("u_bmax"), def.bounds_max.x, def.bounds_max.y, def.bounds_max.z);
-      glProgramUniform1f(id, loc("u_inv_h"), 1.0f / h);
-      glProgramUniform1ui(id, loc("u_blocks"), GLuint((cells() + kScanBlock - 1) / kScanBlock));
-      glProgramUniform1f(id, loc("u_kn"), m.normal_stiffness);
-      glProgramUniform1f(id, loc("u_cn0"), cn0);
-      glProgramUniform1f(id, loc("u_kt"), m.normal_stiffness * m.tangential_stiffness_ratio);
-      glProgramUniform1f(id, loc("u_ctr"), m.tangential_damping_ratio);
-      glProgramUniform1f(id, loc("u_mu"), m.friction);
-      glProgramUniform1f(id, loc("u_kb"), m.bell_shear_viscosity);
-      glProgramUniform1i(id, loc("u_bell"), m.shear == ShearLaw::BellVelocityCapped ? 1 : 0);
-      glProgramUniform1f(id, loc("u_floor_y"), def.floor_height);
-      glProgramUniform1i(id, loc("u_walls"), def.side_walls ? 1 : 0);
-      glProgramUniform3f(id, loc("u_gravity"), gravity.x, gravity.y, gravity.z);
-      glProgramUniform1f(id, loc("u_reach"), shape.centre_distance + shape.radius);
-      glProgramUniform1f(id, loc("u_resort_d2"), 0.25f * skin * skin);
-      glProgramUniform1f(id, loc("u_half_skin"), 0.5f * skin);
-      const TerrainGrid& t = def.terrain;
-      glProgramUniform1i(id, loc("u_terrain"), t.empty() ? 0 : 1);
-      glProgramUniform2i(id, loc("u_tn"), t.nx, t.nz);
-      glProgramUniform2f(id, loc("u_t0"), t.x0, t.z0);
-      glProgramUniform1f(id, loc("u_tspacing"), t.spacing);
-      glProgramUniform4f(id, loc("u_fill"), t.fill_min_x, t.fill_min_z, t.fill_max_x, t.fill_max_z);
-    }
-  }
-  // The terrain heights after the sort arrays (common.glsl: Sort.terrain).
-  void upload_terrain() {
-    if (def.terrain.empty()) return;
-    glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
-    write(kSort, sort_terrain_offset(), def.terrain.heights.size() * 4, def.terrain.heights.data());
-  }
-  void set_counts() {
-    for (auto& p : prog) {
-      glProgramUniform1ui(p.id(), glGetUniformLocation(p.id(), "u_np"), GLuint(np_gpu));
-      glProgramUniform1ui(p.id(), glGetUniformLocation(p.id(), "u_nb"), GLuint(nb_gpu));
-    }
-  }
-
-  void dispatch(Kernel k, int items, int per_group) {
-    if (items <= 0) return;
-    std::chrono::steady_clock::time_point t0;
-    if (opt.profile) {
-      glFinish();
-      t0 = std::chrono::steady_clock::now();
-    }
-    glUseProgram(prog[k].id());
-    glDispatchCompute(GLuint((items + per_group - 1) / per_group), 1, 1);
-    glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
-    if (opt.profile) {
-      glFinish();
-      kernel_seconds[k] += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    }
-  }
-
-  // A grid kernel with the arguments grid_decide.comp wrote (0 workgroups: no re-sort).
-  void dispatch_indirect(Kernel k) {
-    std::chrono::steady_clock::time_point t0;
-    if (opt.profile) {
-      glFinish();
-      t0 = std::chrono::steady_clock::now();
-    }
-    glUseProgram(prog[k].id());
-    glDispatchComputeIndirect(GLintptr(4 * (8 + 3 * (k - kGridCount))));
-    glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
-    if (opt.profile) {
-      glFinish();
-      kernel_seconds[k] += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    }
-  }
-
-  void write(Buf b, std::size_t offset, std::size_t bytes, const void* data) {
-    if (bytes == 0) return;
-    glBindBuffer(GL_COPY_WRITE_BUFFER, buf[b]);
-    glBufferSubData(GL_COPY_WRITE_BUFFER, GLintptr(offset), GLsizeiptr(bytes), data);
-  }
-  void read(Buf b, std::size_t offset, std::size_t bytes, void* out) const {
-    if (bytes == 0) return;
-    glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
-    glBindBuffer(GL_COPY_READ_BUFFER, buf[b]);
-    glGetBufferSubData(GL_COPY_READ_BUFFER, GLintptr(offset), GLsizeiptr(bytes), out);
-  }
-  Buf pcur() const { return Buf(kP0 + cur_p); }
-
-  // Bytes one staged body (with its spheres) takes to upload.
-  std::size_t body_upload_bytes(std::size_t staged_body) const {
-    return body_bytes + std::size_t(bst.count[staged_body]) * (particle_bytes + 4);
-  }
-  static constexpr std::size_t body_bytes = sum_strides(kBodyFields);
-  static constexpr std::size_t particle_bytes = sum_strides(kParticleFields);
-
-  std::size_t pending_bytes() const {
-    std::size_t n = 0;
-    for (std::size_t b = 0; b < std::size_t(nb - nb_gpu); ++b) n += body_upload_bytes(b);
-    return n;
-  }
-
-  // Uploads staged bodies in order, whole bodies only, while they fit in max_bytes (with
-  // at_least_one, the first body goes however large it is), one write per field; then
-  // rebuilds their spheres. Returns the bytes written.
-  std::size_t upload(std::size_t max_bytes, bool at_least_one = true) {
-    const std::size_t staged = std::size_t(nb - nb_gpu);
-    if (staged == 0) return 0;
-    std::size_t bn = 0, bytes = 0;
-    while (bn < staged && ((bn == 0 && at_least_one) || bytes + body_upload_bytes(bn) <= max_bytes))
-      bytes += body_upload_bytes(bn++);
-    if (bn == 0) return 0;
-    std::size_t pn = 0;
-    for (std::size_t b = 0; b < bn; ++b) pn += std::size_t(bst.count[b]);
-    glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
-    const std::size_t p0 = std::size_t(np_gpu), b0 = std::size_t(nb_gpu);
-    // new particles take sorted places np_gpu.. (their ids), until the next grid build
-#define SP_UP_P(type, name, n, hashed, unit) \
-  write(pcur(), poff(kParticle_##name) + p0 * 4 * (n), pn * 4 * (n), pst.name.data());
-    SANDPATCH_PARTICLE_FIELDS(SP_UP_P)
-#undef SP_UP_P
-#define SP_UP_B(type, name, n, hashed, unit) \
-  write(kB, boff(kBody_##name) + b0 * 4 * (n), bn * 4 * (n), bst.name.data());
-    SANDPATCH_BODY_FIELDS(SP_UP_B)
-#undef SP_UP_B
-    std::vector<std::int32_t> slot(pn);
-    for (std::size_t k = 0; k < pn; ++k) slot[k] = std::int32_t(p0 + k);
-    write(kSort, s_slot_of() + p0 * 4, pn * 4, slot.data());
-    const std::uint32_t one = 1;  // the new spheres are in no cell yet: re-sort
-    write(kG, 4 * 5, 4, &one);
-    // drop the uploaded part of the staging arrays
-#define SP_DROP_P(type, name, n, hashed, unit) pst.name.erase(pst.name.begin(), pst.name.begin() + pn * (n));
-    SANDPATCH_PARTICLE_FIELDS(SP_DROP_P)
-#undef SP_DROP_P
-#define SP_DROP_B(type, name, n, hashed, unit) bst.name.erase(bst.name.begin(), bst.name.begin() + bn * (n));
-    SANDPATCH_BODY_FIELDS(SP_DROP_B)
-#undef SP_DROP_B
-    np_gpu += int(pn);
-    nb_gpu += int(bn);
-    set_counts();
-    bind_all();
-    glMemoryBarrier(GL_ALL_BARRIER_BITS);
-    glProgramUniform1i(prog[kBodies].id(), glGetUniformLocation(prog[kBodies].id(), "u_mode"), 1);
-    glProgramUniform1ui(prog[kBodies].id(), glGetUniformLocation(prog[kBodies].id(), "u_first_body"), GLuint(b0));
-    dispatch(kBodies, int(bn), wg);
-    glProgramUniform1i(prog[kBodies].id(), glGetUniformLocation(prog[kBodies].id(), "u_mode"), 0);
-    glUseProgram(0);
-    return bytes;
-  }
-  void flush() {
-    while (nb_gpu < nb) upload(std::numeric_limits<std::size_t>::max());
-  }
-
-  std::uint32_t body_flags(int i) const { return host_flags[std::size_t(i)]; }
-  // Writes xyz of a vec4 body field of body i: the staged copy, or 12 bytes at its index.
-  void set_body_vec(int field, int i, const float* xyzw, std::size_t comps) {
-    if (i >= nb_gpu) {
-      std::vector<float>* a[] = {&bst.pos, &bst.quat, &bst.vel, &bst.omega};
-      const int fields[] = {kBody_pos, kBody_quat, kBody_vel, kBody_omega};
-      for (int k = 0; k < 4; ++k)
-        if (fields[k] == field)
-          for (std::size_t c = 0; c < comps; ++c) (*a[k])[4 * std::size_t(i - nb_gpu) + c] = xyzw[c];
-      return;
-    }
-    glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
-    write(kB, boff(field) + std::size_t(i) * 16, comps * 4, xyzw);
-  }
-  // Rebuilds the spheres of uploaded body i from its (just written) state, as an upload
-  // does (bodies.comp mode 1, limited to body i), and raises the re-sort flag: the spheres
-  // jumped, so the cells and the neighbour search must be rebuilt before the next contacts.
-  void rebuild_body(int i) {
-    if (i >= nb_gpu) return;  // staged: upload() rebuilds it
-    bind_all();
-    glMemoryBarrier(GL_ALL_BARRIER_BITS);
-    const GLuint bp = prog[kBodies].id();
-    glProgramUniform1i(bp, glGetUniformLocation(bp, "u_mode"), 1);
-    glProgramUniform1ui(bp, glGetUniformLocation(bp, "u_first_body"), GLuint(i));
-    glProgramUniform1ui(bp, glGetUniformLocation(bp, "u_nb"), GLuint(i + 1));
-    dispatch(kBodies, 1, wg);
-    glProgramUniform1ui(bp, glGetUniformLocation(bp, "u_nb"), GLuint(nb_gpu));
-    glProgramUniform1i(bp, glGetUniformLocation(bp, "u_mode"), 0);
-    glUseProgram(0);
-    const std::uint32_t one = 1;
-    glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
-    write(kG, 4 * 5, 4, &one);
-  }
-
-  void substep(float dt) {
-    bind_all();
-    // grid: decided on the GPU, then the counting sort by indirect dispatches
-    dispatch(kGridDecide, 1, 1);
-    glMemoryBarrier(GL_COMMAND_BARRIER_BIT);
-    glBindBuffer(GL_DISPATCH_INDIRECT_BUFFER, buf[kG]);
-    for (int k = kGridCount; k <= kGridCopyBack; ++k) dispatch_indirect(Kernel(k));
-    glBindBuffer(GL_DISPATCH_INDIRECT_BUFFER, 0);
-    glProgramUniform1f(prog[kForce].id(), glGetUniformLocation(prog[kForce].id(), "u_dt"), dt);
-    glProgramUniform1i(prog[kForce].id(), glGetUniformLocation(prog[kForce].id(), "u_first_law"),
-                       guard->contact_timing_on(dt) ? 1 : 0);
-    dispatch(kForce, np_gpu, wg);
-    cur_s = 1 - cur_s;  // the springs written become the ones read next substep
-    bind_all();
-    glProgramUniform1f(prog[kBodies].id(), glGetUniformLocation(prog[kBodies].id(), "u_dt"), dt);
-    glProgramUniform1f(prog[kBodies].id(), glGetUniformLocation(prog[kBodies].id(), "u_pred"),
-                       float(guard->velocity_predictor_gain(dt)));
-    dispatch(kBodies, nb_gpu, wg);
-  }
-
-  // Appends a body and its spheres to the staging arrays (caller checked capacities).
-  int push_body(std::uint32_t flags, Vec3 x, Quat q, Vec3 v, Vec3 w, float mass, float invm, Vec3 inv_inertia,
-                const Vec3* offsets, const float* radii, int count, bool one_radius) {
-    const int i = nb++;
-    const std::size_t bi = std::size_t(i - nb_gpu);
-    bst.push_zero();
-    put3(bst.pos, bi, x);
-    Quat qn = normalized(q);
-    bst.quat[4 * bi] = qn.x;
-    bst.quat[4 * bi + 1] = qn.y;
-    bst.quat[4 * bi + 2] = qn.z;
-    bst.quat[4 * bi + 3] = qn.w;
-    put3(bst.vel, bi, v);
-    put3(bst.omega, bi, w);
-    bst.mass[4 * bi] = mass;
-    bst.mass[4 * bi + 1] = invm;
-    put3(bst.inv_inertia, bi, inv_inertia);
-    bst.flags[bi] = flags;
-    host_flags.push_back(flags);
-    bst.first[bi] = np;
-    bst.count[bi] = count;
-    for (int k = 0; k < count; ++k) {
-      const int s = np++;
-      const std::size_t si = std::size_t(s - np_gpu);
-      pst.push_zero();
-      pst.id[si] = s;
-      pst.body[si] = i;
-      put3(pst.offset, si, offsets[k]);
-      pst.pos[4 * si + 3] = one_radius ? radii[0] : radii[k];
-    }
-    asleep = false;
-    below_time = 0;
-    return i;
-  }
-
-  Vec3 body_vec(int field, BodyId b) const {
-    float v[4] = {};
-    if (b.index < 0 || b.index >= nb) return {};
-    if (b.index >= nb_gpu) {  // still staged: not simulated yet
-      const std::size_t k = std::size_t(b.index - nb_gpu);
-      const std::vector<float>* a[] = {&bst.pos, &bst.quat, &bst.vel, &bst.omega, &bst.force, &bst.torque};
-      const int fields[] = {kBody_pos, kBody_quat, kBody_vel, kBody_omega, kBody_force, kBody_torque};
-      for (int i = 0; i < 6; ++i)
-        if (fields[i] == field) return {(*a[i])[4 * k], (*a[i])[4 * k + 1], (*a[i])[4 * k + 2]};
-      return {};
-    }
-    read(kB, boff(field) + std::size_t(b.index) * 16, 16, v);
-    return {v[0], v[1], v[2]};
-  }
-  // Particle field (vec4) in stable-id order.
-  std::vector<Vec3> by_id(int field) const {
-    const_cast<Impl*>(this)->flush();
-    std::vector<float> a(std::size_t(np) * 4);
-    std::vector<std::int32_t> slot(np);
-    read(pcur(), poff(field), a.size() * 4, a.data());
-    read(kSort, s_slot_of(), slot.size() * 4, slot.data());
-    std::vector<Vec3> out(np);
-    for (int id = 0; id < np; ++id) {
-      const std::size_t s = std::size_t(slot[id]);
-      out[id] = {a[4 * s], a[4 * s + 1], a[4 * s + 2]};
-    }
-    return out;
-  }
-
-  // Checks the generated layout against the offsets the driver assigned.
-  Status check_layout() const {
-    auto check = [&](GLuint program, const std::string& block, std::string_view field, std::size_t want) -> Status {
-      const std::string name = block + "." + std::string(field) + "[0]";
-      GLuint idx = glGetProgramResourceIndex(program, GL_BUFFER_VARIABLE, name.c_str());
-      if (idx == GL_INVALID_INDEX) return Ok{};  // not reported by this driver: nothing to compare
-      const GLenum props[1] = {GL_OFFSET};
-      GLint got = -1;
-      glGetProgramResourceiv(program, GL_BUFFER_VARIABLE, idx, 1, props, 1, nullptr, &got);
-      if (std::size_t(got) != want)
-        return Error{"", "std430 layout of " + name, std::to_string(got),
-                     "the driver's offset must equal the generated offset " + std::to_string(want),
-                     "particles/gpu/layout.hpp and the driver disagree"};
-      return Ok{};
-    };
-    for (int f = 0; f < kParticleFieldCount; ++f)
-      if (auto st = check(prog[kGridGather].id(), "ParticlesA", kParticleFields[f].name, poff(f)); !st) return st;
-    for (int f = 0; f < kBodyFieldCount; ++f)
-      if (auto st = check(prog[kBodies].id(), "Bodies", kBodyFields[f].name, boff(f)); !st) return st;
-    return Ok{};
-  }
-};
 
 // ---------------------------------------------------------------------------------------
 GlSimulation::GlSimulation(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
@@ -606,7 +149,7 @@ Result<GlSimulation> GlSimulation::create(const SimulationDef& d, const GlOption
   const std::size_t P = std::size_t(s.cap_p);
   s.buf_bytes[Impl::kP0] = s.buf_bytes[Impl::kP1] = std430_size(kParticleFields, P);
   s.buf_bytes[Impl::kB] = std430_size(kBodyFields, std::size_t(s.cap_b));
-  s.buf_bytes[Impl::kG] = 4 * (kStatusWords + std::size_t(s.cap_cells) + 1 + std::size_t(s.cap_cells) + s.scan_blocks_cap);
+  s.buf_bytes[Impl::kG] = sizeof(physics::DemStatus) + 4 * (std::size_t(s.cap_cells) + 1 + std::size_t(s.cap_cells) + s.scan_blocks_cap);
   s.buf_bytes[Impl::kS0] = s.buf_bytes[Impl::kS1] = round_up(4 * P, 16) + 16 * P * std::size_t(s.K);
   s.buf_bytes[Impl::kW] = round_up(4 * P, 16) + 16 * P * kWallSlots;
   s.buf_bytes[Impl::kSort] = s.sort_terrain_offset() + 4 * std::max<std::size_t>(s.cap_terrain, 1);
@@ -624,16 +167,7 @@ Result<GlSimulation> GlSimulation::create(const SimulationDef& d, const GlOption
                    "must fit the driver's GL_MAX_SHADER_STORAGE_BLOCK_SIZE = " + format_number(double(max_block)) + " bytes",
                    "lower the capacity named"};
 
-  // programs: generated preamble + common.glsl + kernel
-  const std::string pre = s.preamble() + std::string(shaders::source("dem/common.glsl")) + "\n#line 1 2\n";
-  for (int k = 0; k < kKernelCount; ++k) {
-    std::string_view src = shaders::source(kKernelFile[k]);
-    if (src.empty()) return Error{"", std::string("shaders/") + kKernelFile[k], "missing", "must be embedded", ""};
-    auto p = gl::Program::compute(std::string("shaders/") + kKernelFile[k], pre + std::string(src));
-    if (!p) return p.errors();
-    s.prog[k] = std::move(*p);
-  }
-  if (auto st = s.check_layout(); !st) return st.errors();
+  if (auto st = s.build_programs(); !st) return st.errors();
 
   // buffers, zeroed (spring counts, wall masks and cell counts start at 0)
   glGenBuffers(Impl::kBufCount, s.buf);
@@ -747,20 +281,18 @@ Status GlSimulation::set_body_enabled(BodyId id, bool enabled) {
   if (id.index < 0 || id.index >= s.nb)
     return Error{"", "set_body_enabled.body", std::to_string(id.index), "must be a body of this simulation", ""};
   std::uint32_t f = s.body_flags(id.index);
-  const std::uint32_t motion = kBodyStatic | kBodyKinematic | kBodyDynamic;
   const bool parked = f & kBodyParked;
   if (enabled == !parked) return Ok{};
   if (!enabled) {
-    f = (f & ~motion) | kBodyStatic | kBodyParked | ((f & motion) << 8);
-    const SimulationDef& d = s.def;
-    const float far[3] = {0.5f * (d.bounds_min.x + d.bounds_max.x), d.bounds_max.y + 1000.0f,
-                          0.5f * (d.bounds_min.z + d.bounds_max.z)};
+    f = parked_flags(f);  // dem_control.hpp, as the CPU backend
+    const Vec3 pk = parking_position(s.def);
+    const float far[3] = {pk.x, pk.y, pk.z};
     const float zero[3] = {0, 0, 0};
     s.set_body_vec(kBody_pos, id.index, far, 3);
     s.set_body_vec(kBody_vel, id.index, zero, 3);
     s.set_body_vec(kBody_omega, id.index, zero, 3);
   } else {
-    f = (f & ~(motion | kBodyParked | (motion << 8))) | ((f >> 8) & motion);
+    f = unparked_flags(f);
   }
   s.host_flags[std::size_t(id.index)] = f;
   if (id.index >= s.nb_gpu) {
@@ -796,15 +328,13 @@ Status GlSimulation::step(double dt_frame) {
     // only the kinematic shells move and time advances; if so, wake and step.
     bool touch = false;
     if (s.has_moving_kinematic && s.np_gpu > 0) {
-      const std::uint32_t zero = 0;
-      glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
-      s.write(Impl::kG, 4 * 7, 4, &zero);
+      s.set_status_word(offsetof(physics::DemStatus, kinematic_touch), 0);
       s.bind_all();
       const GLuint tp = s.prog[kKinematicTouch].id();
       glProgramUniform1f(tp, glGetUniformLocation(tp, "u_dt"), float(dt_frame));
       s.dispatch(kKinematicTouch, s.np_gpu, s.wg);
       std::uint32_t flag = 0;
-      s.read(Impl::kG, 4 * 7, 4, &flag);
+      s.read(Impl::kG, offsetof(physics::DemStatus, kinematic_touch), 4, &flag);
       touch = flag != 0;
       if (!touch) {
         const GLuint bp = s.prog[kBodies].id();
@@ -828,45 +358,41 @@ Status GlSimulation::step(double dt_frame) {
     s.time += dt_frame;
     return Ok{};
   }
-  std::uint32_t status[8] = {};
+  // the status block's counters (physics::DemStatus): zeroed for this frame, except the re-sort
+  // flag, which carries over
+  physics::DemStatus status{};
   glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
-  s.write(Impl::kG, 0, 5 * 4, status);  // words 0-4; word 5 (re-sort flag) carries over
-  s.write(Impl::kG, 6 * 4, 4, status);
+  s.write(Impl::kG, 0, offsetof(physics::DemStatus, resort), &status);
+  s.write(Impl::kG, offsetof(physics::DemStatus, grid_rebuilds), 4, &status.grid_rebuilds);
   const float dt = float(dt_frame / *ns);
   for (int k = 0; k < *ns; ++k) {
     if (k + 1 == *ns) {  // the counters describe the last substep, as on the CPU
       glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
-      const std::uint32_t z[3] = {0, 0, 0};
-      s.write(Impl::kG, 8, 12, z);
-      std::uint32_t z0 = 0;
-      s.write(Impl::kG, 0, 4, &z0);
+      constexpr std::size_t first = offsetof(physics::DemStatus, max_partners);
+      s.write(Impl::kG, first, offsetof(physics::DemStatus, resort) - first, &status.max_partners);
+      s.write(Impl::kG, offsetof(physics::DemStatus, max_granule_speed), 4, &status.max_granule_speed);
     }
     s.substep(dt);
     s.time += dt;
   }
   glUseProgram(0);
-  s.read(Impl::kG, 0, sizeof status, status);
+  s.read(Impl::kG, 0, offsetof(physics::DemStatus, grid_dispatch), &status);
   float vmax;
-  std::memcpy(&vmax, &status[0], 4);
+  std::memcpy(&vmax, &status.max_granule_speed, 4);
   s.last_vmax = vmax;
-  s.stats.contacts = status[3];
-  s.stats.wall_contacts = status[4];
-  s.stats.resorts = int(status[6]);
-  if (status[1] > 0)
-    return Error{"", "step", "NaN", std::to_string(status[1]) + " bodies became non-finite in the integrate stage",
+  s.stats.contacts = status.contacts;
+  s.stats.wall_contacts = status.plane_contacts;
+  s.stats.resorts = int(status.grid_rebuilds);
+  if (status.nonfinite_bodies > 0)
+    return Error{"", "step", "NaN", std::to_string(status.nonfinite_bodies) + " bodies became non-finite in the integrate stage",
                  "reduce the frame dt or material.normal_stiffness, or check the inputs"};
-  // (the slots hold the springs and, with either law, which contacts are not new: force.comp)
-  if (int(status[2]) > s.K)
+  // (the slots hold the springs and which contacts are not new: force.comp)
+  if (int(status.max_partners) > s.K)
     return Error{"", "GlOptions.max_contacts_per_sphere", std::to_string(s.K),
-                 "is full: a sphere touched " + std::to_string(status[2]) + " partners at once; raise max_contacts_per_sphere",
+                 "is full: a sphere touched " + std::to_string(status.max_partners) + " partners at once; raise max_contacts_per_sphere",
                  "the springs beyond the capacity restarted from zero this frame, and those contacts were "
                  "treated as new (first-substep dashpot)"};
-  if (vmax < s.def.sleep_speed) {
-    s.below_time += dt_frame;
-    if (s.below_time >= s.def.sleep_time && s.def.sleep_time > 0) s.asleep = true;
-  } else {
-    s.below_time = 0;
-  }
+  update_sleep(s.def, vmax, dt_frame, s.below_time, s.asleep);  // dem_control.hpp, as the CPU backend
   return Ok{};
 }
 
@@ -921,26 +447,44 @@ std::uint64_t GlSimulation::state_hash() const {
   Hasher h;
   h.pod(s.nb);
   h.pod(s.np);
-#define SP_HASH_B(type, name, n, hashed, unit)                                                  \
-  if (hashed) {                                                                                 \
+#define SP_HASH_B(type, name, n, hashed, backend, unit)                                         \
+  SANDPATCH_FIELD_ON(GL, backend, if (hashed) {                                                  \
     std::vector<type> a(std::size_t(s.nb) * (n));                                               \
     s.read(Impl::kB, s.boff(kBody_##name), a.size() * sizeof(type), a.data());                  \
     h.bytes(a.data(), a.size() * sizeof(type));                                                 \
-  }
+  })
   SANDPATCH_BODY_FIELDS(SP_HASH_B)
 #undef SP_HASH_B
   std::vector<std::int32_t> slot(s.np);
   s.read(Impl::kSort, s.s_slot_of(), slot.size() * 4, slot.data());
-#define SP_HASH_P(type, name, n, hashed, unit)                                                  \
-  if (hashed) {                                                                                 \
+#define SP_HASH_P(type, name, n, hashed, backend, unit)                                         \
+  SANDPATCH_FIELD_ON(GL, backend, if (hashed) {                                                  \
     std::vector<type> a(std::size_t(s.np) * (n)), b(a.size());                                  \
     s.read(s.pcur(), s.poff(kParticle_##name), a.size() * sizeof(type), a.data());              \
     for (int id = 0; id < s.np; ++id)                                                           \
       for (int c = 0; c < (n); ++c) b[std::size_t(id) * (n) + c] = a[std::size_t(slot[id]) * (n) + c]; \
     h.bytes(b.data(), b.size() * sizeof(type));                                                 \
-  }
+  })
   SANDPATCH_PARTICLE_FIELDS(SP_HASH_P)
 #undef SP_HASH_P
+  // The contact history (fields.hpp: the GL keeps it by particle id in buffers of its own
+  // layout, common.glsl): each sphere's plane mask and 6 plane springs, then its pair springs
+  // (count, and the slots in use: xi bits and partner id) as the next substep reads them.
+  {
+    const std::size_t n = std::size_t(s.np), head = round_up(4 * std::size_t(s.cap_p), 16);
+    std::vector<std::uint32_t> mask(n), wxi(n * 4 * kWallSlots), count(n), slots(n * 4 * std::size_t(s.K));
+    s.read(Impl::kW, 0, mask.size() * 4, mask.data());
+    s.read(Impl::kW, head, wxi.size() * 4, wxi.data());
+    h.bytes(mask.data(), mask.size() * 4);
+    h.bytes(wxi.data(), wxi.size() * 4);
+    const Impl::Buf springs = Impl::Buf(Impl::kS0 + s.cur_s);
+    s.read(springs, 0, count.size() * 4, count.data());
+    s.read(springs, head, slots.size() * 4, slots.data());
+    for (std::size_t id = 0; id < n; ++id) {
+      h.pod(count[id]);
+      h.bytes(&slots[id * 4 * std::size_t(s.K)], 16 * std::size_t(count[id]));
+    }
+  }
   return h.value();
 }
 

@@ -36,7 +36,7 @@ namespace sandpatch::gpu {
 
 struct GlOptions {
   // Contact slots per sphere (partners touching at once): the tangential spring, and which
-  // contacts are not new (the first-substep dashpot, either shear law). 12 equal spheres can
+  // contacts are not new (the first-substep dashpot). 12 equal spheres can
   // touch one (kissing number); a granule's own 3 are not contacts. More simultaneous
   // contacts than this are reported by step() as an Error naming this field.
   int max_contacts_per_sphere = 16;
@@ -45,7 +45,7 @@ struct GlOptions {
   // 0 = everything. Bodies not uploaded yet are not simulated (their queries return the
   // values they were added with).
   std::size_t upload_bytes_per_step = 0;
-  bool upload_in_step = true;  // false: only upload() uploads (GlPool budgets its frames)
+  bool upload_in_step = true;  // false: only upload() uploads (the caller budgets its frames)
   bool profile = false;        // time every dispatch (glFinish around it; slows the step)
 };
 
@@ -82,7 +82,7 @@ class GlSimulation {
 
   // Empties the simulation and takes a new definition that must fit the capacities it was
   // created with (max_bodies, max_particles, grid cells); errors name the capacity to raise
-  // as capacity_prefix + field (e.g. "GlPoolDef.capacity."). GPU memory is kept.
+  // as capacity_prefix + field (default "SimulationDef."). GPU memory is kept.
   Status reset(const SimulationDef& def, const char* capacity_prefix = "SimulationDef.");
 
   // Advances dt_frame in substeps_for(dt_frame) equal substeps (the CPU backend's guard).

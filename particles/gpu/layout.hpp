@@ -48,21 +48,22 @@ constexpr std::string_view glsl_type() {
   else static_assert(sizeof(T) == 0, "fields.hpp: field type must be float, int32_t or uint32_t");
 }
 
-#define SP_GPU_FIELD(type, name, n, hashed, unit) \
-  Std430Field{#name, glsl_type<type, n>(), n, std::size_t(4 * (n)), std::size_t((n) == 4 ? 16 : 4)},
+// (the GL backend's fields only: SANDPATCH_FIELD_ON(GL, ...))
+#define SP_GPU_FIELD(type, name, n, hashed, backend, unit) \
+  SANDPATCH_FIELD_ON(GL, backend, Std430Field{#name, glsl_type<type, n>(), n, std::size_t(4 * (n)), std::size_t((n) == 4 ? 16 : 4)},)
 inline constexpr std::array kParticleFields{SANDPATCH_PARTICLE_FIELDS(SP_GPU_FIELD)};
 inline constexpr std::array kBodyFields{SANDPATCH_BODY_FIELDS(SP_GPU_FIELD)};
 #undef SP_GPU_FIELD
 
 // Field indices, generated: kParticle_pos, kParticle_vel, ..., kBody_pos, ...
 enum ParticleField : int {
-#define SP_GPU_PIDX(type, name, n, hashed, unit) kParticle_##name,
+#define SP_GPU_PIDX(type, name, n, hashed, backend, unit) SANDPATCH_FIELD_ON(GL, backend, kParticle_##name,)
   SANDPATCH_PARTICLE_FIELDS(SP_GPU_PIDX)
 #undef SP_GPU_PIDX
   kParticleFieldCount
 };
 enum BodyField : int {
-#define SP_GPU_BIDX(type, name, n, hashed, unit) kBody_##name,
+#define SP_GPU_BIDX(type, name, n, hashed, backend, unit) SANDPATCH_FIELD_ON(GL, backend, kBody_##name,)
   SANDPATCH_BODY_FIELDS(SP_GPU_BIDX)
 #undef SP_GPU_BIDX
   kBodyFieldCount

@@ -1,12 +1,12 @@
-// Body stage (dem.cpp `bodies`): each body sums its own spheres' forces and torques in
+// Body stage (dem_bodies.cpp `bodies`): each body sums its own spheres' forces and torques in
 // sphere-id order, integrates (symplectic Euler; normalised quaternion), and rebuilds its
 // spheres' positions and velocities. u_mode = 1 only rebuilds the spheres of bodies
 // [u_first_body, u_nb) (after an upload); u_mode = 2 only moves the kinematic bodies by u_dt
-// (an asleep frame, dem.cpp move_kinematic).
+// (an asleep frame, dem_bodies.cpp move_kinematic).
 //   v += dt (F/m + g);  w += dt I^-1 (T - w x I w) (body frame; isotropic granules skip
 //   the gyroscopic term);  x += dt v;  q += dt/2 (w, 0) q, normalised
 // The spheres get the velocity predicted to the next contact stage's time, v + u_pred dt a
-// with a = (v - v_old)/dt this substep's acceleration, translation only (dem.cpp `bodies`;
+// with a = (v - v_old)/dt this substep's acceleration, translation only (dem_bodies.cpp `bodies`;
 // u_pred = Simulation::velocity_predictor_gain; zero when a body is only rebuilt, modes 1, 2).
 layout(local_size_x = SP_WG) in;
 
@@ -55,7 +55,7 @@ void main() {
     B.pos[b].xyz = xk;
     B.quat[b] = q;
     rebuild(b, xk, q, v, w, invm);
-    atomicOr(G.status[5], 1u);  // moved: re-sort when awake
+    atomicOr(G.status.resort, 1u);  // moved: re-sort when awake
     return;
   }
   vec3 F = vec3(0.0), T = vec3(0.0);
@@ -84,14 +84,14 @@ void main() {
     B.vel[b].xyz = v;
     B.omega[b].xyz = w;
     if ((fl & SP_BODY_GRANULE) != 0u)
-      atomicMax(G.status[0], floatBitsToUint(sqrt(dot(v, v)) + sqrt(dot(w, w)) * u_reach));
+      atomicMax(G.status.max_granule_speed, floatBitsToUint(sqrt(dot(v, v)) + sqrt(dot(w, w)) * u_reach));
   }
   const vec3 xn = x + u_dt * v;
   const vec4 qd = quat_mul(vec4(w, 0.0), q);
   q = quat_normalized(q + 0.5 * u_dt * qd);
   const float chk = xn.x + xn.y + xn.z + v.x + v.y + v.z + w.x + w.y + w.z + q.w;
-  if (isnan(chk) || isinf(chk)) atomicAdd(G.status[1], 1u);
+  if (isnan(chk) || isinf(chk)) atomicAdd(G.status.nonfinite_bodies, 1u);
   B.pos[b].xyz = xn;
   B.quat[b] = q;
-  if (rebuild(b, xn, q, v + u_pred * (v - v_old), w, invm) > u_resort_d2) atomicOr(G.status[5], 1u);
+  if (rebuild(b, xn, q, v + u_pred * (v - v_old), w, invm) > u_resort_d2) atomicOr(G.status.resort, 1u);
 }

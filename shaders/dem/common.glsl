@@ -1,6 +1,7 @@
 // Shared helpers of the granule DEM kernels (shaders/dem/*.comp). Prepended after the
-// generated preamble (particles/gpu/gl_simulation.cpp: #version, capacities, the std430
-// blocks generated from particles/fields.hpp, BodyFlags) and before each kernel.
+// generated preamble (particles/gpu/gl_programs.cpp: #version, capacities, the std430
+// blocks generated from particles/fields.hpp, BodyFlags) and physics_common.glsl (the
+// physics shared with the CPU backend, and the status block), before each kernel.
 //
 // Buffer bindings (all std430; every kernel declares all of them, uses a few):
 //   0 P    particles, current (cell-sorted) order        generated from fields.hpp
@@ -11,15 +12,11 @@
 //   5 SOut tangential springs written this substep
 //   6 W    boundary-plane springs (by particle id, 6 planes each)
 //   7 S    sort bookkeeping: slot_of (id -> sorted index), cell_of, order; terrain heights
-// Math follows particles/math.hpp and contact.hpp operation by operation.
+// Math follows particles/math.hpp operation by operation; the contact law, terrain and
+// boundary planes are physics_common.glsl's, the CPU backend's own source.
 
 layout(std430, binding = 3) buffer Grid {
-  // status: [0] max granule speed (float bits; speeds >= 0 order like their bits),
-  // [1] non-finite bodies, [2] most touching partners of one sphere, [3] sphere-sphere
-  // contacts (pairs, owner side as the CPU counts), [4] plane contacts, [5] re-sort needed
-  // (a sphere moved more than skin/2 since the last sort, or spheres were added), [6] grid
-  // rebuilds this frame; [8 + 3k ..] dispatch-indirect arguments of grid kernel k
-  uint status[SP_STATUS_WORDS];
+  DemStatus status;  // physics_common.glsl; read back by the host after each frame
   uint cell_start[SP_CELLS + 1];
   uint cell_count[SP_CELLS];
   uint block_sum[SP_SCAN_BLOCKS];
@@ -37,6 +34,8 @@ layout(std430, binding = 7) buffer Sort {
   float terrain[];
 } S;
 
+float terrain_sample(int k) { return S.terrain[k]; }  // physics_common.glsl's SP_TERRAIN_AT
+
 uniform uint u_np;          // live particles
 uniform uint u_nb;          // live bodies
 uniform uint u_cells;       // gx * gy * gz (<= SP_CELLS)
@@ -45,7 +44,7 @@ uniform vec3 u_bmin;        // bounds_min (m)
 uniform vec3 u_bmax;        // bounds_max (m)
 uniform float u_inv_h;      // 1 / cell size (1/m)
 
-// Cell coordinate of one axis, clamped to the grid (dem.cpp cell_coord).
+// Cell coordinate of one axis, clamped to the grid (dem_impl.hpp cell_coord).
 int cell_coord(float v, float lo, int n) {
   int c = int(floor((v - lo) * u_inv_h));
   return c < 0 ? 0 : (c >= n ? n - 1 : c);

@@ -1,5 +1,5 @@
-// Asleep simulations (dem.cpp kinematic_touch): would a moving kinematic sphere, moved by
-// the frame's dt, come within contact range + skin/2 of a dynamic sphere? Then status[7] = 1
+// Asleep simulations (dem_grid.cpp kinematic_touch): would a moving kinematic sphere, moved by
+// the frame's dt, come within contact range + skin/2 of a dynamic sphere? Then status.kinematic_touch = 1
 // and the simulation wakes. The grid is still valid: the dynamic spheres have not moved
 // since it was built (less than skin/2), so the 27 cells around the moved sphere hold them.
 layout(local_size_x = SP_WG) in;
@@ -28,7 +28,7 @@ void main() {
         if (P.vel[j].w == 0.0) continue;  // not dynamic
         const vec3 d = xs - P.pos[j].xyz;
         const float rs = r + P.pos[j].w + u_half_skin;
-        if (dot(d, d) < rs * rs) atomicOr(G.status[7], 1u);
+        if (dot(d, d) < rs * rs) atomicOr(G.status.kinematic_touch, 1u);
       }
     }
 }

@@ -69,7 +69,7 @@ inline BedResult run_bed(ShearLaw law, int n, int layers, double settle, double 
   r.surface = int(surf.size());
   std::printf("bed %s %dx%dx%d settle %.2f s window %.2f s: speed after settling %.3g m/s, at end %.3g m/s; "
               "surface drift max %.3g d, mean %.3g d (%d granules)\n",
-              law == ShearLaw::SpringHistory ? "spring-history" : "bell", n, n, layers, settle, window,
+              "spring-history", n, n, layers, settle, window,
               r.settled_speed, r.final_speed, r.drift_max / 0.01, r.drift_mean / 0.01, r.surface);
   return r;
 }

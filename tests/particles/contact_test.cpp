@@ -11,6 +11,7 @@
 
 #include "particles/dem.hpp"
 #include "tests/particles/head_on.hpp"
+#include "tests/particles/textbook_law.hpp"
 
 namespace sandpatch {
 namespace {
@@ -22,7 +23,7 @@ double sphere_mass() { return kRho * 4.0 / 3.0 * std::numbers::pi * kR * kR * kR
 
 // Normal force is never attractive: a fast separating contact gives f_n = 0, not < 0.
 TEST(ContactLaw, NeverAttractive) {
-  ContactParams p{1000, 10, 300, 5, 0.5f, 2, 1e-4f, false};
+  ContactParams p{1000, 10, 300, 5, 0.5f, 1e-4f, false};
   Vec3 xi{};
   ContactForce f = contact_force(p, {0, 1, 0}, 1e-4f, {0, 10, 0}, xi);  // separating at 10 m/s
   EXPECT_EQ(f.f.y, 0.0f);
@@ -37,7 +38,7 @@ TEST(ContactLaw, NeverAttractive) {
 // with the sign of v.n, i.e. the impulse c_n (delta + |v.n| dt/2) from the touch to half a step
 // past the substep's time; ongoing contacts keep c_n v.n; the force is never attractive.
 TEST(ContactLaw, FirstSubstepDashpot) {
-  ContactParams p{1000, 10, 300, 5, 0.5f, 2, 1e-4f, false};
+  ContactParams p{1000, 10, 300, 5, 0.5f, 1e-4f, false};
   p.new_contact = true;
   Vec3 xi{};
   // approaching at 1 m/s, delta = 2.5e-5 m < |v| dt = 1e-4 m: f_n = 1000*2.5e-5 + 10*(0.25 + 0.5) = 7.525 N
@@ -60,7 +61,7 @@ TEST(ContactLaw, FirstSubstepDashpot) {
 
 // Spring law: xi grows by v_t dt while it sticks, then is capped at mu f_n (slip).
 TEST(ContactLaw, SpringStickThenSlip) {
-  ContactParams p{1000, 0, 300, 0, 0.5f, 0, 1e-3f, false};
+  ContactParams p{1000, 0, 300, 0, 0.5f, 1e-3f, false};
   Vec3 xi{};
   // f_n = 1000 * 1e-3 = 1 N; cap 0.5 N; v_t = 0.1 m/s -> after one step xi = 1e-4, f_t = -0.03
   ContactForce f = contact_force(p, {0, 1, 0}, 1e-3f, {0.1f, 0, 0}, xi);
@@ -75,18 +76,6 @@ TEST(ContactLaw, SpringStickThenSlip) {
   f = contact_force(p, n, 1e-3f, {0, 0, 0}, xi);
   EXPECT_NEAR(dot(xi, n), 0.0f, 1e-7f);
   EXPECT_NEAR(length(xi), len, len * 1e-5f);
-}
-
-// Bell's law: f_t = -min(mu f_n, k_b |v_t|) v_t/|v_t|.
-TEST(ContactLaw, BellVelocityCapped) {
-  ContactParams p{1000, 0, 0, 0, 0.5f, 2, 1e-3f, true};
-  Vec3 xi{};
-  ContactForce f = contact_force(p, {0, 1, 0}, 1e-3f, {0.1f, 0, 0}, xi);  // k_b v = 0.2 < 0.5
-  EXPECT_NEAR(f.ft.x, -0.2f, 1e-6f);
-  f = contact_force(p, {0, 1, 0}, 1e-3f, {1.0f, 0, 0}, xi);  // capped at 0.5
-  EXPECT_NEAR(f.ft.x, -0.5f, 1e-6f);
-  f = contact_force(p, {0, 1, 0}, 1e-3f, {0, 0, 0}, xi);  // at rest: no shear force at all
-  EXPECT_EQ(f.ft.x, 0.0f);
 }
 
 // Head-on collision (tests/particles/head_on.hpp): two single-sphere shells, or one sphere
@@ -131,7 +120,7 @@ TEST_P(HeadOn, RestitutionAndContactTime) {
   RecordProperty("e_measured_max", std::to_string(h.e_hi));
   std::printf("%s e %.2f, dt = t_clamped/%d: zeta %.4f (textbook %.4f); measured e %.4f..%.4f (%+.2f%%..%+.2f%%), "
               "contact %.4f..%.4f/w0 (clamped theory %.4f/w0, %+.2f%%..%+.2f%%; textbook t_c %.4f/w0)\n",
-              c.floor ? "floor" : "pair ", c.e, c.steps_per_contact, zeta, textbook_damping_ratio(c.e), h.e_lo, h.e_hi,
+              c.floor ? "floor" : "pair ", c.e, c.steps_per_contact, zeta, testutil::textbook_damping_ratio(c.e), h.e_lo, h.e_hi,
               100 * (h.e_lo / c.e - 1), 100 * (h.e_hi / c.e - 1), h.t_lo / h.t_unit, h.t_hi / h.t_unit,
               h.t_clamped / h.t_unit, 100 * (h.t_lo / h.t_clamped - 1), 100 * (h.t_hi / h.t_clamped - 1),
               tc_textbook / h.t_unit);
@@ -173,7 +162,7 @@ LawRun head_on_law(double e, int N, bool fixed) {
   const float v0 = 0.2f;
   LawRun out;
   for (int phase = 0; phase < 32; ++phase) {
-    ContactParams p{mat.normal_stiffness, float(cn), 0, 0, 0, 0, dt, false};
+    ContactParams p{mat.normal_stiffness, float(cn), 0, 0, 0, dt, false};
     float xa = 0, xb = float(2 * kR) + 1e-5f + phase / 32.0f * 2 * v0 * dt, va = v0, vb = -v0;
     float va_old = va, vb_old = vb;  // velocities before the last kick: a_prev = (v - v_old)/dt
     double gap_prev = xb - xa - 2 * kR, t = 0, t_in = -1, t_out = -1;
@@ -303,12 +292,5 @@ TEST(Friction, SpringsSurviveListRebuilds) {
   EXPECT_LT(std::abs(r.drift), 0.001 * 2 * kR);
 }
 
-// Bell's velocity-capped law cannot stick: at 20 deg the plate creeps at the speed where
-// 9 k_b v = M g sin(theta), i.e. v = m_s g sin(theta) / k_b (within 5%).
-TEST(Friction, BellLawCreepsBelowFrictionAngle) {
-  Incline r = run_incline(20.0, ShearLaw::BellVelocityCapped, 0.5, 1.5);
-  double v = sphere_mass() * 9.81 * std::sin(20.0 * std::numbers::pi / 180) / Material{}.bell_shear_viscosity;
-  EXPECT_NEAR(r.drift / 1.0, v, 0.05 * v);
-}
 
 }  // namespace sandpatch

@@ -1,6 +1,7 @@
 // Material formulas (particles/material.cpp): each case checks a closed form or an
 // independent numerical integration.
 #include "particles/material.hpp"
+#include "tests/particles/textbook_law.hpp"
 
 #include <gtest/gtest.h>
 
@@ -54,11 +55,11 @@ TEST(Material, DampingRatioInvertsClampedLaw) {
 // The textbook pair zeta(e) <-> e(zeta) (kept for the peer) round-trips to round-off.
 TEST(Material, TextbookRoundTrip) {
   for (double e : {0.05, 0.1, 0.3, 0.5, 0.9, 0.999}) {
-    double z = textbook_damping_ratio(e);
-    EXPECT_NEAR(textbook_restitution(z), e, 1e-12) << e;
+    double z = testutil::textbook_damping_ratio(e);
+    EXPECT_NEAR(testutil::textbook_restitution(z), e, 1e-12) << e;
   }
-  EXPECT_EQ(textbook_damping_ratio(1.0), 0.0);
-  EXPECT_TRUE(std::isinf(textbook_contact_time(1.0, 1.0, 1.0)));
+  EXPECT_EQ(testutil::textbook_damping_ratio(1.0), 0.0);
+  EXPECT_TRUE(std::isinf(testutil::textbook_contact_time(1.0, 1.0, 1.0)));
 }
 
 // The peer's parameters: k_n = 3292 N/m, e = 0.3 through the TEXTBOOK mapping, m_eff = m/2 of
@@ -68,8 +69,8 @@ TEST(Material, TextbookRoundTrip) {
 TEST(Material, PeerContactTime) {
   Material m;
   double ms = 2500.0 * 4.0 / 3.0 * std::numbers::pi * 0.005 * 0.005 * 0.005;
-  double zt = textbook_damping_ratio(0.3);
-  EXPECT_NEAR(textbook_contact_time(zt, m.normal_stiffness, ms / 2), 1.5e-3, 1.5e-3 * 0.01);
+  double zt = testutil::textbook_damping_ratio(0.3);
+  EXPECT_NEAR(testutil::textbook_contact_time(zt, m.normal_stiffness, ms / 2), 1.5e-3, 1.5e-3 * 0.01);
   EXPECT_NEAR(2 * zt * std::sqrt(m.normal_stiffness / (ms / 2)), 1605.0, 1605.0 * 0.01);
   EXPECT_NEAR(normal_damping(m, ms / 2) / (ms / 2), 2230.0, 2230.0 * 0.01);
 }
@@ -92,7 +93,7 @@ TEST(Material, ClampedLawClosedForms) {
     ASSERT_LT(e, prev) << z;
     prev = e;
   }
-  double z9 = textbook_damping_ratio(0.9);
+  double z9 = testutil::textbook_damping_ratio(0.9);
   EXPECT_NEAR(clamped_restitution(z9), 0.9, 0.9 * 0.003);
   Material m;
   m.restitution = 1.0f;

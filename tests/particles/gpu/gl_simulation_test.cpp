@@ -148,7 +148,6 @@ void forces_match(ShearLaw law) {
 }
 
 TEST(GlSimulation, ForcesMatchCpuOnRandomConfiguration) { forces_match(ShearLaw::SpringHistory); }
-TEST(GlSimulation, ForcesMatchCpuOnRandomConfigurationBell) { forces_match(ShearLaw::BellVelocityCapped); }
 
 // Head-on collision through the GL backend (tests/particles/head_on.hpp; the CPU's
 // HeadOn.RestitutionAndContactTime): at dt = t_clamped/50, for e = 0.1, 0.5, 0.9, sphere pairs

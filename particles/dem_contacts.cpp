@@ -1,0 +1,194 @@
+// Granule DEM, CPU backend: the contact stage's pair pass (dem.hpp step 3). Each pair is
+// computed once with the contact law of shaders/dem/physics_common.glsl (particles/contact.hpp),
+// or 8 at a time by the AVX2 kernel (contact_avx2.cpp, checked against it by
+// tests/particles/contact_avx2_test.cpp), and added to both spheres' sums. dem_impl.hpp.
+#include "particles/dem_impl.hpp"
+
+#include <cstdlib>
+#include <cstring>
+
+#include "particles/contact.hpp"
+#include "particles/contact_simd.hpp"
+
+namespace sandpatch {
+
+bool simd::use_avx2_pair_kernel() {
+#ifdef SANDPATCH_AVX2_KERNEL
+  const char* k = std::getenv("SANDPATCH_DEM_KERNEL");
+  return simd::avx2_available() && !(k && std::strcmp(k, "scalar") == 0);
+#else
+  return false;
+#endif
+}
+
+// ---- contact stage, pair pass: each pair is computed once, by its owner's entry, and added
+// to both spheres' sums (acc; read by gather_sphere in the body stage), slab by slab
+void Simulation::Impl::contacts(float dt) {
+  const Material& mat = def.material;
+  const float kn = mat.normal_stiffness;
+  const float cn0 = float(2.0 * zeta * std::sqrt(double(mat.normal_stiffness)));  // c_n = cn0 sqrt(m_eff)
+  const float kt = mat.normal_stiffness * mat.tangential_stiffness_ratio;
+  const float ctr = mat.tangential_damping_ratio;
+  const float mu = mat.friction;
+  const float* P = p.pos.data();
+  const float* V = p.vel.data();
+  const float* W = p.omega.data();
+  const std::int32_t* NS = nstart.data();
+  const std::int32_t* NB = nbr.data();
+  const std::int32_t* CS = chunk_start.data();
+  const int nchunks = int(chunk_start.size()) - 1;
+  float* XI = pairs.xi.data();
+  float* ACC = acc.data()->v;
+  std::uint8_t* TCH = pairs.touch.data();
+  std::int64_t npairs = 0;
+  const int n = np;
+  law = {kn, cn0, kt, ctr, mu};  // for gather_sphere
+
+  // not touching: the spring is forgotten
+  auto part = [&](int e, float* xe) __attribute__((always_inline)) {
+    TCH[e] = 0;
+    if (xe[0] != 0.0f || xe[1] != 0.0f || xe[2] != 0.0f) xe[0] = xe[1] = xe[2] = 0.0f;
+  };
+  // the pair's force f on i (N) and n x f_t (N) into both sums: i gets +f, j gets -f, both
+  // + n x f_t (their torques about their centres are -r_i and -r_j times it)
+  auto add_pair = [&](int i, int j, __m128 f4, __m128 c4) __attribute__((always_inline)) {
+    float* ai = ACC + kAcc * std::size_t(i);
+    float* aj = ACC + kAcc * std::size_t(j);
+    _mm_storeu_ps(ai, _mm_add_ps(_mm_loadu_ps(ai), f4));
+    _mm_storeu_ps(ai + 4, _mm_add_ps(_mm_loadu_ps(ai + 4), c4));
+    _mm_storeu_ps(aj, _mm_sub_ps(_mm_loadu_ps(aj), f4));
+    _mm_storeu_ps(aj + 4, _mm_add_ps(_mm_loadu_ps(aj + 4), c4));
+  };
+#pragma omp parallel num_threads(threads) if (n > 4096)
+  {
+  if (simd_pairs) {
+  // pair pass, AVX2: the same walk; touching pairs are collected per thread into batches of
+  // 8 and evaluated by the kernel (same results, contact_simd.hpp), then added to the sums in
+  // pair order (the pass reads no sum, so the additions are those of the scalar pass). A
+  // slab is one task, its last batch evaluated before the slab ends.
+  const simd::PairLaw plaw{kn, cn0, kt, ctr, mu, dt};
+  simd::PairBatch bt;
+  int bi[simd::kPairLanes], bj[simd::kPairLanes];
+  auto flush = [&]() {
+    const int cnt = bt.count;
+    for (int k = cnt; k < simd::kPairLanes; ++k) {  // idle lanes: a copy of lane 0
+      bt.dx[k] = bt.dx[0], bt.dy[k] = bt.dy[0], bt.dz[k] = bt.dz[0], bt.d2[k] = bt.d2[0], bt.rs[k] = bt.rs[0];
+      bt.dux[k] = bt.dux[0], bt.duy[k] = bt.duy[0], bt.duz[k] = bt.duz[0];
+      bt.rwx[k] = bt.rwx[0], bt.rwy[k] = bt.rwy[0], bt.rwz[k] = bt.rwz[0];
+      bt.invm[k] = bt.invm[0], bt.newc[k] = bt.newc[0];
+      bt.xix[k] = bt.xix[0], bt.xiy[k] = bt.xiy[0], bt.xiz[k] = bt.xiz[0];
+    }
+#ifdef SANDPATCH_AVX2_KERNEL
+    simd::spring_pairs_avx2(plaw, bt);
+#endif
+    for (int k = 0; k < cnt; ++k) {
+      float* xe = XI + 3 * std::size_t(bt.entry[k]);
+      xe[0] = bt.xix[k], xe[1] = bt.xiy[k], xe[2] = bt.xiz[k];
+      add_pair(bi[k], bj[k], _mm_setr_ps(bt.fx[k], bt.fy[k], bt.fz[k], 0.0f),
+               _mm_setr_ps(bt.cx[k], bt.cy[k], bt.cz[k], 0.0f));
+    }
+    bt.count = 0;
+  };
+  for (int parity = 0; parity < 2; ++parity) {
+#pragma omp for schedule(dynamic, 1) reduction(+ : npairs)
+  for (int c = parity; c < nchunks; c += 2) {
+    bt.count = 0;
+    for (int i = CS[c], i1 = CS[c + 1]; i < i1; ++i) {
+      const int e0 = NS[i], e1 = NS[i + 1];
+      if (e0 == e1) continue;
+      const Vec3 pi{P[4 * i], P[4 * i + 1], P[4 * i + 2]};
+      const float ri = P[4 * i + 3];
+      const Vec3 ui{V[4 * i], V[4 * i + 1], V[4 * i + 2]};
+      const float invm_i = V[4 * i + 3];
+      const Vec3 rwi = ri * Vec3{W[4 * i], W[4 * i + 1], W[4 * i + 2]};
+      for (int e = e0; e < e1; ++e) {
+        const int j = NB[e];
+        const float dx = pi.x - P[4 * j], dy = pi.y - P[4 * j + 1], dz = pi.z - P[4 * j + 2];
+        const float rj = P[4 * j + 3];
+        const float rs = ri + rj;
+        const float d2 = dx * dx + dy * dy + dz * dz;
+        float* xe = XI + 3 * std::size_t(e);
+        if (d2 >= rs * rs || d2 <= 0.0f) {
+          part(e, xe);
+          continue;
+        }
+        ++npairs;
+        const int k = bt.count++;
+        const Vec3 du = ui - Vec3{V[4 * j], V[4 * j + 1], V[4 * j + 2]};
+        const Vec3 rw = rwi + rj * Vec3{W[4 * j], W[4 * j + 1], W[4 * j + 2]};
+        bt.dx[k] = dx, bt.dy[k] = dy, bt.dz[k] = dz, bt.d2[k] = d2, bt.rs[k] = rs;
+        bt.dux[k] = du.x, bt.duy[k] = du.y, bt.duz[k] = du.z;
+        bt.rwx[k] = rw.x, bt.rwy[k] = rw.y, bt.rwz[k] = rw.z;
+        bt.invm[k] = invm_i + V[4 * j + 3];
+        bt.newc[k] = first_law && TCH[e] == 0 ? 1.0f : 0.0f;  // first substep (ContactParams::new_contact)
+        TCH[e] = 1;
+        bt.xix[k] = xe[0], bt.xiy[k] = xe[1], bt.xiz[k] = xe[2];
+        bt.entry[k] = e;
+        bi[k] = i, bj[k] = j;
+        if (bt.count == simd::kPairLanes) flush();
+      }
+    }
+    if (bt.count > 0) flush();
+  }
+  }
+  } else {
+  // pair pass: each entry computes its pair once
+  for (int parity = 0; parity < 2; ++parity) {
+#pragma omp for schedule(dynamic, 1) reduction(+ : npairs)
+  for (int c = parity; c < nchunks; c += 2) {
+  for (int i = CS[c], i1 = CS[c + 1]; i < i1; ++i) {
+    const int e0 = NS[i], e1 = NS[i + 1];
+    if (e0 == e1) continue;
+    const Vec3 pi{P[4 * i], P[4 * i + 1], P[4 * i + 2]};
+    const float ri = P[4 * i + 3];
+    const Vec3 ui{V[4 * i], V[4 * i + 1], V[4 * i + 2]};
+    const float invm_i = V[4 * i + 3];
+    const Vec3 rwi = ri * Vec3{W[4 * i], W[4 * i + 1], W[4 * i + 2]};
+    float last_invm_j = -1.0f, last_cn = 0.0f;
+    for (int e = e0; e < e1; ++e) {
+      const int j = NB[e];
+      const float dx = pi.x - P[4 * j], dy = pi.y - P[4 * j + 1], dz = pi.z - P[4 * j + 2];
+      const float rj = P[4 * j + 3];
+      const float rs = ri + rj;
+      const float d2 = dx * dx + dy * dy + dz * dz;
+      float* xe = XI + 3 * std::size_t(e);
+      if (d2 >= rs * rs || d2 <= 0.0f) {
+        part(e, xe);
+        continue;
+      }
+      ++npairs;
+      const float inv = 1.0f / std::sqrt(d2);
+      const float dist = d2 * inv;
+      const Vec3 nrm{dx * inv, dy * inv, dz * inv};
+      const Vec3 uj{V[4 * j], V[4 * j + 1], V[4 * j + 2]};
+      const Vec3 rwj = rj * Vec3{W[4 * j], W[4 * j + 1], W[4 * j + 2]};
+      // contact-point velocity (physics_common.glsl); the spheres' velocities are the
+      // bodies' predicted to this substep's time (`bodies`)
+      const Vec3 v = physics::pair_contact_velocity(ui, uj, nrm, rwi + rwj);
+      // c_n = 2 zeta sqrt(k_n m_eff); granule beds repeat the same mass pair, so the
+      // last value is reused when the partner's inverse mass is the same
+      const float invm_j = V[4 * j + 3];
+      if (invm_j != last_invm_j) {
+        last_invm_j = invm_j;
+        last_cn = cn0 / std::sqrt(invm_i + invm_j);
+      }
+      const float cn = last_cn;
+      Vec3 xi{xe[0], xe[1], xe[2]};  // zero for a new contact; carried over on rebuilds
+      const ContactParams cp{kn, cn, kt, ctr * cn, mu, dt, first_law && TCH[e] == 0};  // new_contact: first substep
+      TCH[e] = 1;
+      ContactForce cf = contact_force(cp, nrm, rs - dist, v, xi);
+      xe[0] = xi.x;
+      xe[1] = xi.y;
+      xe[2] = xi.z;
+      add_pair(i, j, from_vec3(cf.f), from_vec3(cross(nrm, cf.ft)));
+    }
+  }
+  }
+  }
+  }  // scalar pair pass
+  }  // omp parallel
+  stats.contacts = npairs;
+  stats.neighbour_entries = nstart.empty() ? 0 : nstart[np];
+}
+
+}  // namespace sandpatch

@@ -1,0 +1,182 @@
+// Granule DEM, CPU backend: the cell grid (cell = 2 r_max + skin), the counting sort of the
+// spheres by cell and the Verlet neighbour list with its contact history carried over by
+// partner id (dem.hpp steps 2; dem_impl.hpp).
+#include "particles/dem_impl.hpp"
+
+#include <algorithm>
+#include <cassert>
+
+namespace sandpatch {
+
+// ---- setup
+void Simulation::Impl::size_grid() {
+  h = 2.0f * r_max + skin;
+  inv_h = 1.0f / h;
+  Vec3 ext = def.bounds_max - def.bounds_min;
+  gx = std::max(1, int(std::ceil(ext.x * inv_h)));
+  gy = std::max(1, int(std::ceil(ext.y * inv_h)));
+  gz = std::max(1, int(std::ceil(ext.z * inv_h)));
+  cell_start.assign(std::size_t(gx) * gy * gz + 1, 0);
+  need_sort = true;
+}
+
+// Counting sort of the particles by cell (stable, serial: deterministic), permuting every
+// particle field, then the neighbour list is rebuilt and the springs carried over.
+void Simulation::Impl::sort() {
+  std::vector<std::int32_t> old_slot(slot_of.begin(), slot_of.begin() + np);
+  std::fill(cell_start.begin(), cell_start.end(), 0);
+  std::vector<std::int32_t> c(np);
+  for (int s = 0; s < np; ++s) {
+    c[s] = cell_of(ld3(p.pos, s));
+    cell_start[c[s] + 1]++;
+  }
+  for (std::size_t i = 1; i < cell_start.size(); ++i) cell_start[i] += cell_start[i - 1];
+  std::vector<std::int32_t> fill(cell_start.begin(), cell_start.end() - 1), dest(np);
+  for (int s = 0; s < np; ++s) dest[s] = fill[c[s]]++;
+  auto permute = [&](auto& arr, int n) {
+    auto tmp = arr;
+    for (int s = 0; s < np; ++s)
+      for (int k = 0; k < n; ++k) tmp[std::size_t(dest[s]) * n + k] = arr[std::size_t(s) * n + k];
+    arr.swap(tmp);
+  };
+#define SP_PERMUTE(type, name, n, hashed, backend, unit) SANDPATCH_FIELD_ON(CPU, backend, permute(p.name, n);)
+  SANDPATCH_PARTICLE_FIELDS(SP_PERMUTE)
+  SANDPATCH_SPHERE_CONTACT_FIELDS(SP_PERMUTE)
+#undef SP_PERMUTE
+  cell.resize(np);
+  for (int s = 0; s < np; ++s) cell[dest[s]] = c[s];
+  for (int s = 0; s < np; ++s) slot_of[p.id[s]] = s;
+  pos_at_sort.assign(p.pos.begin(), p.pos.end());
+  {
+    std::vector<std::uint8_t> seen(nb, 0);
+    body_order.clear();
+    body_order.reserve(nb);
+    for (int s2 = 0; s2 < np; ++s2)
+      if (!seen[p.body[s2]]) {
+        seen[p.body[s2]] = 1;
+        body_order.push_back(p.body[s2]);
+      }
+    for (int i = 0; i < nb; ++i)  // bodies without spheres (none today) keep their place at the end
+      if (!seen[i]) body_order.push_back(i);
+  }
+  // slabs of two z-layers of cells (the pair pass's chunks)
+  chunk_start.clear();
+  for (int z = 0; z < gz; z += 2) chunk_start.push_back(cell_start[std::size_t(z) * gx * gy]);
+  chunk_start.push_back(np);
+  // the sums are zero between substeps (the body stage zeroes what it reads; this also clears
+  // what a step that failed half-way left)
+  std::fill(acc.begin(), acc.begin() + np, SphereSums{});
+  need_sort = false;
+  stats.resorts++;
+  build_list(old_slot);
+}
+
+// Visits the spheres j of other bodies within r_i + r_j + skin of sphere i, in a fixed
+// order (cells z, y, x, then sorted index).
+template <class F>
+void Simulation::Impl::for_near(int i, F&& f) const {
+  const float* P = p.pos.data();
+  const Vec3 pi{P[4 * i], P[4 * i + 1], P[4 * i + 2]};
+  const float ri = P[4 * i + 3];
+  const std::int32_t bi = p.body[i];
+  const bool dyn_i = p.vel[4 * i + 3] > 0.0f;
+  const int c = cell[i];
+  const int cx = c % gx, cy = (c / gx) % gy, cz = c / (gx * gy);
+  const int x0 = cx > 0 ? cx - 1 : 0, x1 = cx < gx - 1 ? cx + 1 : gx - 1;
+  for (int zz = (cz > 0 ? cz - 1 : 0); zz <= (cz < gz - 1 ? cz + 1 : gz - 1); ++zz)
+    for (int yy = (cy > 0 ? cy - 1 : 0); yy <= (cy < gy - 1 ? cy + 1 : gy - 1); ++yy) {
+      const int row = (zz * gy + yy) * gx;
+      for (int j = cell_start[row + x0], j1 = cell_start[row + x1 + 1]; j < j1; ++j) {
+        const float dx = pi.x - P[4 * j], dy = pi.y - P[4 * j + 1], dz = pi.z - P[4 * j + 2];
+        const float rs = ri + P[4 * j + 3] + skin;
+        if (dx * dx + dy * dy + dz * dz >= rs * rs || p.body[j] == bi) continue;
+        if (!dyn_i && p.vel[4 * j + 3] == 0.0f) continue;  // neither moves under forces
+        f(j);
+      }
+    }
+}
+
+// Rebuilds the CSR neighbour list (two parallel passes: count, fill) and carries each
+// pair's spring over from the old list (found by partner id).
+void Simulation::Impl::build_list(const std::vector<std::int32_t>& old_slot) {
+  std::vector<std::int32_t> ostart, onbr_id;
+  PairArrays old;
+  ostart.swap(nstart);
+  onbr_id.swap(nbr_id);
+  old.swap(pairs);
+  const int n = np;
+  const int old_np = ostart.empty() ? 0 : int(ostart.size()) - 1;
+  nstart.assign(n + 1, 0);
+  // i owns the pair with j: a static partner has no list, else the lower stable id
+  auto owns = [&](int i, int j) { return (b.flags[p.body[j]] & kBodyStatic) || p.id[i] < p.id[j]; };
+#pragma omp parallel for num_threads(threads) schedule(dynamic, 256) if (n > 4096)
+  for (int i = 0; i < n; ++i) {
+    if (b.flags[p.body[i]] & kBodyStatic) continue;
+    int cnt = 0;
+    for_near(i, [&](int j) { cnt += owns(i, j); });
+    nstart[i + 1] = cnt;
+  }
+  for (int i = 0; i < n; ++i) nstart[i + 1] += nstart[i];
+  nbr.resize(nstart[n]);
+  nbr_id.resize(nstart[n]);
+  pairs.assign(std::size_t(nstart[n]));
+#pragma omp parallel for num_threads(threads) schedule(dynamic, 256) if (n > 4096)
+  for (int i = 0; i < n; ++i) {
+    if (b.flags[p.body[i]] & kBodyStatic) continue;
+    int e = nstart[i];
+    const int id = p.id[i];
+    const int oi = id < int(old_slot.size()) ? old_slot[id] : -1;
+    const bool has_old = oi >= 0 && oi < old_np;
+    for_near(i, [&](int j) {
+      if (!owns(i, j)) return;
+      nbr[e] = j;
+      nbr_id[e] = p.id[j];
+      if (has_old)
+        for (int k = ostart[oi]; k < ostart[oi + 1]; ++k)
+          if (onbr_id[k] == p.id[j]) {
+            pairs.xi[3 * e] = old.xi[3 * k];
+            pairs.xi[3 * e + 1] = old.xi[3 * k + 1];
+            pairs.xi[3 * e + 2] = old.xi[3 * k + 2];
+            pairs.touch[e] = old.touch[k];
+            break;
+          }
+      ++e;
+    });
+    assert(e == nstart[i + 1]);
+  }
+}
+
+// Asleep: move the kinematic bodies; true if one of their spheres would touch a dynamic one.
+bool Simulation::Impl::kinematic_touch(double dt) {
+  for (int i = 0; i < nb; ++i) {
+    if (!(b.flags[i] & kBodyKinematic)) continue;
+    Vec3 v = ld3(b.vel, i), w = ld3(b.omega, i);
+    if (dot(v, v) == 0.0f && dot(w, w) == 0.0f) continue;
+    Vec3 x = ld3(b.pos, i) + float(dt) * v;
+    Quat q = ldq(b.quat, i);
+    Quat qd = Quat{w.x, w.y, w.z, 0} * q;
+    float hd = 0.5f * float(dt);
+    q = normalized(Quat{q.x + hd * qd.x, q.y + hd * qd.y, q.z + hd * qd.z, q.w + hd * qd.w});
+    for (int k = 0; k < b.count[i]; ++k) {
+      int s = slot_of[b.first[i] + k];
+      Vec3 xs = x + rotate(q, ld3(p.offset, s));
+      float r = p.pos[4 * s + 3];
+      int c = cell_of(xs);
+      int cx = c % gx, cy = (c / gx) % gy, cz = c / (gx * gy);
+      for (int zz = std::max(0, cz - 1); zz <= std::min(gz - 1, cz + 1); ++zz)
+        for (int yy = std::max(0, cy - 1); yy <= std::min(gy - 1, cy + 1); ++yy)
+          for (int xx = std::max(0, cx - 1); xx <= std::min(gx - 1, cx + 1); ++xx) {
+            int cc = (zz * gy + yy) * gx + xx;
+            for (int j = cell_start[cc]; j < cell_start[cc + 1]; ++j) {
+              if (p.vel[4 * j + 3] == 0.0f) continue;
+              Vec3 d = xs - ld3(p.pos, j);
+              float rs = r + p.pos[4 * j + 3] + 0.5f * skin;
+              if (dot(d, d) < rs * rs) return true;
+            }
+          }
+    }
+  }
+  return false;
+}
+
+}  // namespace sandpatch

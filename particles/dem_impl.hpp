@@ -1,0 +1,347 @@
+// The CPU backend's internal state (Simulation::Impl) and the helpers its files share; the
+// step's stages are listed in dem.hpp. Internal to particles/: the backend is split by
+// responsibility into
+//   dem.cpp             Simulation's methods: create, add bodies, step and substep, queries,
+//                       energies, state hash, control from the terrain manager
+//   dem_grid.cpp        cell grid, counting sort, Verlet neighbour list (and its spring carry-over)
+//   dem_contacts.cpp    contact stage, pair pass (scalar, or 8 pairs at a time by the AVX2 kernel)
+//   dem_bodies.cpp      body stage: sphere sums, integration, sphere rebuild; push_body
+//   dem_boundaries.cpp  boundary planes and terrain (shaders/dem/physics_common.glsl)
+//   dem_guard.cpp       step-size and overlap guards, contact timing (velocity predictor)
+// The physics shared with the GL kernels is particles/dem_physics.hpp; the host-side rules
+// shared with the GL backend (parking, sleep timer) are particles/dem_control.hpp.
+#pragma once
+
+#include <xmmintrin.h>
+
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <limits>
+#include <vector>
+
+#include "common/error.hpp"
+#include "particles/dem.hpp"
+#include "particles/dem_physics.hpp"
+#include "particles/fields.hpp"
+
+namespace sandpatch {
+
+// Tangential springs against the boundaries, per sphere: floor, walls x0, x1, z0, z1, terrain
+// (the plane slots of physics_common.glsl).
+constexpr int kWallSlots = physics::kPlaneSlots;
+// Per sphere, the pair pass's sums (kAcc floats; Simulation::Impl::acc): contact force (N) in 0-2,
+// the sum of n x f_t (N) in 4-6 (the torque about the centre is -r times it); 3 and 7 stay 0.
+constexpr std::size_t kAcc = 8;
+
+// Structure-of-arrays generated from fields.hpp, the CPU's fields only (the GL backend's
+// per-sphere force sums are neither allocated nor sorted here): a field of n components is
+// (cap x n). The particle arrays include the per-sphere contact history (the boundary-plane
+// springs), so the sort permutes it with them.
+struct ParticleArrays {
+#define SP_DECL(type, name, n, hashed, backend, unit) SANDPATCH_FIELD_ON(CPU, backend, std::vector<type> name;)
+  SANDPATCH_PARTICLE_FIELDS(SP_DECL)
+  SANDPATCH_SPHERE_CONTACT_FIELDS(SP_DECL)
+#undef SP_DECL
+  void resize(std::size_t cap) {
+#define SP_RESIZE(type, name, n, hashed, backend, unit) SANDPATCH_FIELD_ON(CPU, backend, name.assign(cap * (n), type{});)
+    SANDPATCH_PARTICLE_FIELDS(SP_RESIZE)
+    SANDPATCH_SPHERE_CONTACT_FIELDS(SP_RESIZE)
+#undef SP_RESIZE
+  }
+};
+
+struct BodyArrays {
+#define SP_DECL(type, name, n, hashed, backend, unit) SANDPATCH_FIELD_ON(CPU, backend, std::vector<type> name;)
+  SANDPATCH_BODY_FIELDS(SP_DECL)
+#undef SP_DECL
+  void resize(std::size_t cap) {
+#define SP_RESIZE(type, name, n, hashed, backend, unit) SANDPATCH_FIELD_ON(CPU, backend, name.assign(cap * (n), type{});)
+    SANDPATCH_BODY_FIELDS(SP_RESIZE)
+#undef SP_RESIZE
+  }
+};
+
+// The contact history of the neighbour list, one element per list entry (fields.hpp
+// SANDPATCH_PAIR_CONTACT_FIELDS), carried over by partner id when the list is rebuilt.
+struct PairArrays {
+#define SP_DECL(type, name, n, hashed, backend, unit) SANDPATCH_FIELD_ON(CPU, backend, std::vector<type> name;)
+  SANDPATCH_PAIR_CONTACT_FIELDS(SP_DECL)
+#undef SP_DECL
+  void assign(std::size_t entries) {
+#define SP_RESIZE(type, name, n, hashed, backend, unit) SANDPATCH_FIELD_ON(CPU, backend, name.assign(entries * (n), type{});)
+    SANDPATCH_PAIR_CONTACT_FIELDS(SP_RESIZE)
+#undef SP_RESIZE
+  }
+  void swap(PairArrays& o) {
+#define SP_SWAP(type, name, n, hashed, backend, unit) SANDPATCH_FIELD_ON(CPU, backend, name.swap(o.name);)
+    SANDPATCH_PAIR_CONTACT_FIELDS(SP_SWAP)
+#undef SP_SWAP
+  }
+};
+
+inline Vec3 ld3(const std::vector<float>& a, std::size_t i) { return {a[4 * i], a[4 * i + 1], a[4 * i + 2]}; }
+inline void st3(std::vector<float>& a, std::size_t i, Vec3 v) {
+  a[4 * i] = v.x;
+  a[4 * i + 1] = v.y;
+  a[4 * i + 2] = v.z;
+}
+inline Quat ldq(const std::vector<float>& a, std::size_t i) {
+  return {a[4 * i], a[4 * i + 1], a[4 * i + 2], a[4 * i + 3]};
+}
+inline void stq(std::vector<float>& a, std::size_t i, Quat q) {
+  a[4 * i] = q.x;
+  a[4 * i + 1] = q.y;
+  a[4 * i + 2] = q.z;
+  a[4 * i + 3] = q.w;
+}
+
+// Vec3 formulas in 4-wide SSE2 registers (x, y, z, lane 3): every lane does the float
+// operations of math.hpp's formula in its order, so the results are the same bit for bit.
+inline __m128 xyz_mask() { return _mm_castsi128_ps(_mm_setr_epi32(-1, -1, -1, 0)); }
+inline __m128 xyz0(__m128 a) { return _mm_and_ps(a, xyz_mask()); }  // lane 3 = +0
+// lanes x, y, z of a and lane 3 of keep (a field's 4th component is stored back unchanged)
+inline __m128 xyz_keep_w(__m128 a, __m128 keep) {
+  return _mm_or_ps(_mm_and_ps(xyz_mask(), a), _mm_andnot_ps(xyz_mask(), keep));
+}
+// cross(a, b) of math.hpp: lane k = a_(k+1) b_(k+2) - a_(k+2) b_(k+1); lane 3 = a3 b3 - a3 b3
+inline __m128 cross4(__m128 a, __m128 b) {
+  const __m128 a_yzx = _mm_shuffle_ps(a, a, _MM_SHUFFLE(3, 0, 2, 1)), a_zxy = _mm_shuffle_ps(a, a, _MM_SHUFFLE(3, 1, 0, 2));
+  const __m128 b_yzx = _mm_shuffle_ps(b, b, _MM_SHUFFLE(3, 0, 2, 1)), b_zxy = _mm_shuffle_ps(b, b, _MM_SHUFFLE(3, 1, 0, 2));
+  return _mm_sub_ps(_mm_mul_ps(a_yzx, b_zxy), _mm_mul_ps(a_zxy, b_yzx));
+}
+inline Vec3 to_vec3(__m128 a) {
+  alignas(16) float f[4];
+  _mm_store_ps(f, a);
+  return {f[0], f[1], f[2]};
+}
+inline __m128 from_vec3(Vec3 v) { return _mm_setr_ps(v.x, v.y, v.z, 0.0f); }
+// Orientation after dt (s) at angular velocity w (rad/s, world frame): q + (dt/2) (w, 0) q,
+// normalised (the body stage's integrator, granules' and shells').
+inline Quat advance_orientation(Quat q, Vec3 w, float dt) {
+  const Quat qd = Quat{w.x, w.y, w.z, 0.0f} * q;
+  return normalized(Quat{q.x + 0.5f * dt * qd.x, q.y + 0.5f * dt * qd.y, q.z + 0.5f * dt * qd.z, q.w + 0.5f * dt * qd.w});
+}
+// dot(a, a) of math.hpp: (x x + y y) + z z
+inline float norm2(__m128 a) {
+  const __m128 aa = _mm_mul_ps(a, a);
+  return (_mm_cvtss_f32(aa) + _mm_cvtss_f32(_mm_shuffle_ps(aa, aa, 1))) + _mm_cvtss_f32(_mm_shuffle_ps(aa, aa, 2));
+}
+
+struct Simulation::Impl {
+  SimulationDef def;
+  GranuleShape shape;
+  Vec3 gravity;            // sim units, m/s^2
+  int threads = 1;
+  // The pair pass evaluates touching pairs 8 at a time with the AVX2 kernel of
+  // contact_avx2.cpp (same results bit for bit as contact_force, contact_simd.hpp) when the
+  // CPU has AVX2; SANDPATCH_DEM_KERNEL=scalar forces the scalar path (tests run on both),
+  // =avx2 asks for the kernel (ignored without AVX2).
+  bool simd_pairs = false;
+
+  // bodies (creation order) and particles (cell-sorted order)
+  int nb = 0, np = 0;
+  BodyArrays b;
+  ParticleArrays p;
+  std::vector<std::int32_t> slot_of;   // particle id -> sorted index
+  std::vector<std::int32_t> cell;      // sorted index -> cell at the last sort
+  std::vector<float> pos_at_sort;      // sorted index -> xyz (stride 4) at the last sort
+  // Bodies in the order of their first sphere in the sorted particle order (set by sort()):
+  // the body stage walks them in this order so that consecutive bodies reach spheres that are
+  // close in memory (a 64,000-sphere bed does not fit in L2). Each body's sums do not depend
+  // on the order, so neither do the results.
+  std::vector<std::int32_t> body_order;
+  bool need_sort = true;
+  float shape_offsets[16] = {};        // the granule's 4 sphere offsets (x, y, z, 0), m, body frame
+
+  // Verlet neighbour list (CSR, sorted order, no cap), one entry per pair: for sphere i the
+  // entries [nstart[i], nstart[i+1]) hold every sphere j of another body with
+  // |x_i - x_j| < r_i + r_j + skin at the last rebuild for which i is the pair's owner: the
+  // sphere with the lower stable id, or the only side with a list (a static partner has none).
+  // Each entry carries the pair's tangential spring (3 floats).
+  std::vector<std::int32_t> nstart;    // np + 1
+  std::vector<std::int32_t> nbr;       // sorted index of the partner
+  std::vector<std::int32_t> nbr_id;    // stable id of the partner (history carry-over)
+  // The pairs' contact history (fields.hpp): xi, the tangential spring (3 per entry, m), and
+  // touch, 1 if the pair touched at the last substep (a touching pair without it is in its
+  // first substep, new_contact).
+  PairArrays pairs;
+  // The pair pass computes each pair once and adds its result to both spheres' sums in acc
+  // (kAcc per sphere, sorted order; the body stage reads and zeroes them). No atomics and the
+  // same order of additions for any thread count: the spheres are split into slabs of two
+  // z-layers of cells (contiguous in the sorted order, z outermost; chunk_start), fixed by the
+  // grid, not by the threads. A pair reaches at most one layer up or down, so slabs of the same
+  // parity never write the same sphere: the even slabs run in parallel, then the odd ones, each
+  // slab on one thread front to back. (Before: each pair's result was stored per list entry and
+  // every sphere gathered its entries, the partner's mirrored one included; 2 list entries
+  // per pair, and the gather's loads of the mirrored results were 20 % of the body stage's
+  // samples on 64,000 spheres. docs/BENCHMARKS.md, session 8.)
+  struct alignas(32) SphereSums {
+    float v[kAcc];
+  };
+  std::vector<SphereSums> acc;  // one per sphere, 32-byte aligned: one cache line holds it
+  std::vector<std::int32_t> chunk_start;  // slabs + 1: sorted index where each slab begins
+  // (the boundary-plane springs are particle arrays: p.wall_xi, p.wall_mask, fields.hpp)
+
+  // grid
+  float r_max = 0, h = 0, inv_h = 0, skin = 0;
+  int gx = 1, gy = 1, gz = 1;
+  std::vector<std::int32_t> cell_start;  // gx*gy*gz + 1
+
+  // guard
+  double min_point_mass = std::numeric_limits<double>::infinity();  // kg, dynamic bodies
+  double zeta = 0;
+  // overlap guard, per body (creation order; not state, not hashed): point effective mass
+  // (kg, 0 for static/kinematic), farthest sphere centre from the COM (m), smallest radius (m)
+  std::vector<float> guard_pt_mass, guard_arm, guard_rmin;
+
+  // state
+  double time = 0;
+  bool asleep = false;
+  double below_time = 0;
+  float granule_vmax = 0;              // max granule speed after the last substep, m/s
+  float pred_gain = 0.5f;              // velocity predictor gain of this substep (predictor_gain)
+  bool first_law = false;              // this substep applies the first-substep dashpot (timing_on)
+  StepStats stats;
+
+  // ---- setup
+  void size_grid();
+  int cell_coord(float v, float lo, int n) const {
+    int c = int(std::floor((v - lo) * inv_h));
+    return c < 0 ? 0 : (c >= n ? n - 1 : c);
+  }
+  int cell_of(Vec3 x) const {
+    int cx = cell_coord(x.x, def.bounds_min.x, gx), cy = cell_coord(x.y, def.bounds_min.y, gy),
+        cz = cell_coord(x.z, def.bounds_min.z, gz);
+    return (cz * gy + cy) * gx + cx;
+  }
+
+  // Rebuild the spheres of body i from its pose and velocity; returns the largest squared
+  // displacement of one of them since the last sort.
+  float rebuild_body(int i);
+  // The same with the velocities v, w (m/s, rad/s) the spheres' contacts are to see: the body
+  // stage passes them predicted to the next contact stage's time (see `bodies`).
+  // In 4-wide SSE2 registers (baseline x86-64), every lane doing the float operations of the
+  // Vec3 formulas in their order: arm = R o with R's columns, lane k = dot(row k, o);
+  // cross(a, b) lane-wise as math.hpp's. Lane 3 is unused (the radius and the inverse mass
+  // are kept in the stores).
+  float rebuild_body(int i, Vec3 v, Vec3 w);
+  // The same with the body's pose x4 (lane 3 unused), q and v4, w4 (lane 3 = 0) in registers.
+  float rebuild_body(int i, const __m128 x4, const Quat q, const __m128 v4, const __m128 w4);
+
+  // Counting sort of the particles by cell (stable, serial: deterministic), permuting every
+  // particle field, then the neighbour list is rebuilt and the springs carried over.
+  void sort();
+
+  // Visits the spheres j of other bodies within r_i + r_j + skin of sphere i, in a fixed
+  // order (cells z, y, x, then sorted index).
+  template <class F>
+  void for_near(int i, F&& f) const;
+
+  // Rebuilds the CSR neighbour list (two parallel passes: count, fill) and carries each
+  // pair's spring over from the old list (found by partner id).
+  void build_list(const std::vector<std::int32_t>& old_slot);
+
+  // ---- guard
+  double guard_meff() const;
+  double body_pair_meff() const { return 0.5 * double(shape.mass); }
+  double contact_time_() const;
+  // Lightest dynamic point mass (kg): granules' and dynamic shells'.
+  double lightest_point_mass() const;
+  double max_impact_speed(double m_pt) const;
+  // The body's overlap (m) if it hit something immovable at its current speed, with what the
+  // error message needs.
+  struct ImpactCheck {
+    double speed, m, r, overlap;  // m/s, kg (point mass), m (smallest sphere radius), m
+  };
+  ImpactCheck impact_of(int i, double kn, double m_light) const;
+  // The overlap guard before a step: every moving body's speed against the immovable case.
+  // The scan is parallel (it ran on one thread and was ~5 % of a two-thread step of a
+  // 64,000-sphere bed); the error names the lowest body index that fails, as a serial scan would.
+  Status check_impacts() const;
+  // Gain p of the velocity predictor (`bodies`: the spheres get v + p (v - v_old)) for a
+  // substep dt: 1/2 (v at the contact stage's time) while the dashpot's damping per substep,
+  // h = c_n dt / m_eff = 2 zeta w0 dt of a granule pair, is at most 0.2, falling linearly to 0
+  // at h = 0.25. Extrapolating the velocity with the last acceleration (which holds the damping
+  // forces) shrinks the explicit damper's stability region: for one contact the predicted
+  // dashpot needs h < 1 instead of 2, less for the stiffer, more damped modes of a body caged
+  // by several contacts. Measured (5x5x5 granule bed, 0.8-1.6 s after the drop): with p = 1/2
+  // at e = 0.1 (h = 0.14) it settled like the plain step; at e = 0.01 (h = 0.27) and e = 0.02
+  // (h = 0.37) it kept moving at 0.008-0.15 m/s (also with p = 0.46 and 0.26) against
+  // 0.001-0.008 m/s with p = 0. The head-on case (e = 0.1, dt = t_contact/50) has
+  // h = 0.11 (0.15 against the floor). docs/dem.md "Step size".
+  bool timing_on(double /*dt*/) const;
+  double predictor_gain(double dt) const;
+  double max_dt() const;
+
+  // ---- contact stage, pair pass: each pair is computed once, by its owner's entry, and added
+  // to both spheres' sums (acc; read by gather_sphere in the body stage), slab by slab
+  void contacts(float dt);
+
+  // ---- sphere stage (called by the body stage for each sphere of a body): sphere i takes the
+  // pair pass's sums (and zeroes them) and adds the boundaries; returns the sphere's force and
+  // torque (the body stage sums them straight into the body: the particle fields force/torque
+  // are the GL backend's).
+  struct LawConstants {
+    float kn, cn0, kt, ctr, mu;  // N/m, c_n = cn0 / sqrt(1/m_i + 1/m_j), N/m, c_t/c_n, -
+  } law{};
+  struct SphereSum {
+    Vec3 F, T;  // N, N m (about the sphere centre)
+    Vec3 x;     // the sphere's centre, m
+  };
+  // What gather_sphere reads, copied to a local of the body stage once per substep: held in
+  // members, these were loaded again after every float store (the compiler cannot tell a
+  // store to a force from one to a member), ~20 instructions per sphere-step.
+  struct GatherCtx {
+    LawConstants law;
+    const float *P, *V, *W;
+    float* ACC;
+    float* WX;
+    std::uint32_t* WM;
+    physics::Boundaries bounds;
+    float floor_y;
+    bool first_law;
+    // A sphere with x0 + r <= x <= x1 - r, z0 + r <= z <= z1 - r and y >= floor_y + r touches
+    // no boundary (m): the side walls' or the fill rectangle's sides (the terrain), +-inf
+    // without either; boundary_contacts is only called for the others.
+    float x0, x1, z0, z1;
+  };
+  GatherCtx gather_ctx() const;
+  // Sphere i's force F4 and torque T4 about its centre (lane 3 = 0); returns its centre (lane 3 = 0).
+  __m128 gather_sphere4(const GatherCtx& g, const int i, const float dt, std::int64_t& nwall, __m128& F4,
+                        __m128& T4);
+  SphereSum gather_sphere(const GatherCtx& g, const int i, const float dt, std::int64_t& nwall);
+  // Boundaries of sphere i (dynamic): the planes of physics::boundary_plane (floor, side walls,
+  // the terrain outside the fill and the fill's sides; shaders/dem/physics_common.glsl, shared
+  // with the GL force kernel) in slot order; adds their force and torque (about the sphere
+  // centre) to F, T. WM[i] has bit k set while plane k touched the sphere at the last substep;
+  // a plane contact that was not in the mask starts with a fresh spring. Out of line: 4 % of
+  // sphere-steps reach it in a bed.
+  void boundary_contacts(const GatherCtx& g, const int i, const float dt, Vec3& F, Vec3& T, std::int64_t& nwall);
+
+  // The body stage for granule i (dynamic, isotropic inertia): the formulas of the general
+  // path below in 4-wide SSE2 registers, each lane doing the scalar code's float operations in
+  // its order (the same results bit for bit, ~1/3 fewer instructions).
+  void granule_update(const GatherCtx& gctx, const int i, const float dt, std::int64_t& nwall, float& d2max,
+                      float& vmax, int& bad);
+
+  // ---- body stage: gather each sphere (gather_sphere), sum the spheres' forces in id order,
+  // integrate, rebuild the spheres
+  bool bodies(float dt, float* d2max_out);
+
+  // The substep's stages, each timed into stats (StepStats::*_seconds).
+  Status substep(float dt);
+
+  double max_granule_speed() const;
+
+  // Asleep: move the kinematic bodies; true if one of their spheres would touch a dynamic one.
+  bool kinematic_touch(double dt);
+
+  void move_kinematic(double dt);
+
+  // Appends a body and its spheres; the caller has checked the capacities.
+  int push_body(std::uint32_t flags, Vec3 x, Quat q, Vec3 v, Vec3 w, float mass, float invm, Vec3 inv_inertia,
+                const Vec3* offsets, const float* radii, int count, bool one_radius);
+};
+
+}  // namespace sandpatch

@@ -1,0 +1,290 @@
+// The GL backend's internal state (GlSimulation::Impl) and what its files share; see
+// gl_simulation.hpp and docs/dem-gpu.md. Internal to particles/gpu/:
+//   gl_simulation.cpp  GlSimulation's methods: create/reset, bodies, step and substep, queries,
+//                      state hash
+//   gl_programs.cpp    the kernels' generated preamble (std430 blocks of fields.hpp), their
+//                      compilation (with shaders/dem/physics_common.glsl), uniforms, layout check
+//   gl_transfer.cpp    host <-> GPU: staging and upload of bodies, writes of a body's state,
+//                      read-backs by id
+#pragma once
+
+#include <GL/glcorearb.h>
+
+#include <array>
+#include <chrono>
+#include <cstddef>
+#include <cstdint>
+#include <limits>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "gl/program.hpp"
+#include "particles/dem_physics.hpp"
+#include "particles/fields.hpp"
+#include "particles/gpu/gl_simulation.hpp"
+#include "particles/gpu/layout.hpp"
+
+namespace sandpatch::gpu {
+
+// Buffer bindings (shaders/dem/common.glsl lists the same).
+enum Binding : GLuint { kBindP = 0, kBindPn = 1, kBindB = 2, kBindG = 3, kBindSIn = 4, kBindSOut = 5, kBindW = 6, kBindS = 7 };
+
+constexpr int kWallSlots = physics::kPlaneSlots;  // per sphere: floor, walls x0, x1, z0, z1, terrain
+constexpr int kScanBlock = 1024;  // cells per workgroup of scan_blocks.comp
+
+// The kernels, in the order of a substep (rebuild is bodies.comp in mode 1). The grid
+// kernels kGridCount..kGridCopyBack run by glDispatchComputeIndirect with the arguments
+// grid_decide.comp wrote (DemStatus::grid_dispatch[3 (k - kGridCount) ..]).
+enum Kernel {
+  kGridDecide, kGridCount, kScanBlocks, kScanTop, kScanAdd, kGridScatter, kGridCellSort, kGridGather, kGridCopyBack,
+  kForce, kBodies, kKinematicTouch, kKernelCount
+};
+inline constexpr const char* kKernelFile[kKernelCount] = {
+    "dem/grid_decide.comp",   "dem/grid_count.comp",    "dem/scan_blocks.comp", "dem/scan_top.comp",
+    "dem/scan_add.comp",      "dem/grid_scatter.comp",  "dem/grid_cellsort.comp", "dem/grid_gather.comp",
+    "dem/grid_copyback.comp", "dem/force.comp",         "dem/bodies.comp",        "dem/kinematic_touch.comp"};
+
+// CPU staging of bodies/particles added since the last upload (generated SoA, as dem.cpp).
+struct ParticleStage {
+#define SP_DECL(type, name, n, hashed, backend, unit) SANDPATCH_FIELD_ON(GL, backend, std::vector<type> name;)
+  SANDPATCH_PARTICLE_FIELDS(SP_DECL)
+#undef SP_DECL
+  void clear() {
+#define SP_CLR(type, name, n, hashed, backend, unit) SANDPATCH_FIELD_ON(GL, backend, name.clear();)
+    SANDPATCH_PARTICLE_FIELDS(SP_CLR)
+#undef SP_CLR
+  }
+  void push_zero() {
+#define SP_PUSH(type, name, n, hashed, backend, unit) SANDPATCH_FIELD_ON(GL, backend, name.resize(name.size() + (n), type{});)
+    SANDPATCH_PARTICLE_FIELDS(SP_PUSH)
+#undef SP_PUSH
+  }
+  std::size_t size() const { return id.size(); }
+};
+struct BodyStage {
+#define SP_DECL(type, name, n, hashed, backend, unit) SANDPATCH_FIELD_ON(GL, backend, std::vector<type> name;)
+  SANDPATCH_BODY_FIELDS(SP_DECL)
+#undef SP_DECL
+  void clear() {
+#define SP_CLR(type, name, n, hashed, backend, unit) SANDPATCH_FIELD_ON(GL, backend, name.clear();)
+    SANDPATCH_BODY_FIELDS(SP_CLR)
+#undef SP_CLR
+  }
+  void push_zero() {
+#define SP_PUSH(type, name, n, hashed, backend, unit) SANDPATCH_FIELD_ON(GL, backend, name.resize(name.size() + (n), type{});)
+    SANDPATCH_BODY_FIELDS(SP_PUSH)
+#undef SP_PUSH
+  }
+};
+
+inline void put3(std::vector<float>& a, std::size_t i, Vec3 v, float w = 0.0f) {
+  a[4 * i] = v.x;
+  a[4 * i + 1] = v.y;
+  a[4 * i + 2] = v.z;
+  a[4 * i + 3] = w;
+}
+
+// Bytes per element summed over a block's fields (one body / one particle).
+template <std::size_t N>
+constexpr std::size_t sum_strides(const std::array<Std430Field, N>& fields) {
+  std::size_t n = 0;
+  for (const auto& f : fields) n += f.stride;
+  return n;
+}
+
+struct GlSimulation::Impl {
+  SimulationDef def;
+  GlOptions opt;
+  GranuleShape shape;
+  Vec3 gravity;
+  float zeta = 0;
+
+  // Stability guard: a CPU Simulation of capacity 1 with the same definition, holding (at
+  // most) one single-sphere dynamic shell with the lightest point mass of our dynamic
+  // shells, so substeps_for / contact_time / max_substep_dt are the CPU backend's own.
+  std::unique_ptr<Simulation> guard;
+  double guard_point_mass = std::numeric_limits<double>::infinity();
+
+  // capacities and live counts
+  int cap_p = 0, cap_b = 0, cap_cells = 0, scan_blocks_cap = 0, K = 16, wg = 64;
+  std::size_t cap_terrain = 0;  // terrain height samples (fixed at creation)
+  int np = 0, nb = 0, np_gpu = 0, nb_gpu = 0;  // *_gpu: uploaded
+  ParticleStage pst;
+  BodyStage bst;
+  std::vector<std::uint32_t> host_flags;  // every body's flags (only the host changes them): no read-back
+
+  // grid (sized as the CPU's: cell = 2 r_max + skin)
+  float r_max = 0, skin = 0, h = 0;
+  int gx = 1, gy = 1, gz = 1;
+
+  // GL objects
+  enum Buf { kP0, kP1, kB, kG, kS0, kS1, kW, kSort, kBufCount };
+  GLuint buf[kBufCount] = {};
+  std::size_t buf_bytes[kBufCount] = {};
+  gl::Program prog[kKernelCount];
+  int cur_p = 0;  // P is buffer kP0 + cur_p, the grid's scratch copy the other (cur_p stays 0:
+                  // grid_copyback.comp copies the sorted particles back)
+  int cur_s = 0;  // springs read this substep: kS0 + cur_s; written: the other
+
+  // state
+  double time = 0;
+  bool asleep = false;
+  double below_time = 0;
+  bool has_moving_kinematic = false;
+  float last_vmax = 0;
+  StepStats stats;
+  double kernel_seconds[kKernelCount] = {};  // GlOptions::profile
+
+  Status configure(const SimulationDef& d, const char* cap_prefix);
+  Status build_programs();  // gl_programs.cpp
+
+  std::size_t poff(int f) const { return std430_offset(kParticleFields, f, std::size_t(cap_p)); }
+  std::size_t boff(int f) const { return std430_offset(kBodyFields, f, std::size_t(cap_b)); }
+  // Byte offsets inside the other blocks (common.glsl's declarations).
+  std::size_t g_cell_start() const { return sizeof(physics::DemStatus); }
+  std::size_t s_slot_of() const { return 0; }
+  std::size_t sort_terrain_offset() const { return round_up(12 * std::size_t(cap_p), 16) + 16 * std::size_t(cap_p); }
+
+  ~Impl() {
+    // a program in use is only flagged for deletion: release ours so the names really go
+    GLint current = 0;
+    glGetIntegerv(GL_CURRENT_PROGRAM, &current);
+    for (const auto& p : prog)
+      if (p.id() != 0 && GLuint(current) == p.id()) glUseProgram(0);
+    bool any = false;
+    for (GLuint b : buf) any = any || b != 0;
+    if (any) glDeleteBuffers(kBufCount, buf);
+  }
+
+  std::string preamble() const;
+
+  void size_grid() {
+    h = 2.0f * r_max + skin;
+    const float inv_h = 1.0f / h;
+    Vec3 ext = def.bounds_max - def.bounds_min;
+    gx = std::max(1, int(std::ceil(ext.x * inv_h)));
+    gy = std::max(1, int(std::ceil(ext.y * inv_h)));
+    gz = std::max(1, int(std::ceil(ext.z * inv_h)));
+  }
+  int cells() const { return gx * gy * gz; }
+
+  void bind_all() {
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, kBindP, buf[kP0 + cur_p]);
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, kBindPn, buf[kP0 + 1 - cur_p]);
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, kBindB, buf[kB]);
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, kBindG, buf[kG]);
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, kBindSIn, buf[kS0 + cur_s]);
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, kBindSOut, buf[kS0 + 1 - cur_s]);
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, kBindW, buf[kW]);
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, kBindS, buf[kSort]);
+  }
+
+  // Uniforms that change only with the grid or never: set on every program.
+  void set_static_uniforms();
+  // The terrain heights after the sort arrays (common.glsl: Sort.terrain).
+  void upload_terrain() {
+    if (def.terrain.empty()) return;
+    glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
+    write(kSort, sort_terrain_offset(), def.terrain.heights.size() * 4, def.terrain.heights.data());
+  }
+  void set_counts() {
+    for (auto& p : prog) {
+      glProgramUniform1ui(p.id(), glGetUniformLocation(p.id(), "u_np"), GLuint(np_gpu));
+      glProgramUniform1ui(p.id(), glGetUniformLocation(p.id(), "u_nb"), GLuint(nb_gpu));
+    }
+  }
+
+  void dispatch(Kernel k, int items, int per_group) {
+    if (items <= 0) return;
+    std::chrono::steady_clock::time_point t0;
+    if (opt.profile) {
+      glFinish();
+      t0 = std::chrono::steady_clock::now();
+    }
+    glUseProgram(prog[k].id());
+    glDispatchCompute(GLuint((items + per_group - 1) / per_group), 1, 1);
+    glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
+    if (opt.profile) {
+      glFinish();
+      kernel_seconds[k] += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    }
+  }
+
+  // A grid kernel with the arguments grid_decide.comp wrote (0 workgroups: no re-sort).
+  void dispatch_indirect(Kernel k) {
+    std::chrono::steady_clock::time_point t0;
+    if (opt.profile) {
+      glFinish();
+      t0 = std::chrono::steady_clock::now();
+    }
+    glUseProgram(prog[k].id());
+    glDispatchComputeIndirect(GLintptr(offsetof(physics::DemStatus, grid_dispatch) + 12 * std::size_t(k - kGridCount)));
+    glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
+    if (opt.profile) {
+      glFinish();
+      kernel_seconds[k] += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    }
+  }
+
+  // One word of the status block (physics::DemStatus, at the start of the grid buffer).
+  void set_status_word(std::size_t offset, std::uint32_t v) {
+    glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
+    write(kG, offset, 4, &v);
+  }
+  void write(Buf b, std::size_t offset, std::size_t bytes, const void* data) {
+    if (bytes == 0) return;
+    glBindBuffer(GL_COPY_WRITE_BUFFER, buf[b]);
+    glBufferSubData(GL_COPY_WRITE_BUFFER, GLintptr(offset), GLsizeiptr(bytes), data);
+  }
+  void read(Buf b, std::size_t offset, std::size_t bytes, void* out) const {
+    if (bytes == 0) return;
+    glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
+    glBindBuffer(GL_COPY_READ_BUFFER, buf[b]);
+    glGetBufferSubData(GL_COPY_READ_BUFFER, GLintptr(offset), GLsizeiptr(bytes), out);
+  }
+  Buf pcur() const { return Buf(kP0 + cur_p); }
+
+  // Bytes one staged body (with its spheres) takes to upload.
+  std::size_t body_upload_bytes(std::size_t staged_body) const {
+    return body_bytes + std::size_t(bst.count[staged_body]) * (particle_bytes + 4);
+  }
+  static constexpr std::size_t body_bytes = sum_strides(kBodyFields);
+  static constexpr std::size_t particle_bytes = sum_strides(kParticleFields);
+
+  std::size_t pending_bytes() const {
+    std::size_t n = 0;
+    for (std::size_t b = 0; b < std::size_t(nb - nb_gpu); ++b) n += body_upload_bytes(b);
+    return n;
+  }
+
+  // Uploads staged bodies in order, whole bodies only, while they fit in max_bytes (with
+  // at_least_one, the first body goes however large it is), one write per field; then
+  // rebuilds their spheres. Returns the bytes written.
+  std::size_t upload(std::size_t max_bytes, bool at_least_one = true);
+  void flush() {
+    while (nb_gpu < nb) upload(std::numeric_limits<std::size_t>::max());
+  }
+
+  std::uint32_t body_flags(int i) const { return host_flags[std::size_t(i)]; }
+  // Writes xyz of a vec4 body field of body i: the staged copy, or 12 bytes at its index.
+  void set_body_vec(int field, int i, const float* xyzw, std::size_t comps);
+  // Rebuilds the spheres of uploaded body i from its (just written) state, as an upload
+  // does (bodies.comp mode 1, limited to body i), and raises the re-sort flag: the spheres
+  // jumped, so the cells and the neighbour search must be rebuilt before the next contacts.
+  void rebuild_body(int i);
+
+  void substep(float dt);
+
+  // Appends a body and its spheres to the staging arrays (caller checked capacities).
+  int push_body(std::uint32_t flags, Vec3 x, Quat q, Vec3 v, Vec3 w, float mass, float invm, Vec3 inv_inertia, const Vec3* offsets, const float* radii, int count, bool one_radius);
+
+  Vec3 body_vec(int field, BodyId b) const;
+  // Particle field (vec4) in stable-id order.
+  std::vector<Vec3> by_id(int field) const;
+
+  // Checks the generated layout against the offsets the driver assigned.
+  Status check_layout() const;
+};
+
+}  // namespace sandpatch::gpu
