@@ -36,7 +36,7 @@ inline double seconds_since(Clock::time_point t0) {
 // "%g" of v, for setting ids.
 std::string num_id(double v);
 
-// The contact material of the pile and crater cases: the peer's (../shared/peers/), mu = 0.5
+// The contact material of the pile and crater cases: the LAMMPS peer's (docs/BENCHMARKS.md), mu = 0.5
 // (docs/dem.md).
 Material reference_material();
 

@@ -17,7 +17,7 @@ std::string num_id(double v) {
   return b;
 }
 
-// The contact material of both cases: the peer's (../shared/peers/), mu = 0.5 (docs/dem.md).
+// The contact material of both cases: the LAMMPS peer's (docs/BENCHMARKS.md), mu = 0.5 (docs/dem.md).
 Material reference_material() {
   Material m;
   m.density = 2500;

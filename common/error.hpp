@@ -1,6 +1,6 @@
 // Errors for untrusted input (scene files, heightmaps, meshes, parameters).
 //
-// Two tiers (../shared/STYLE.md 7): programmer mistakes are asserts; anything a user
+// Two tiers: programmer mistakes are asserts; anything a user
 // can get wrong comes back as an Error that names the file, the field path, the
 // offending value and what is allowed. Creation functions return Result<T>.
 #pragma once

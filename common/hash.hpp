@@ -1,6 +1,6 @@
 // Stable 64-bit hashing for scene hashes and final-state hashes (FNV-1a, 64 bit).
 // Byte-exact: the same floats in the same order give the same hash on every run,
-// so a state hash is a determinism check (../shared/STYLE.md 8).
+// so a state hash is a determinism check.
 #pragma once
 
 #include <cstdint>

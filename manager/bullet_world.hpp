@@ -1,4 +1,4 @@
-// The one place Sandpatch wraps Bullet (../shared/STYLE.md counter-examples: Bullet's global
+// The one place Sandpatch wraps Bullet (Bullet's global
 // state and its hidden time accumulator). Bodies outside active patches collide with the
 // heightfield through one btHeightfieldTerrainShape per heightfield tile, reading Sandpatch's
 // own tile arrays (no copy). Tiles are static, asleep collision objects and Bullet updates
@@ -7,7 +7,7 @@
 // is O(tiles), not O(samples). step(dt) advances exactly dt: stepSimulation(dt, 0) makes Bullet
 // take one step of dt with no accumulator and no interpolation.
 //
-// Precision boundary (../shared/STYLE.md 11): Bullet runs in float, relative to the terrain's
+// Precision boundary: Bullet runs in float, relative to the terrain's
 // world origin; world positions given to and returned from this class are double.
 #pragma once
 

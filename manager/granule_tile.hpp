@@ -1,4 +1,4 @@
-// Pre-settled granule configurations (../shared/DESIGN.md "Heightfield → particles"; the
+// Pre-settled granule configurations (docs/manager.md "Pre-settled tiles"; the
 // "pregenerated particle configurations" Leach & Marais name as future work, §7).
 //
 // A block of granules is settled once, at start-up, in a walled box of side P; it becomes a

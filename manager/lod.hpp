@@ -1,4 +1,4 @@
-// Predictive activation (../shared/DESIGN.md "One frame" step 2; Leach & Marais §3): before
+// Predictive activation (Leach & Marais §3; docs/manager.md "The frame"): before
 // a body touches the terrain, request a granular patch around the predicted contact, so a
 // fast body never lands on a patch that is not ready.
 //
@@ -10,7 +10,7 @@
 // The request covers the footprint at contact plus `apron` on every side.
 //
 // Pure functions of their inputs (no GL, no Bullet), after CDLOD's split of LOD selection
-// from everything else (../shared/STYLE.md).
+// from everything else (as CDLOD keeps LOD selection apart from drawing).
 #pragma once
 
 #include "common/knobs.hpp"

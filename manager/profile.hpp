@@ -1,5 +1,5 @@
-// The frame as a short list of named stages, each with one timer (../shared/STYLE.md 5;
-// ../shared/DESIGN.md "One frame"). The CLI prints this profile and the run report stores it.
+// The frame as a short list of named stages, each with one timer (World::step runs them,
+// docs/manager.md "The frame"). The CLI prints this profile and the run report stores it.
 #pragma once
 
 #include <array>

@@ -23,7 +23,7 @@ struct LatticeBedDef {
 Status add_lattice_bed(Simulation& sim, const LatticeBedDef& bed);
 
 // Footprint side (m) of a square box holding `granules` with the settled depth of the
-// peer's bed (../shared/peers/lammps_bed.sh: 0.4 m holds 20,000 spheres of d = 0.01 m),
+// peer's bed (docs/BENCHMARKS.md "Running the LAMMPS peer": 0.4 m holds 20,000 spheres of d = 0.01 m),
 // scaled to the sphere diameter 2 r.
 double peer_footprint(int granules, double radius);
 

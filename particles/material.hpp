@@ -1,5 +1,5 @@
 // Contact material of the granule DEM and the formulas that tie its parameters together
-// (../shared/DESIGN.md "Granule model"; Bell et al. 2005; Cundall & Strack 1979;
+// (Bell et al. 2005; Cundall & Strack 1979;
 // Schwager & Poeschel 2007, "Coefficient of restitution and linear-dashpot model revisited",
 // Granular Matter 9:465).
 //

@@ -1,5 +1,5 @@
 // std430 layout of the GPU granule DEM's state, generated from the field lists of
-// particles/fields.hpp (../shared/STYLE.md 3: each field declared once).
+// particles/fields.hpp (each field declared once, as MuJoCo's mjxmacro.h does).
 //
 // The GPU keeps the same structure-of-arrays as the CPU backend: one shader storage block
 // per kind (particles, bodies) whose members are the field arrays, each sized by the

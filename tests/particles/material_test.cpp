@@ -64,7 +64,7 @@ TEST(Material, TextbookRoundTrip) {
 
 // The peer's parameters: k_n = 3292 N/m, e = 0.3 through the TEXTBOOK mapping, m_eff = m/2 of
 // a d = 0.01 m sphere give t_c = 1.5e-3 s and c_n = m_eff gamma_n with gamma_n = 1605 1/s
-// (../shared/peers/in.lammps_bed; LAMMPS' hooke lets the force turn attractive). Our e = 0.3
+// (docs/BENCHMARKS.md "Running the LAMMPS peer"; LAMMPS' hooke lets the force turn attractive). Our e = 0.3
 // is the clamped (measured) one: zeta = 0.4972, so gamma_n = 2 zeta w0 = 2230 1/s.
 TEST(Material, PeerContactTime) {
   Material m;

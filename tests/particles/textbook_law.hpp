@@ -1,5 +1,5 @@
 // The textbook linear spring-dashpot relations (a force allowed to turn attractive), for the
-// tests only: the LAMMPS peer's gamma_n (../shared/peers/in.lammps_bed) was derived with them,
+// tests only: the LAMMPS peer's gamma_n (docs/BENCHMARKS.md "Running the LAMMPS peer") was derived with them,
 // and the tests check the clamped law of particles/material.hpp against them where both agree.
 //   e = exp(-pi zeta / sqrt(1 - zeta^2)),  zeta = -ln e / sqrt(pi^2 + ln^2 e),
 //   t_c = pi / (w0 sqrt(1 - zeta^2))  (s; +inf for zeta >= 1)
