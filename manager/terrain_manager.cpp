@@ -199,14 +199,40 @@ struct TerrainManager::Impl {
   std::vector<nlohmann::ordered_json> ledgers;  // closed ledgers (demoted patches)
   std::vector<GridRegion> dirty;                // written by demotions, not yet taken
 
+  // The demotion's GL depth render (create(): when use_gl and a context could be made; else
+  // null, gl_note says why, and demotions render on the CPU).
   std::unique_ptr<ParticleDepthRenderer> depth;
-  bool gl_failed = false;
   std::string gl_note;
 
+  // The depth render on GL when def.use_gl: the context (the GL backend's, or a new one) and
+  // the renderer; without them gl_note says why and demotions render on the CPU.
+  Status make_depth_renderer() {
+    if (!def.use_gl) return Ok{};
+    if (!gl) {
+      auto ctx = gl::Context::create();
+      if (!ctx) {
+        gl_note = ctx.message();
+        return Ok{};
+      }
+      gl = std::move(*ctx);
+    }
+    if (Status st = gl->make_current(); !st) return st;
+    auto dr = ParticleDepthRenderer::create({def.depth_resolution});
+    if (dr) depth = std::move(*dr);
+    else gl_note = dr.message();
+    return Ok{};
+  }
+
   // The GL backend's context must be current for any slot call (other GL users of the
-  // thread, e.g. the image writer, make their own current in between).
+  // thread, e.g. the image writer, make their own current in between). The CPU backend's
+  // slots need none: there the manager's context (made at creation for the depth render) is
+  // made current by the depth render alone, as before it was made at the first demotion, so
+  // a caller's context current between frames stays current (manager/run.cpp's image writer
+  // updates its terrain textures after after_bodies without making its own current: with
+  // the manager's context made current every frame, those updates went to the wrong context
+  // and the next GL depth render failed with GL_INVALID_OPERATION).
   void current() const {
-    if (gl) (void)gl->make_current();
+    if (gl && def.backend == "gl") (void)gl->make_current();
   }
   // m (world): a body's shell joins a patch when the body's lowest point is within half of
   // this above the patch's highest surface point; the simulation's domain reaches this high.
@@ -764,19 +790,6 @@ struct TerrainManager::Impl {
     const float x1 = float((a.i0 + a.ni - 0.5) * sp), z1 = float((a.j0 + a.nj - 0.5) * sp);
     const int res = def.depth_resolution;
     bool on_gl = false;
-    if (gl_ok && def.use_gl && !gl_failed && !depth) {
-      auto ctx = gl ? Result<std::unique_ptr<gl::Context>>(std::unique_ptr<gl::Context>()) : gl::Context::create();
-      if (ctx) {
-        if (!gl) gl = std::move(*ctx);
-        if (Status st = gl->make_current(); !st) return st;
-        auto dr = ParticleDepthRenderer::create({res});
-        if (dr) depth = std::move(*dr);
-        else gl_note = dr.message();
-      } else {
-        gl_note = ctx.message();
-      }
-      gl_failed = !depth;
-    }
     const float du = (x1 - x0) / float(res), dv = (z1 - z0) / float(res);
     const double rx0 = slot.region.i0 * sp, rx1 = (slot.region.i0 + slot.region.ni - 1) * sp;
     const double rz0 = slot.region.j0 * sp, rz1 = (slot.region.j0 + slot.region.nj - 1) * sp;
@@ -1022,11 +1035,13 @@ Result<std::unique_ptr<TerrainManager>> TerrainManager::create(const TerrainMana
       I.slots.emplace_back(make_cpu_backend(std::move(*sim)));
     }
   }
+  // The demotion's depth render on GL, decided now (without a context it renders on the CPU).
+  if (Status st = I.make_depth_renderer(); !st) return st.errors();
   return m;
 }
 
 TerrainManager::~TerrainManager() {
-  if (impl_) impl_->current();  // GL slots free their buffers in their context
+  if (impl_ && impl_->gl) (void)impl_->gl->make_current();  // GL slots and the depth renderer free their objects in it
 }
 
 Status TerrainManager::before_bodies(double time, double dt, Profile& profile) {
