@@ -12,7 +12,6 @@ namespace sandpatch {
 using manager_detail::body_key;
 using manager_detail::Clock;
 using manager_detail::ms_since;
-using manager_detail::trapezoid_weight;
 
 Status TerrainManager::Impl::demote_idle(double time) {
   for (auto& s : slots)
@@ -181,18 +180,7 @@ void TerrainManager::Impl::set_bodies_down(const Slot& slot, double time) {
 // Ledger: the region above the floor plus what spilled onto the apron, against the volume
 // before promotion; appended to the closed ledgers (the report's ledger.patches).
 void TerrainManager::Impl::close_ledger(const Slot& slot, PatchRecord& rec, bool on_gl) {
-  const double sp = hf->spacing();
-  const GridRegion& a = slot.apron;
-  double after = 0;
-  for (int j = a.j0; j < a.j0 + a.nj; ++j)
-    for (int i = a.i0; i < a.i0 + a.ni; ++i) {
-      const bool in = i >= slot.region.i0 && i < slot.region.i0 + slot.region.ni && j >= slot.region.j0 &&
-                      j < slot.region.j0 + slot.region.nj;
-      const double h0 = rec.before_heights[std::size_t(j - a.j0) * a.ni + (i - a.i0)];
-      after += in ? trapezoid_weight(i, j, slot.region) * (hf->height(i, j) - slot.floor_local)
-                  : (hf->height(i, j) - h0) * (1.0 - 0.0);
-    }
-  rec.ledger.after = after * sp * sp;
+  rec.ledger.after = soil_volume_after(*hf, slot.region, slot.apron, slot.floor_local, rec.before_heights);
   const double err = rec.ledger.before > 0 ? 100.0 * (rec.ledger.after - rec.ledger.before) / rec.ledger.before : 0;
   ledgers.push_back({{"patch", slot.patch},
                      {"particle_scale", slot.scale},

@@ -13,7 +13,6 @@ namespace sandpatch {
 
 using manager_detail::Clock;
 using manager_detail::ms_since;
-using manager_detail::trapezoid_weight;
 using manager_detail::v3;
 
 Status TerrainManager::Impl::activate(double time, double dt) {
@@ -176,7 +175,7 @@ Status TerrainManager::Impl::promote(Slot& slot, const PatchRequest& req, double
   PatchRecord& rec = record(slot);
   const double s = scale_for(req);
   TileSet& tset = set_for(s);
-  auto reg = region_for(req, tset.cells);
+  auto reg = patch_region(*hf, req, tset.cells);
   if (!reg) return reg.errors();
   const GridRegion region = *reg;
   const float sp = hf->spacing();
@@ -255,12 +254,8 @@ Status TerrainManager::Impl::promote(Slot& slot, const PatchRequest& req, double
   slot.carried.clear();
   slot.state = SlotState::Filling;
   // Ledger: volume between the floor and the surface over the region.
-  double v = 0;
-  for (int j = region.j0; j < region.j0 + region.nj; ++j)
-    for (int i = region.i0; i < region.i0 + region.ni; ++i)
-      v += trapezoid_weight(i, j, region) * (hf->height(i, j) - floor_local);
   rec.ledger = Ledger{};
-  rec.ledger.before = v * double(sp) * sp;
+  rec.ledger.before = soil_volume(*hf, region, floor_local);
   rec.ledger.active = double(slot.pending.size()) * granule_volume(s) / tile.packing_fraction;
   rec.fill_ms = ms_since(t0);
   events.push_back({PatchEventKind::Promoted, slot.patch, time, rec.fill_ms, int(slot.pending.size())});

@@ -1,10 +1,11 @@
 // The terrain manager's planning (Stage::Lod): requests from predicted contacts, the queue,
-// merging, and growth of a patch under a body heading past its edge. See
-// terrain_manager_impl.hpp.
+// merging, and growth of a patch under a body heading past its edge (terrain_manager_impl.hpp);
+// and the planning geometry (planning.hpp).
 #include <algorithm>
 #include <cmath>
 #include <limits>
 
+#include "manager/planning.hpp"
 #include "manager/terrain_manager_impl.hpp"
 
 namespace sandpatch {
@@ -44,7 +45,7 @@ Status TerrainManager::Impl::plan(double time) {
   // what one slot holds (before: unbounded, and bodies landing side by side merged into one
   // patch no slot could hold, an error mid-run).
   auto predicted = predict_contacts(*hf, motions, def.gravity, def.lod);
-  for (auto& r : predicted) clip_to_terrain(r);
+  for (auto& r : predicted) clip_to_terrain(*hf, r);
   auto reqs = merge_requests(std::move(predicted), max_merged_side());
   // A queued request lapses when no body predicts a contact there any more (its body came
   // to rest on the heightfield meanwhile); requests made with request_patch() stay.
@@ -93,44 +94,9 @@ double TerrainManager::Impl::scale_for(const PatchRequest& r) const {
   return def.scale_bands.back().particle_scale;
 }
 
-// Floor of a patch over `region` (m, heightfield-local): patch_depth below the lowest
-// surface sample, and never below the bedrock under any sample of the region (the DEM's
-// floor is one plane, so it sits at the highest bedrock point: no granule below the
-// bedrock anywhere; where the surface dips below that plane the patch has no granules and
-// its floor holds bodies up to that much above the surface, docs/extremes.md). `lo`, `hi`:
-// the lowest and highest surface samples. A floor at or above `hi`: no soil, no patch.
-double TerrainManager::Impl::floor_of(const GridRegion& region, float* lo, float* hi) const {
-  *lo = std::numeric_limits<float>::max(), *hi = -*lo;
-  double bedrock = -std::numeric_limits<double>::infinity();
-  for (int j = region.j0; j < region.j0 + region.nj; ++j)
-    for (int i = region.i0; i < region.i0 + region.ni; ++i) {
-      const float h = hf->height(i, j);
-      *lo = std::min(*lo, h);
-      *hi = std::max(*hi, h);
-      bedrock = std::max({bedrock, double(h) - def.soil_depth, std::min(double(h), def.bedrock_height)});
-    }
-  return std::max(double(*lo) - def.patch_depth, bedrock);
-}
-
-// The terrain's world rectangle.
-PatchRequest TerrainManager::Impl::terrain_rect() const {
-  PatchRequest t;
-  t.x0 = hf->origin_x();
-  t.z0 = hf->origin_z();
-  t.x1 = t.x0 + (hf->samples_x() - 1) * double(hf->spacing());
-  t.z1 = t.z0 + (hf->samples_z() - 1) * double(hf->spacing());
-  return t;
-}
-
-void TerrainManager::Impl::clip_to_terrain(PatchRequest& r) const {
-  const PatchRequest t = terrain_rect();
-  r.x0 = std::max(r.x0, t.x0), r.z0 = std::max(r.z0, t.z0);
-  r.x1 = std::min(r.x1, t.x1), r.z1 = std::min(r.z1, t.z1);
-}
-
 // m: the widest square request that merging may make, so that one slot holds its patch: the
 // side of a patch_depth-deep square of granules_per_slot granules at the first tile's
-// packing, with 20 % to spare, less the rounding out to whole tile periods (region_for:
+// packing, with 20 % to spare, less the rounding out to whole tile periods (patch_region:
 // up to one period and a sample on each axis). Requests wider than that are not merged
 // (each single request is still checked against the capacity in promote()).
 double TerrainManager::Impl::max_merged_side() const {
@@ -149,30 +115,10 @@ double TerrainManager::Impl::max_merged_side() const {
 // bedrock. (A body falling just past the terrain's edge, or onto bare rock, asks for a
 // patch that cannot exist; before, promote() failed the whole frame with an error.)
 bool TerrainManager::Impl::has_soil(const PatchRequest& r) const {
-  auto reg = region_for(r, set_for(scale_for(r)).cells);
+  auto reg = patch_region(*hf, r, set_for(scale_for(r)).cells);
   if (!reg) return false;
   float lo = 0, hi = 0;
   return floor_of(*reg, &lo, &hi) < hi;
-}
-
-// Region of heightfield samples for a request, within what one slot can hold.
-Result<GridRegion> TerrainManager::Impl::region_for(const PatchRequest& r, int tile_cells) const {
-  int i0 = std::max(0, sample_i(r.x0)), j0 = std::max(0, sample_j(r.z0));
-  int i1 = std::min(hf->samples_x() - 1, sample_i(r.x1) + 1), j1 = std::min(hf->samples_z() - 1, sample_j(r.z1) + 1);
-  if (i1 - i0 < 2 || j1 - j0 < 2) return Error{"", "patch request", "", "off the terrain"};
-  // Whole tile periods: the patch's sides then fall on the walls the tile was settled
-  // against, so the granules along them sit as they settled (granule_tile.hpp).
-  auto align = [&](int& a, int& b, int samples) {
-    const int cells = b - a, whole = ((cells + tile_cells - 1) / tile_cells) * tile_cells;
-    if (whole > samples - 1) return;  // terrain narrower than the rounded patch: keep the cut sides
-    a -= (whole - cells) / 2;
-    b = a + whole;
-    if (a < 0) b -= a, a = 0;
-    if (b > samples - 1) a -= b - (samples - 1), b = samples - 1;
-  };
-  align(i0, i1, hf->samples_x());
-  align(j0, j1, hf->samples_z());
-  return GridRegion{i0, j0, i1 - i0 + 1, j1 - j0 + 1};
 }
 
 bool TerrainManager::Impl::covered(const PatchRequest& r) const {
@@ -208,7 +154,7 @@ Result<bool> TerrainManager::Impl::extend(const PatchRequest& r, double time) {
     // A side of the patch on the terrain's edge cannot be crossed (requests are clipped there).
     const double m = 4.0 * radius_world(s), ap = def.lod.apron, e = 1e-6;
     const int tile_cells = set_for(s.scale).cells;
-    const PatchRequest t = terrain_rect();
+    const PatchRequest t = terrain_rect(*hf);
     const bool in_x0 = a.x0 <= t.x0 + e || r.x0 + ap >= a.x0 + m, in_x1 = a.x1 >= t.x1 - e || r.x1 - ap <= a.x1 - m;
     const bool in_z0 = a.z0 <= t.z0 + e || r.z0 + ap >= a.z0 + m, in_z1 = a.z1 >= t.z1 - e || r.z1 - ap <= a.z1 - m;
     if (in_x0 && in_x1 && in_z0 && in_z1) return false;
@@ -225,6 +171,90 @@ Result<bool> TerrainManager::Impl::extend(const PatchRequest& r, double time) {
     return true;
   }
   return false;
+}
+
+// ---- planning geometry (planning.hpp) ----
+
+namespace {
+// Trapezoid weights of a sample in a region (½ on edges, ¼ at corners): Σ w h sp² is the
+// volume under the bilinear surface.
+double trapezoid_weight(int i, int j, const GridRegion& r) {
+  const double wi = (i == r.i0 || i == r.i0 + r.ni - 1) ? 0.5 : 1.0;
+  const double wj = (j == r.j0 || j == r.j0 + r.nj - 1) ? 0.5 : 1.0;
+  return wi * wj;
+}
+}  // namespace
+
+PatchRequest terrain_rect(const Heightfield& hf) {
+  PatchRequest t;
+  t.x0 = hf.origin_x();
+  t.z0 = hf.origin_z();
+  t.x1 = t.x0 + (hf.samples_x() - 1) * double(hf.spacing());
+  t.z1 = t.z0 + (hf.samples_z() - 1) * double(hf.spacing());
+  return t;
+}
+
+void clip_to_terrain(const Heightfield& hf, PatchRequest& r) {
+  const PatchRequest t = terrain_rect(hf);
+  r.x0 = std::max(r.x0, t.x0), r.z0 = std::max(r.z0, t.z0);
+  r.x1 = std::min(r.x1, t.x1), r.z1 = std::min(r.z1, t.z1);
+}
+
+Result<GridRegion> patch_region(const Heightfield& hf, const PatchRequest& r, int tile_cells) {
+  auto sample_i = [&](double x) { return int(std::floor((x - hf.origin_x()) / hf.spacing())); };
+  auto sample_j = [&](double z) { return int(std::floor((z - hf.origin_z()) / hf.spacing())); };
+  int i0 = std::max(0, sample_i(r.x0)), j0 = std::max(0, sample_j(r.z0));
+  int i1 = std::min(hf.samples_x() - 1, sample_i(r.x1) + 1), j1 = std::min(hf.samples_z() - 1, sample_j(r.z1) + 1);
+  if (i1 - i0 < 2 || j1 - j0 < 2) return Error{"", "patch request", "", "off the terrain"};
+  auto align = [&](int& a, int& b, int samples) {
+    const int cells = b - a, whole = ((cells + tile_cells - 1) / tile_cells) * tile_cells;
+    if (whole > samples - 1) return;  // terrain narrower than the rounded patch: keep the cut sides
+    a -= (whole - cells) / 2;
+    b = a + whole;
+    if (a < 0) b -= a, a = 0;
+    if (b > samples - 1) a -= b - (samples - 1), b = samples - 1;
+  };
+  align(i0, i1, hf.samples_x());
+  align(j0, j1, hf.samples_z());
+  return GridRegion{i0, j0, i1 - i0 + 1, j1 - j0 + 1};
+}
+
+double patch_floor(const Heightfield& hf, const GridRegion& region, double patch_depth, double soil_depth,
+                   double bedrock_height, float* lo, float* hi) {
+  *lo = std::numeric_limits<float>::max(), *hi = -*lo;
+  double bedrock = -std::numeric_limits<double>::infinity();
+  for (int j = region.j0; j < region.j0 + region.nj; ++j)
+    for (int i = region.i0; i < region.i0 + region.ni; ++i) {
+      const float h = hf.height(i, j);
+      *lo = std::min(*lo, h);
+      *hi = std::max(*hi, h);
+      bedrock = std::max({bedrock, double(h) - soil_depth, std::min(double(h), bedrock_height)});
+    }
+  return std::max(double(*lo) - patch_depth, bedrock);
+}
+
+double soil_volume(const Heightfield& hf, const GridRegion& region, double floor_local) {
+  const float sp = hf.spacing();
+  double v = 0;
+  for (int j = region.j0; j < region.j0 + region.nj; ++j)
+    for (int i = region.i0; i < region.i0 + region.ni; ++i)
+      v += trapezoid_weight(i, j, region) * (hf.height(i, j) - floor_local);
+  return v * double(sp) * sp;
+}
+
+double soil_volume_after(const Heightfield& hf, const GridRegion& region, const GridRegion& apron, double floor_local,
+                         const std::vector<float>& before_heights) {
+  const double sp = hf.spacing();
+  const GridRegion& a = apron;
+  double after = 0;
+  for (int j = a.j0; j < a.j0 + a.nj; ++j)
+    for (int i = a.i0; i < a.i0 + a.ni; ++i) {
+      const bool in = i >= region.i0 && i < region.i0 + region.ni && j >= region.j0 && j < region.j0 + region.nj;
+      const double h0 = before_heights[std::size_t(j - a.j0) * a.ni + (i - a.i0)];
+      after += in ? trapezoid_weight(i, j, region) * (hf.height(i, j) - floor_local)
+                  : (hf.height(i, j) - h0) * (1.0 - 0.0);
+    }
+  return after * sp * sp;
 }
 
 }  // namespace sandpatch

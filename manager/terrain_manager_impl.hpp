@@ -1,7 +1,8 @@
 // TerrainManager::Impl (internal to manager/): the manager's state and its stages, one source
 // file per stage (docs/manager.md "Sources"):
 //   terrain_manager.cpp  create, the frame's sequence (before_bodies, after_bodies), queries, report
-//   planning.cpp         lod: requests, queue, merge, growth of a patch under a body
+//   planning.cpp         lod: requests, queue, merge, growth of a patch under a body; the
+//                        planning geometry (planning.hpp: region, floor, soil volume)
 //   filling.cpp          activation: tiles, promotion (heightfield -> granules), uploads
 //   coupling.cpp         dem and sleep: carriers, shells, forces to and from Bullet
 //   demotion.cpp         demotion: depth render, heightfield write, bodies set down, ledger
@@ -24,6 +25,7 @@
 #include "gl/context.hpp"
 #include "manager/depth_conversion.hpp"
 #include "manager/patch.hpp"
+#include "manager/planning.hpp"
 #include "manager/terrain_manager.hpp"
 
 namespace sandpatch {
@@ -35,14 +37,6 @@ inline double ms_since(Clock::time_point t0) { return std::chrono::duration<doub
 inline Vec3 v3(const Eigen::Vector3f& v) { return {v.x(), v.y(), v.z()}; }
 inline Eigen::Vector3f eig(Vec3 v) { return {v.x, v.y, v.z}; }
 inline Quat quat(const Eigen::Quaternionf& q) { return {q.x(), q.y(), q.z(), q.w()}; }
-
-// Trapezoid weights of a sample in a region (½ on edges, ¼ at corners): Σ w h sp² is the
-// volume under the bilinear surface.
-inline double trapezoid_weight(int i, int j, const GridRegion& r) {
-  const double wi = (i == r.i0 || i == r.i0 + r.ni - 1) ? 0.5 : 1.0;
-  const double wj = (j == r.j0 || j == r.j0 + r.nj - 1) ? 0.5 : 1.0;
-  return wi * wj;
-}
 
 // Key of a body in the manager's maps: index << 32 | generation.
 inline std::int64_t body_key(RigidBodyId b) { return (std::int64_t(b.index) << 32) | std::uint32_t(b.generation); }
@@ -125,9 +119,6 @@ struct TerrainManager::Impl {
   const PatchRecord& record(const Slot& s) const { return records[std::size_t(&s - slots.data())]; }
   float radius_world(double s) const { return float(def.material.radius * s); }
   float radius_world(const Slot& slot) const { return radius_world(slot.scale); }
-  // World <-> heightfield sample index helpers.
-  int sample_i(double x) const { return int(std::floor((x - hf->origin_x()) / hf->spacing())); }
-  int sample_j(double z) const { return int(std::floor((z - hf->origin_z()) / hf->spacing())); }
   // m³ (world) of one granule's solid at particle scale s.
   double granule_volume(double s) const {
     return 4.0 * 4.0 / 3.0 * std::numbers::pi * std::pow(double(def.material.radius) * s, 3);
@@ -182,12 +173,12 @@ struct TerrainManager::Impl {
   // ones (or grows a patch under a body heading past its edge) and orders the queue.
   Status plan(double time);
   double scale_for(const PatchRequest& r) const;
-  double floor_of(const GridRegion& region, float* lo, float* hi) const;
-  PatchRequest terrain_rect() const;
-  void clip_to_terrain(PatchRequest& r) const;
+  // The floor of a patch over `region` (planning.hpp patch_floor, with def's depths).
+  double floor_of(const GridRegion& region, float* lo, float* hi) const {
+    return patch_floor(*hf, region, def.patch_depth, def.soil_depth, def.bedrock_height, lo, hi);
+  }
   double max_merged_side() const;
   bool has_soil(const PatchRequest& r) const;
-  Result<GridRegion> region_for(const PatchRequest& r, int tile_cells) const;
   bool covered(const PatchRequest& r) const;
   bool overlaps_patch(const PatchRequest& r) const;
   Result<bool> extend(const PatchRequest& r, double time);
