@@ -89,7 +89,7 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
   // output at time 0 is the state before the first frame).
   auto write_outputs = [&](long long frame, double t) -> Status {
     auto timer = world.profile().time(Stage::Outputs);
-    images.heightfield_changed(world.take_dirty_regions());
+    if (Status s = images.heightfield_changed(world.take_dirty_regions()); !s) return s;
     for (std::size_t k = 0; k < scene.outputs.frames.size(); ++k) {
       const FrameOutputDef& o = scene.outputs.frames[k];
       bool due = frame > 0 && o.every_k_frames > 0 && frame % o.every_k_frames == 0;
@@ -167,7 +167,8 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
   if (Status st = world.demote_all(); !st) return fail(ExitCode::RuntimeFailure, "demotion", st.message());
   {
     auto timer = world.profile().time(Stage::Outputs);
-    images.heightfield_changed(world.take_dirty_regions());
+    if (Status s = images.heightfield_changed(world.take_dirty_regions()); !s)
+      return fail(ExitCode::RuntimeFailure, "outputs", s.message());
     for (const auto& o : scene.outputs.heightfields)
       if (o.at_end)
         if (Status s = export_heightfield(o, frames, t_end); !s) return fail(ExitCode::RuntimeFailure, "outputs", s.message());

@@ -76,9 +76,13 @@ FrameWriter::~FrameWriter() {
   if (context_) (void)context_->make_current();  // the renderer frees its GL objects in its context
 }
 
-void FrameWriter::heightfield_changed(const std::vector<GridRegion>& regions) {
-  if (renderer_)
-    for (const auto& r : regions) renderer_->heightfield_changed(r);
+Status FrameWriter::heightfield_changed(const std::vector<GridRegion>& regions) {
+  if (!renderer_ || regions.empty()) return Ok{};
+  // The renderer's textures live in its context; another (the manager's depth render) may be
+  // current after a step.
+  if (Status s = context_->make_current(); !s) return s;
+  for (const auto& r : regions) renderer_->heightfield_changed(r);
+  return Ok{};
 }
 
 Status FrameWriter::write(const render::CameraView& view, const std::string& path) {

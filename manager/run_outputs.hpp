@@ -51,7 +51,8 @@ class FrameWriter {
   // No GL context could be made: images are skipped (why() says why).
   bool unavailable() const { return !why_.empty(); }
   const std::string& why() const { return why_; }
-  void heightfield_changed(const std::vector<GridRegion>& regions);
+  // Re-uploads the heightfield regions that changed (in the renderer's own context).
+  Status heightfield_changed(const std::vector<GridRegion>& regions);
   // Renders `view` (terrain and the live patches' granules) into `path`.
   Status write(const render::CameraView& view, const std::string& path);
 

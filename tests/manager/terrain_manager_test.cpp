@@ -313,3 +313,24 @@ TEST(TerrainManager, PatchWithRestingBodyFallsAsleep) {
   EXPECT_NEAR(world.state(*id).position.y(), y, 1e-4) << "asleep, the sphere stays put (m)";
   for (const PatchEvent& e : m.events()) EXPECT_NE(e.kind, PatchEventKind::Woke);
 }
+
+// The demotion's GL depth render is decided when the manager is made, not in its first
+// demotion: with use_gl, before any frame has run, the manager either has its depth renderer
+// or its report says why not (depth_render_note), and its demotions then render on GL, or on
+// the CPU, accordingly. (No second context is made here to probe for GL: destroying one
+// terminates the EGL display that the manager's context shares.)
+TEST(TerrainManager, DepthRenderDecidedAtCreation) {
+  test::Rig rig(test::terrain_8m("flat"));
+  ASSERT_TRUE(rig.ok()) << rig.error;
+  auto def = small_manager_def();
+  def.use_gl = true;
+  ASSERT_TRUE(rig.start(def).ok()) << rig.error;
+  const bool on_gl = !rig.manager->report().contains("depth_render_note");
+  rig.manager->request_patch(3.0, 3.0, 3.6, 3.6, 0.0);
+  rig.step_bodies = false;
+  ASSERT_TRUE(rig.frames(1).ok()) << rig.error;
+  ASSERT_TRUE(rig.demote_all().ok()) << rig.error;
+  const auto ledger = rig.manager->report()["ledger"]["patches"];
+  ASSERT_EQ(ledger.size(), 1u);
+  EXPECT_EQ(ledger[0]["depth_render"], on_gl ? "gl" : "cpu");
+}

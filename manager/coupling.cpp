@@ -1,0 +1,255 @@
+// The terrain manager's coupling (Stage::Dem, Stage::Sleep): which patch carries each body,
+// the bodies' shells in the patches' simulations, the contact forces handed to Bullet, and
+// patches falling asleep. See terrain_manager_impl.hpp.
+#include <algorithm>
+#include <cmath>
+
+#include "manager/shell.hpp"
+#include "manager/terrain_manager_impl.hpp"
+
+namespace sandpatch {
+
+using manager_detail::body_key;
+using manager_detail::eig;
+using manager_detail::quat;
+using manager_detail::v3;
+
+Status TerrainManager::Impl::step_patches(double time, double dt) {
+  choose_carriers();
+  for (auto& s : slots) {
+    if (s.state != SlotState::Active && s.state != SlotState::Asleep) continue;
+    if (Status st = couple_before(s, dt); !st) return st;
+    if (s.sim->asleep()) {
+      hold_resting_bodies(s);
+      continue;
+    }
+    if (s.state == SlotState::Asleep) {
+      s.state = SlotState::Active;
+      s.asleep_for = 0;
+      events.push_back({PatchEventKind::Woke, s.patch, time, 0, record(s).granules});
+    }
+    if (Status st = s.sim->step(dt); !st) return st;
+    couple_after(s, dt);
+    s.fade = std::min(s.fade + 1, def.fade_frames);
+  }
+  return Ok{};
+}
+
+void TerrainManager::Impl::update_sleep(double time, double dt) {
+  for (auto& s : slots) {
+    if (s.state == SlotState::Active && s.sim->asleep()) {
+      s.state = SlotState::Asleep;
+      // The bodies it carries stop with it (they keep no residual drift while it sleeps).
+      for (const auto& c : s.carried)
+        if (c.enabled && world->alive(c.body)) {
+          BodyState b = world->state(c.body);
+          b.linear_velocity.setZero();
+          b.angular_velocity.setZero();
+          world->set_state(c.body, b);
+        }
+      events.push_back({PatchEventKind::Asleep, s.patch, time + dt, 0, record(s).granules});
+    }
+    if (s.state == SlotState::Asleep) s.asleep_for += dt;
+  }
+}
+
+// Whether a body's bounds reach into a slot's region (and down to its granules).
+// `inside`: the footprint lies within the patch's DEM terrain, the filled region and the
+// apron around it, where the simulation's terrain grid is solid up to the surface.
+bool TerrainManager::Impl::engages(const Slot& s, const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, bool* inside) const {
+  const double sp = hf->spacing();
+  const double x0 = hf->origin_x() + s.region.i0 * sp, x1 = x0 + (s.region.ni - 1) * sp;
+  const double z0 = hf->origin_z() + s.region.j0 * sp, z1 = z0 + (s.region.nj - 1) * sp;
+  const double surface_top = hf->origin_y() + s.top_local;
+  const bool overlap = lo.x() < x1 && hi.x() > x0 && lo.z() < z1 && hi.z() > z0 && lo.y() < surface_top + 0.5 * engage_height;
+  // Within the filled region the granules carry the body; a body across the region's edge
+  // rests partly on the terrain grid outside it. Both are in the DEM, so a body anywhere over
+  // the DEM's terrain (region + apron) is carried by the DEM alone: with the heightfield too,
+  // a body at rest across the edge was held by Bullet at the heightfield's surface while its
+  // shell (which keeps its own state while the body rests) settled lower into the granules,
+  // so the DEM's force pulled the body down by up to its weight and the heightfield pushed
+  // back twice it (measured, ExtremesManager.HundredBodiesAtOnceOnTwoSlots: -19.6 N and
+  // +39.2 N on a 2 kg sphere), and the patch never slept.
+  const double ax0 = hf->origin_x() + s.apron.i0 * sp, ax1 = hf->origin_x() + (s.apron.i0 + s.apron.ni - 1) * sp;
+  const double az0 = hf->origin_z() + s.apron.j0 * sp, az1 = hf->origin_z() + (s.apron.j0 + s.apron.nj - 1) * sp;
+  // Outside the region the DEM's ground is the higher of its floor plane and the terrain
+  // grid, so it is the heightfield only where the surface is above the floor (not over bare
+  // rock below a flat bedrock's floor, docs/extremes.md): there the heightfield stays on
+  // (ExtremesManager.FlatBedrockMeetingTheSurface: a body held up on the floor plane over the
+  // rock pushed granules onto it, which raised the rock by 11 cm).
+  const double margin = 2.0 * radius_world(s);
+  *inside = lo.x() > x0 + margin && hi.x() < x1 - margin && lo.z() > z0 + margin && hi.z() < z1 - margin;
+  if (!*inside && lo.x() > ax0 + margin && hi.x() < ax1 - margin && lo.z() > az0 + margin && hi.z() < az1 - margin) {
+    bool faithful = true;
+    const int i0 = std::max(0, int(std::floor((lo.x() - hf->origin_x()) / sp)));
+    const int i1 = std::min(hf->samples_x() - 1, int(std::ceil((hi.x() - hf->origin_x()) / sp)));
+    const int j0 = std::max(0, int(std::floor((lo.z() - hf->origin_z()) / sp)));
+    const int j1 = std::min(hf->samples_z() - 1, int(std::ceil((hi.z() - hf->origin_z()) / sp)));
+    for (int j = j0; j <= j1 && faithful; ++j)
+      for (int i = i0; i <= i1 && faithful; ++i) faithful = hf->height(i, j) > s.floor_local;
+    *inside = faithful;
+  }
+  return overlap;
+}
+
+// The carrier of every body (see Impl::carrier).
+void TerrainManager::Impl::choose_carriers() {
+  std::unordered_map<std::int64_t, int> next;
+  for (RigidBodyId b : world->bodies()) {
+    Eigen::Vector3d lo, hi;
+    world->bounds(b, &lo, &hi);
+    const auto prev = carrier.find(body_key(b));
+    int best = -1;
+    double best_area = -1, prev_area = -1;
+    for (int k = 0; k < int(slots.size()); ++k) {
+      const Slot& sl = slots[std::size_t(k)];
+      if (sl.state != SlotState::Active && sl.state != SlotState::Asleep) continue;
+      bool inside = false;
+      if (!engages(sl, lo, hi, &inside)) continue;
+      const PatchRequest r = rect(sl);
+      const double area = std::max(0.0, std::min(hi.x(), r.x1) - std::max(lo.x(), r.x0)) *
+                          std::max(0.0, std::min(hi.z(), r.z1) - std::max(lo.z(), r.z0));
+      if (area > best_area) best = k, best_area = area;
+      if (prev != carrier.end() && prev->second == k) prev_area = area;
+    }
+    if (best < 0) continue;
+    if (prev_area >= 0 && prev_area >= 0.5 * best_area) {
+      next[body_key(b)] = prev->second;
+      continue;
+    }
+    // A body lying on the terrain is not taken up by a patch it is not in yet: it lies where
+    // its last patch or the heightfield left it, at or below the surface the new patch's fill
+    // was cut to (sunk into the granules of a patch just demoted), and the top granules of a
+    // fill reach about a granule radius above that surface; a shell started there was thrown
+    // out at 1-3 m/s (measured in the hundred-bodies case). It is taken when it moves.
+    if (lying(b, lo, hi) || settling(b)) {
+      if (prev_area >= 0) next[body_key(b)] = prev->second;  // nor handed to another one
+      continue;
+    }
+    next[body_key(b)] = best;
+  }
+  carrier.swap(next);
+}
+
+// A body lying on the terrain: its lowest point within one granule diameter (at the coarsest
+// scale) of the surface under its centre, slower than 10 sleep_speed (m/s; Bullet's contacts
+// on the heightfield jitter resting bodies at about sleep_speed).
+bool TerrainManager::Impl::lying(RigidBodyId b, const Eigen::Vector3d& lo, const Eigen::Vector3d& hi) const {
+  const BodyState st = world->state(b);
+  const double reach = 0.5 * (hi - lo).norm(), slow = 10.0 * def.sleep_speed;
+  if (st.linear_velocity.norm() >= slow || st.angular_velocity.norm() * reach >= slow) return false;
+  double s_max = 0;
+  for (double sc : scales()) s_max = std::max(s_max, sc);
+  const double cx = 0.5 * (lo.x() + hi.x()) - hf->origin_x(), cz = 0.5 * (lo.z() + hi.z()) - hf->origin_z();
+  const double surface = hf->origin_y() + hf->sample(float(cx), float(cz));
+  return lo.y() < surface + 2.0 * def.material.radius * s_max;
+}
+
+Status TerrainManager::Impl::couple_before(Slot& slot, double dt) {
+  const double s = slot.scale;
+  const int self = int(&slot - slots.data());
+  // Bodies removed from the world since the last frame: their shells leave the patch.
+  for (auto it = slot.carried.begin(); it != slot.carried.end();) {
+    if (world->alive(it->body)) {
+      ++it;
+      continue;
+    }
+    if (Status e = slot.sim->set_body_enabled(it->shell, false); !e) return e.errors();
+    it = slot.carried.erase(it);
+  }
+  for (RigidBodyId b : world->bodies()) {
+    Eigen::Vector3d lo, hi;
+    world->bounds(b, &lo, &hi);
+    bool inside = false;
+    const bool touch = engages(slot, lo, hi, &inside) && carries(self, b);
+    auto it = std::find_if(slot.carried.begin(), slot.carried.end(),
+                           [&](const Carried& c) { return c.body.index == b.index && c.body.generation == b.generation; });
+    if (!touch && it == slot.carried.end()) continue;
+    const BodyState st = world->state(b);
+    const bool fresh = it == slot.carried.end();
+    if (fresh) {
+      auto pts = shell_points(b, s);
+      if (!pts) return pts.errors();
+      ShellDef sh;
+      for (const auto& p : *pts) sh.offsets.push_back(v3(p));
+      sh.radii = {def.material.radius};
+      sh.motion = MotionType::Dynamic;
+      sh.mass = world->mass(b);  // the body enters with its own mass (mass ratio 1)
+      sh.inertia = v3(Eigen::Vector3f(world->principal_inertia(b) / float(s * s)));
+      sh.position = slot.sim->def().scale.position_to_sim({st.position.x(), st.position.y(), st.position.z()});
+      sh.orientation = quat(st.orientation);
+      auto id = slot.sim->add_shell(sh);
+      if (!id) return id.errors();
+      slot.carried.push_back({b, *id, true, Eigen::Vector3f::Zero(), Eigen::Vector3f::Zero()});
+      it = slot.carried.end() - 1;
+    }
+    Carried& c = *it;
+    const bool reenabled = touch && !c.enabled;  // parked until now: its state must be set
+    if (touch != c.enabled) {
+      if (Status e = slot.sim->set_body_enabled(c.shell, touch); !e) return e.errors();
+      c.enabled = touch;
+    }
+    // Only the carrier decides the heightfield collision; a body no patch carries meets it.
+    if (touch) world->set_terrain_collision(b, !inside);
+    else if (!carried_anywhere(b)) world->set_terrain_collision(b, true);
+    if (!touch) continue;
+    // The shell starts the frame where Bullet has the body.
+    c.v0 = st.linear_velocity;
+    c.w0 = st.angular_velocity;
+    // A body at rest keeps the shell's own state: setting it wakes the patch and restarts
+    // its sleep clock (a patch carrying a resting body never fell asleep before this).
+    Eigen::Vector3d blo, bhi;
+    world->bounds(b, &blo, &bhi);
+    const double reach = 0.5 * (bhi - blo).norm();
+    const bool at_rest = st.linear_velocity.norm() <= def.sleep_speed && st.angular_velocity.norm() * reach <= def.sleep_speed;
+    if (at_rest && !fresh && !reenabled) continue;
+    const Vec3 p = slot.sim->def().scale.position_to_sim({st.position.x(), st.position.y(), st.position.z()});
+    if (Status e = slot.sim->set_body_state(c.shell, p, quat(st.orientation), v3(Eigen::Vector3f(st.linear_velocity / float(s))),
+                                           v3(st.angular_velocity));
+        !e)
+      return e.errors();
+    if (st.linear_velocity.norm() > def.sleep_speed) slot.sim->wake();
+  }
+  (void)dt;
+  return Ok{};
+}
+
+// While a patch sleeps, the bodies it carries rest on it: Bullet gets their weight back as
+// the support force, so they stay where the patch left them.
+void TerrainManager::Impl::hold_resting_bodies(Slot& slot) {
+  for (const Carried& c : slot.carried)
+    if (c.enabled && world->alive(c.body))
+      world->apply_force(c.body, -world->mass(c.body) * def.gravity.cast<float>(), Eigen::Vector3f::Zero());
+}
+
+void TerrainManager::Impl::couple_after(Slot& slot, double dt) {
+  const double s = slot.scale;
+  for (const Carried& c : slot.carried) {
+    if (!c.enabled || !world->alive(c.body)) continue;
+    // Mean contact force and torque over the frame from the shell's change of momentum.
+    const Eigen::Vector3f v1 = eig(slot.sim->body_velocity(c.shell)) * float(s);
+    const Eigen::Vector3f w1 = eig(slot.sim->body_angular_velocity(c.shell));
+    const float m = world->mass(c.body);
+    const Eigen::Vector3f f = m * ((v1 - c.v0) / float(dt) - def.gravity.cast<float>());
+    const Eigen::Matrix3f R = world->state(c.body).orientation.toRotationMatrix();
+    const Eigen::Matrix3f I = R * world->principal_inertia(c.body).asDiagonal() * R.transpose();
+    const Eigen::Vector3f t = I * (w1 - c.w0) / float(dt);
+    world->apply_force(c.body, f, t);
+  }
+}
+
+// A body's shell: its surface sampled at the granule sphere spacing (sim units). Meshes go
+// through their signed distance field (0.2–0.9 s for a few thousand triangles), cached by
+// sample_shell per mesh; plan() asks once for every new body, so the cost falls in the frame
+// the body appears, not in the frame it first touches a patch.
+Result<std::vector<Eigen::Vector3f>> TerrainManager::Impl::shell_points(RigidBodyId b, double scale) const {
+  RigidShape shape = world->definition(b).shape;
+  const float inv = float(1.0 / scale);
+  shape.radius *= inv;
+  shape.height *= inv;
+  shape.half_extents *= inv;
+  for (auto& v : shape.vertices) v *= inv;
+  return sample_shell(shape, 1.5f * def.material.radius, def.material.radius, def.shell_particles_per_slot);
+}
+
+}  // namespace sandpatch

@@ -1,0 +1,196 @@
+// The terrain manager's demotion (Stage::Demotion): a patch's granules rendered top-down into
+// the heightfield (manager/depth_conversion.hpp), the bodies it carried set down on the new
+// heights, its ledger closed, its slot back to the pool. See terrain_manager_impl.hpp.
+#include <algorithm>
+#include <cmath>
+
+#include "heightfield/filter.hpp"
+#include "manager/terrain_manager_impl.hpp"
+
+namespace sandpatch {
+
+using manager_detail::body_key;
+using manager_detail::Clock;
+using manager_detail::ms_since;
+
+Status TerrainManager::Impl::demote_idle(double time) {
+  for (auto& s : slots)
+    if (s.state == SlotState::Asleep && s.asleep_for >= def.idle_timeout)
+      if (Status st = demote(s, time); !st) return st;
+  return Ok{};
+}
+
+Status TerrainManager::Impl::demote_every(double time) {
+  for (auto& s : slots) {
+    if (s.state == SlotState::Filling) {
+      if (Status st = upload(s, s.pending.size(), time); !st) return st;
+    }
+    if (s.state != SlotState::Free)
+      if (Status st = demote(s, time); !st) return st;
+  }
+  return Ok{};
+}
+
+// Appends the slot's granule spheres (x, y, z, r; m, heightfield-local). Granules are the
+// first bodies of a patch, so their spheres have the first 4 × granules particle ids.
+void TerrainManager::Impl::granule_spheres(const Slot& slot, std::vector<float>& xyzr) const {
+  const std::vector<Vec3> pos = slot.sim->particle_positions();
+  const std::size_t n = std::min(pos.size(), std::size_t(4) * std::size_t(record(slot).granules));
+  const float rw = radius_world(slot);
+  for (std::size_t k = 0; k < n; ++k) {
+    const auto w = slot.sim->def().scale.position_to_world(pos[k]);
+    xyzr.insert(xyzr.end(), {float(w[0] - hf->origin_x()), float(w[1] - hf->origin_y()), float(w[2] - hf->origin_z()), rw});
+  }
+}
+
+// `gl_ok`: the depth render may use GL (false: the CPU depth render, same contract). A
+// patch grown mid-frame (extend) is demoted on the CPU: demoting on GL there left the
+// manager's context in a state where the next GL depth render failed with
+// GL_INVALID_OPERATION (measured on llvmpipe; cause not found yet).
+Status TerrainManager::Impl::demote(Slot& slot, double time, bool gl_ok) {
+  const auto t0 = Clock::now();
+  PatchRecord& rec = record(slot);
+  const double sp = hf->spacing();
+  // Granule spheres in heightfield-local coordinates (m), now and as filled.
+  std::vector<float> xyzr;
+  granule_spheres(slot, xyzr);
+  std::vector<float> filled = rec.fill_spheres;
+  // Spheres grown by the probe radius, tops lowered by it after the render (lower_by_probe).
+  const float rw = radius_world(slot);
+  const float probe = float(def.surface_probe) * rw;
+  for (std::size_t k = 3; k < xyzr.size(); k += 4) xyzr[k] += probe;
+  for (std::size_t k = 3; k < filled.size(); k += 4) filled[k] += probe;
+  float top = float(slot.floor_local) + rw + probe;
+  for (std::size_t k = 1; k < xyzr.size(); k += 4) top = std::max(top, xyzr[k] + rw + probe);
+  for (std::size_t k = 1; k < filled.size(); k += 4) top = std::max(top, filled[k] + rw + probe);
+  const GridRegion& a = slot.apron;
+  RenderBox box;
+  box.x0 = float((a.i0 - 0.5) * sp), box.z0 = float((a.j0 - 0.5) * sp);
+  box.x1 = float((a.i0 + a.ni - 0.5) * sp), box.z1 = float((a.j0 + a.nj - 0.5) * sp);
+  box.floor = float(slot.floor_local);
+  box.top = top;
+  box.probe = probe;
+  bool on_gl = false;
+  auto img = render_surface(slot, box, xyzr, gl_ok, &on_gl);
+  if (!img) return img.errors();
+  auto was = rec.fill_spheres.empty() ? Result<HeightImage>(HeightImage{}) : render_surface(slot, box, filled, gl_ok, &on_gl);
+  if (!was) return was.errors();
+  // Where the surface did not move, the heights of before the promotion come back exactly
+  // (write_to_heightfield's RenderBaseline; docs/manager.md "Round trip").
+  const RenderBaseline base{&*was, &rec.before_heights, rw, rec.fill_rise};
+  const bool have_base = !rec.fill_spheres.empty() && rec.before_heights.size() == std::size_t(a.ni) * a.nj;
+  write_to_heightfield(*img, a, *hf, 1, have_base ? &base : nullptr);
+  // The patch's own edge inside the apron: particles on one side, old terrain (or what
+  // spilled onto it) on the other; the same Gaussian band stitches it.
+  smooth_border_band(*hf, slot.region, 1);
+  set_bodies_down(slot, time);
+  // The border band reaches one sample beyond the apron.
+  GridRegion d{std::max(0, a.i0 - 1), std::max(0, a.j0 - 1), 0, 0};
+  d.ni = std::min(hf->samples_x(), a.i0 + a.ni + 1) - d.i0;
+  d.nj = std::min(hf->samples_z(), a.j0 + a.nj + 1) - d.j0;
+  dirty.push_back(d);
+  close_ledger(slot, rec, on_gl);
+  for (const Carried& c : slot.carried)
+    if (c.enabled && world->alive(c.body)) world->set_terrain_collision(c.body, true);
+  events.push_back({PatchEventKind::Demoted, slot.patch, time, ms_since(t0), rec.granules});
+  slot.state = SlotState::Free;
+  rec.granules = 0;
+  slot.carried.clear();
+  slot.patch = -1;
+  return Ok{};
+}
+
+// The surface of a set of (grown) spheres over the slot's apron, as the heightfield will take
+// it: on GL when the manager has a depth renderer and `gl_ok` (then *on_gl is set), else on
+// the CPU.
+Result<HeightImage> TerrainManager::Impl::render_surface(const Slot& slot, const RenderBox& box, const std::vector<float>& spheres,
+                                                         bool gl_ok, bool* on_gl) const {
+  const double sp = hf->spacing();
+  const int res = def.depth_resolution;
+  const float x0 = box.x0, z0 = box.z0, x1 = box.x1, z1 = box.z1;
+  const float du = (x1 - x0) / float(res), dv = (z1 - z0) / float(res);
+  const double rx0 = slot.region.i0 * sp, rx1 = (slot.region.i0 + slot.region.ni - 1) * sp;
+  const double rz0 = slot.region.j0 * sp, rz1 = (slot.region.j0 + slot.region.nj - 1) * sp;
+  HeightImage img;
+  if (depth && gl_ok) {
+    if (Status st = gl->make_current(); !st) return st.errors();
+    auto r = depth->render(spheres.data(), spheres.size() / 4, x0, z0, x1, z1, box.floor, box.top + 1.0f);
+    if (!r) return r.errors();
+    img = std::move(*r);
+    *on_gl = true;
+  } else {
+    img = render_heights_cpu(spheres.data(), spheres.size() / 4, res, x0, z0, x1, z1, box.floor);
+  }
+  lower_by_probe(img, box.floor, box.probe);
+  // Outside the filled region the terrain was there before: particles add to it, an
+  // empty texel keeps it (texels inside the region with no particle read the floor).
+  for (int v = 0; v < res; ++v)
+    for (int u = 0; u < res; ++u) {
+      const float x = x0 + (u + 0.5f) * du, z = z0 + (v + 0.5f) * dv;
+      float& h = img.h[std::size_t(v) * res + u];
+      // An empty texel reads the floor. Where the old surface lies below it (bare rock under
+      // the bedrock plane, floor_of), the rock stays: it is not raised to the floor.
+      const bool empty = h <= box.floor;
+      if (x >= rx0 && x <= rx1 && z >= rz0 && z <= rz1) {
+        if (empty) h = std::min(h, hf->sample(x, z));
+        continue;
+      }
+      h = empty ? hf->sample(x, z) : std::max(h, hf->sample(x, z));
+    }
+  return img;
+}
+
+// A body the patch carried stays at rest on the new surface: under its footprint the heights
+// are kept below its lowest point (the Gaussian lifts a narrow crater's floor, and Bullet
+// would push the body out with a kick that asked for a new patch). Every body over the
+// written heights is then given time to settle before it may ask for a patch.
+void TerrainManager::Impl::set_bodies_down(const Slot& slot, double time) {
+  const double sp = hf->spacing();
+  const GridRegion& a = slot.apron;
+  for (const Carried& c : slot.carried) {
+    if (!c.enabled || !world->alive(c.body)) continue;  // (a disabled shell: another patch carries it)
+    Eigen::Vector3d lo, hi;
+    world->bounds(c.body, &lo, &hi);
+    const float floor_at = float(lo.y() - hf->origin_y());
+    // (the samples of the triangles under it: one more sample around its bounds; within
+    // the written apron)
+    const int i0 = std::max(a.i0, int(std::floor((lo.x() - hf->origin_x()) / sp))), i1 = std::min(a.i0 + a.ni - 1, int(std::ceil((hi.x() - hf->origin_x()) / sp)));
+    const int j0 = std::max(a.j0, int(std::floor((lo.z() - hf->origin_z()) / sp))), j1 = std::min(a.j0 + a.nj - 1, int(std::ceil((hi.z() - hf->origin_z()) / sp)));
+    for (int j = j0; j <= j1; ++j)
+      for (int i = i0; i <= i1; ++i)
+        if (hf->height(i, j) > floor_at) hf->set_height(i, j, floor_at);
+    BodyState st = world->state(c.body);
+    st.linear_velocity.setZero();
+    st.angular_velocity.setZero();
+    world->set_state(c.body, st);
+  }
+  world->terrain_changed();
+  // Every body over the written heights (those it carried, and those resting on the
+  // heightfield there: Bullet's contacts with the changed tiles are made again, and such a
+  // body first falls g dt) is given 0.1 s (6 frames) to settle before it may ask for a patch.
+  const double wx0 = hf->origin_x() + (a.i0 - 1) * sp, wx1 = hf->origin_x() + (a.i0 + a.ni) * sp;
+  const double wz0 = hf->origin_z() + (a.j0 - 1) * sp, wz1 = hf->origin_z() + (a.j0 + a.nj) * sp;
+  for (RigidBodyId b : world->bodies()) {
+    Eigen::Vector3d lo, hi;
+    world->bounds(b, &lo, &hi);
+    if (lo.x() < wx1 && hi.x() > wx0 && lo.z() < wz1 && hi.z() > wz0) set_down_until[body_key(b)] = time + 0.1;
+  }
+}
+
+// Ledger: the region above the floor plus what spilled onto the apron, against the volume
+// before promotion; appended to the closed ledgers (the report's ledger.patches).
+void TerrainManager::Impl::close_ledger(const Slot& slot, PatchRecord& rec, bool on_gl) {
+  rec.ledger.after = soil_volume_after(*hf, slot.region, slot.apron, slot.floor_local, rec.before_heights);
+  const double err = rec.ledger.before > 0 ? 100.0 * (rec.ledger.after - rec.ledger.before) / rec.ledger.before : 0;
+  ledgers.push_back({{"patch", slot.patch},
+                     {"particle_scale", slot.scale},
+                     {"region", {slot.region.i0, slot.region.j0, slot.region.ni, slot.region.nj}},
+                     {"granules", rec.granules},
+                     {"volume_before_m3", rec.ledger.before},
+                     {"volume_active_m3", rec.ledger.active},
+                     {"volume_after_m3", rec.ledger.after},
+                     {"error_pct", err},
+                     {"depth_render", on_gl ? "gl" : "cpu"}});
+}
+
+}  // namespace sandpatch

@@ -1,0 +1,86 @@
+// The terrain manager's patch types (internal to manager/; see terrain_manager.hpp): a pool
+// slot and the record kept for its patch, the body a patch carries, and the pre-settled tiles
+// of one particle scale.
+//
+// A slot is split the way Box2D splits b2Body from b2BodySim: `Slot` holds what the per-frame
+// stages touch (the simulation, the state, the patch's placement, the bodies it carries, the
+// upload cursor and the timers), `PatchRecord` what promotion keeps for the demotion and the
+// report (the heights and spheres of the fill, the ledger, conversion times, granule count).
+// TerrainManager::Impl keeps them in two arrays indexed alike (Impl::slots, Impl::records).
+#pragma once
+
+#include <Eigen/Core>
+#include <cstddef>
+#include <memory>
+#include <vector>
+
+#include "heightfield/heightfield.hpp"
+#include "manager/bullet_world.hpp"
+#include "manager/granule_tile.hpp"
+#include "particles/backend.hpp"
+
+namespace sandpatch {
+
+enum class SlotState { Free, Filling, Active, Asleep };
+
+// A body a patch carries: its shell in the patch's simulation.
+struct Carried {
+  RigidBodyId body;
+  sandpatch::BodyId shell;
+  bool enabled = true;
+  Eigen::Vector3f v0 = Eigen::Vector3f::Zero(), w0 = Eigen::Vector3f::Zero();  // world velocities at the frame start
+};
+
+// Volume of the patch's soil (m³): the heightfield's before promotion, the granules' while
+// it lives, the heightfield's after demotion.
+struct Ledger {
+  double before = 0, active = 0, after = 0;
+  bool closed = false;
+};
+
+// What the frame touches: one pool slot and the patch in it.
+struct Slot {
+  std::unique_ptr<DemBackend> sim;
+  SlotState state = SlotState::Free;
+  int patch = -1;            // id of the patch in the slot
+  GridRegion region;         // heightfield samples of the patch
+  GridRegion apron;          // region + the band where spilled granules may rest
+  Eigen::Vector3d origin;    // m, world: sim (0,0,0)
+  double floor_local = 0;    // m, floor height relative to the heightfield origin
+  double top_local = 0;      // m, highest surface sample of the region at promotion
+  double scale = 1;          // world size / simulated size of this patch, fixed while it lives
+  std::vector<PlacedGranule> pending;  // granules still to upload
+  std::size_t uploaded = 0;
+  int fade = 0;              // frames simulated, up to fade_frames
+  double asleep_for = 0;     // s asleep and untouched
+  std::vector<Carried> carried;
+  bool live() const { return state != SlotState::Free; }
+  bool ready() const { return state == SlotState::Active || state == SlotState::Asleep; }
+  explicit Slot(std::unique_ptr<DemBackend> s) : sim(std::move(s)) {}
+};
+
+// What the demotion and the report read: the record of the patch in the slot of the same index.
+struct PatchRecord {
+  int granules = 0;                   // uploaded
+  double fill_ms = 0;                 // promotion and uploads, wall
+  std::vector<float> before_heights;  // heights of the slot's apron at promotion
+  std::vector<float> fill_spheres;    // the granule spheres as filled (x, y, z, r; m, heightfield-local): the
+                                      // demotion renders them too, so its render error cancels where nothing moved
+  float fill_rise = 0;                // m, the tile's elastic rebound (GranuleTile::rebound), world
+  Ledger ledger;
+};
+
+// Pre-settled tiles (granule_tile.hpp) of one particle scale, shallowest first. A fill deeper
+// than a tile's vertical period would stack copies, and the seam leaves voids (measured:
+// surfaces just above a seam render 0.75 d low), so a patch takes the shallowest tile that
+// holds its depth, and a deeper one is settled (and kept) when none does. A tile is settled in
+// simulation units, its period a whole number of heightfield cells at its scale, under
+// gravity g / s.
+struct TileSet {
+  double scale = 1;                 // world size / simulated size
+  int cells = 1;                    // heightfield cells per tile period (patch sides fall on tile walls)
+  GranuleTileDef def;
+  std::vector<GranuleTile> tiles;   // shallowest first
+};
+
+}  // namespace sandpatch

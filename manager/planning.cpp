@@ -1,0 +1,260 @@
+// The terrain manager's planning (Stage::Lod): requests from predicted contacts, the queue,
+// merging, and growth of a patch under a body heading past its edge (terrain_manager_impl.hpp);
+// and the planning geometry (planning.hpp).
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "manager/planning.hpp"
+#include "manager/terrain_manager_impl.hpp"
+
+namespace sandpatch {
+
+using manager_detail::body_key;
+
+Status TerrainManager::Impl::plan(double time) {
+  std::vector<BodyMotion> motions;
+  for (RigidBodyId b : world->bodies()) {
+    if (shells_sampled.insert(body_key(b)).second) {
+      for (const TileSet& set : tile_sets) {
+        auto pts = shell_points(b, set.scale);  // warms sample_shell's cache (meshes), per scale
+        if (!pts) return pts.errors();
+      }
+    }
+    BodyMotion m;
+    world->bounds(b, &m.lo, &m.hi);
+    const BodyState st = world->state(b);
+    m.velocity = st.linear_velocity.cast<double>();
+    // A body at rest for two frames in a row (a free body cannot be: gravity moves it)
+    // lies on the terrain and disturbs nothing: it asks for no patch. Without this rule a
+    // resting body asked again after every demotion and a queue never drained.
+    const double reach = 0.5 * (m.hi - m.lo).norm();
+    const bool still = st.linear_velocity.norm() <= def.sleep_speed && st.angular_velocity.norm() * reach <= def.sleep_speed;
+    int& frames_still = still_frames[body_key(b)];
+    frames_still = still ? frames_still + 1 : 0;
+    if (frames_still >= 2 || settling(b)) continue;
+    // A body lying on the heightfield (slow, at the surface) that no patch carries asks for
+    // none either: a patch would not take it up (lying), and its requests made patches come
+    // and go under it.
+    if (!carried_anywhere(b) && lying(b, m.lo, m.hi)) continue;
+    motions.push_back(m);
+  }
+  // Requests are clipped to the terrain: a body landing at its edge asks for what exists
+  // (before, a request reaching past the edge was never `covered` by the clipped patch and
+  // made it `extend` - demote and promote again - every frame). Merged requests stay within
+  // what one slot holds (before: unbounded, and bodies landing side by side merged into one
+  // patch no slot could hold, an error mid-run).
+  auto predicted = predict_contacts(*hf, motions, def.gravity, def.lod);
+  for (auto& r : predicted) clip_to_terrain(*hf, r);
+  auto reqs = merge_requests(std::move(predicted), max_merged_side());
+  // A queued request lapses when no body predicts a contact there any more (its body came
+  // to rest on the heightfield meanwhile); requests made with request_patch() stay.
+  for (auto it = queue.begin(); it != queue.end();) {
+    bool live = it->bodies.empty();
+    for (const auto& r : reqs) live = live || it->overlaps(r);
+    if (live) {
+      ++it;
+    } else {
+      it = queue.erase(it);
+      ++lapsed_requests;
+    }
+  }
+  for (auto& r : reqs) {
+    if (covered(r) || !has_soil(r)) continue;
+    if (overlaps_patch(r)) {
+      if (auto e = extend(r, time); !e) return e.errors();
+      continue;
+    }
+    bool queued = false;
+    for (const auto& q : queue) queued = queued || q.overlaps(r);
+    if (!queued) {
+      queue.push_back(r);
+      events.push_back({PatchEventKind::Requested, -1, time, 0, 0});
+    }
+  }
+  std::stable_sort(queue.begin(), queue.end(), [](const PatchRequest& p, const PatchRequest& q) {
+    if (p.time_to_contact != q.time_to_contact) return p.time_to_contact < q.time_to_contact;
+    return p.speed > q.speed;
+  });
+  return Ok{};
+}
+
+// The scale a request is promoted at (Leach & Marais §4.3, §6.3 scenario 2): its own (a
+// patch growing under a body keeps its scale), else the first band whose max_distance reaches
+// the 3-D distance from the camera to the request's centre on the surface (the last band's
+// beyond), else particle_scale.
+double TerrainManager::Impl::scale_for(const PatchRequest& r) const {
+  if (r.particle_scale > 0) return r.particle_scale;
+  if (def.scale_bands.empty()) return def.particle_scale;
+  const double x = 0.5 * (r.x0 + r.x1), z = 0.5 * (r.z0 + r.z1);
+  const double y = hf->origin_y() + hf->sample(float(x - hf->origin_x()), float(z - hf->origin_z()));
+  const double d = (Eigen::Vector3d(x, y, z) - camera).norm();
+  for (const auto& b : def.scale_bands)
+    if (d <= b.max_distance) return b.particle_scale;
+  return def.scale_bands.back().particle_scale;
+}
+
+// m: the widest square request that merging may make, so that one slot holds its patch: the
+// side of a patch_depth-deep square of granules_per_slot granules at the first tile's
+// packing, with 20 % to spare, less the rounding out to whole tile periods (patch_region:
+// up to one period and a sample on each axis). Requests wider than that are not merged
+// (each single request is still checked against the capacity in promote()).
+double TerrainManager::Impl::max_merged_side() const {
+  const double fill = std::min(def.patch_depth, def.soil_depth);  // m
+  // (With scale bands, at the finest scale: the most granules per area.)
+  double side = std::numeric_limits<double>::max();
+  for (const TileSet& t : tile_sets) {
+    const double pf = t.tiles.empty() ? 0.5 : t.tiles.front().packing_fraction;
+    const double area = def.granules_per_slot * granule_volume(t.scale) / (pf * std::max(fill, 1e-6)) / 1.2;  // m²
+    side = std::min(side, std::sqrt(area) - (max_cells() + 1) * double(hf->spacing()));
+  }
+  return side;
+}
+
+// Whether a request can become a patch: its region is on the terrain and has soil above the
+// bedrock. (A body falling just past the terrain's edge, or onto bare rock, asks for a
+// patch that cannot exist; before, promote() failed the whole frame with an error.)
+bool TerrainManager::Impl::has_soil(const PatchRequest& r) const {
+  auto reg = patch_region(*hf, r, set_for(scale_for(r)).cells);
+  if (!reg) return false;
+  float lo = 0, hi = 0;
+  return floor_of(*reg, &lo, &hi) < hi;
+}
+
+bool TerrainManager::Impl::covered(const PatchRequest& r) const {
+  for (const Slot& s : slots) {
+    if (s.state == SlotState::Free) continue;
+    const double sp = hf->spacing();
+    const double x0 = hf->origin_x() + s.region.i0 * sp, x1 = x0 + (s.region.ni - 1) * sp;
+    const double z0 = hf->origin_z() + s.region.j0 * sp, z1 = z0 + (s.region.nj - 1) * sp;
+    if (r.x0 >= x0 && r.x1 <= x1 && r.z0 >= z0 && r.z1 <= z1) return true;
+  }
+  return false;
+}
+
+bool TerrainManager::Impl::overlaps_patch(const PatchRequest& r) const {
+  for (const Slot& s : slots)
+    if (s.state != SlotState::Free && rect(s).overlaps(r)) return true;
+  return false;
+}
+
+// A body in a patch heading past its edge (its predicted contact reaches beyond the
+// region): the patch grows to cover both, if the slot holds the grown patch (estimated from
+// its granules per area, with 20 % to spare). The patch is demoted now (what the body did
+// is written to the heightfield) and the grown request goes to the front of the queue, so
+// it is promoted in this frame from the slot just freed: nothing is lost, and the body
+// stays on particles. Returns whether it did.
+Result<bool> TerrainManager::Impl::extend(const PatchRequest& r, double time) {
+  for (Slot& s : slots) {
+    if ((s.state != SlotState::Active && s.state != SlotState::Asleep) || !rect(s).overlaps(r)) continue;
+    const PatchRequest a = rect(s);
+    // Only when the predicted contact itself (the request without its apron) comes within
+    // two granule diameters of the patch's edge: a body settling near the middle whose
+    // apron pokes out by a few mm must not make the patch grow.
+    // A side of the patch on the terrain's edge cannot be crossed (requests are clipped there).
+    const double m = 4.0 * radius_world(s), ap = def.lod.apron, e = 1e-6;
+    const int tile_cells = set_for(s.scale).cells;
+    const PatchRequest t = terrain_rect(*hf);
+    const bool in_x0 = a.x0 <= t.x0 + e || r.x0 + ap >= a.x0 + m, in_x1 = a.x1 >= t.x1 - e || r.x1 - ap <= a.x1 - m;
+    const bool in_z0 = a.z0 <= t.z0 + e || r.z0 + ap >= a.z0 + m, in_z1 = a.z1 >= t.z1 - e || r.z1 - ap <= a.z1 - m;
+    if (in_x0 && in_x1 && in_z0 && in_z1) return false;
+    PatchRequest u = r;
+    u.x0 = std::min(a.x0, r.x0), u.z0 = std::min(a.z0, r.z0), u.x1 = std::max(a.x1, r.x1), u.z1 = std::max(a.z1, r.z1);
+    const double grow = (u.x1 - u.x0 + 2 * hf->spacing() * tile_cells) * (u.z1 - u.z0 + 2 * hf->spacing() * tile_cells) /
+                        std::max(1e-9, (a.x1 - a.x0) * (a.z1 - a.z0));
+    if (double(record(s).granules) * grow * 1.2 > double(def.granules_per_slot)) return false;
+    if (Status st = demote(s, time, false); !st) return st.errors();
+    u.time_to_contact = 0;
+    u.particle_scale = s.scale;  // the grown patch keeps its scale
+    queue.insert(queue.begin(), u);
+    ++extensions;
+    return true;
+  }
+  return false;
+}
+
+// ---- planning geometry (planning.hpp) ----
+
+namespace {
+// Trapezoid weights of a sample in a region (½ on edges, ¼ at corners): Σ w h sp² is the
+// volume under the bilinear surface.
+double trapezoid_weight(int i, int j, const GridRegion& r) {
+  const double wi = (i == r.i0 || i == r.i0 + r.ni - 1) ? 0.5 : 1.0;
+  const double wj = (j == r.j0 || j == r.j0 + r.nj - 1) ? 0.5 : 1.0;
+  return wi * wj;
+}
+}  // namespace
+
+PatchRequest terrain_rect(const Heightfield& hf) {
+  PatchRequest t;
+  t.x0 = hf.origin_x();
+  t.z0 = hf.origin_z();
+  t.x1 = t.x0 + (hf.samples_x() - 1) * double(hf.spacing());
+  t.z1 = t.z0 + (hf.samples_z() - 1) * double(hf.spacing());
+  return t;
+}
+
+void clip_to_terrain(const Heightfield& hf, PatchRequest& r) {
+  const PatchRequest t = terrain_rect(hf);
+  r.x0 = std::max(r.x0, t.x0), r.z0 = std::max(r.z0, t.z0);
+  r.x1 = std::min(r.x1, t.x1), r.z1 = std::min(r.z1, t.z1);
+}
+
+Result<GridRegion> patch_region(const Heightfield& hf, const PatchRequest& r, int tile_cells) {
+  auto sample_i = [&](double x) { return int(std::floor((x - hf.origin_x()) / hf.spacing())); };
+  auto sample_j = [&](double z) { return int(std::floor((z - hf.origin_z()) / hf.spacing())); };
+  int i0 = std::max(0, sample_i(r.x0)), j0 = std::max(0, sample_j(r.z0));
+  int i1 = std::min(hf.samples_x() - 1, sample_i(r.x1) + 1), j1 = std::min(hf.samples_z() - 1, sample_j(r.z1) + 1);
+  if (i1 - i0 < 2 || j1 - j0 < 2) return Error{"", "patch request", "", "off the terrain"};
+  auto align = [&](int& a, int& b, int samples) {
+    const int cells = b - a, whole = ((cells + tile_cells - 1) / tile_cells) * tile_cells;
+    if (whole > samples - 1) return;  // terrain narrower than the rounded patch: keep the cut sides
+    a -= (whole - cells) / 2;
+    b = a + whole;
+    if (a < 0) b -= a, a = 0;
+    if (b > samples - 1) a -= b - (samples - 1), b = samples - 1;
+  };
+  align(i0, i1, hf.samples_x());
+  align(j0, j1, hf.samples_z());
+  return GridRegion{i0, j0, i1 - i0 + 1, j1 - j0 + 1};
+}
+
+double patch_floor(const Heightfield& hf, const GridRegion& region, double patch_depth, double soil_depth,
+                   double bedrock_height, float* lo, float* hi) {
+  *lo = std::numeric_limits<float>::max(), *hi = -*lo;
+  double bedrock = -std::numeric_limits<double>::infinity();
+  for (int j = region.j0; j < region.j0 + region.nj; ++j)
+    for (int i = region.i0; i < region.i0 + region.ni; ++i) {
+      const float h = hf.height(i, j);
+      *lo = std::min(*lo, h);
+      *hi = std::max(*hi, h);
+      bedrock = std::max({bedrock, double(h) - soil_depth, std::min(double(h), bedrock_height)});
+    }
+  return std::max(double(*lo) - patch_depth, bedrock);
+}
+
+double soil_volume(const Heightfield& hf, const GridRegion& region, double floor_local) {
+  const float sp = hf.spacing();
+  double v = 0;
+  for (int j = region.j0; j < region.j0 + region.nj; ++j)
+    for (int i = region.i0; i < region.i0 + region.ni; ++i)
+      v += trapezoid_weight(i, j, region) * (hf.height(i, j) - floor_local);
+  return v * double(sp) * sp;
+}
+
+double soil_volume_after(const Heightfield& hf, const GridRegion& region, const GridRegion& apron, double floor_local,
+                         const std::vector<float>& before_heights) {
+  const double sp = hf.spacing();
+  const GridRegion& a = apron;
+  double after = 0;
+  for (int j = a.j0; j < a.j0 + a.nj; ++j)
+    for (int i = a.i0; i < a.i0 + a.ni; ++i) {
+      const bool in = i >= region.i0 && i < region.i0 + region.ni && j >= region.j0 && j < region.j0 + region.nj;
+      const double h0 = before_heights[std::size_t(j - a.j0) * a.ni + (i - a.i0)];
+      after += in ? trapezoid_weight(i, j, region) * (hf.height(i, j) - floor_local)
+                  : (hf.height(i, j) - h0) * (1.0 - 0.0);
+    }
+  return after * sp * sp;
+}
+
+}  // namespace sandpatch

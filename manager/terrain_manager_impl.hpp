@@ -1,0 +1,230 @@
+// TerrainManager::Impl (internal to manager/): the manager's state and its stages, one source
+// file per stage (docs/manager.md "Sources"):
+//   terrain_manager.cpp  create, the frame's sequence (before_bodies, after_bodies), queries, report
+//   planning.cpp         lod: requests, queue, merge, growth of a patch under a body; the
+//                        planning geometry (planning.hpp: region, floor, soil volume)
+//   filling.cpp          activation: tiles, promotion (heightfield -> granules), uploads
+//   coupling.cpp         dem and sleep: carriers, shells, forces to and from Bullet
+//   demotion.cpp         demotion: depth render, heightfield write, bodies set down, ledger
+// Each stage function runs inside its Profile timer (manager/profile.hpp), opened by the
+// sequencer.
+#pragma once
+
+#include <Eigen/Core>
+#include <algorithm>
+#include <chrono>
+#include <cstdint>
+#include <deque>
+#include <memory>
+#include <numbers>
+#include <string>
+#include <unordered_map>
+#include <unordered_set>
+#include <vector>
+
+#include "gl/context.hpp"
+#include "manager/depth_conversion.hpp"
+#include "manager/patch.hpp"
+#include "manager/planning.hpp"
+#include "manager/terrain_manager.hpp"
+
+namespace sandpatch {
+namespace manager_detail {
+
+using Clock = std::chrono::steady_clock;
+inline double ms_since(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
+
+inline Vec3 v3(const Eigen::Vector3f& v) { return {v.x(), v.y(), v.z()}; }
+inline Eigen::Vector3f eig(Vec3 v) { return {v.x, v.y, v.z}; }
+inline Quat quat(const Eigen::Quaternionf& q) { return {q.x(), q.y(), q.z(), q.w()}; }
+
+// Key of a body in the manager's maps: index << 32 | generation.
+inline std::int64_t body_key(RigidBodyId b) { return (std::int64_t(b.index) << 32) | std::uint32_t(b.generation); }
+
+}  // namespace manager_detail
+
+struct TerrainManager::Impl {
+  TerrainManagerDef def;
+  Heightfield* hf = nullptr;
+  BulletWorld* world = nullptr;
+
+  // ---- tiles (filling.cpp) ----
+  std::deque<TileSet> tile_sets;      // made at start-up, one per scale (references stay valid)
+  double tiles_settled_ms = 0;
+  std::string tile_cache;             // resolved directory ("" = no disk cache)
+  std::vector<std::string> tile_cache_notes;  // why a stored tile was not used or not written
+  int tiles_from[3] = {};             // tiles by TileCacheOutcome::Source: disk, memory, settled
+  Eigen::Vector3d camera = Eigen::Vector3d::Zero();  // m, world: the scale bands' centre
+
+  // ---- planning (planning.cpp) ----
+  std::unordered_map<std::int64_t, int> still_frames;  // frames each body (body_key) has been at rest
+  int lapsed_requests = 0;  // queued requests dropped because no body predicted contact there any more
+  int extensions = 0;       // patches grown under a body heading past their edge
+
+  // ---- the pool ----
+  // The GL context (the GL backend's and the demotion's depth render's, made by create())
+  // outlives the slots: declared first.
+  std::unique_ptr<gl::Context> gl;
+  std::vector<Slot> slots;            // what the frame touches
+  std::vector<PatchRecord> records;   // records[k]: the patch in slots[k], for demotion and the report
+  std::vector<PatchRequest> queue;
+  std::vector<PatchEvent> events;
+  int next_patch = 0;
+  int peak_slots = 0;
+  int peak_queue = 0;
+  std::vector<nlohmann::ordered_json> ledgers;  // closed ledgers (demoted patches)
+  std::vector<GridRegion> dirty;                // written by demotions, not yet taken
+
+  // The demotion's GL depth render (create(): when use_gl and a context could be made; else
+  // null, gl_note says why, and demotions render on the CPU).
+  std::unique_ptr<ParticleDepthRenderer> depth;
+  std::string gl_note;
+
+  // ---- coupling (coupling.cpp) ----
+  // One carrier per body. A body over two patches at once (resting across the seam of
+  // adjacent patches) had a shell in both, and each DEM, supporting it on its granules and on
+  // its terrain grid outside its region, gave Bullet the full support force: measured in
+  // ExtremesManager.HundredBodiesAtOnceOnTwoSlots, 30.6 N + 18.3 N upwards on a 2 kg sphere
+  // (weight 19.6 N), which bounced at 0.24-0.34 m/s and kept both patches awake. Now a
+  // body is carried by the ready patch that holds most of its footprint (the one carrying it
+  // keeps it while it holds at least half as much as another: no flip-flop), and only that
+  // patch sets its heightfield collision. Key: body_key -> slot index.
+  std::unordered_map<std::int64_t, int> carrier;
+  // Bodies a demotion set down on the new heights, until this simulated time (s): their first
+  // Bullet step on the changed heightfield falls g dt (0.16 m/s) before the contact holds them,
+  // which asked for a new patch at once; promoted under bodies sunk into the old one's crater,
+  // it threw them out of its fill at 1-3 m/s (measured in the hundred-bodies case). Until then
+  // they ask for no patch and no patch takes them up.
+  std::unordered_map<std::int64_t, double> set_down_until;
+  double now = 0;  // s, simulated time of the frame being run
+  std::unordered_set<std::int64_t> shells_sampled;  // bodies whose shell was sampled ahead (body_key)
+
+  // m (world): a body's shell joins a patch when the body's lowest point is within half of
+  // this above the patch's highest surface point; the simulation's domain reaches this high.
+  static constexpr double engage_height = 1.0;
+
+  // ---- shared helpers ----
+  // The GL backend's context must be current for any slot call (other GL users of the
+  // thread, e.g. the image writer, make their own current in between). The CPU backend's
+  // slots need none: there the manager's context (made at creation for the depth render) is
+  // made current by the depth render alone, as before it was made at the first demotion, so
+  // a caller's context current between frames stays current (manager/run.cpp's image writer
+  // updates its terrain textures after after_bodies without making its own current: with
+  // the manager's context made current every frame, those updates went to the wrong context
+  // and the next GL depth render failed with GL_INVALID_OPERATION).
+  void current() const {
+    if (gl && def.backend == "gl") (void)gl->make_current();
+  }
+  PatchRecord& record(const Slot& s) { return records[std::size_t(&s - slots.data())]; }
+  const PatchRecord& record(const Slot& s) const { return records[std::size_t(&s - slots.data())]; }
+  float radius_world(double s) const { return float(def.material.radius * s); }
+  float radius_world(const Slot& slot) const { return radius_world(slot.scale); }
+  // m³ (world) of one granule's solid at particle scale s.
+  double granule_volume(double s) const {
+    return 4.0 * 4.0 / 3.0 * std::numbers::pi * std::pow(double(def.material.radius) * s, 3);
+  }
+  // The scales patches can take: the bands', or the one particle_scale.
+  std::vector<double> scales() const {
+    std::vector<double> v;
+    for (const auto& b : def.scale_bands)
+      if (std::find(v.begin(), v.end(), b.particle_scale) == v.end()) v.push_back(b.particle_scale);
+    if (v.empty()) v.push_back(def.particle_scale);
+    return v;
+  }
+  TileSet& set_for(double s) {
+    for (TileSet& t : tile_sets)
+      if (t.scale == s) return t;
+    return tile_sets.front();  // not reached: every scale a request can take has a set from create()
+  }
+  const TileSet& set_for(double s) const { return const_cast<Impl*>(this)->set_for(s); }
+  int max_cells() const {
+    int c = 1;
+    for (const TileSet& t : tile_sets) c = std::max(c, t.cells);
+    return c;
+  }
+  bool settling(RigidBodyId b) const {
+    const auto it = set_down_until.find(manager_detail::body_key(b));
+    return it != set_down_until.end() && now < it->second;
+  }
+  // Whether slot `k` carries body b (see `carrier`).
+  bool carries(int k, RigidBodyId b) const {
+    const auto it = carrier.find(manager_detail::body_key(b));
+    return it != carrier.end() && it->second == k;
+  }
+  bool carried_anywhere(RigidBodyId b) const { return carrier.count(manager_detail::body_key(b)) > 0; }
+  // The world rectangle of a slot's region.
+  PatchRequest rect(const Slot& s) const {
+    const double sp = hf->spacing();
+    PatchRequest p;
+    p.x0 = hf->origin_x() + s.region.i0 * sp;
+    p.x1 = p.x0 + (s.region.ni - 1) * sp;
+    p.z0 = hf->origin_z() + s.region.j0 * sp;
+    p.z1 = p.z0 + (s.region.nj - 1) * sp;
+    return p;
+  }
+
+  // ---- creation (terrain_manager.cpp) ----
+  // The demotion's GL depth render when def.use_gl: the context (the GL backend's, or a new
+  // one) and the renderer; without them, gl_note says why and demotions render on the CPU.
+  Status make_depth_renderer();
+
+  // ---- planning (planning.cpp): Stage::Lod ----
+  // Predicts contacts, merges them into requests, drops lapsed queued requests, queues new
+  // ones (or grows a patch under a body heading past its edge) and orders the queue.
+  Status plan(double time);
+  double scale_for(const PatchRequest& r) const;
+  // The floor of a patch over `region` (planning.hpp patch_floor, with def's depths).
+  double floor_of(const GridRegion& region, float* lo, float* hi) const {
+    return patch_floor(*hf, region, def.patch_depth, def.soil_depth, def.bedrock_height, lo, hi);
+  }
+  double max_merged_side() const;
+  bool has_soil(const PatchRequest& r) const;
+  bool covered(const PatchRequest& r) const;
+  bool overlaps_patch(const PatchRequest& r) const;
+  Result<bool> extend(const PatchRequest& r, double time);
+
+  // ---- filling (filling.cpp): Stage::Activation ----
+  // Serves the queue while slots are free, then uploads a chunk of every filling patch.
+  Status activate(double time, double dt);
+  Status add_tile_set(double scale);
+  int tile_layers(double fill_depth) const;
+  Result<const GranuleTile*> tile_for(TileSet& set, double fill_depth);
+  SimulationDef sim_def(double scale) const;
+  Status promote(Slot& slot, const PatchRequest& req, double time);
+  Status upload(Slot& slot, std::size_t budget, double time);
+
+  // ---- coupling (coupling.cpp): Stage::Dem and Stage::Sleep ----
+  // Chooses carriers, hands every ready patch its bodies, steps the awake ones and hands the
+  // contact forces back to Bullet.
+  Status step_patches(double time, double dt);
+  // After the Bullet step: patches whose DEM came to rest fall asleep (their bodies stop).
+  void update_sleep(double time, double dt);
+  bool engages(const Slot& s, const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, bool* inside) const;
+  void choose_carriers();
+  bool lying(RigidBodyId b, const Eigen::Vector3d& lo, const Eigen::Vector3d& hi) const;
+  Status couple_before(Slot& slot, double dt);
+  void hold_resting_bodies(Slot& slot);
+  void couple_after(Slot& slot, double dt);
+  Result<std::vector<Eigen::Vector3f>> shell_points(RigidBodyId b, double scale) const;
+
+  // ---- demotion (demotion.cpp): Stage::Demotion ----
+  // Demotes every patch asleep for idle_timeout.
+  Status demote_idle(double time);
+  // Demotes every live patch (filling ones after uploading the rest).
+  Status demote_every(double time);
+  Status demote(Slot& slot, double time, bool gl_ok = true);
+  void granule_spheres(const Slot& slot, std::vector<float>& xyzr) const;
+  // The box a demotion renders: the slot's apron (m, heightfield-local), from the floor to
+  // above the highest (grown) sphere.
+  struct RenderBox {
+    float x0 = 0, z0 = 0, x1 = 0, z1 = 0;
+    float floor = 0, top = 0;
+    float probe = 0;  // m, the spheres' growth
+  };
+  Result<HeightImage> render_surface(const Slot& slot, const RenderBox& box, const std::vector<float>& spheres, bool gl_ok,
+                                     bool* on_gl) const;
+  void set_bodies_down(const Slot& slot, double time);
+  void close_ledger(const Slot& slot, PatchRecord& rec, bool on_gl);
+};
+
+}  // namespace sandpatch
