@@ -327,7 +327,6 @@ TEST(TerrainManager, DepthRenderDecidedAtCreation) {
   ASSERT_TRUE(rig.start(def).ok()) << rig.error;
   const bool on_gl = !rig.manager->report().contains("depth_render_note");
   rig.manager->request_patch(3.0, 3.0, 3.6, 3.6, 0.0);
-  rig.step_bodies = false;
   ASSERT_TRUE(rig.frames(1).ok()) << rig.error;
   ASSERT_TRUE(rig.demote_all().ok()) << rig.error;
   const auto ledger = rig.manager->report()["ledger"]["patches"];
