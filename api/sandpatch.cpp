@@ -225,7 +225,6 @@ Result<core::Heightfield> build_heightfield(const TerrainDef& d) {
 EventKind kind_of(core::PatchEventKind k) {
   switch (k) {
     case core::PatchEventKind::Requested: return EventKind::Requested;
-    case core::PatchEventKind::Queued: return EventKind::Requested;  // not emitted by the manager today
     case core::PatchEventKind::Promoted: return EventKind::Promoted;
     case core::PatchEventKind::Ready: return EventKind::Ready;
     case core::PatchEventKind::Asleep: return EventKind::Asleep;
@@ -584,7 +583,6 @@ std::vector<Event> Terrain::poll_events() {
   const auto& es = I.manager()->events();
   for (; I.events_read < es.size(); ++I.events_read) {
     const core::PatchEvent& e = es[I.events_read];
-    if (e.kind == core::PatchEventKind::Queued) continue;
     out.push_back({kind_of(e.kind), e.patch, e.time, e.wall_ms, e.granules});
   }
   return out;

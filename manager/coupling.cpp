@@ -28,7 +28,15 @@ Status TerrainManager::Impl::step_patches(double time, double dt) {
       s.asleep_for = 0;
       events.push_back({PatchEventKind::Woke, s.patch, time, 0, record(s).granules});
     }
-    if (Status st = s.sim->step(dt); !st) return st;
+    if (Status st = s.sim->step(dt); !st) {
+      // The DEM names its own definition; say which knob of the terrain's trades it.
+      std::vector<Error> es = st.errors();
+      for (Error& e : es)
+        if (e.field == "step.dt_frame")
+          e.detail = "lower the frame's dt, raise simulation.max_substeps (TerrainDef.max_substeps), lower "
+                     "simulation.steps_per_contact (TerrainDef.steps_per_contact) or the material's stiffness";
+      return es;
+    }
     couple_after(s, dt);
     s.fade = std::min(s.fade + 1, def.fade_frames);
   }

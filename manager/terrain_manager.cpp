@@ -17,7 +17,6 @@ namespace sandpatch {
 const char* to_string(PatchEventKind k) {
   switch (k) {
     case PatchEventKind::Requested: return "requested";
-    case PatchEventKind::Queued: return "queued";
     case PatchEventKind::Promoted: return "promoted";
     case PatchEventKind::Ready: return "ready";
     case PatchEventKind::Asleep: return "asleep";

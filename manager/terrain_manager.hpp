@@ -1,7 +1,7 @@
-// The terrain manager (Leach & Marais §3, §5; ../shared/DESIGN.md "One frame"): granular
+// The terrain manager (Leach & Marais §3, §5; docs/manager.md "The frame"): granular
 // patches that come and go around bodies that touch the terrain.
 //
-// Per frame, around the Bullet step (manager/run.cpp calls them in this order):
+// Per frame, around the Bullet step (World::step, manager/world.hpp, calls them in this order):
 //   lod         predict contacts of every body within a horizon (manager/lod.hpp); requests
 //               that overlap merge; a request not covered by a patch takes a pool slot, or
 //               waits in a queue ordered by time to contact, then speed
@@ -56,7 +56,7 @@ struct TerrainManagerDef {
   GranularMaterial material;
   double particle_scale = knobs::kParticleScale.def;  // world size / simulated size (Leach & Marais §4.3)
   // N: every slot's DEM substeps at dt <= t_c / N, t_c the contact time of the lightest pair
-  // (SimulationDef.accuracy_steps_per_contact; ../shared/DESIGN.md: stable to about t_c / 1.7,
+  // (SimulationDef.accuracy_steps_per_contact; docs/dem.md: stable to about t_c / 1.7,
   // accurate from t_c / 20). Scene simulation.steps_per_contact; docs/tradeoff.md measures it.
   int steps_per_contact = int(knobs::kStepsPerContact.def);
   // Most DEM substeps per frame before the frame is refused (0 = max(64, 64 N / 20)).
@@ -103,7 +103,7 @@ struct TerrainManagerDef {
   std::uint64_t seed = 1;
 };
 
-enum class PatchEventKind { Requested, Queued, Promoted, Ready, Asleep, Woke, Demoted };
+enum class PatchEventKind { Requested, Promoted, Ready, Asleep, Woke, Demoted };
 const char* to_string(PatchEventKind k);
 
 struct PatchEvent {

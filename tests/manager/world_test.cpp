@@ -139,3 +139,34 @@ TEST(World, ApiAndSceneRunGiveTheSameHash) {
 
 }  // namespace
 }  // namespace sandpatch
+
+namespace sandpatch {
+namespace {
+
+// A stiff material at a long frame needs more DEM substeps than the default cap: the step is
+// refused naming the knobs that trade it, and raising max_substeps lets it run.
+TEST(World, TooManyDemSubstepsNameTheKnobs) {
+  for (int max_substeps : {0, 400}) {
+    SCOPED_TRACE("max_substeps " + std::to_string(max_substeps));
+    auto w = World::create(test::terrain_8m("flat"), {0, -9.81f, 0});
+    ASSERT_TRUE(w.ok());
+    auto def = test::small_manager_def();
+    def.material.stiffness = 1.5e5f;  // k_n: t_c / 20 needs ~ 101 substeps of a 1/60 s frame (default cap 64)
+    def.max_substeps = max_substeps;
+    ASSERT_TRUE((*w)->enable_patches(def).ok());
+    (*w)->manager()->request_patch(3.5, 3.5, 4.0, 4.0, 0.0);
+    Status s = Ok{};
+    for (int k = 0; k < 10 && s.ok(); ++k) s = (*w)->step(1.0 / 60.0);
+    if (max_substeps == 0) {
+      ASSERT_FALSE(s.ok()) << "the default cap should refuse this frame";
+      EXPECT_STREQ((*w)->failed_stage(), "dem");
+      EXPECT_NE(s.message().find("simulation.max_substeps (TerrainDef.max_substeps)"), std::string::npos) << s.message();
+    } else {
+      EXPECT_TRUE(s.ok()) << s.message();
+      EXPECT_GT((*w)->manager()->granules(), 0);
+    }
+  }
+}
+
+}  // namespace
+}  // namespace sandpatch
