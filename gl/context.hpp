@@ -43,6 +43,14 @@ struct ContextInfo {
 class Context {
  public:
   static Result<std::unique_ptr<Context>> create(const ContextDef& def = {});
+  // For callers with a CPU fallback: the context, or null with `why` set to why none could
+  // be made.
+  static std::unique_ptr<Context> create_or_explain(std::string& why, const ContextDef& def = {}) {
+    auto ctx = create(def);
+    if (ctx) return std::move(*ctx);
+    why = ctx.message();
+    return nullptr;
+  }
   ~Context();
   Context(const Context&) = delete;
   Context& operator=(const Context&) = delete;

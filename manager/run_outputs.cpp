@@ -91,12 +91,8 @@ Status FrameWriter::write(const render::CameraView& view, const std::string& pat
   gl::Context* shared = manager_ ? manager_->gl_context() : nullptr;
   if (!renderer_ && why_.empty()) {
     if (!shared) {
-      auto ctx = gl::Context::create();
-      if (!ctx) {
-        why_ = ctx.message();
-        return Ok{};
-      }
-      ctx_ = std::move(*ctx);
+      ctx_ = gl::Context::create_or_explain(why_);
+      if (!ctx_) return Ok{};  // no images; the run's warnings say why
     }
     context_ = shared ? shared : ctx_.get();
     if (Status s = context_->make_current(); !s) return s;

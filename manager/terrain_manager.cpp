@@ -28,14 +28,8 @@ const char* to_string(PatchEventKind k) {
 
 Status TerrainManager::Impl::make_depth_renderer() {
   if (!def.use_gl) return Ok{};
-  if (!gl) {
-    auto ctx = gl::Context::create();
-    if (!ctx) {
-      gl_note = ctx.message();
-      return Ok{};
-    }
-    gl = std::move(*ctx);
-  }
+  if (!gl) gl = gl::Context::create_or_explain(gl_note);
+  if (!gl) return Ok{};  // demotions render on the CPU; the report says why (depth_render_note)
   if (Status st = gl->make_current(); !st) return st;
   auto dr = ParticleDepthRenderer::create({def.depth_resolution});
   if (dr) depth = std::move(*dr);
