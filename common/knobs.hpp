@@ -72,6 +72,48 @@ inline constexpr std::array<const Knob*, 23> kAll = {
     &kSoilDepth, &kSleepSpeed, &kSleepTime, &kIdleTimeout, &kThreads, &kLodHorizon, &kLodMargin,
     &kLodApron, &kBodyFriction, &kBodyRestitution, &kBodyRollingFriction};
 
+// Every other setting: not a number with a range, or in one door only (then `note` says why).
+// Scene paths name a field or a whole section ("cameras" covers everything under it).
+struct Field {
+  const char* scene;  // "" = the library only
+  const char* api;    // "" = scene files only
+  const char* note;
+};
+inline constexpr std::array<Field, 30> kOtherFields = {{
+    {"terrain.source", "TerrainDef.file, TerrainDef.procedural (+ samples_x/z, base_height, slope_x/z, amplitude, wavelength, noise_seed, octaves)", "a heightmap file or a generator"},
+    {"", "TerrainDef.heights", "an array from the game; scene files name a heightmap file instead"},
+    {"terrain.spacing", "TerrainDef.spacing", "with an esri_ascii source, a spacing given overrides the file's cellsize (TerrainDef.spacing_overrides_file)"},
+    {"terrain.size", "", "the library gives spacing and the sample count"},
+    {"terrain.vertical_scale", "TerrainDef.vertical_scale", ""},
+    {"terrain.vertical_offset", "TerrainDef.vertical_offset", ""},
+    {"terrain.origin", "TerrainDef.origin", ""},
+    {"terrain.bedrock_height", "", "a flat bedrock; the library's bedrock is surface − soil_depth"},
+    {"terrain.material", "", "a scene names one of its materials; a TerrainDef has one material"},
+    {"materials[].name", "", "as terrain.material"},
+    {"materials[].damping_ratio", "", "the library takes the restitution e, from which ζ follows"},
+    {"materials[].packing_fraction", "", "validated, not used: the pre-settled tile measures its own φ"},
+    {"bodies[].name", "BodyDef.name", ""},
+    {"bodies[].shape", "BodyDef.shape", "mesh: an OBJ file in both; the library also takes vertices and triangles"},
+    {"bodies[].mass", "BodyDef.mass", ""},
+    {"bodies[].density", "", "the library takes the mass"},
+    {"bodies[].pose", "BodyDef.position, BodyDef.orientation", "[w, x, y, z] in both; scene files also take euler_deg"},
+    {"bodies[].linear_velocity", "BodyDef.linear_velocity", ""},
+    {"bodies[].angular_velocity", "BodyDef.angular_velocity", ""},
+    {"bodies[].spawn_time", "", "a game adds a body when it is due (Terrain::add_body)"},
+    {"simulation.dt", "Terrain::step(dt, substeps)", "the step's arguments"},
+    {"simulation.substeps", "Terrain::step(dt, substeps)", "the step's arguments"},
+    {"simulation.duration", "", "a game steps for as long as it runs"},
+    {"simulation.backend", "TerrainDef.backend", "cpu or gl"},
+    {"simulation.granular_patches", "TerrainDef.granular_patches", ""},
+    {"simulation.gravity", "TerrainDef.gravity", ""},
+    {"simulation.seed", "TerrainDef.seed", ""},
+    {"simulation.preset", "", "a named set of knobs; a game sets the knobs themselves"},
+    {"simulation.scale_by_distance", "", "bands around a scene camera; a game sets particle_scale"},
+    {"", "TerrainDef.gl_depth_render", "a scene run renders the demotion's depth on GL when a context can be made, else on the CPU"},
+}};
+// Scene-file sections that describe a run, not the terrain (what it writes, what it is called).
+inline constexpr std::array<const char*, 5> kRunSections = {"name", "description", "version", "cameras", "outputs"};
+
 // "(0, 1e+05] kg/m^3"; integers: "[1, 1024] (whole number)".
 inline std::string describe_range(const Knob& k) {
   std::string s = std::string(k.lo_open ? "(" : "[") + format_number(k.lo) + ", " + format_number(k.hi) + (k.hi_open ? ")" : "]");
@@ -91,6 +133,12 @@ inline std::string knob_table_markdown() {
   for (const Knob* k : kAll)
     t += "| " + cell(k->scene, k->one_door) + " | " + cell(k->api, k->one_door) + " | " + format_number(k->def) +
          (*k->unit ? std::string(" ") + k->unit : "") + " | " + describe_range(*k) + " | " + k->what + " |\n";
+  t += "\nThe other settings, and those only one door has:\n\n| scene file | library | note |\n|---|---|---|\n";
+  auto plain = [](const char* field) { return *field ? std::string("`") + field + "`" : std::string("—"); };
+  for (const Field& f : kOtherFields) t += "| " + plain(f.scene) + " | " + plain(f.api) + " | " + f.note + " |\n";
+  t += "\nScene files also describe the run (";
+  for (std::size_t i = 0; i < kRunSections.size(); ++i) t += std::string(i ? ", " : "") + "`" + kRunSections[i] + "`";
+  t += "): what it writes and what it is called; a game renders and names things itself.\n";
   return t;
 }
 

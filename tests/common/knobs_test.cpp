@@ -4,7 +4,10 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <filesystem>
 #include <fstream>
+#include <set>
 #include <functional>
 #include <map>
 #include <nlohmann/json.hpp>
@@ -229,6 +232,58 @@ TEST(Knobs, BothDoorsRefuseTheSameRange) {
       ASSERT_FALSE(h.ok()) << "BodyDef accepted " << v;
       EXPECT_NE(h.message().find(c.knob->api), std::string::npos) << h.message();
     }
+  }
+}
+
+// Every field path of a scene's canonical JSON ("bodies[].shape.radius").
+void field_paths(const json& j, const std::string& path, std::vector<std::string>& out) {
+  if (j.is_object()) {
+    for (const auto& [k, v] : j.items()) field_paths(v, path.empty() ? k : path + "." + k, out);
+  } else if (j.is_array() && !j.empty() && j[0].is_object()) {
+    for (const auto& v : j) field_paths(v, path + "[]", out);
+  } else {
+    out.push_back(path);
+  }
+}
+
+bool covers(const std::string& section, const std::string& path) {
+  return path == section || path.starts_with(section + ".") || path.starts_with(section + "[");
+}
+
+// Every field of every shipped scene (and of the parser's test scene, which uses every
+// section) is a knob, another listed setting, or part of the run's description: a new scene
+// field must say what the library has for it, or why it has none.
+TEST(Knobs, EverySceneFieldHasALibraryFieldOrAReason) {
+  std::vector<std::string> files = {std::string(SANDPATCH_SOURCE_DIR) + "/tests/scene/data/full.json"};
+  for (const auto& e : std::filesystem::directory_iterator(std::string(SANDPATCH_SOURCE_DIR) + "/scenes"))
+    if (e.path().extension() == ".json") files.push_back(e.path().string());
+  files.push_back("");  // base_scene() with a preset
+  std::set<std::string> seen;
+  json with_preset = base_scene();
+  with_preset["simulation"]["preset"] = "game";  // no shipped scene uses a preset
+  for (const auto& f : files) {
+    auto scene = f.empty() ? parse_scene(with_preset.dump(), "preset.json", "") : load_scene_file(f);
+    ASSERT_TRUE(scene.ok()) << scene.message();
+    std::vector<std::string> paths;
+    field_paths(scene_to_json(*scene), "", paths);
+    for (const auto& p : paths) {
+      seen.insert(p);
+      bool ok = false;
+      for (const knobs::Knob* k : knobs::kAll) ok = ok || p == k->scene;
+      for (const knobs::Field& o : knobs::kOtherFields) ok = ok || (*o.scene && covers(o.scene, p));
+      for (const char* r : knobs::kRunSections) ok = ok || covers(r, p);
+      EXPECT_TRUE(ok) << f << ": scene field " << p << " is in no table of common/knobs.hpp";
+    }
+  }
+  // The tables name no scene field that does not exist.
+  for (const knobs::Field& o : knobs::kOtherFields) {
+    if (!*o.scene) {
+      EXPECT_TRUE(*o.note) << o.api << ": a library-only field needs a reason";
+      continue;
+    }
+    if (!*o.api) EXPECT_TRUE(*o.note) << o.scene << ": a scene-only field needs a reason";
+    EXPECT_TRUE(std::any_of(seen.begin(), seen.end(), [&](const std::string& p) { return covers(o.scene, p); }))
+        << o.scene << " is listed but no shipped scene has it";
   }
 }
 
