@@ -126,7 +126,7 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
       FrameSample fs;
       fs.frame = frame;
       fs.time_s = world.time();
-      fs.frame_ms = world.frame_records().back().wall_ms;
+      fs.frame_ms = world.last_frame().wall_ms;
       fs.dem_ms = world.profile().timer(Stage::Dem).total_ms - dem_ms_before;
       if (manager) {
         fs.patches_filling = manager->filling_patches();

@@ -185,7 +185,11 @@ Status World::step(double dt, int substeps) {
   }
   ++steps_at_dt_;
   ++steps_;
-  frames_.push_back({std::chrono::duration<double, std::milli>(Clock::now() - f0).count(), conversion});
+  last_frame_ = {std::chrono::duration<double, std::milli>(Clock::now() - f0).count(), conversion};
+  if (frame_ms_.size() < kFrameWindow) frame_ms_.push_back(last_frame_.wall_ms);
+  else frame_ms_[std::size_t(steps_ - 1) % kFrameWindow] = last_frame_.wall_ms;
+  frame_max_ms_ = std::max(frame_max_ms_, last_frame_.wall_ms);
+  if (conversion) conversion_max_ms_ = std::max(conversion_max_ms_, last_frame_.wall_ms), ++conversion_frames_;
   return Ok{};
 }
 
@@ -230,15 +234,9 @@ nlohmann::ordered_json World::report() const {
 
   // Frame times (the step only) and stutter: the longest frame in which a patch was
   // promoted, uploaded or demoted, against the median frame.
-  std::vector<double> ms;
-  double mx = 0, conv_max = 0;
-  int conv_frames = 0;
-  for (const FrameRecord& f : frames_) {
-    ms.push_back(f.wall_ms);
-    mx = std::max(mx, f.wall_ms);
-    if (f.conversion) conv_max = std::max(conv_max, f.wall_ms), ++conv_frames;
-  }
-  const double med = median(ms);
+  const double med = median(frame_ms_);
+  const double mx = frame_max_ms_, conv_max = conversion_max_ms_;
+  const long long conv_frames = conversion_frames_;
   r["frames"] = {{"median_ms", med},
                  {"max_ms", mx},
                  {"max_over_median", med > 0 ? mx / med : 0.0},

@@ -99,7 +99,10 @@ class World {
     double wall_ms = 0;    // the step, all stages (a caller's outputs are not in it)
     bool conversion = false;  // a promotion, an upload or a demotion ran in it
   };
-  const std::vector<FrameRecord>& frame_records() const { return frames_; }
+  const FrameRecord& last_frame() const { return last_frame_; }
+  // The report's median is over the last kFrameWindow steps (memory stays bounded in a game
+  // that runs for hours); the maxima and counts are over every step.
+  static constexpr std::size_t kFrameWindow = 1 << 16;
   int peak_granules() const { return peak_granules_; }
 
   // ---- parts ----
@@ -140,7 +143,10 @@ class World {
   std::vector<std::pair<std::size_t, RigidBodyDef>> pending_;  // scheduled, not yet spawned (entry, definition)
   std::vector<RigidBodyId> removing_;  // removed, leaving the Bullet world in the next step
   std::vector<GridRegion> dirty_;
-  std::vector<FrameRecord> frames_;
+  std::vector<double> frame_ms_;       // ring of the last kFrameWindow steps' wall ms
+  FrameRecord last_frame_;
+  double frame_max_ms_ = 0, conversion_max_ms_ = 0;
+  long long conversion_frames_ = 0;
   int filling_ = 0;                    // patches promoted and not yet ready
   int peak_granules_ = 0;
   double time_base_ = 0, dt_ = 0;      // s
