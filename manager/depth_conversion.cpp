@@ -13,6 +13,20 @@
 
 namespace sandpatch {
 
+namespace {
+// A res × res height image over [x0, x1] × [z0, z1] (m), every texel `fill` (m).
+HeightImage blank_image(int res, float x0, float z0, float x1, float z1, float fill) {
+  HeightImage img;
+  img.width = img.height = res;
+  img.x0 = x0;
+  img.z0 = z0;
+  img.x1 = x1;
+  img.z1 = z1;
+  img.h.assign(std::size_t(res) * res, fill);
+  return img;
+}
+}  // namespace
+
 float HeightImage::box_mean(float x, float z, float hx, float hz) const {
   const float du = (x1 - x0) / float(width), dv = (z1 - z0) / float(height);
   // Texels with centres in [x - hx, x + hx]: u from ceil((x - hx - x0)/du - ½) to floor((x + hx - x0)/du - ½).
@@ -122,13 +136,7 @@ Result<HeightImage> ParticleDepthRenderer::render(const float* s, std::size_t n,
     glBindVertexArray(0);
     glUseProgram(0);
   }
-  HeightImage img;
-  img.width = img.height = resolution_;
-  img.x0 = x0;
-  img.z0 = z0;
-  img.x1 = x1;
-  img.z1 = z1;
-  img.h.resize(std::size_t(resolution_) * resolution_);
+  HeightImage img = blank_image(resolution_, x0, z0, x1, z1, 0.0f);
   glPixelStorei(GL_PACK_ALIGNMENT, 4);
   glReadPixels(0, 0, resolution_, resolution_, GL_DEPTH_COMPONENT, GL_FLOAT, img.h.data());
   glBindFramebuffer(GL_FRAMEBUFFER, 0);
@@ -141,13 +149,7 @@ Result<HeightImage> ParticleDepthRenderer::render(const float* s, std::size_t n,
 
 HeightImage render_heights_cpu(const float* s, std::size_t n, int res, float x0, float z0, float x1, float z1,
                                float floor_y) {
-  HeightImage img;
-  img.width = img.height = res;
-  img.x0 = x0;
-  img.z0 = z0;
-  img.x1 = x1;
-  img.z1 = z1;
-  img.h.assign(std::size_t(res) * res, floor_y);
+  HeightImage img = blank_image(res, x0, z0, x1, z1, floor_y);
   const float du = (x1 - x0) / float(res), dv = (z1 - z0) / float(res);
   for (std::size_t k = 0; k < n; ++k) {
     const float cx = s[4 * k], cy = s[4 * k + 1], cz = s[4 * k + 2], r = s[4 * k + 3];

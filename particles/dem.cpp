@@ -361,11 +361,8 @@ double Simulation::kinetic_energy() const {
 double Simulation::potential_energy() const {
   const Impl& s = *impl_;
   double e = 0;
-  // gravity
-  for (int i = 0; i < s.nb; ++i) {
-    if (!(s.b.flags[i] & kBodyDynamic)) continue;
-    e -= double(s.b.mass[4 * i]) * double(dot(s.gravity, ld3(s.b.pos, i)));
-  }
+  for (int i = 0; i < s.nb; ++i)  // gravity, dynamic bodies
+    if (s.b.flags[i] & kBodyDynamic) e -= double(s.b.mass[4 * i]) * double(dot(s.gravity, ld3(s.b.pos, i)));
   // elastic: normal springs at the current positions, tangential springs from the history
   const Material& m = s.def.material;
   const float kn = m.normal_stiffness, kt = m.normal_stiffness * m.tangential_stiffness_ratio;

@@ -12,6 +12,33 @@
 
 namespace sandpatch {
 
+namespace {
+
+// Least-squares line y = icpt + slope·x through (x, y) points (the sums taken in order);
+// ok is false with fewer than two points or no spread in x. residual: RMS of y about it.
+struct Line {
+  bool ok = false;
+  double slope = 0, residual = 0;
+};
+Line fit_line(const std::vector<std::pair<double, double>>& pts) {
+  Line l;
+  const int n = int(pts.size());
+  if (n < 2) return l;
+  double sx = 0, sy = 0, sxx = 0, sxy = 0;
+  for (auto [x, y] : pts) sx += x, sy += y, sxx += x * x, sxy += x * y;
+  const double den = n * sxx - sx * sx;
+  if (!(den > 0)) return l;
+  l.slope = (n * sxy - sx * sy) / den;
+  const double icpt = (sy - l.slope * sx) / n;
+  double r2 = 0;
+  for (auto [x, y] : pts) r2 += (y - icpt - l.slope * x) * (y - icpt - l.slope * x);
+  l.residual = std::sqrt(r2 / n);
+  l.ok = true;
+  return l;
+}
+
+}  // namespace
+
 
 FlankFit fit_flank(const std::vector<SurfacePoint>& points, const FlankFitDef& def) {
   FlankFit out;
@@ -42,7 +69,6 @@ FlankFit fit_flank(const std::vector<SurfacePoint>& points, const FlankFitDef& d
   for (int b = 0; b < nbins; ++b) out.surface[b] = surf[b] > -1e299 ? surf[b] : -1.0;
   // the outer flank: from the peak bin outwards up to the first bin at or below the toe
   // level (or empty); bins above the top level are left out
-  double sx = 0, sy = 0, sxx = 0, sxy = 0;
   std::vector<std::pair<double, double>> used;
   for (int b = def.outer_run ? int(peak_it - surf.begin()) + 1 : 0; b < nbins; ++b) {
     if (!(surf[b] > def.lo_frac * out.peak)) {
@@ -50,20 +76,13 @@ FlankFit fit_flank(const std::vector<SurfacePoint>& points, const FlankFitDef& d
       continue;
     }
     if (surf[b] >= def.hi_frac * out.peak) continue;
-    const double x = def.bin * (b + 0.5);
-    sx += x, sy += surf[b], sxx += x * x, sxy += x * surf[b];
-    used.push_back({x, surf[b]});
+    used.push_back({def.bin * (b + 0.5), surf[b]});
   }
-  const int n = int(used.size());
-  out.points = n;
-  if (n < 2) return out;
-  const double den = n * sxx - sx * sx;
-  if (!(den > 0)) return out;
-  out.slope = (n * sxy - sx * sy) / den;
-  const double icpt = (sy - out.slope * sx) / n;
-  double r2 = 0;
-  for (auto [x, y] : used) r2 += (y - icpt - out.slope * x) * (y - icpt - out.slope * x);
-  out.residual = std::sqrt(r2 / n);
+  out.points = int(used.size());
+  const Line line = fit_line(used);
+  if (!line.ok) return out;
+  out.slope = line.slope;
+  out.residual = line.residual;
   out.angle_deg = std::atan(-out.slope) * 180.0 / std::numbers::pi;
   return out;
 }
@@ -99,23 +118,16 @@ ConeFit fit_cone_area(const std::vector<Vec3>& points, double radius, const Cone
     if (c > -1e299) hs.push_back(c);
   std::sort(hs.begin(), hs.end());
   std::vector<std::pair<double, double>> used;  // (r(z), z)
-  double sx = 0, sy = 0, sxx = 0, sxy = 0;
   for (int l = 0; l < def.levels; ++l) {
     const double z = H * (def.lo_frac + (def.hi_frac - def.lo_frac) * l / (def.levels - 1));
     const double cells = double(hs.end() - std::upper_bound(hs.begin(), hs.end(), z));
-    const double r = std::sqrt(cells * def.cell * def.cell / std::numbers::pi);
-    sx += r, sy += z, sxx += r * r, sxy += r * z;
-    used.push_back({r, z});
+    used.push_back({std::sqrt(cells * def.cell * def.cell / std::numbers::pi), z});
   }
-  const int m = int(used.size());
-  const double den = m * sxx - sx * sx;
-  if (!(den > 0)) return out;
-  out.levels = m;
-  out.slope = (m * sxy - sx * sy) / den;
-  const double icpt = (sy - out.slope * sx) / m;
-  double r2 = 0;
-  for (auto [r, z] : used) r2 += (z - icpt - out.slope * r) * (z - icpt - out.slope * r);
-  out.residual = std::sqrt(r2 / m);
+  const Line line = fit_line(used);
+  if (!line.ok) return out;
+  out.levels = int(used.size());
+  out.slope = line.slope;
+  out.residual = line.residual;
   out.angle_deg = std::atan(-out.slope) * 180.0 / std::numbers::pi;
   return out;
 }
