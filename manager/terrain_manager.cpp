@@ -55,12 +55,15 @@ Result<std::unique_ptr<TerrainManager>> TerrainManager::create(const TerrainMana
                            "must be finite and greater than " + std::string(k == 0 ? "0 m" : "the previous band's (" + std::to_string(prev) + " m)")});
   }
   if (!def.camera.allFinite()) errs.push_back(Error{"", "camera", "", "must be finite (m, world)"});
-  if (def.slots < 1) bad("pool.slots", def.slots, "must be >= 1");
-  if (def.steps_per_contact < 2 || def.steps_per_contact > 1000)
-    bad("steps_per_contact", def.steps_per_contact, "must be in [2, 1000] (the DEM substep is t_c / N)");
-  if (def.max_substeps < 0) bad("max_substeps", def.max_substeps, "must be >= 0 (0 = automatic)");
-  if (def.granules_per_slot < 16) bad("pool.granules_per_slot", def.granules_per_slot, "must be >= 16");
-  if (!(def.patch_depth > 0)) bad("patch_depth", def.patch_depth, "must be > 0 (m)");
+  // The settings both doors share are checked against the same table they are (common/knobs.hpp).
+  auto knob = [&](const char* field, double v, const knobs::Knob& k) {
+    if (!k.allows(v)) errs.push_back(Error{"", field, format_number(v), "must be in " + knobs::describe_range(k)});
+  };
+  knob("pool.slots", def.slots, knobs::kSlots);
+  knob("steps_per_contact", def.steps_per_contact, knobs::kStepsPerContact);
+  knob("max_substeps", def.max_substeps, knobs::kMaxSubsteps);
+  knob("pool.granules_per_slot", def.granules_per_slot, knobs::kGranulesPerSlot);
+  knob("patch_depth", def.patch_depth, knobs::kPatchDepth);
   if (!(def.surface_probe >= 0 && def.surface_probe <= 4)) bad("surface_probe", def.surface_probe, "must be in [0, 4] sphere radii");
   if (def.fill_granules_per_frame < 1) bad("fill_granules_per_frame", def.fill_granules_per_frame, "must be >= 1");
   if (!errs.empty()) return errs;
