@@ -197,6 +197,22 @@ TEST(Knobs, SceneValuesReachTheWorld) {
     ASSERT_TRUE(scene.ok()) << scene.message();
     EXPECT_DOUBLE_EQ(c.scene_value(*scene), v);
     EXPECT_FLOAT_EQ(float(c.internal_value(*scene)), float(v));
+    // The canonical JSON (scene hash, `sandpatch check`) writes it back at the same path.
+    const json canon = scene_to_json(*scene);
+    const json* at = &canon;
+    std::string path = c.knob->scene;
+    for (std::size_t start = 0; start <= path.size();) {
+      std::size_t dot = path.find('.', start);
+      if (dot == std::string::npos) dot = path.size();
+      std::string key = path.substr(start, dot - start);
+      const bool array = key.ends_with("[]");
+      if (array) key.resize(key.size() - 2);
+      ASSERT_TRUE(at->contains(key)) << "scene_to_json has no " << path;
+      at = &(*at)[key];
+      if (array) at = &(*at)[0];
+      start = dot + 1;
+    }
+    EXPECT_DOUBLE_EQ(at->get<double>(), v) << "scene_to_json at " << path;
   }
 }
 
