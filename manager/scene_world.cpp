@@ -1,6 +1,7 @@
 #include "manager/scene_world.hpp"
 
 #include "manager/terrain.hpp"
+#include "manager/terrain_def.hpp"
 #include "scene/mesh.hpp"
 
 namespace sandpatch {
@@ -81,34 +82,42 @@ Result<RigidBodyDef> to_rigid_body(const SceneDef& scene, std::size_t index) {
   return d;
 }
 
-TerrainManagerDef manager_def(const SceneDef& scene, const Heightfield& hf, int threads, const std::string& backend) {
+api::TerrainDef terrain_def(const SceneDef& scene, int threads, const std::string& backend) {
   const SceneSimulationDef& sim = scene.simulation;
   const MaterialDef* mat = scene.terrain.material.empty() ? &scene.materials.front()
                                                          : scene.find_material(scene.terrain.material);
-  TerrainManagerDef d;
-  d.material.radius = float(mat->granule_radius);
-  d.material.density = float(mat->density);
-  d.material.friction = float(mat->friction);
-  d.material.restitution = float(mat->restitution_value());
-  d.material.stiffness = float(mat->stiffness);
-  d.material.tangential_stiffness_ratio = float(mat->tangential_stiffness_ratio);
-  d.particle_scale = sim.particle_scale;
-  d.steps_per_contact = sim.steps_per_contact;
-  d.slots = sim.pool.slots;
-  d.granules_per_slot = sim.pool.granules_per_slot;
-  d.soil_depth = scene.terrain.soil_depth.value_or(knobs::kSoilDepth.def);
-  d.patch_depth = std::min(scene.terrain.patch_depth, d.soil_depth);
-  d.max_substeps = sim.max_substeps;
-  d.lod.horizon = sim.lod.horizon;
-  d.lod.margin = sim.lod.margin;
-  d.lod.apron = sim.lod.apron;
-  d.sleep_speed = sim.sleep.speed_threshold;
-  d.sleep_time = sim.sleep.hold_time;
-  d.idle_timeout = sim.idle_timeout;
-  d.gravity = {sim.gravity[0], sim.gravity[1], sim.gravity[2]};
-  d.threads = threads;
-  d.seed = sim.seed;
-  d.backend = backend;
+  api::TerrainDef t;
+  t.material.granule_radius = mat->granule_radius;
+  t.material.density = mat->density;
+  t.material.friction = mat->friction;
+  t.material.restitution = mat->restitution_value();
+  t.material.stiffness = mat->stiffness;
+  t.material.tangential_stiffness_ratio = mat->tangential_stiffness_ratio;
+  t.particle_scale = sim.particle_scale;
+  t.steps_per_contact = sim.steps_per_contact;
+  t.max_substeps = sim.max_substeps;
+  t.slots = sim.pool.slots;
+  t.granules_per_slot = sim.pool.granules_per_slot;
+  t.soil_depth = scene.terrain.soil_depth.value_or(knobs::kSoilDepth.def);
+  t.patch_depth = std::min(scene.terrain.patch_depth, t.soil_depth);
+  t.lod_horizon = sim.lod.horizon;
+  t.lod_margin = sim.lod.margin;
+  t.lod_apron = sim.lod.apron;
+  t.sleep_speed = sim.sleep.speed_threshold;
+  t.sleep_time = sim.sleep.hold_time;
+  t.idle_timeout = sim.idle_timeout;
+  t.gravity = {sim.gravity[0], sim.gravity[1], sim.gravity[2]};
+  t.granular_patches = sim.granular_patches;
+  t.threads = threads;
+  t.seed = sim.seed;
+  t.backend = backend;
+  t.gl_depth_render = true;  // a run renders the demotion's depth on GL when it can make a context
+  return t;
+}
+
+TerrainManagerDef manager_def(const SceneDef& scene, const Heightfield& hf, int threads, const std::string& backend) {
+  const SceneSimulationDef& sim = scene.simulation;
+  TerrainManagerDef d = manager_def(terrain_def(scene, threads, backend));
   // Particle scale by distance from a camera (scenario 2 of Leach & Marais §6.3): the bands,
   // and the camera where it is at the start; the run moves it (World::set_camera).
   if (const auto& sd = sim.scale_by_distance) {

@@ -8,6 +8,7 @@
 
 #include "common/error.hpp"
 #include "manager/bullet_world.hpp"
+#include "manager/terrain_def.hpp"
 #include "manager/terrain_manager.hpp"
 #include "manager/world.hpp"
 #include "render/render.hpp"
@@ -15,9 +16,13 @@
 
 namespace sandpatch {
 
-// The terrain manager's definition from a scene's terrain material and simulation section
-// (docs/scene-format.md), with the scale bands (camera at t = 0) and the flat bedrock, which
-// need the heightfield. `backend`: "cpu" or "gl".
+// The library's TerrainDef for a scene's terrain material and simulation section
+// (docs/scene-format.md): the settings both doors share. `backend`: "cpu" or "gl".
+api::TerrainDef terrain_def(const SceneDef& scene, int threads, const std::string& backend);
+
+// The terrain manager's definition of a scene: manager_def(terrain_def(...))
+// (manager/terrain_def.hpp), then what only scene files have: the scale bands (camera at
+// t = 0) and the flat bedrock, which need the heightfield.
 TerrainManagerDef manager_def(const SceneDef& scene, const Heightfield& hf, int threads, const std::string& backend);
 
 // Scene body `index` as a Bullet body definition (meshes are read again from their validated
