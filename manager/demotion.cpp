@@ -140,10 +140,18 @@ Result<HeightImage> TerrainManager::Impl::render_surface(const Slot& slot, const
   return img;
 }
 
-// A body the patch carried stays at rest on the new surface: under its footprint the heights
-// are kept below its lowest point (the Gaussian lifts a narrow crater's floor, and Bullet
-// would push the body out with a kick that asked for a new patch). Every body over the
-// written heights is then given time to settle before it may ask for a patch.
+// A body the patch carried stays where it is on the new surface: under its footprint the
+// heights are kept below its lowest point (the Gaussian lifts a narrow crater's floor, and
+// Bullet would push the body out with a kick that asked for a new patch). A body resting on
+// the granules is set down: its velocities are zeroed, so it stays at rest there. Resting is
+// `lying` (coupling.cpp), the manager's test for a body on the terrain: lowest point within a
+// granule diameter of the surface under its centre, slower than 10 sleep_speed (linear, and
+// angular at its half-diagonal; a body settling into a patch still creeps at a few cm/s when
+// sleep_speed is 1 cm/s). Any other body is moving (falling onto the patch, rolling across
+// it) and keeps its position and velocities: the demotion hands it back to the heightfield
+// as it is (before, every carried body was stopped, and a body in free fall at the end of a
+// run was reported at rest in mid-air). Every body over the written heights is then given
+// time to settle before it may ask for a patch.
 void TerrainManager::Impl::set_bodies_down(const Slot& slot, double time) {
   const double sp = hf->spacing();
   const GridRegion& a = slot.apron;
@@ -151,6 +159,7 @@ void TerrainManager::Impl::set_bodies_down(const Slot& slot, double time) {
     if (!c.enabled || !world->alive(c.body)) continue;  // (a disabled shell: another patch carries it)
     Eigen::Vector3d lo, hi;
     world->bounds(c.body, &lo, &hi);
+    const bool resting = lying(c.body, lo, hi);  // on the surface just written, before the cut below
     const float floor_at = float(lo.y() - hf->origin_y());
     // (the samples of the triangles under it: one more sample around its bounds; within
     // the written apron)
@@ -159,6 +168,7 @@ void TerrainManager::Impl::set_bodies_down(const Slot& slot, double time) {
     for (int j = j0; j <= j1; ++j)
       for (int i = i0; i <= i1; ++i)
         if (hf->height(i, j) > floor_at) hf->set_height(i, j, floor_at);
+    if (!resting) continue;
     BodyState st = world->state(c.body);
     st.linear_velocity.setZero();
     st.angular_velocity.setZero();

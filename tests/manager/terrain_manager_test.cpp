@@ -312,6 +312,52 @@ TEST(TerrainManager, PatchWithRestingBodyFallsAsleep) {
   ASSERT_TRUE(rig.frames(60).ok()) << rig.error;
   EXPECT_NEAR(world.state(*id).position.y(), y, 1e-4) << "asleep, the sphere stays put (m)";
   for (const PatchEvent& e : m.events()) EXPECT_NE(e.kind, PatchEventKind::Woke);
+  // Demoted, the resting sphere is set down: at rest on the new heights, the heightfield
+  // holds it again, and it is still where the patch left it.
+  ASSERT_TRUE(rig.demote_all().ok()) << rig.error;
+  const BodyState down = world.state(*id);
+  EXPECT_EQ(down.linear_velocity.norm(), 0.0f);
+  EXPECT_EQ(down.angular_velocity.norm(), 0.0f);
+  EXPECT_TRUE(world.terrain_collision(*id));
+  EXPECT_NEAR(down.position.y(), y, 1e-4);
+}
+
+// A demotion hands a moving body back to the heightfield as it is: a sphere falling onto a
+// ready patch (carried by it, its heightfield collision off) keeps its position and velocity
+// through demote_all. Before, every body a demoted patch carried was stopped, so a body in
+// free fall at the end of a run was reported at rest in mid-air.
+TEST(TerrainManager, DemotionKeepsAFallingBodysVelocity) {
+  test::Rig rig(test::terrain_8m("flat"));
+  ASSERT_TRUE(rig.ok()) << rig.error;
+  BulletWorld& world = *rig.world;
+  // Bottom 1.5 m above the sand (y = 1 m): it lands at about 0.55 s, at 5.4 m/s.
+  auto id = rig.add_sphere(0.1f, 5.0f, {4.0, 1.0 + 0.1 + 1.5, 4.0});
+  ASSERT_TRUE(id.ok());
+  auto def = small_manager_def();
+  def.granules_per_slot = 4000;
+  def.patch_depth = 0.2;
+  def.lod.apron = 0.2;
+  ASSERT_TRUE(rig.start(def).ok()) << rig.error;
+  // Until the patch carries it (its shell in the patch, the heightfield off), still in the air.
+  auto carried_in_flight = [&] {
+    const BodyState st = world.state(*id);
+    return !world.terrain_collision(*id) && st.position.y() - 0.1 > 1.0 + 0.1;
+  };
+  ASSERT_TRUE(rig.frames(40, carried_in_flight).ok()) << rig.error;
+  ASSERT_TRUE(carried_in_flight()) << "the patch never carried the falling sphere before it landed (t = " << rig.t() << " s)";
+  ASSERT_EQ(rig.manager->ready_patches(), 1);
+  const BodyState before = world.state(*id);
+  ASSERT_LT(before.linear_velocity.y(), -1.0f) << "falling";
+  ASSERT_TRUE(rig.demote_all().ok()) << rig.error;
+  ASSERT_EQ(rig.manager->active_patches(), 0);
+  const BodyState after = world.state(*id);
+  std::printf("falling sphere at t = %.3f s, y = %.3f m: velocity %.4f m/s before demote_all, %.4f m/s after\n", rig.t(),
+              before.position.y(), before.linear_velocity.y(), after.linear_velocity.y());
+  EXPECT_GT(after.linear_velocity.norm(), 1.0f) << "still falling";
+  EXPECT_LT((after.linear_velocity - before.linear_velocity).norm(), 1e-6f) << "m/s";
+  EXPECT_LT((after.angular_velocity - before.angular_velocity).norm(), 1e-6f) << "rad/s";
+  EXPECT_LT((after.position - before.position).norm(), 1e-9) << "m";
+  EXPECT_TRUE(world.terrain_collision(*id)) << "handed back to the heightfield";
 }
 
 // The demotion's GL depth render is decided when the manager is made, not in its first
