@@ -573,7 +573,15 @@ Result<SceneDef> parse_scene(const std::string& json_text, const std::string& so
   if (const json* v = top.get("version")) {
     read_integer(c, *v, "version", kSceneFormatVersion, kSceneFormatVersion);
   }
-  top.string("name", s.name);
+  if (top.has("name")) {
+    top.string("name", s.name);
+    // The name is the output directory under the run's root (out/<name>): one path component.
+    const bool control = std::any_of(s.name.begin(), s.name.end(), [](char ch) { return (unsigned char)ch < 0x20; });
+    if (s.name == "." || s.name == ".." || s.name.find_first_of("/\\") != std::string::npos || control ||
+        s.name.size() > 255)
+      c.error("name", json_quote(s.name), "must be a file name: no '/', '\\' or control characters, not '.' or '..', at most 255 bytes",
+              "it names the output directory out/<name>");
+  }
   top.string("description", s.description, /*non_empty=*/false);
   if (const json* mj = top.require("materials", "an array of at least one material")) {
     for_each_element(c, *mj, "materials", [&](const json& e, const std::string& p) {

@@ -692,5 +692,20 @@ TEST(ScenePreset, CanonicalJsonKeepsThePresetAndScenesWithoutOneKeepTheirHash) {
   EXPECT_FALSE(scene_to_json(*plain)["simulation"].contains("preset"));
 }
 
+// The scene's name is its output directory (out/<name>): a name that would leave the output
+// root or is not one file name is refused, naming the field; a plain one is kept.
+TEST(Scene, NameMustBeOneFileName) {
+  for (const char* bad : {"../../x", "/tmp/abs", "a/b", "..", ".", "a\\b", "tab\there"}) {
+    SCOPED_TRACE(bad);
+    auto r = parse(scene_with({{"name", bad}}));
+    ASSERT_FALSE(r.ok());
+    EXPECT_NE(r.message().find("name = "), std::string::npos) << r.message();
+    EXPECT_NE(r.message().find("must be a file name"), std::string::npos) << r.message();
+  }
+  auto ok = parse(scene_with({{"name", "dune run-2"}}));
+  ASSERT_TRUE(ok.ok()) << ok.message();
+  EXPECT_EQ(ok->name, "dune run-2");
+}
+
 }  // namespace
 }  // namespace sandpatch
