@@ -46,8 +46,17 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
   omp_set_num_threads(threads);
 
   const double dt = sim.dt;
-  long long frames = opt.frames > 0 ? opt.frames : std::llround(std::ceil((opt.seconds > 0 ? opt.seconds : sim.duration) / dt - 1e-9));
-  if (frames < 1) frames = 1;
+  // The number of fixed steps: --frames, or --seconds / dt, or the scene's duration / dt; a
+  // non-finite --seconds, or more than kMaxRunFrames steps, is refused.
+  if (opt.frames <= 0 && !std::isfinite(opt.seconds))
+    return fail(ExitCode::BadInput, "options", "--seconds " + format_number(opt.seconds) + ": must be a finite number > 0");
+  const double steps = opt.frames > 0 ? double(opt.frames) : std::ceil((opt.seconds > 0 ? opt.seconds : sim.duration) / dt - 1e-9);
+  if (!(steps <= kMaxRunFrames))
+    return fail(ExitCode::BadInput, "options",
+                (opt.frames > 0 ? "--frames " + std::to_string(opt.frames) : "--seconds " + format_number(opt.seconds)) +
+                    ": " + format_number(steps) + " steps of dt = " + format_number(dt) + " s; at most " +
+                    format_number(kMaxRunFrames) + " steps");
+  const long long frames = std::max(1LL, (long long)steps);
 
   std::string failed_part;
   auto made = make_world(scene, threads, backend, &failed_part);

@@ -278,6 +278,10 @@ SceneSimulationDef parse_simulation(Ctx& c, const json& j) {
   o.number("dt", s.dt, {0.0, 0.1, true, false, "s"});
   o.integer("substeps", s.substeps, 1, 1000);
   o.number("duration", s.duration, positive(1e6, "s"));
+  if (std::ceil(s.duration / s.dt - 1e-9) > kMaxRunFrames)
+    c.error(o.at("duration"), fmt_num(s.duration),
+            "simulation.duration / simulation.dt must be at most " + fmt_num(kMaxRunFrames) + " steps",
+            "dt = " + fmt_num(s.dt) + " s gives " + fmt_num(std::ceil(s.duration / s.dt)) + " steps");
   o.enumeration("backend", s.backend, kBackends);
   o.knob("threads", s.threads, knobs::kThreads);
   if (const json* pj = o.get("pool")) {

@@ -283,6 +283,9 @@ struct SceneDef {
 
 // The version of the format this library reads (the optional top-level "version" key).
 inline constexpr int kSceneFormatVersion = 1;
+// The most fixed steps one run may take (duration / dt, or the CLI's --seconds / --frames):
+// 10^8 steps is 19 days at 1/60 s. More is refused before anything runs, naming the field.
+inline constexpr double kMaxRunFrames = 1e8;
 
 // Reads and validates a scene file; relative paths inside resolve against its directory.
 Result<SceneDef> load_scene_file(const std::string& path);

@@ -3,6 +3,8 @@
 // the heightfield says.
 #include <gtest/gtest.h>
 
+#include <limits>
+
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -117,6 +119,35 @@ TEST(Run, BodyBelowBedrockIsRefusedAndNothingWritten) {
   EXPECT_EQ(r.code, ExitCode::BadInput);
   EXPECT_NE(r.message.find("bodies[0]"), std::string::npos) << r.message;
   EXPECT_FALSE(fs::exists(opt.out_dir));
+}
+
+// The number of steps is checked before anything runs: a non-finite --seconds, or more than
+// kMaxRunFrames steps from --seconds, --frames or the scene's duration / dt, is bad input and
+// writes nothing (a tiny dt inside its range no longer runs "1 frame, 0 s simulated").
+TEST(Run, StepCountIsCheckedBeforeTheFirstFrame) {
+  const SceneDef scene = scene_from(kFlatScene);
+  RunOptions opt;
+  opt.out_dir = fresh_dir("steps").string();
+  opt.progress = ProgressStyle::None;
+  opt.seconds = std::numeric_limits<double>::quiet_NaN();
+  RunResult r = run_scene(scene, opt);
+  EXPECT_EQ(r.code, ExitCode::BadInput);
+  EXPECT_NE(r.message.find("--seconds"), std::string::npos) << r.message;
+  opt.seconds = 1e308;
+  r = run_scene(scene, opt);
+  EXPECT_EQ(r.code, ExitCode::BadInput);
+  opt.seconds = -1;
+  opt.frames = 1000000000000LL;
+  r = run_scene(scene, opt);
+  EXPECT_EQ(r.code, ExitCode::BadInput);
+  EXPECT_NE(r.message.find("--frames"), std::string::npos) << r.message;
+  EXPECT_FALSE(fs::exists(opt.out_dir));
+  // The scene file's own duration / dt: refused by the parser (so `check` refuses it too).
+  std::string json = kFlatScene;
+  json.replace(json.find("\"dt\": 0.01"), 10, "\"dt\": 1e-320");
+  auto tiny = parse_scene(json, "tiny.json", "");
+  ASSERT_FALSE(tiny.ok());
+  EXPECT_NE(tiny.message().find("simulation.duration"), std::string::npos) << tiny.message();
 }
 
 // `run --backend gl`: the terrain manager's pool runs on the GL compute-shader backend
