@@ -1,4 +1,4 @@
-// bench dem: throughput of the CPU granule DEM on a settled bed (DESIGN.md "Yardsticks").
+// bench dem: throughput of the CPU granule DEM on a settled bed (docs/BENCHMARKS.md).
 //
 // 1. build   granules on a loose lattice with random orientations in a walled box of the
 //            peer's footprint (particles/bed.hpp)

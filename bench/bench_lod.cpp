@@ -1,4 +1,4 @@
-// bench lod: the cost of a frame must not grow with the terrain (Leach & Marais §6; issue 7).
+// bench lod: the cost of a frame must not grow with the terrain (Leach & Marais §6).
 //
 // 1. sizes    the same three bodies dropped on the same spot of procedural hills whose grid
 //             grows from 512² to 8192² cells (same 0.5 m cells, same origin). Every size is

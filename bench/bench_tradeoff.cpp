@@ -1,4 +1,4 @@
-// bench tradeoff: what each knob users turn costs and what it gets wrong (issue 7, "The trade,
+// bench tradeoff: what each knob users turn costs and what it gets wrong ("The trade,
 // measured"; docs/tradeoff.md).
 //
 // Three reference cases, each run at every setting of the sweep:

@@ -28,7 +28,7 @@ struct TradeoffKnobs {
   // granules of the material's radius r; the world sees them s times larger, so a fixed world
   // volume holds 1/s^3 as many granules. s = 1 is the material as given.
   double particle_scale = 1.0;
-  // N: the DEM substep is dt = t_c / N (t_c the contact time of the lightest pair; DESIGN.md:
+  // N: the DEM substep is dt = t_c / N (t_c the contact time of the lightest pair; docs/dem.md:
   // stable near t_c / 1.7, accurate from t_c / 20). SimulationDef.accuracy_steps_per_contact.
   int steps_per_contact = 20;
   // Crater only: side of the square patch (granular bed, side walls) in sphere radii R. The slot

@@ -175,7 +175,7 @@ struct Simulation::Impl {
   // slab on one thread front to back. (Before: each pair's result was stored per list entry and
   // every sphere gathered its entries, the partner's mirrored one included; 2 list entries
   // per pair, and the gather's loads of the mirrored results were 20 % of the body stage's
-  // samples on 64,000 spheres. docs/BENCHMARKS.md, session 8.)
+  // samples on 64,000 spheres. docs/BENCHMARKS.md.)
   struct alignas(32) SphereSums {
     float v[kAcc];
   };

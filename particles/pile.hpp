@@ -1,5 +1,5 @@
 // Angle of repose of the granule DEM: a poured pile on a rough floor and the flank fit
-// (issue #3; DESIGN.md "Yardsticks": angle of repose of a pile against the material's value).
+// (the angle of repose of a pile against the material's value).
 // Used by tests/particles/pile_test.cpp and meant for `sandpatch bench tradeoff`.
 //
 // Pile (measure_repose): a rough floor (a static shell of spheres of the granule radius on a

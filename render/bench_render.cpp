@@ -1,5 +1,5 @@
 // `sandpatch bench render`: clipmaps against a full-resolution grid of the same terrain
-// (DESIGN.md yardstick "Rendering"); see render.hpp and docs/rendering.md.
+// (the rendering yardstick); see render.hpp and docs/rendering.md.
 #include <GL/glcorearb.h>
 
 #include <algorithm>

@@ -1,7 +1,7 @@
 // Sandpatch's renderer, the one entry point for the CLI (`sandpatch render`, `sandpatch bench
 // render`) and the scene runner's PNG frames. docs/rendering.md describes what is drawn.
 //
-// One frame (DESIGN.md "One frame" step 7; Leach & Marais §5.1):
+// One frame (Leach & Marais §5.1):
 //   1. move the clipmap windows to the camera (toroidal texel updates);
 //   2. clear colour (the background) and depth; draw the terrain (geometry clipmaps);
 //   3. when particles are set: clear depth, draw the particle splats, draw the terrain again,

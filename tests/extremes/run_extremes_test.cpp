@@ -1,4 +1,4 @@
-// Extremes of a scene run (issue 7, docs/extremes.md): a body spawned inside the terrain is
+// Extremes of a scene run (docs/extremes.md): a body spawned inside the terrain is
 // refused before the first frame, with an error naming the body and its position; a body only
 // partly in the ground is pushed out; a scene with a flat bedrock hands it to the patches.
 #include <gtest/gtest.h>

@@ -1,4 +1,4 @@
-// The terrain manager at the extremes (issue 7, docs/extremes.md): patches at the edge of the
+// The terrain manager at the extremes (docs/extremes.md): patches at the edge of the
 // terrain, bodies faster than one patch per frame, a hundred bodies at once, zero-thickness
 // soil over bedrock, a pool of one slot. Each case ends correct (asserted with numbers: every
 // body above the terrain surface minus a stated tolerance, nothing non-finite, the volume

@@ -16,7 +16,7 @@
 using namespace sandpatch;
 using test::small_manager_def;
 
-// A barrel dropped on sand (issue 5): it lands on the particles (not on the heightfield),
+// A barrel dropped on sand: it lands on the particles (not on the heightfield),
 // comes to rest in them, and after demotion the exported heightfield has a crater under it
 // and a rim around it; the volume ledger closes within 2 %.
 TEST(TerrainManager, BarrelLeavesCraterAndRim) {
@@ -75,7 +75,7 @@ TEST(TerrainManager, BarrelLeavesCraterAndRim) {
               crater / d, rim / d, rep["ledger"]["total"]["error_pct"].get<double>());
 }
 
-// Pool exhaustion (issue 5): three spheres land at once in three places with one pool slot.
+// Pool exhaustion: three spheres land at once in three places with one pool slot.
 // The first lands on particles; the other two wait in the queue and land on the heightfield
 // meanwhile (at rest at surface + radius). A body lying on the heightfield asks for no patch
 // and is not taken up by one (terrain_manager.cpp `lying`: a patch promoted under a resting
@@ -131,7 +131,7 @@ TEST(TerrainManager, PoolExhaustionQueueDrains) {
               promoted, demoted, m.report()["pool"]["lapsed_requests"].get<int>(), peak_queue, t);
 }
 
-// A body driven across a patch's edge (issue 5; Leach & Marais left it open): a sphere
+// A body driven across a patch's edge (Leach & Marais left it open): a sphere
 // resting in the sand is pushed sideways at 0.4 m/s for 3 s, 1.2 m, past the edge of the
 // patch it landed on. The patch grows under it (demoted and promoted again around both, in
 // the same frame), so the sphere stays on particles in every frame, and the volume ledger

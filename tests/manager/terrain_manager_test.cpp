@@ -14,17 +14,17 @@
 using namespace sandpatch;
 using test::small_manager_def;
 
-// Round trip with nothing disturbing the patch (issue 5): heightfield -> particles ->
+// Round trip with nothing disturbing the patch: heightfield -> particles ->
 // heightfield. d = 2 r = 5 cm, heightfield spacing 10 cm (2 d).
 // Issue targets: height RMSE < 0.1 d and max < 0.5 d inside the patch, volume within 1 %,
 // largest step across the border < 0.1 d, surface moving < 0.1 d in the first second.
 // One round trip is one sample of a chaotic settling: the fill's seed (or any change of
 // rounding, e.g. the order of the DEM's force sums) moves each number a lot. Over the manager
-// seeds 1-6 (session 8, CPU DEM; the tree before its pair-pass change in brackets): surface
+// seeds 1-6 (CPU DEM; in brackets the DEM before its sums-per-sphere pair pass): surface
 // motion 0.085-0.175 d, mean 0.131 d [0.096-0.155, mean 0.129]; RMSE 0.049-0.121 d, mean
 // 0.075 [0.050-0.094, 0.076]; max 0.163-0.638 d, mean 0.338 [0.165-0.605, 0.352]; border step
 // 0.038-0.156 d, mean 0.083 [0.028-0.080, 0.055]; volume -0.25 to -1.43 %, mean -0.88 %
-// [-0.29 to -1.26, -0.63]. (Until session 8 this test ran seed 1 only, the one seed of six
+// [-0.29 to -1.26, -0.63]. (This test once ran seed 1 only, the one seed of six
 // that met every target on the tree before.) So the test asserts the means of seeds 1-6 at
 // the targets, except the surface motion: its 0.1 d target is NOT met (mean 0.13 d), asserted
 // at 0.15 d. The demotion renders the fill too and keeps the old heights where the surface

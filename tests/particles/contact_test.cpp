@@ -91,7 +91,7 @@ TEST(ContactLaw, SpringStickThenSlip) {
 // Step size (docs/dem.md "Step size"): the contact stage sees the bodies' velocities predicted
 // to its time (v + (dt/2) a_prev) and gives a contact's first substep the dashpot impulse of
 // the time since the touch (ContactParams::new_contact); without both, e = 0.1 at N = 50 came
-// out -17 % ... +2 % with the phase. Asserted (issue #3) within 2 % at N = 50 for e = 0.1, 0.5,
+// out -17 % ... +2 % with the phase. Asserted within 2 % at N = 50 for e = 0.1, 0.5,
 // 0.9 (sphere pairs and the floor), and at N = 100 and 1000. HeadOnLaw below runs the same 1-D
 // collision through contact_force alone.
 struct HeadOnCase {

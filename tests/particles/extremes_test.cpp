@@ -1,4 +1,4 @@
-// Extremes of issue #3 (docs/dem.md "Extremes"): each case is either correct (checked against
+// DEM extremes (docs/dem.md "Extremes"): each case is either correct (checked against
 // a formula with a stated tolerance) or refused with an Error naming the field; never NaN,
 // never a body through the floor.
 #include <gtest/gtest.h>

@@ -1,4 +1,4 @@
-// Angle of repose, HEAVY (issue #3): poured piles of 800 granules (particles/pile.hpp), three
+// Angle of repose, HEAVY: poured piles of 800 granules (particles/pile.hpp), three
 // seeds at each mu of the sweep 0.2, 0.35, 0.5, 0.7, 1.0. Prints the mu -> angle table of
 // docs/dem.md. Fifteen piles, two at a time (one per core, each single-threaded).
 #include <gtest/gtest.h>

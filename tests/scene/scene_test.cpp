@@ -560,7 +560,7 @@ TEST(ScenePreset, EveryPresetSetsItsKnobs) {
     EXPECT_DOUBLE_EQ(r->simulation.particle_scale, p->particle_scale);
     EXPECT_EQ(r->simulation.pool.granules_per_slot, p->granules_per_slot);
     EXPECT_EQ(r->simulation.steps_per_contact, p->steps_per_contact);
-    // accurate from t_c / 20, stable to about t_c / 1.7 (DESIGN.md): presets stay in [10, 50]
+    // accurate from t_c / 20, stable to about t_c / 1.7 (docs/dem.md): presets stay in [10, 50]
     EXPECT_GE(p->steps_per_contact, 10);
     EXPECT_LE(p->steps_per_contact, 50);
     // A slot holds the same world volume: capacity x scale^3 stays within one 1024-block of 32768.

@@ -1,4 +1,4 @@
-// Angle of repose of the GL DEM against the CPU backend (issue 4 statistics). HEAVY: six
+// Angle of repose of the GL DEM against the CPU backend (statistics). HEAVY: six
 // poured piles of 400 granules (three seeds on each backend), a few minutes on llvmpipe.
 #include <gtest/gtest.h>
 

@@ -152,7 +152,7 @@ TEST(GlSimulation, ForcesMatchCpuOnRandomConfiguration) { forces_match(ShearLaw:
 // Head-on collision through the GL backend (tests/particles/head_on.hpp; the CPU's
 // HeadOn.RestitutionAndContactTime): at dt = t_clamped/50, for e = 0.1, 0.5, 0.9, sphere pairs
 // and a sphere onto the floor, 4 phases of the touch: e within 2 % of the requested e and the
-// contact time within 2 % of the clamped law's (issue #3), and the same numbers as the CPU
+// contact time within 2 % of the clamped law's, and the same numbers as the CPU
 // backend's to 1e-3 of e (the shaders predict the velocities and flag a contact's first substep
 // as dem.cpp does; docs/dem.md "Step size").
 TEST(GlSimulation, HeadOnRestitutionAndContactTime) {
@@ -309,7 +309,7 @@ TEST(GlSimulation, TrajectoriesAgreeOver200Steps) {
   EXPECT_LT(dev_gl[199], 1e-2 * 2 * d.particle_radius);
 }
 
-// Statistics after settling (issue 4): the same loose bed of 96 granules poured into a
+// Statistics after settling: the same loose bed of 96 granules poured into a
 // walled box settles to a statistically equal bed on both backends. Bed height = twice the
 // mean sphere-centre height (the height of a uniform layer with that centroid), within 2 %
 // of the CPU's or within twice the deviation of a CPU run started one ulp away, whichever is
