@@ -297,7 +297,9 @@ TEST(Knobs, EverySceneFieldHasALibraryFieldOrAReason) {
       EXPECT_TRUE(*o.note) << o.api << ": a library-only field needs a reason";
       continue;
     }
-    if (!*o.api) EXPECT_TRUE(*o.note) << o.scene << ": a scene-only field needs a reason";
+    if (!*o.api) {
+      EXPECT_TRUE(*o.note) << o.scene << ": a scene-only field needs a reason";
+    }
     EXPECT_TRUE(std::any_of(seen.begin(), seen.end(), [&](const std::string& p) { return covers(o.scene, p); }))
         << o.scene << " is listed but no shipped scene has it";
   }

@@ -18,7 +18,9 @@ namespace {
 std::unique_ptr<World> flat_world(bool patches) {
   auto w = World::create(test::terrain_8m("flat"), {0, -9.81f, 0});
   EXPECT_TRUE(w.ok()) << (w.ok() ? "" : w.message());
-  if (patches) EXPECT_TRUE((*w)->enable_patches(test::small_manager_def()).ok());
+  if (patches) {
+    EXPECT_TRUE((*w)->enable_patches(test::small_manager_def()).ok());
+  }
   return std::move(*w);
 }
 
