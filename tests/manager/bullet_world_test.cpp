@@ -306,10 +306,7 @@ TEST(BulletWorld, SubstepsKeepTheSphereOnAPatch) {
     ASSERT_TRUE(rig.ok()) << rig.error;
     auto id = rig.add_sphere(0.1f, 5.0f, {4.0, 1.4, 4.0});
     ASSERT_TRUE(id.ok());
-    auto def = test::small_manager_def();
-    def.granules_per_slot = 4000;
-    def.patch_depth = 0.2;
-    def.lod.apron = 0.2;
+    auto def = test::sphere_patch_def();
     ASSERT_TRUE(rig.start(def).ok()) << rig.error;
     TerrainManager& m = *rig.manager;
     auto frame = [&] { return rig.frame(k); };  // World::step with k Bullet substeps

@@ -71,6 +71,16 @@ inline TerrainManagerDef small_manager_def() {
   return d;
 }
 
+// small_manager_def() for one small sphere on the 8 m terrain: a 4000-granule slot, patches
+// 0.2 m deep with a 0.2 m apron (a 0.1 m sphere's patch fits it).
+inline TerrainManagerDef sphere_patch_def() {
+  TerrainManagerDef d = small_manager_def();
+  d.granules_per_slot = 4000;
+  d.patch_depth = 0.2;
+  d.lod.apron = 0.2;
+  return d;
+}
+
 // A sphere of `radius` (m) and `mass` (kg) at `position` (m, world), every other field default.
 inline RigidBodyDef sphere_body(float radius, float mass, const Eigen::Vector3d& position) {
   RigidBodyDef b;

@@ -292,10 +292,7 @@ TEST(TerrainManager, PatchWithRestingBodyFallsAsleep) {
   ASSERT_TRUE(rig.ok()) << rig.error;
   auto id = rig.add_sphere(0.1f, 5.0f, {4.0, 1.4, 4.0});
   ASSERT_TRUE(id.ok());
-  auto def = small_manager_def();
-  def.granules_per_slot = 4000;
-  def.patch_depth = 0.2;
-  def.lod.apron = 0.2;
+  auto def = test::sphere_patch_def();
   ASSERT_TRUE(rig.start(def).ok()) << rig.error;
   TerrainManager& m = *rig.manager;
   BulletWorld& world = *rig.world;
@@ -333,10 +330,7 @@ TEST(TerrainManager, DemotionKeepsAFallingBodysVelocity) {
   // Bottom 1.5 m above the sand (y = 1 m): it lands at about 0.55 s, at 5.4 m/s.
   auto id = rig.add_sphere(0.1f, 5.0f, {4.0, 1.0 + 0.1 + 1.5, 4.0});
   ASSERT_TRUE(id.ok());
-  auto def = small_manager_def();
-  def.granules_per_slot = 4000;
-  def.patch_depth = 0.2;
-  def.lod.apron = 0.2;
+  auto def = test::sphere_patch_def();
   ASSERT_TRUE(rig.start(def).ok()) << rig.error;
   // Until the patch carries it (its shell in the patch, the heightfield off), still in the air.
   auto carried_in_flight = [&] {
