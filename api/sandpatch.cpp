@@ -509,6 +509,40 @@ std::vector<BodyHandle> Terrain::bodies() const {
   return out;
 }
 
+// ---- driving bodies (World::apply_force, apply_torque, apply_impulse) ----
+
+namespace {
+Eigen::Vector3d evd(const Vec3& v) { return {v[0], v[1], v[2]}; }
+}  // namespace
+
+Status Terrain::apply_force(BodyHandle h, const Vec3f& force, const Vec3* world_point) {
+  if (Status s = impl_->check(h); !s) return s;
+  const Eigen::Vector3d p = world_point ? evd(*world_point) : Eigen::Vector3d::Zero();
+  if (core::Status s = impl_->world->apply_force(impl_->id(h), ev(force), world_point ? &p : nullptr); !s)
+    return convert(s.errors(), "apply_force.");
+  return Ok{};
+}
+
+Status Terrain::apply_torque(BodyHandle h, const Vec3f& torque) {
+  if (Status s = impl_->check(h); !s) return s;
+  if (core::Status s = impl_->world->apply_torque(impl_->id(h), ev(torque)); !s) return convert(s.errors(), "apply_torque.");
+  return Ok{};
+}
+
+Status Terrain::apply_impulse(BodyHandle h, const Vec3f& impulse, const Vec3* world_point) {
+  if (Status s = impl_->check(h); !s) return s;
+  const Eigen::Vector3d p = world_point ? evd(*world_point) : Eigen::Vector3d::Zero();
+  if (core::Status s = impl_->world->apply_impulse(impl_->id(h), ev(impulse), world_point ? &p : nullptr); !s)
+    return convert(s.errors(), "apply_impulse.");
+  return Ok{};
+}
+
+Result<BodyForces> Terrain::granular_force(BodyHandle h) const {
+  if (Status s = impl_->check(h); !s) return s.errors();
+  const core::World::SoilForce f = impl_->world->soil_force(impl_->id(h));
+  return BodyForces{{f.force.x(), f.force.y(), f.force.z()}, {f.torque.x(), f.torque.y(), f.torque.z()}, f.carried};
+}
+
 // ---- the step ----
 
 Status Terrain::step(double dt, int substeps) {

@@ -226,8 +226,11 @@ Status TerrainManager::Impl::couple_before(Slot& slot, double dt) {
 // the support force, so they stay where the patch left them.
 void TerrainManager::Impl::hold_resting_bodies(Slot& slot) {
   for (const Carried& c : slot.carried)
-    if (c.enabled && world->alive(c.body))
-      world->apply_force(c.body, -world->mass(c.body) * def.gravity.cast<float>(), Eigen::Vector3f::Zero());
+    if (c.enabled && world->alive(c.body)) {
+      const Eigen::Vector3f f = -world->mass(c.body) * def.gravity.cast<float>();
+      world->apply_force(c.body, f, Eigen::Vector3f::Zero());
+      soil[body_key(c.body)] = {f, Eigen::Vector3f::Zero()};
+    }
 }
 
 void TerrainManager::Impl::couple_after(Slot& slot, double dt) {
@@ -243,6 +246,7 @@ void TerrainManager::Impl::couple_after(Slot& slot, double dt) {
     const Eigen::Matrix3f I = R * world->principal_inertia(c.body).asDiagonal() * R.transpose();
     const Eigen::Vector3f t = I * (w1 - c.w0) / float(dt);
     world->apply_force(c.body, f, t);
+    soil[body_key(c.body)] = {f, t};
   }
 }
 

@@ -46,6 +46,22 @@ render::CameraView camera_at(const CameraDef& c, double t) {
   return v;
 }
 
+std::vector<World::Load> to_loads(const BodyDef& body) {
+  std::vector<World::Load> out;
+  for (const LoadDef& l : body.loads) {
+    World::Load w;
+    w.force = vec3f(l.force);
+    w.torque = vec3f(l.torque);
+    w.at_centre = !l.at.has_value();
+    if (l.at) w.at = vec3f(*l.at);
+    w.from = l.from;
+    if (l.until) w.until = *l.until;
+    w.body_frame = l.frame == LoadFrame::Body;
+    out.push_back(w);
+  }
+  return out;
+}
+
 Result<RigidBodyDef> to_rigid_body(const SceneDef& scene, std::size_t index) {
   const BodyDef& b = scene.bodies[index];
   RigidBodyDef d;
@@ -177,7 +193,10 @@ Result<std::unique_ptr<World>> make_world(const SceneDef& scene, int threads, co
     part = "activation";
     if (Status s = (*world)->enable_patches(md); !s) return s.errors();
   }
-  for (std::size_t i = 0; i < body_defs.size(); ++i) (*world)->schedule_body(body_defs[i], scene.bodies[i].spawn_time);
+  for (std::size_t i = 0; i < body_defs.size(); ++i) {
+    const std::size_t entry = (*world)->schedule_body(body_defs[i], scene.bodies[i].spawn_time);
+    if (!scene.bodies[i].loads.empty()) (*world)->set_loads(entry, to_loads(scene.bodies[i]));
+  }
   return world;
 }
 

@@ -29,6 +29,9 @@ TerrainManagerDef manager_def(const SceneDef& scene, const Heightfield& hf, int 
 // OBJ, centred on their centroid).
 Result<RigidBodyDef> to_rigid_body(const SceneDef& scene, std::size_t index);
 
+// A scene body's loads as the World applies them (World::set_loads).
+std::vector<World::Load> to_loads(const BodyDef& body);
+
 // Camera pose at simulated time t: fixed, or linear between path keyframes (held outside).
 render::CameraView camera_at(const CameraDef& camera, double t);
 

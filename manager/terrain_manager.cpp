@@ -134,6 +134,7 @@ Status TerrainManager::before_bodies(double time, double dt, Profile& profile) {
   Impl& I = *impl_;
   I.current();
   I.now = time;
+  I.soil.clear();
   for (auto it = I.set_down_until.begin(); it != I.set_down_until.end();)
     it = it->second <= time ? I.set_down_until.erase(it) : std::next(it);
   {
@@ -163,6 +164,14 @@ Status TerrainManager::after_bodies(double time, double dt, Profile& profile) {
     if (Status st = I.demote_idle(time + dt); !st) return st;
   }
   return Ok{};
+}
+
+bool TerrainManager::soil_force(RigidBodyId body, Eigen::Vector3f* force, Eigen::Vector3f* torque) const {
+  const auto it = impl_->soil.find(manager_detail::body_key(body));
+  if (it == impl_->soil.end()) return false;
+  *force = it->second.force;
+  *torque = it->second.torque;
+  return true;
 }
 
 void TerrainManager::set_camera(const Eigen::Vector3d& position) { impl_->camera = position; }

@@ -135,6 +135,12 @@ class TerrainManager {
   // Demotes every patch now (end of a run that wants the final terrain).
   Status demote_all(double time, Profile& profile);
 
+  // The soil's force on a body in the last frame's dem stage: the mean contact force (N,
+  // world) and torque (N m about its centre of mass, world) its carrying patch handed Bullet
+  // (a sleeping patch: the body's weight back). False, and nothing written, when no patch
+  // carried it.
+  bool soil_force(RigidBodyId body, Eigen::Vector3f* force, Eigen::Vector3f* torque) const;
+
   int active_patches() const;
   int ready_patches() const;                   // filled and simulating (or asleep)
   int granules() const;                        // live granules over all patches

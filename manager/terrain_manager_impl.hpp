@@ -97,6 +97,13 @@ struct TerrainManager::Impl {
   // they ask for no patch and no patch takes them up.
   std::unordered_map<std::int64_t, double> set_down_until;
   double now = 0;  // s, simulated time of the frame being run
+  // The soil's force on each carried body in the last dem stage (body_key -> N, N m about the
+  // centre of mass, world): what couple_after or hold_resting_bodies handed Bullet. Cleared at
+  // the start of every frame.
+  struct SoilForce {
+    Eigen::Vector3f force, torque;
+  };
+  std::unordered_map<std::int64_t, SoilForce> soil;
   std::unordered_set<std::int64_t> shells_sampled;  // bodies whose shell was sampled ahead (body_key)
 
   // m (world): a body's shell joins a patch when the body's lowest point is within half of

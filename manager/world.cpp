@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <optional>
 
 #include "common/hash.hpp"
 
@@ -99,6 +100,131 @@ std::vector<RigidBodyId> World::bodies() const {
   return out;
 }
 
+// ---- driving bodies ----
+
+namespace {
+
+std::string vec_str(const Eigen::Vector3f& v) {
+  return "[" + format_number(v.x()) + ", " + format_number(v.y()) + ", " + format_number(v.z()) + "]";
+}
+std::string vec_str(const Eigen::Vector3d& v) {
+  return "[" + format_number(v.x()) + ", " + format_number(v.y()) + ", " + format_number(v.z()) + "]";
+}
+
+// A load vector: finite, |v| <= World::kMaxLoad.
+std::optional<Error> check_load(const char* field, const Eigen::Vector3f& v, const char* unit) {
+  if (!v.allFinite()) return Error{"", field, vec_str(v), std::string("must be finite (") + unit + ")"};
+  if (double(v.cast<double>().norm()) > World::kMaxLoad)
+    return Error{"", field, vec_str(v),
+                 "its magnitude must be at most " + format_number(World::kMaxLoad) + " " + unit,
+                 "|" + std::string(field) + "| = " + format_number(v.cast<double>().norm())};
+  return std::nullopt;
+}
+
+}  // namespace
+
+Status World::check_body(RigidBodyId id) const {
+  if (alive(id)) return Ok{};
+  return Error{"", "body", "{" + std::to_string(id.index) + ", " + std::to_string(id.generation) + "}",
+               "must be a live body of this world (removed, or never added)"};
+}
+
+void World::accumulate(RigidBodyId id, const Eigen::Vector3f& force, const Eigen::Vector3f& torque) {
+  for (Held& h : held_)
+    if (same(h.id, id)) {
+      h.force += force;
+      h.torque += torque;
+      return;
+    }
+  held_.push_back({id, force, torque});
+}
+
+Status World::apply_force(RigidBodyId id, const Eigen::Vector3f& force, const Eigen::Vector3d* world_point) {
+  if (Status s = check_body(id); !s) return s;
+  std::vector<Error> errs;
+  if (auto e = check_load("force", force, "N")) errs.push_back(*e);
+  Eigen::Vector3f torque = Eigen::Vector3f::Zero();
+  if (world_point) {
+    const Eigen::Vector3d arm = *world_point - bullet_->state(id).position;  // m
+    if (!world_point->allFinite())
+      errs.push_back({"", "world_point", vec_str(*world_point), "must be finite (m, world)"});
+    else if (arm.norm() > kMaxArm)
+      errs.push_back({"", "world_point", vec_str(*world_point),
+                      "must be within " + format_number(kMaxArm) + " m of the body's centre of mass",
+                      "it is " + format_number(arm.norm()) + " m away"});
+    else
+      torque = arm.cast<float>().cross(force);  // N m, about the centre of mass
+  }
+  if (!errs.empty()) return errs;
+  accumulate(id, force, torque);
+  return Ok{};
+}
+
+Status World::apply_torque(RigidBodyId id, const Eigen::Vector3f& torque) {
+  if (Status s = check_body(id); !s) return s;
+  if (auto e = check_load("torque", torque, "N m")) return *e;
+  accumulate(id, Eigen::Vector3f::Zero(), torque);
+  return Ok{};
+}
+
+Status World::apply_impulse(RigidBodyId id, const Eigen::Vector3f& impulse, const Eigen::Vector3d* world_point) {
+  if (Status s = check_body(id); !s) return s;
+  std::vector<Error> errs;
+  if (auto e = check_load("impulse", impulse, "N s")) errs.push_back(*e);
+  BodyState st = bullet_->state(id);
+  Eigen::Vector3d arm = Eigen::Vector3d::Zero();  // m
+  if (world_point) {
+    if (!world_point->allFinite())
+      errs.push_back({"", "world_point", vec_str(*world_point), "must be finite (m, world)"});
+    else if ((arm = *world_point - st.position).norm() > kMaxArm)
+      errs.push_back({"", "world_point", vec_str(*world_point),
+                      "must be within " + format_number(kMaxArm) + " m of the body's centre of mass",
+                      "it is " + format_number(arm.norm()) + " m away"});
+  }
+  if (!errs.empty()) return errs;
+  const float m = bullet_->mass(id);  // kg
+  if (m > 0) st.linear_velocity += impulse / m;
+  if (world_point) {
+    // Δω = I⁻¹ (r × J), I⁻¹ = R diag(1 / I_i) Rᵀ (principal moments in the body frame).
+    const Eigen::Vector3f I = bullet_->principal_inertia(id);
+    const Eigen::Vector3f inv(I.x() > 0 ? 1 / I.x() : 0, I.y() > 0 ? 1 / I.y() : 0, I.z() > 0 ? 1 / I.z() : 0);
+    const Eigen::Matrix3f R = st.orientation.toRotationMatrix();
+    st.angular_velocity += R * inv.asDiagonal() * R.transpose() * arm.cast<float>().cross(impulse);
+  }
+  bullet_->set_state(id, st);
+  return Ok{};
+}
+
+void World::set_loads(std::size_t entry, std::vector<Load> loads) {
+  if (entry >= entries_.size()) return;
+  if (loads_.size() < entries_.size()) loads_.resize(entries_.size());
+  loads_[entry] = std::move(loads);
+}
+
+// The scene loads active in the frame starting at t (s): from <= t < until, with the spawn
+// stage's 1 ns tolerance on t.
+void World::apply_scene_loads(double t) {
+  for (std::size_t k = 0; k < loads_.size(); ++k) {
+    if (loads_[k].empty() || !entries_[k].spawned() || !alive(entries_[k].id)) continue;
+    const RigidBodyId id = entries_[k].id;
+    const BodyState st = bullet_->state(id);
+    const Eigen::Matrix3f R = st.orientation.toRotationMatrix();
+    for (const Load& l : loads_[k]) {
+      if (!(t + 1e-9 >= l.from && t + 1e-9 < l.until)) continue;
+      const Eigen::Vector3f f = l.body_frame ? Eigen::Vector3f(R * l.force) : l.force;
+      Eigen::Vector3f tq = l.body_frame ? Eigen::Vector3f(R * l.torque) : l.torque;
+      if (!l.at_centre) tq += (R * l.at).cross(f);  // N m: `at` is a point of the body, wherever it has turned
+      accumulate(id, f, tq);
+    }
+  }
+}
+
+World::SoilForce World::soil_force(RigidBodyId id) const {
+  SoilForce out;
+  if (manager_ && alive(id)) out.carried = manager_->soil_force(id, &out.force, &out.torque);
+  return out;
+}
+
 // ---- the frame ----
 
 void World::set_camera(const Eigen::Vector3d& position) {
@@ -158,6 +284,7 @@ Status World::step(double dt, int substeps) {
       it = pending_.erase(it);
     }
   }
+  apply_scene_loads(t);  // the body frame's loads turn with the body as it starts the frame
   if (manager_) {
     if (Status s = manager_->before_bodies(t, dt, profile_); !s) return fail("dem", s);
     if (Status s = check_bodies("dem"); !s) return s;
@@ -166,7 +293,11 @@ Status World::step(double dt, int substeps) {
   removing_.clear();
   {
     auto timer = profile_.time(Stage::Bodies);
-    bullet_->step_frame(float(dt), substeps);  // the patches' forces act over every substep
+    // The callers' forces join the patches' (given in the dem stage); both act over every substep.
+    for (const Held& h : held_)
+      if (alive(h.id)) bullet_->apply_force(h.id, h.force, h.torque);
+    held_.clear();
+    bullet_->step_frame(float(dt), substeps);
     if (Status s = check_bodies("bodies"); !s) return s;
   }
   if (manager_) {
@@ -260,6 +391,10 @@ nlohmann::ordered_json World::report() const {
       b["linear_velocity_m_s"] = vec_json(s.linear_velocity);
       b["angular_velocity_rad_s"] = vec_json(s.angular_velocity);
       b["at_rest"] = rest;
+      const SoilForce soil = soil_force(e.id);
+      b["carried_by_patch"] = soil.carried;
+      b["granular_force_N"] = vec_json(soil.force);
+      b["granular_torque_N_m"] = vec_json(soil.torque);
     }
     bodies.push_back(b);
   }

@@ -2,11 +2,13 @@
 // when granular patches are on, the terrain manager over both, and advances them together:
 //
 //   World::step(dt, substeps) runs, in order, each stage timed in the World's Profile:
-//     spawn      bodies scheduled for this time enter the Bullet world
+//     spawn      bodies scheduled for this time enter the Bullet world; scene loads due now are
+//                added to the callers' forces (apply_force, apply_torque)
 //     lod        contact prediction, patch requests            (TerrainManager::before_bodies)
 //     activation pool slots filled from the heightfield         (TerrainManager::before_bodies)
 //     dem        coupled granule substeps, forces to the bodies (TerrainManager::before_bodies)
-//     bodies     `substeps` Bullet steps of dt / substeps; the patches' forces act over all
+//     bodies     `substeps` Bullet steps of dt / substeps; the patches' forces and the callers'
+//                act over all
 //     sleep      sleep / wake bookkeeping                       (TerrainManager::after_bodies)
 //     demotion   particles back to heightfield                  (TerrainManager::after_bodies)
 //   After each stage that can move a body (dem, bodies, demotion) every body's state is
@@ -24,6 +26,7 @@
 
 #include <Eigen/Core>
 #include <cstdint>
+#include <limits>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <string>
@@ -81,6 +84,44 @@ class World {
   // Live bodies (not being removed), in slot order.
   std::vector<RigidBodyId> bodies() const;
 
+  // ---- driving bodies ----
+  // Loads a caller puts on a body (N, N m, N s; world). Forces and torques accumulate until
+  // the next step and act over the whole of it, over every Bullet substep, beside the forces
+  // the patches hand Bullet in the dem stage; then they are cleared. An impulse changes the
+  // velocities at once. Each is refused, naming the argument and its value, when it is not
+  // finite, when its magnitude is above kMaxLoad, when a world point is more than kMaxArm from
+  // the centre of mass, or when the body is not alive ("body").
+  static constexpr double kMaxLoad = 1e9;  // N, N m or N s: the largest |force|, |torque|, |impulse|
+  static constexpr double kMaxArm = 1e4;   // m: the farthest a world point may be from the centre of mass
+  // At the centre of mass, or at `world_point` (m, world), which adds (p − c) × F.
+  Status apply_force(RigidBodyId id, const Eigen::Vector3f& force, const Eigen::Vector3d* world_point = nullptr);
+  Status apply_torque(RigidBodyId id, const Eigen::Vector3f& torque);
+  // Δv = J / m; at a world point also Δω = I⁻¹ ((p − c) × J) (I the world inertia tensor).
+  Status apply_impulse(RigidBodyId id, const Eigen::Vector3f& impulse, const Eigen::Vector3d* world_point = nullptr);
+  // A scene file's load on a body (docs/scene-format.md "loads"): validated by the scene
+  // parser, applied by step() to every frame that starts at a time t with from <= t < until.
+  struct Load {
+    Eigen::Vector3f force = Eigen::Vector3f::Zero();   // N
+    Eigen::Vector3f torque = Eigen::Vector3f::Zero();  // N m
+    bool at_centre = true;                             // the force acts at the centre of mass ...
+    Eigen::Vector3f at = Eigen::Vector3f::Zero();      // ... or at this point (m, body frame)
+    double from = 0;                                   // s
+    double until = std::numeric_limits<double>::infinity();  // s
+    bool body_frame = false;  // force, torque and `at` in the body frame (they turn with it)
+  };
+  // The loads of the body at entry `entry` (entries()), from its spawn on; replaces any before.
+  void set_loads(std::size_t entry, std::vector<Load> loads);
+
+  // ---- the soil's force ----
+  struct SoilForce {
+    Eigen::Vector3f force = Eigen::Vector3f::Zero();   // N, world: mean contact force of the granules over the last step
+    Eigen::Vector3f torque = Eigen::Vector3f::Zero();  // N m, world, about the centre of mass
+    bool carried = false;                              // a patch carried the body in the last step (else zeros)
+  };
+  // What the granular patch carrying the body did to it in the last step (zeros, not carried,
+  // when none did, before the first step, or when the body is not alive).
+  SoilForce soil_force(RigidBodyId id) const;
+
   // ---- the frame ----
   // Moves the camera the manager's scale bands are measured from (m, world).
   void set_camera(const Eigen::Vector3d& position);
@@ -130,6 +171,10 @@ class World {
  private:
   World() = default;
   Status check_bodies(const char* stage);
+  Status check_body(RigidBodyId id) const;
+  void accumulate(RigidBodyId id, const Eigen::Vector3f& force, const Eigen::Vector3f& torque);
+  void apply_scene_loads(double t);
+
   Status fail(const char* stage, Status s);
 
 
@@ -143,6 +188,12 @@ class World {
   std::vector<std::pair<std::size_t, RigidBodyDef>> pending_;  // scheduled, not yet spawned (entry, definition)
   std::vector<RigidBodyId> removing_;  // removed, leaving the Bullet world in the next step
   std::vector<GridRegion> dirty_;
+  struct Held {               // a caller's force and torque on a body until the next step
+    RigidBodyId id;
+    Eigen::Vector3f force, torque;  // N, N m, world
+  };
+  std::vector<Held> held_;    // in the order bodies were first loaded
+  std::vector<std::vector<Load>> loads_;  // by entry index (scene loads)
   std::vector<double> frame_ms_;       // ring of the last kFrameWindow steps' wall ms
   FrameRecord last_frame_;
   double frame_max_ms_ = 0, conversion_max_ms_ = 0;

@@ -42,6 +42,7 @@ const std::vector<std::string> kSourceTypes = {"png16", "raw_f32", "esri_ascii",
 const std::vector<std::string> kProceduralKinds = {"flat", "plane", "hills", "noise"};
 const std::vector<std::string> kShapeKinds = {"sphere", "box", "cylinder", "capsule", "mesh"};
 const std::vector<std::string> kBackends = {"cpu", "gl"};
+const std::vector<std::string> kLoadFrames = {"world", "body"};
 const std::vector<std::string> kHeightfieldFormats = {"png16", "raw_f32", "esri_ascii"};
 
 // Value limits, one place (docs/scene-format.md lists the same).
@@ -177,6 +178,39 @@ std::optional<TriangleMesh> load_body_mesh(Ctx& c, ShapeDef& s, const std::strin
 
 double lowest_offset(const BodyDef& b, const TriangleMesh* mesh);
 
+// One of a body's loads (docs/scene-format.md "loads").
+LoadDef parse_load(Ctx& c, const json& j, const std::string& path) {
+  LoadDef l;
+  Obj o(c, j, path);
+  // A vector no longer than kMaxLoad (the API's limit on |force| and |torque|).
+  auto bounded = [&](const char* key, Vec3d& out, const char* unit) {
+    Vec3d v = out;
+    o.vec3(key, v, closed(-kMaxLoad, kMaxLoad, unit));
+    const double n = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+    if (n > kMaxLoad)
+      c.error(o.at(key), show(*o.get(key)), "its magnitude must be at most " + fmt_num(kMaxLoad) + " " + unit,
+              "|" + std::string(key) + "| = " + fmt_num(n));
+    else
+      out = v;
+  };
+  bounded("force", l.force, "N");
+  bounded("torque", l.torque, "N m");
+  if (const json* a = o.get("at")) {
+    if (auto v = read_numbers<3>(c, *a, o.at("at"), closed(-1e4, 1e4, "m"))) l.at = *v;
+    if (!o.has("force")) c.error(o.at("at"), show(*a), "'at' is where the force acts: give 'force' too");
+  }
+  o.number("from", l.from, closed(0.0, 1e6, "s"));
+  l.until = o.number_opt("until", positive(1e6, "s"));
+  if (l.until && !(*l.until > l.from))
+    c.error(o.at("until"), show(*o.get("until")), "must be greater than 'from' (" + fmt_num(l.from) + " s)",
+            "a load acts for from <= t < until");
+  o.enumeration("frame", l.frame, kLoadFrames);
+  if (o.valid() && !o.has("force") && !o.has("torque"))
+    c.missing(o.at("force"), "'force' (N), 'torque' (N m) or both");
+  o.finish();
+  return l;
+}
+
 BodyDef parse_body(Ctx& c, const json& j, const std::string& path, std::optional<TriangleMesh>& mesh) {
   BodyDef b;
   Obj o(c, j, path);
@@ -256,6 +290,12 @@ BodyDef parse_body(Ctx& c, const json& j, const std::string& path, std::optional
   o.knob("friction", b.friction, knobs::kBodyFriction);
   o.knob("restitution", b.restitution, knobs::kBodyRestitution);
   o.knob("rolling_friction", b.rolling_friction, knobs::kBodyRollingFriction);
+  if (const json* lj = o.get("loads")) {
+    if (lj->is_array() && lj->size() > std::size_t(kMaxLoadsPerBody))
+      c.error(o.at("loads"), std::to_string(lj->size()) + " loads", "at most " + std::to_string(kMaxLoadsPerBody) + " loads per body");
+    else
+      for_each_element(c, *lj, o.at("loads"), [&](const json& e, const std::string& p) { b.loads.push_back(parse_load(c, e, p)); });
+  }
   o.finish();
   return b;
 }
@@ -556,6 +596,7 @@ const SimulationPreset* find_simulation_preset(const std::string& name) {
 
 const char* to_string(Backend b) { return kBackends[static_cast<int>(b)].c_str(); }
 const char* to_string(HeightfieldFormat f) { return kHeightfieldFormats[static_cast<int>(f)].c_str(); }
+const char* to_string(LoadFrame f) { return kLoadFrames[static_cast<int>(f)].c_str(); }
 
 Result<SceneDef> parse_scene(const std::string& json_text, const std::string& source_name,
                              const std::string& base_dir) {
@@ -760,6 +801,18 @@ nlohmann::json scene_to_json(const SceneDef& s) {
     bj["friction"] = b.friction;
     bj["restitution"] = b.restitution;
     bj["rolling_friction"] = b.rolling_friction;
+    if (!b.loads.empty()) {
+      json loads = json::array();
+      for (const LoadDef& l : b.loads) {
+        json lj = {{"force", l.force}, {"torque", l.torque}};
+        if (l.at) lj["at"] = *l.at;
+        lj["from"] = l.from;
+        if (l.until) lj["until"] = *l.until;
+        lj["frame"] = to_string(l.frame);
+        loads.push_back(lj);
+      }
+      bj["loads"] = loads;
+    }
     j["bodies"].push_back(bj);
   }
 

@@ -127,6 +127,21 @@ struct PoseDef {
   // both are stored here as the normalised quaternion.
 };
 
+// A force and / or torque put on a body while the simulated time t of a step's start is in
+// [from, until) (World::set_loads): a push, a wheel's traction, a thrust.
+enum class LoadFrame { World, Body };
+inline constexpr int kMaxLoadsPerBody = 256;
+inline constexpr double kMaxLoad = 1e9;        // N or N m: the largest |force| and |torque| (as the API's)
+struct LoadDef {
+  Vec3d force = {0.0, 0.0, 0.0};               // N, |force| <= kMaxLoad
+  Vec3d torque = {0.0, 0.0, 0.0};              // N m, |torque| <= kMaxLoad
+  std::optional<Vec3d> at;                     // m, the force's point in the body frame (origin at the
+                                               //   centre of mass); none: the centre of mass
+  double from = 0.0;                           // s
+  std::optional<double> until;                 // s, > from; none: to the end of the run
+  LoadFrame frame = LoadFrame::World;          // body: force and torque turn with the body
+};
+
 struct BodyDef {
   std::string name;                            // unique
   ShapeDef shape;
@@ -139,6 +154,7 @@ struct BodyDef {
   double friction = knobs::kBodyFriction.def;  // μ against terrain and other bodies
   double restitution = knobs::kBodyRestitution.def;  // e in [0, 1] for body–body / body–heightfield contacts
   double rolling_friction = knobs::kBodyRollingFriction.def;  // rolling resistance (torque arm / radius)
+  std::vector<LoadDef> loads;                  // at most kMaxLoadsPerBody
 
   // Mass in kg: `mass`, or density × shape.volume().
   double mass_value() const;
@@ -320,5 +336,6 @@ const char* to_string(ProceduralKind k);
 const char* to_string(ShapeKind k);
 const char* to_string(Backend b);
 const char* to_string(HeightfieldFormat f);
+const char* to_string(LoadFrame f);
 
 }  // namespace sandpatch

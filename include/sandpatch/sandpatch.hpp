@@ -226,6 +226,14 @@ struct BodyState {
   Vec3f angular_velocity{};                    // rad/s
 };
 
+// The granular soil's push on a body (Terrain::granular_force): the mean contact force and
+// torque the patch carrying it applied over the last step.
+struct BodyForces {
+  Vec3f force{};                               // N, world
+  Vec3f torque{};                              // N m, world, about the centre of mass
+  bool carried = false;                        // a patch carried the body in the last step (else zeros)
+};
+
 // ---------------------------------------------------------------------------------------
 // Events, particles, heightfield data for renderers
 
@@ -325,6 +333,24 @@ class SANDPATCH_API Terrain {
   Status set_body_transform(BodyHandle h, const Vec3& position, const Quat& orientation);
   Status set_body_velocity(BodyHandle h, const Vec3f& linear, const Vec3f& angular);
   std::vector<BodyHandle> bodies() const;
+
+  // ---- driving bodies ----
+  // A force (N, world) at the centre of mass, or at `world_point` (m, world), which adds the
+  // torque (p − c) × F; a torque (N m, world). They add up until the next step(), act over the
+  // whole of it (every rigid-body substep, beside the granular patches' forces) and are then
+  // cleared: call them every step for a lasting push. An impulse (N s, world) changes the
+  // velocities at once: Δv = J / m, and at a world point Δω = I⁻¹ ((p − c) × J).
+  // Refused, naming the argument ("apply_force.force") and its value: a stale handle,
+  // non-finite values, a magnitude above 1e9 (N, N m, N s), a point farther than 1e4 m from
+  // the centre of mass.
+  Status apply_force(BodyHandle h, const Vec3f& force, const Vec3* world_point = nullptr);
+  Status apply_torque(BodyHandle h, const Vec3f& torque);
+  Status apply_impulse(BodyHandle h, const Vec3f& impulse, const Vec3* world_point = nullptr);
+  // What the granular soil did to the body in the last step: the mean contact force and
+  // torque of the patch carrying it (a sleeping patch: the body's weight back); zeros and
+  // carried = false when no patch carried it (on the heightfield, in the air, before the
+  // first step).
+  Result<BodyForces> granular_force(BodyHandle h) const;
 
   // Low-level entry of sandpatch::api::bullet::adopt (include/sandpatch/bullet.hpp): use that.
   // `bt_rigid_body` is a btRigidBody*; `abi` describes the Bullet the caller was compiled

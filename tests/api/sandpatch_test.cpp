@@ -437,3 +437,224 @@ TEST(Api, UntouchedPatchSleepsAndIsDemoted) {
   EXPECT_EQ(t->active_patches(), 0);
   EXPECT_EQ(t->take_dirty_regions().size(), 1u);
 }
+
+// ---- driving bodies: apply_force, apply_torque, apply_impulse, granular_force ----
+
+namespace {
+
+// A body of `def` in the air over the flat terrain (no patches).
+sp::BodyDef air_body(sp::ShapeKind kind, double mass) {
+  sp::BodyDef b;
+  b.name = "driven";
+  b.shape.kind = kind;
+  b.shape.radius = 0.5;
+  b.shape.half_extents = {0.2, 0.3, 0.4};
+  b.mass = mass;
+  b.position = {5.0, 6.0, 5.0};  // 5 m above the surface
+  return b;
+}
+
+}  // namespace
+
+// F = m a in free fall: a 2 kg sphere under gravity and a force F held for 12 steps (4
+// substeps each) has v = (F / m + g) t, within 1 %; a force given once acts over one step
+// only (cleared after it).
+TEST(ApiDrive, ForceGivesMassTimesAcceleration) {
+  auto t = sp::Terrain::create(flat_def());
+  ASSERT_TRUE(t.ok()) << t.message();
+  auto h = t->add_body(air_body(sp::ShapeKind::Sphere, 2.0));
+  ASSERT_TRUE(h.ok()) << h.message();
+  const sp::Vec3f F = {6.0f, 30.0f, -4.0f};  // N
+  const double dt = 1.0 / 60.0, m = 2.0, g = -9.81;
+  for (int k = 0; k < 12; ++k) {
+    ASSERT_TRUE(t->apply_force(*h, F).ok());
+    ASSERT_TRUE(t->step(dt, 4).ok());
+  }
+  const double time = 12 * dt;
+  auto s = t->body_state(*h);
+  ASSERT_TRUE(s.ok());
+  const double expect[3] = {F[0] / m * time, (F[1] / m + g) * time, F[2] / m * time};  // m/s
+  for (int i = 0; i < 3; ++i) EXPECT_NEAR(s->linear_velocity[i], expect[i], 0.01 * std::abs(expect[i])) << "axis " << i;
+  EXPECT_NEAR(s->angular_velocity[0], 0.0f, 1e-6f);
+  // Not given again: the next step feels gravity only.
+  ASSERT_TRUE(t->step(dt, 4).ok());
+  auto s2 = t->body_state(*h);
+  EXPECT_NEAR(s2->linear_velocity[0], s->linear_velocity[0], 1e-5);
+  EXPECT_NEAR(s2->linear_velocity[1] - s->linear_velocity[1], g * dt, 1e-4);
+}
+
+// F = m a on the heightfield: a 10 kg box with zero friction, pushed along x by 20 N for 1 s,
+// reaches v = F t / m = 2 m/s, within 1 %.
+TEST(ApiDrive, FrictionlessBoxOnFlatHeightfield) {
+  auto t = sp::Terrain::create(flat_def());
+  ASSERT_TRUE(t.ok()) << t.message();
+  sp::BodyDef b = air_body(sp::ShapeKind::Box, 10.0);
+  b.position = {2.0, 1.0 + 0.3, 5.0};  // resting on the surface (y = 1 m)
+  b.friction = 0.0;
+  b.rolling_friction = 0.0;
+  b.restitution = 0.0;
+  auto h = t->add_body(b);
+  ASSERT_TRUE(h.ok()) << h.message();
+  const double dt = 1.0 / 60.0;
+  for (int k = 0; k < 30; ++k) ASSERT_TRUE(t->step(dt).ok());  // settle on the contact
+  const double v0 = t->body_state(*h)->linear_velocity[0];
+  for (int k = 0; k < 60; ++k) {
+    ASSERT_TRUE(t->apply_force(*h, {20.0f, 0.0f, 0.0f}).ok());
+    ASSERT_TRUE(t->step(dt).ok());
+  }
+  auto s = t->body_state(*h);
+  EXPECT_NEAR(s->linear_velocity[0] - v0, 2.0, 0.02);
+  EXPECT_NEAR(s->position[1], 1.3, 0.05) << "still on the surface";
+}
+
+// τ = I α about a principal axis: a 3 kg box of half extents (0.2, 0.3, 0.4) m has
+// I_y = m (a² + c²) / 3 = 0.2 kg m²; 0.5 N m for 6 steps gives ω_y = τ t / I_y = 0.25 rad/s.
+TEST(ApiDrive, TorqueGivesInertiaTimesAngularAcceleration) {
+  auto t = sp::Terrain::create(flat_def());
+  ASSERT_TRUE(t.ok()) << t.message();
+  auto h = t->add_body(air_body(sp::ShapeKind::Box, 3.0));
+  ASSERT_TRUE(h.ok());
+  const double dt = 1.0 / 60.0, I_y = 3.0 * (0.2 * 0.2 + 0.4 * 0.4) / 3.0;
+  for (int k = 0; k < 6; ++k) {
+    ASSERT_TRUE(t->apply_torque(*h, {0.0f, 0.5f, 0.0f}).ok());
+    ASSERT_TRUE(t->step(dt, 2).ok());
+  }
+  auto s = t->body_state(*h);
+  EXPECT_NEAR(s->angular_velocity[1], 0.5 * 6 * dt / I_y, 0.01 * 0.25);
+  EXPECT_NEAR(s->linear_velocity[0], 0.0f, 1e-6f);
+}
+
+// A force at a world point adds r × F: 2 N along z at 0.5 m above a 2 kg sphere's centre
+// (I = 2/5 m r² = 0.2 kg m²) gives τ_x = 1 N m, so ω_x = τ t / I after t; the same as the
+// force at the centre plus apply_torque(r × F), to the bit.
+TEST(ApiDrive, ForceAtAPointAddsTheTorque) {
+  auto run = [](bool at_point) {
+    auto t = sp::Terrain::create(flat_def());
+    EXPECT_TRUE(t.ok());
+    auto h = t->add_body(air_body(sp::ShapeKind::Sphere, 2.0));
+    const double dt = 1.0 / 60.0;
+    for (int k = 0; k < 6; ++k) {
+      const auto p = t->body_state(*h)->position;
+      const sp::Vec3 top = {p[0], p[1] + 0.5, p[2]};
+      if (at_point) {
+        EXPECT_TRUE(t->apply_force(*h, {0.0f, 0.0f, 2.0f}, &top).ok());
+      } else {
+        EXPECT_TRUE(t->apply_force(*h, {0.0f, 0.0f, 2.0f}).ok());
+        EXPECT_TRUE(t->apply_torque(*h, {1.0f, 0.0f, 0.0f}).ok());
+      }
+      EXPECT_TRUE(t->step(dt).ok());
+    }
+    return std::make_pair(*t->body_state(*h), t->state_hash());
+  };
+  const auto [s, hash] = run(true);
+  const double I = 0.4 * 2.0 * 0.25, time = 6.0 / 60.0;
+  EXPECT_NEAR(s.angular_velocity[0], 1.0 * time / I, 0.01 * time / I);
+  EXPECT_NEAR(s.linear_velocity[2], 2.0 / 2.0 * time, 0.01 * time);
+  EXPECT_EQ(hash, run(false).second);
+}
+
+// An impulse changes the velocities at once: Δv = J / m and, at a point, Δω = I⁻¹ (r × J).
+TEST(ApiDrive, ImpulseGivesVelocityChange) {
+  auto t = sp::Terrain::create(flat_def());
+  ASSERT_TRUE(t.ok());
+  auto h = t->add_body(air_body(sp::ShapeKind::Sphere, 2.0));
+  ASSERT_TRUE(h.ok());
+  ASSERT_TRUE(t->apply_impulse(*h, {4.0f, 0.0f, 0.0f}).ok());
+  auto s = t->body_state(*h);
+  EXPECT_FLOAT_EQ(s->linear_velocity[0], 2.0f);
+  EXPECT_FLOAT_EQ(s->angular_velocity[2], 0.0f);
+  const sp::Vec3 top = {s->position[0], s->position[1] + 0.5, s->position[2]};
+  ASSERT_TRUE(t->apply_impulse(*h, {0.0f, 0.0f, 3.0f}, &top).ok());  // r × J = (1.5, 0, 0) N m s
+  s = t->body_state(*h);
+  EXPECT_FLOAT_EQ(s->linear_velocity[2], 1.5f);
+  EXPECT_NEAR(s->angular_velocity[0], 1.5 / 0.2, 1e-5);  // I = 2/5 m r² = 0.2 kg m²
+  // And it carries on through a step (free flight: x velocity unchanged).
+  ASSERT_TRUE(t->step(1.0 / 60.0).ok());
+  EXPECT_NEAR(t->body_state(*h)->linear_velocity[0], 2.0f, 1e-5f);
+}
+
+// Bad loads are refused naming the argument and its value; a stale handle names BodyHandle.
+TEST(ApiDrive, BadLoadsAreRefusedNamingTheArgument) {
+  auto t = sp::Terrain::create(flat_def());
+  ASSERT_TRUE(t.ok());
+  auto h = t->add_body(air_body(sp::ShapeKind::Sphere, 2.0));
+  ASSERT_TRUE(h.ok());
+  const float nan = std::nanf(""), inf = INFINITY;
+  auto e = first_error(t->apply_force(*h, {nan, 0.0f, 0.0f}));
+  EXPECT_EQ(e.field, "apply_force.force");
+  EXPECT_NE(e.value.find("nan"), std::string::npos) << e.message();
+  e = first_error(t->apply_force(*h, {2e9f, 0.0f, 0.0f}));
+  EXPECT_EQ(e.field, "apply_force.force");
+  EXPECT_NE(e.allowed.find("1e+09"), std::string::npos) << e.message();
+  const sp::Vec3 far = {5.0, 6.0, 2e4}, bad = {5.0, std::nan(""), 5.0};
+  EXPECT_EQ(first_error(t->apply_force(*h, {1.0f, 0.0f, 0.0f}, &far)).field, "apply_force.world_point");
+  EXPECT_EQ(first_error(t->apply_force(*h, {1.0f, 0.0f, 0.0f}, &bad)).field, "apply_force.world_point");
+  EXPECT_EQ(first_error(t->apply_torque(*h, {0.0f, inf, 0.0f})).field, "apply_torque.torque");
+  EXPECT_EQ(first_error(t->apply_torque(*h, {0.0f, 1.5e9f, 0.0f})).field, "apply_torque.torque");
+  EXPECT_EQ(first_error(t->apply_impulse(*h, {0.0f, -3e9f, 0.0f})).field, "apply_impulse.impulse");
+  EXPECT_EQ(first_error(t->apply_impulse(*h, {1.0f, 0.0f, 0.0f}, &bad)).field, "apply_impulse.world_point");
+  // Nothing refused was kept: the body is in free fall.
+  ASSERT_TRUE(t->step(1.0 / 60.0).ok());
+  EXPECT_NEAR(t->body_state(*h)->linear_velocity[0], 0.0f, 1e-6f);
+  EXPECT_NEAR(t->body_state(*h)->angular_velocity[1], 0.0f, 1e-6f);
+  ASSERT_TRUE(t->remove_body(*h).ok());
+  EXPECT_EQ(first_error(t->apply_force(*h, {1.0f, 0.0f, 0.0f})).field, "BodyHandle");
+  EXPECT_EQ(first_error(t->apply_torque(*h, {1.0f, 0.0f, 0.0f})).field, "BodyHandle");
+  EXPECT_EQ(first_error(t->apply_impulse(*h, {1.0f, 0.0f, 0.0f})).field, "BodyHandle");
+  EXPECT_EQ(first_error(t->granular_force(*h)).field, "BodyHandle");
+}
+
+// The soil's force on a 20 kg sphere resting on a live patch is its weight, m g = 196.2 N up,
+// within 10 % (mean over the steps of its last half second); in the air no granule pushes it,
+// and on a terrain without patches no patch ever carries it (zeros).
+TEST(ApiDrive, GranularForceOnARestingBodyIsItsWeight) {
+  auto t = sp::Terrain::create(sand_def());
+  ASSERT_TRUE(t.ok()) << t.message();
+  sp::BodyDef b;
+  b.name = "ball";
+  b.shape.radius = 0.15;
+  b.mass = 20;
+  b.position = {2.0, 1.0 + 0.15 + 0.3, 2.0};
+  auto h = t->add_body(b);
+  ASSERT_TRUE(h.ok()) << h.message();
+  auto f0 = t->granular_force(*h);
+  ASSERT_TRUE(f0.ok());
+  EXPECT_FALSE(f0->carried);
+  const double dt = 1.0 / 60.0;
+  const double weight = 20 * 9.81;  // N
+  ASSERT_TRUE(t->step(dt).ok());
+  // Still 0.3 m up: a patch may already hold its shell, but no granule touches it.
+  EXPECT_NEAR(t->granular_force(*h)->force[1], 0.0, 0.01 * weight) << "in the air";
+  // From 1.5 s it rests; the mean over the steps while the patch is awake is the DEM's
+  // contact force (once the patch sleeps, the manager holds the body up with its weight).
+  double sum[3] = {0, 0, 0};
+  int n = 0;
+  bool asleep = false;
+  for (int k = 1; k < 150; ++k) {  // 2.5 s
+    ASSERT_TRUE(t->step(dt).ok());
+    for (const auto& e : t->poll_events()) asleep = asleep || e.kind == sp::EventKind::Asleep;
+    if (k < 90) continue;
+    auto f = t->granular_force(*h);
+    ASSERT_TRUE(f.ok());
+    EXPECT_TRUE(f->carried) << "step " << k;
+    if (asleep) {
+      EXPECT_NEAR(f->force[1], weight, 1e-3 * weight) << "asleep: the weight held up, step " << k;
+      continue;
+    }
+    for (int i = 0; i < 3; ++i) sum[i] += f->force[i];
+    ++n;
+  }
+  ASSERT_GE(n, 10) << "too few steps with the patch awake";
+  EXPECT_NEAR(sum[1] / n, weight, 0.1 * weight);
+  EXPECT_NEAR(sum[0] / n, 0.0, 0.05 * weight);
+  EXPECT_NEAR(sum[2] / n, 0.0, 0.05 * weight);
+  EXPECT_NE(t->report_json().find("\"granular_force_N\""), std::string::npos);
+
+  auto hard = sp::Terrain::create(flat_def());
+  auto hb = hard->add_body(b);
+  for (int k = 0; k < 30; ++k) ASSERT_TRUE(hard->step(dt).ok());
+  auto f = hard->granular_force(*hb);
+  ASSERT_TRUE(f.ok());
+  EXPECT_FALSE(f->carried);
+  EXPECT_EQ(f->force[1], 0.0f);
+}

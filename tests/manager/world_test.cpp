@@ -8,6 +8,7 @@
 #include <limits>
 
 #include "manager/run.hpp"
+#include "manager/scene_world.hpp"
 #include "rig.hpp"
 #include "sandpatch/sandpatch.hpp"
 #include "scene/scene.hpp"
@@ -168,6 +169,146 @@ TEST(World, TooManyDemSubstepsNameTheKnobs) {
       EXPECT_GT((*w)->manager()->granules(), 0);
     }
   }
+}
+
+}  // namespace
+}  // namespace sandpatch
+
+namespace sandpatch {
+namespace {
+
+// A scene with one 2 kg ball in the air, no gravity, no patches, and `loads` on the ball.
+Result<SceneDef> loaded_scene(const std::string& loads) {
+  const std::string text = R"({
+    "name": "loads",
+    "terrain": {"source": {"type": "procedural", "kind": "flat", "height": 0.0, "samples_x": 21, "samples_z": 21},
+                "spacing": 0.5},
+    "materials": [{"name": "sand", "restitution": 0.3}],
+    "bodies": [{"name": "ball", "shape": {"type": "sphere", "radius": 0.5}, "mass": 2.0,
+                "pose": {"position": [5.0, 5.0, 5.0], "euler_deg": [0.0, 90.0, 0.0]}, "loads": )" +
+                           loads + R"(}],
+    "simulation": {"dt": 0.05, "duration": 1.0, "granular_patches": false, "gravity": [0.0, 0.0, 0.0]},
+    "outputs": {"report": false}
+  })";
+  return parse_scene(text, "loads.json", "");
+}
+
+// A scene's load acts on the steps that start in [from, until) and on no other: 10 N on a
+// 2 kg ball from 0.1 s until 0.3 s at dt = 0.05 s acts on the 4 steps starting at 0.1, 0.15,
+// 0.2, 0.25 s: v = F · 0.2 s / m = 1 m/s, reached at 0.3 s and kept.
+TEST(WorldLoads, SceneLoadsActOnlyInTheirInterval) {
+  auto scene = loaded_scene(R"([{"force": [10.0, 0.0, 0.0], "from": 0.1, "until": 0.3}])");
+  ASSERT_TRUE(scene.ok()) << scene.message();
+  auto w = make_world(*scene, 1, "cpu");
+  ASSERT_TRUE(w.ok()) << w.message();
+  World& world = **w;
+  for (int k = 0; k < 12; ++k) {
+    ASSERT_TRUE(world.step(0.05).ok());
+    const float vx = world.bullet().state(world.entries()[0].id).linear_velocity.x();
+    const double t = world.time();  // s, the end of step k
+    const float expect = t < 0.1 + 1e-9 ? 0.0f : t < 0.3 + 1e-9 ? float(5.0 * (t - 0.1)) : 1.0f;
+    EXPECT_NEAR(vx, expect, 1e-5f) << "at t = " << t;
+  }
+}
+
+// A body-frame load turns with the body: the ball is turned 90° about y, so its body x is
+// world −z; a force at a body point adds (R at) × (R F): 1 N along body x at body (0, 0.5, 0)
+// gives the torque (0, 0.5, 0) × (0, 0, −1) = (−0.5, 0, 0) N m. A world-frame load with the
+// same `at` keeps its direction: (0, 0.5, 0) × (1, 0, 0) = (0, 0, −0.5) N m.
+TEST(WorldLoads, BodyFrameLoadsTurnWithTheBody) {
+  for (const char* frame : {"body", "world"}) {
+    SCOPED_TRACE(frame);
+    auto scene = loaded_scene(std::string(R"([{"force": [1.0, 0.0, 0.0], "at": [0.0, 0.5, 0.0], "frame": ")") + frame +
+                              R"("}])");
+    ASSERT_TRUE(scene.ok()) << scene.message();
+    auto w = make_world(*scene, 1, "cpu");
+    ASSERT_TRUE(w.ok()) << w.message();
+    ASSERT_TRUE((*w)->step(0.05).ok());
+    const BodyState s = (*w)->bullet().state((*w)->entries()[0].id);
+    const float a = 0.05f / 2.0f;                 // Δv per N over one step (m/s)
+    const float b = 0.05f / (0.4f * 2.0f * 0.25f);  // Δω per N m over one step (I = 0.2 kg m²)
+    const bool body = std::string(frame) == "body";
+    EXPECT_NEAR(s.linear_velocity.x(), body ? 0.0f : a, 1e-5f);
+    EXPECT_NEAR(s.linear_velocity.z(), body ? -a : 0.0f, 1e-5f);
+    EXPECT_NEAR(s.angular_velocity.x(), body ? -0.5f * b : 0.0f, 1e-4f);
+    EXPECT_NEAR(s.angular_velocity.z(), body ? 0.0f : -0.5f * b, 1e-4f);
+  }
+}
+
+// World::apply_force refuses what the API documents (the API's tests name its fields).
+TEST(WorldLoads, BadLoadsAreRefused) {
+  auto w = flat_world(false);
+  auto id = w->add_body(test::sphere_body(0.1f, 1.0f, {4.0, 2.0, 4.0}));
+  ASSERT_TRUE(id.ok());
+  EXPECT_EQ(w->apply_force(*id, {std::nanf(""), 0, 0}).errors().front().field, "force");
+  EXPECT_EQ(w->apply_torque(*id, {0, 2e9f, 0}).errors().front().field, "torque");
+  const Eigen::Vector3d far(4.0, 2.0, 4.0 + 2e4);
+  EXPECT_EQ(w->apply_impulse(*id, {1, 0, 0}, &far).errors().front().field, "world_point");
+  w->remove_body(*id);
+  EXPECT_EQ(w->apply_force(*id, {1, 0, 0}).errors().front().field, "body");
+}
+
+// The same push through the public API (apply_force / apply_torque before each step) and as a
+// scene load gives the same final state hash, a patch included: both land in World.
+TEST(WorldLoads, ApiForcesAndSceneLoadsGiveTheSameHash) {
+  const char* text = R"({
+    "name": "two_doors_pushed",
+    "terrain": {"source": {"type": "procedural", "kind": "flat", "height": 1.0, "samples_x": 41, "samples_z": 41},
+                "spacing": 0.1, "soil_depth": 1.0, "patch_depth": 0.25},
+    "materials": [{"name": "sand", "restitution": 0.3, "granule_radius": 0.025, "stiffness": 2e4}],
+    "bodies": [{"name": "ball", "shape": {"type": "sphere", "radius": 0.1}, "mass": 5.0,
+                "pose": {"position": [2.0, 1.3, 2.0]},
+                "loads": [{"force": [60.0, 0.0, 5.0], "torque": [0.0, 0.2, 0.0], "from": 0.1, "until": 0.4}]}],
+    "simulation": {"dt": 0.016666666666666666, "duration": 0.5, "threads": 1,
+                   "pool": {"slots": 1, "granules_per_slot": 6000}, "lod": {"apron": 0.3}},
+    "outputs": {"report": false}
+  })";
+  auto scene = parse_scene(text, "two_doors_pushed.json", "");
+  ASSERT_TRUE(scene.ok()) << scene.message();
+  RunOptions opt;
+  opt.out_dir = (std::filesystem::temp_directory_path() / "sandpatch_world_loads_test").string();
+  opt.progress = ProgressStyle::None;
+  const RunResult run = run_scene(*scene, opt);
+  ASSERT_EQ(run.code, ExitCode::Ok) << run.stage << ": " << run.message;
+  ASSERT_GT(run.report["counts"]["peak_granules"].get<int>(), 0) << "a patch must have lived";
+  const auto& ball = run.report["bodies"][0];
+  EXPECT_GT(ball["position_m"][0].get<double>(), 2.05) << "the push moved it";
+
+  api::TerrainDef t;
+  t.procedural = "flat";
+  t.base_height = 1.0f;
+  t.samples_x = t.samples_z = 41;
+  t.spacing = 0.1;
+  t.soil_depth = 1.0;
+  t.patch_depth = 0.25;
+  t.material.restitution = 0.3;
+  t.slots = 1;
+  t.granules_per_slot = 6000;
+  t.lod_apron = 0.3;
+  t.threads = 1;
+  t.gl_depth_render = true;
+  auto terrain = api::Terrain::create(t);
+  ASSERT_TRUE(terrain.ok()) << terrain.message();
+  api::BodyDef b;
+  b.name = "ball";
+  b.shape.radius = 0.1;
+  b.mass = 5.0;
+  b.position = {2.0, 1.3, 2.0};
+  auto h = terrain->add_body(b);
+  ASSERT_TRUE(h.ok());
+  const double dt = scene->simulation.dt;
+  for (int k = 0; k < 30; ++k) {
+    const double time = terrain->time();
+    if (time + 1e-9 >= 0.1 && time + 1e-9 < 0.4) {
+      ASSERT_TRUE(terrain->apply_force(*h, {60.0f, 0.0f, 5.0f}).ok());
+      ASSERT_TRUE(terrain->apply_torque(*h, {0.0f, 0.2f, 0.0f}).ok());
+    }
+    ASSERT_TRUE(terrain->step(dt).ok());
+  }
+  ASSERT_TRUE(terrain->demote_all().ok());
+  char hex[17];
+  std::snprintf(hex, sizeof hex, "%016llx", static_cast<unsigned long long>(terrain->state_hash()));
+  EXPECT_EQ(run.report["final_state_hash"].get<std::string>(), hex);
 }
 
 }  // namespace

@@ -283,7 +283,7 @@ TEST(Scene, Png16AndRawF32SourcesAreChecked) {
 }
 
 TEST(Scene, ShippedScenesParse) {
-  for (const char* name : {"default.json", "barrel_drop.json", "mesh_drop.json"}) {
+  for (const char* name : {"default.json", "barrel_drop.json", "mesh_drop.json", "vehicle_drive.json"}) {
     const auto r = load_scene_file(kScenes + "/" + name);
     EXPECT_TRUE(r.ok()) << name << ":\n" << all(r);
   }
@@ -315,7 +315,7 @@ TEST(Scene, EmbeddedDefaultIsScenesDefaultJson) {
 }
 
 TEST(Scene, CanonicalJsonRoundTrips) {
-  for (const std::string& path : {kScenes + "/default.json", kData + "/full.json"}) {
+  for (const std::string& path : {kScenes + "/default.json", kData + "/full.json", kScenes + "/vehicle_drive.json"}) {
     const auto a = load_scene_file(path);
     ASSERT_TRUE(a.ok()) << all(a);
     const nlohmann::json ja = scene_to_json(*a);
@@ -705,6 +705,100 @@ TEST(Scene, NameMustBeOneFileName) {
   auto ok = parse(scene_with({{"name", "dune run-2"}}));
   ASSERT_TRUE(ok.ok()) << ok.message();
   EXPECT_EQ(ok->name, "dune run-2");
+}
+
+}  // namespace
+}  // namespace sandpatch
+
+namespace sandpatch {
+namespace {
+
+// ---- loads ----
+
+// The vehicle scene: a box of about a car's size and mass pushed along +x by a constant world
+// force above the heightfield's Coulomb friction μ m g (μ the body's 0.5 times the
+// heightfield's 0.8, Bullet's product), with room for at least 20 m of travel on the terrain.
+TEST(SceneLoads, VehicleDriveScene) {
+  const auto r = load_scene_file(kScenes + "/vehicle_drive.json");
+  ASSERT_TRUE(r.ok()) << all(r);
+  const BodyDef& v = r->bodies[0];
+  EXPECT_EQ(v.shape.kind, ShapeKind::Box);
+  EXPECT_NEAR(v.mass_value(), 1500.0, 1e-9);
+  ASSERT_EQ(v.loads.size(), 1u);
+  const LoadDef& l = v.loads[0];
+  EXPECT_EQ(l.frame, LoadFrame::World);
+  EXPECT_FALSE(l.until.has_value());
+  const double friction = v.friction * 0.8 * v.mass_value() * 9.81;  // N
+  EXPECT_GT(l.force[0], friction);
+  EXPECT_EQ(l.force[1], 0.0);
+  const auto& p = r->terrain.source.procedural;
+  const double x_end = r->terrain.origin[0] + (p.samples_x - 1) * r->terrain.spacing;
+  EXPECT_GT(x_end - v.shape.half_extents[0] - v.pose.position[0], 20.0) << "room for 20 m of sand";
+  ASSERT_GE(r->bodies.size(), 2u);
+  EXPECT_EQ(r->bodies[1].shape.kind, ShapeKind::Sphere);
+}
+
+TEST(SceneLoads, FieldsAndDefaults) {
+  using nlohmann::json;
+  json l0 = {{"force", {1.0, 2.0, 3.0}}};
+  json l1 = {{"torque", {0.0, 4.0, 0.0}}, {"at", {0.0, 0.5, 0.0}}, {"force", {1.0, 0.0, 0.0}},
+             {"from", 0.5},          {"until", 2.0},          {"frame", "body"}};
+  json body = {{"name", "b"}, {"shape", {{"type", "sphere"}, {"radius", 0.5}}}, {"mass", 2.0}, {"loads", json::array({l0, l1})}};
+  json patch = json::object();
+  patch["bodies"] = json::array({body});
+  const auto r = parse(scene_with(patch));
+  ASSERT_TRUE(r.ok()) << all(r);
+  const auto& loads = r->bodies[0].loads;
+  ASSERT_EQ(loads.size(), 2u);
+  EXPECT_EQ(loads[0].force, (Vec3d{1.0, 2.0, 3.0}));
+  EXPECT_EQ(loads[0].torque, (Vec3d{0.0, 0.0, 0.0}));
+  EXPECT_FALSE(loads[0].at.has_value());
+  EXPECT_EQ(loads[0].from, 0.0);
+  EXPECT_FALSE(loads[0].until.has_value());
+  EXPECT_EQ(loads[0].frame, LoadFrame::World);
+  EXPECT_EQ(loads[1].torque, (Vec3d{0.0, 4.0, 0.0}));
+  ASSERT_TRUE(loads[1].at.has_value());
+  EXPECT_EQ(*loads[1].at, (Vec3d{0.0, 0.5, 0.0}));
+  EXPECT_EQ(loads[1].from, 0.5);
+  EXPECT_EQ(*loads[1].until, 2.0);
+  EXPECT_EQ(loads[1].frame, LoadFrame::Body);
+  // Written back and read again: the same scene.
+  const auto b = parse_scene(scene_to_json(*r).dump(), "canonical.json", "");
+  ASSERT_TRUE(b.ok()) << all(b);
+  EXPECT_EQ(scene_to_json(*b), scene_to_json(*r));
+}
+
+// Every bad load is named by its field path with the value and what is allowed.
+TEST(SceneLoads, BadLoadsNameTheField) {
+  const auto r = broken("bad_loads.json");
+  ASSERT_FALSE(r.ok());
+  EXPECT_TRUE(has_error(r, "bodies[0].loads[0].force[0]", "\"nan\"", "NaN")) << all(r);
+  EXPECT_TRUE(has_error(r, "bodies[0].loads[1].torque", "800000000", "at most 1000000000 N m")) << all(r);
+  EXPECT_TRUE(has_error(r, "bodies[0].loads[2].at[1]", "20000", "[-10000, 10000] m")) << all(r);
+  EXPECT_TRUE(has_error(r, "bodies[0].loads[3].until", "1", "greater than 'from' (2 s)")) << all(r);
+  EXPECT_TRUE(has_error(r, "bodies[0].loads[4].frame", "\"wheel\"", "one of: world, body")) << all(r);
+  EXPECT_TRUE(has_error(r, "bodies[0].loads[5].force", "", "'force' (N), 'torque' (N m) or both")) << all(r);
+  EXPECT_EQ(r.errors().size(), 6u) << all(r);
+  // More loads than a body may hold, a load that is not an object, `at` without a force.
+  nlohmann::json many = nlohmann::json::array();
+  const nlohmann::json one = {{"force", {1.0, 0.0, 0.0}}};
+  for (int k = 0; k < kMaxLoadsPerBody + 1; ++k) many.push_back(one);
+  auto body = [](const nlohmann::json& loads) {
+    nlohmann::json b = {{"name", "b"}, {"shape", {{"type", "sphere"}, {"radius", 0.5}}}, {"mass", 2.0}};
+    b["loads"] = loads;
+    nlohmann::json patch = nlohmann::json::object();
+    patch["bodies"] = nlohmann::json::array({b});
+    return scene_with(patch);
+  };
+  const auto too_many = parse(body(many));
+  EXPECT_TRUE(has_error(too_many, "bodies[0].loads", "257 loads", "at most 256")) << all(too_many);
+  const auto not_object = parse(body(nlohmann::json::array({3.0})));
+  EXPECT_TRUE(has_error(not_object, "bodies[0].loads[0]", "3", "object")) << all(not_object);
+  const nlohmann::json torque_at = {{"torque", {0.0, 1.0, 0.0}}, {"at", {1.0, 0.0, 0.0}}};
+  const auto at_alone = parse(body(nlohmann::json::array({torque_at})));
+  EXPECT_TRUE(has_error(at_alone, "bodies[0].loads[0].at", "[1.0,0.0,0.0]", "give 'force' too")) << all(at_alone);
+  const auto not_array = parse(body(one));
+  EXPECT_TRUE(has_error(not_array, "bodies[0].loads", "", "array")) << all(not_array);
 }
 
 }  // namespace
