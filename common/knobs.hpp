@@ -79,7 +79,7 @@ struct Field {
   const char* api;    // "" = scene files only
   const char* note;
 };
-inline constexpr std::array<Field, 30> kOtherFields = {{
+inline constexpr std::array<Field, 31> kOtherFields = {{
     {"terrain.source", "TerrainDef.file, TerrainDef.procedural (+ samples_x/z, base_height, slope_x/z, amplitude, wavelength, noise_seed, octaves)", "a heightmap file or a generator"},
     {"", "TerrainDef.heights", "an array from the game; scene files name a heightmap file instead"},
     {"terrain.spacing", "TerrainDef.spacing", "with an esri_ascii source, a spacing given overrides the file's cellsize (TerrainDef.spacing_overrides_file)"},
@@ -108,6 +108,7 @@ inline constexpr std::array<Field, 30> kOtherFields = {{
     {"simulation.gravity", "TerrainDef.gravity", ""},
     {"simulation.seed", "TerrainDef.seed", ""},
     {"simulation.preset", "", "a named set of knobs; a game sets the knobs themselves"},
+    {"simulation.frame_budget_ms", "TerrainDef.frame_budget_ms", "ms > 0, or \"off\" (+infinity in the library); absent: half of each frame's dt"},
     {"simulation.scale_by_distance", "", "bands around a scene camera; a game sets particle_scale"},
     {"", "TerrainDef.gl_depth_render", "a scene run renders the demotion's depth on GL when a context can be made, else on the CPU"},
 }};

@@ -115,10 +115,11 @@ double TerrainManager::Impl::max_merged_side() const {
 // bedrock. (A body falling just past the terrain's edge, or onto bare rock, asks for a
 // patch that cannot exist; before, promote() failed the whole frame with an error.)
 bool TerrainManager::Impl::has_soil(const PatchRequest& r) const {
-  auto reg = patch_region(*hf, r, set_for(scale_for(r)).cells);
+  const double s = scale_for(r);
+  auto reg = patch_region(*hf, r, set_for(s).cells);
   if (!reg) return false;
   float lo = 0, hi = 0;
-  return floor_of(*reg, &lo, &hi) < hi;
+  return floor_of(*reg, s, &lo, &hi) < hi;
 }
 
 bool TerrainManager::Impl::covered(const PatchRequest& r) const {
@@ -165,7 +166,9 @@ Result<bool> TerrainManager::Impl::extend(const PatchRequest& r, double time) {
     if (double(record(s).granules) * grow * 1.2 > double(def.granules_per_slot)) return false;
     if (Status st = demote(s, time, false); !st) return st.errors();
     u.time_to_contact = 0;
-    u.particle_scale = s.scale;  // the grown patch keeps its scale
+    // The grown patch keeps its scale; with a frame budget the budget chooses again from the
+    // request's own scale (the machine may have more room now, or less).
+    u.particle_scale = budget_on() ? 0.0 : s.scale;
     queue.insert(queue.begin(), u);
     ++extensions;
     return true;

@@ -26,6 +26,20 @@ using ojson = nlohmann::ordered_json;
 }  // namespace
 
 RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
+  if (opt.frame_budget_ms) {  // the scene as if it said so (its hash in the report follows)
+    if (!(*opt.frame_budget_ms > 0)) {
+      RunResult r;
+      r.code = ExitCode::BadInput;
+      r.stage = "options";
+      r.message = "--frame-budget " + format_number(*opt.frame_budget_ms) + ": must be a number of ms > 0, or off";
+      return r;
+    }
+    SceneDef s = scene;
+    s.simulation.frame_budget_ms = opt.frame_budget_ms;
+    RunOptions o = opt;
+    o.frame_budget_ms.reset();
+    return run_scene(s, o);
+  }
   RunResult res;
   auto fail = [&](ExitCode code, const std::string& stage, const std::string& msg) {
     res.code = code;

@@ -96,6 +96,7 @@ api::TerrainDef terrain_def(const SceneDef& scene, int threads, const std::strin
   t.particle_scale = sim.particle_scale;
   t.steps_per_contact = sim.steps_per_contact;
   t.max_substeps = sim.max_substeps;
+  t.frame_budget_ms = sim.frame_budget_ms;
   t.slots = sim.pool.slots;
   t.granules_per_slot = sim.pool.granules_per_slot;
   t.soil_depth = scene.terrain.soil_depth.value_or(knobs::kSoilDepth.def);

@@ -88,6 +88,19 @@ struct TerrainManagerDef {
   double sleep_time = knobs::kSleepTime.def;   // s, ... for this long
   double idle_timeout = knobs::kIdleTimeout.def;  // s asleep before demotion (Leach & Marais: two minutes)
   LodDef lod;                                  // contact prediction
+  // The frame budget (docs/manager.md "Frame budget"): wall-clock ms a frame's patches may
+  // take. A new patch is promoted at the finest particle scale and widest extent (its scale
+  // × 1, 1.5, 2, 3, 4; the apron ×1 or ×½) whose predicted DEM cost, with the patches already
+  // awake, fits in 80 % of it (the rest is the frame's other stages); a request that fits
+  // nowhere waits in the queue while other patches live, and goes ahead at the coarsest rung
+  // when none does (counted as an overrun). Infinity: no budget (every patch as requested).
+  // frame_budget_fraction > 0 sets the budget to that fraction of each frame's dt instead.
+  double frame_budget_ms = std::numeric_limits<double>::infinity();
+  double frame_budget_fraction = 0;
+  // The budget's cost model pinned (both > 0): a DEM frame costs n_sub (substep_ms + sphere_ns
+  // 1e-6 × spheres) ms, never measured, so its choices are the same on every machine (tests,
+  // replays). 0: measured at creation and followed while running (budget.cpp).
+  double budget_substep_ms = 0, budget_sphere_ns = 0;
   int fill_granules_per_frame = 4096;          // upload bound per frame
   int fade_frames = 30;                        // frames over which a new patch fades in
   int depth_resolution = 1024;                 // texels per side of the demotion depth render
@@ -132,6 +145,8 @@ class TerrainManager {
   // Moves the camera the scale bands are measured from (m, world); patches already live keep
   // their scale.
   void set_camera(const Eigen::Vector3d& position);
+  // ms the frame budget allows a frame of dt seconds (infinity: no budget).
+  double budget_ms(double dt) const;
   // Demotes every patch now (end of a run that wants the final terrain).
   Status demote_all(double time, Profile& profile);
 
