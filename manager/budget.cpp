@@ -135,7 +135,7 @@ std::vector<double> TerrainManager::Impl::all_scales() const {
 // Granules a request would fill at scale s: its region's soil volume at the tile's packing.
 int TerrainManager::Impl::predict_granules(const PatchRequest& r, double s) const {
   const TileSet& set = set_for(s);
-  auto reg = patch_region(*hf, r, set.cells);
+  auto reg = region_for(r, s);
   if (!reg) return 0;
   float lo = 0, hi = 0;
   const double floor_local = floor_of(*reg, s, &lo, &hi);

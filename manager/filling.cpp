@@ -3,6 +3,7 @@
 // terrain_manager_impl.hpp.
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <string>
 
@@ -19,9 +20,20 @@ Status TerrainManager::Impl::activate(double time, double dt) {
   // Serve the queue while slots are free, in its order, at the scale and extent the frame
   // budget allows (budget.cpp); a request that does not fit waits while other patches live.
   double live_ms = live_cost_ms(dt);
+  bool released_one = false;
   for (auto it = queue.begin(); it != queue.end();) {
     auto free = std::find_if(slots.begin(), slots.end(), [](const Slot& s) { return s.state == SlotState::Free; });
-    if (free == slots.end()) break;
+    if (free == slots.end()) {
+      // A patch no body is over gives its slot to the request: demoted now, the request
+      // promoted next frame (one conversion a frame).
+      if (!released_one) {
+        auto r = release_idle(time);
+        if (!r) return r.errors();
+        released_one = *r;
+      }
+      break;
+    }
+    if (released_one) break;
     if (overlaps_patch(*it) || !has_soil(*it)) {
       it = queue.erase(it);
       continue;
@@ -169,6 +181,13 @@ Result<const GranuleTile*> TerrainManager::Impl::tile_for(TileSet& set, double f
   td.layers = tile_layers(1.1 * fill_depth);
   for (int attempt = 0; attempt < 3; ++attempt) {
     const auto t0 = Clock::now();
+    if (def.on_settle) {
+      char what[160];
+      std::snprintf(what, sizeof what, "settling a granule tile (particle scale %g, %d lattice layers, %.2f m deep)", set.scale,
+                    td.layers, fill_depth * set.scale);
+      const std::string name = what;
+      td.on_progress = [this, name, t0](double done, double max) { def.on_settle(name, done, max, ms_since(t0) * 1e-3); };
+    }
     TileCacheOutcome from;
     auto t = cached_granule_tile(td, tile_cache, &from);
     if (!from.note.empty()) tile_cache_notes.push_back(from.note);
@@ -221,7 +240,7 @@ Status TerrainManager::Impl::promote(Slot& slot, const PatchRequest& req, double
   PatchRecord& rec = record(slot);
   const double s = scale_for(req);
   TileSet& tset = set_for(s);
-  auto reg = patch_region(*hf, req, tset.cells);
+  auto reg = region_for(req, s);
   if (!reg) return reg.errors();
   const GridRegion region = *reg;
   const float sp = hf->spacing();

@@ -131,7 +131,8 @@ TerrainManagerDef manager_def(const SceneDef& scene, const Heightfield& hf, int 
 }
 
 Result<std::unique_ptr<World>> make_world(const SceneDef& scene, int threads, const std::string& backend,
-                                          std::string* stage) {
+                                          std::string* stage,
+                                          const std::function<void(const std::string&, double, double, double)>& on_settle) {
   std::string unused;
   std::string& part = stage ? *stage : unused;
   part = "terrain";
@@ -172,6 +173,7 @@ Result<std::unique_ptr<World>> make_world(const SceneDef& scene, int threads, co
   }
   TerrainManagerDef md;
   if (scene.simulation.granular_patches) md = manager_def(scene, hf, threads, backend);
+  md.on_settle = on_settle;
   auto world = World::create(std::move(*hf_result), vec3f(scene.simulation.gravity));
   if (!world) return world.errors();
   if (scene.simulation.granular_patches) {

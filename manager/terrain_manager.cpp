@@ -70,6 +70,8 @@ Result<std::unique_ptr<TerrainManager>> TerrainManager::create(const TerrainMana
   if (!(def.frame_budget_fraction >= 0 && def.frame_budget_fraction <= 100))
     bad("frame_budget_fraction", def.frame_budget_fraction, "must be in [0, 100] (0: frame_budget_ms applies)");
   if (!(def.surface_probe >= 0 && def.surface_probe <= 4)) bad("surface_probe", def.surface_probe, "must be in [0, 4] sphere radii");
+  if (!(def.depth_texels_per_radius >= 0 && def.depth_texels_per_radius <= 1e3))
+    bad("depth_texels_per_radius", def.depth_texels_per_radius, "must be in [0, 1000] (0: depth_resolution always)");
   if (def.fill_granules_per_frame < 1) bad("fill_granules_per_frame", def.fill_granules_per_frame, "must be >= 1");
   if (!errs.empty()) return errs;
 
@@ -348,7 +350,8 @@ nlohmann::ordered_json TerrainManager::report() const {
                {"queued_requests", int(I.queue.size())},
                {"peak_queued_requests", I.peak_queue},
                {"lapsed_requests", I.lapsed_requests},
-               {"extensions", I.extensions}};
+               {"extensions", I.extensions},
+               {"released", I.released}};
   nlohmann::ordered_json tiles = nlohmann::ordered_json::array();
   for (const TileSet& set : I.tile_sets)
     for (const GranuleTile& t : set.tiles)

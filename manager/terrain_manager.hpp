@@ -25,6 +25,7 @@
 
 #include <Eigen/Core>
 #include <cstdint>
+#include <functional>
 #include <limits>
 #include <memory>
 #include <string>
@@ -103,13 +104,21 @@ struct TerrainManagerDef {
   double budget_substep_ms = 0, budget_sphere_ns = 0;
   int fill_granules_per_frame = 4096;          // upload bound per frame
   int fade_frames = 30;                        // frames over which a new patch fades in
-  int depth_resolution = 1024;                 // texels per side of the demotion depth render
+  int depth_resolution = 1024;                 // most texels per side of the demotion depth render ...
+  // ... which takes this many texels per granule sphere radius over the patch's apron (a
+  // sphere's cap is 8 texels across; the heightfield sample's hat mean averages thousands):
+  // a 5 m apron of r = 4 cm granules renders 500² texels, not 1024². 0: always depth_resolution.
+  double depth_texels_per_radius = 4;
   double surface_probe = 2.0;                  // probe radius of the rendered surface, × sphere radius (depth_conversion.hpp)
   bool use_gl = true;                          // depth render on GL (else, or if no context, on the CPU)
   // On-disk cache of pre-settled granule tiles (manager/tile_cache.hpp): "" = the default
   // ($SANDPATCH_TILE_CACHE, else $XDG_CACHE_HOME/sandpatch/tiles, else ~/.cache/sandpatch/tiles),
   // "off" = none, anything else = that directory. A tile read back is bit-identical to a settled one.
   std::string tile_cache;
+  // Told what start-up (and a deeper tile later) is settling and how far: `what` names the
+  // tile, done_s of at most max_s simulated seconds (settling stops earlier once at rest),
+  // wall_s since it began. The run's progress line prints it (docs/cli.md).
+  std::function<void(const std::string& what, double done_s, double max_s, double wall_s)> on_settle;
   std::string backend = "cpu";                 // DEM backend of the pool: cpu (OpenMP) or gl (compute shaders)
   int threads = int(knobs::kThreads.def);      // DEM threads, 0 = OpenMP default
   Eigen::Vector3d gravity{0.0, -9.81, 0.0};    // m/s²

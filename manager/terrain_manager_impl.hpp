@@ -60,7 +60,8 @@ struct TerrainManager::Impl {
   // ---- planning (planning.cpp) ----
   std::unordered_map<std::int64_t, int> still_frames;  // frames each body (body_key) has been at rest
   int lapsed_requests = 0;  // queued requests dropped because no body predicted contact there any more
-  int extensions = 0;       // patches grown under a body heading past their edge
+  int extensions = 0;       // patches asked for ahead of a body heading past its patch's edge
+  int released = 0;         // patches no body was over, demoted for a request waiting for a slot
 
   // ---- the pool ----
   // The GL context (the GL backend's and the demotion's depth render's, made by create())
@@ -218,9 +219,11 @@ struct TerrainManager::Impl {
   }
   double max_merged_side() const;
   bool has_soil(const PatchRequest& r) const;
+  Result<GridRegion> region_for(const PatchRequest& r, double s) const;
   bool covered(const PatchRequest& r) const;
   bool overlaps_patch(const PatchRequest& r) const;
   Result<bool> extend(const PatchRequest& r, double time);
+  Result<bool> release_idle(double time);
 
   // ---- filling (filling.cpp): Stage::Activation ----
   // Serves the queue while slots are free, then uploads a chunk of every filling patch.
@@ -264,6 +267,7 @@ struct TerrainManager::Impl {
   };
   Result<HeightImage> render_surface(const Slot& slot, const RenderBox& box, const std::vector<float>& spheres, bool gl_ok,
                                      bool* on_gl) const;
+  int render_resolution(const Slot& slot, const RenderBox& box) const;
   void set_bodies_down(const Slot& slot, double time);
   void close_ledger(const Slot& slot, PatchRecord& rec, bool on_gl);
 };

@@ -122,8 +122,9 @@ Status World::check_bodies(const char* stage) {
       continue;
     const std::string& name = bullet_->definition(id).name;
     failed_stage_ = stage;
-    return Error{"", "body",
-                 name.empty() ? "{" + std::to_string(id.index) + ", " + std::to_string(id.generation) + "}" : "'" + name + "'",
+    std::string who = name.empty() ? std::to_string(id.index) + ", " + std::to_string(id.generation) : name;
+    who = name.empty() ? std::string(1, '{').append(who).append("}") : std::string(1, '\'').append(who).append("'");
+    return Error{"", "body", who,
                  "has a non-finite state after the " + std::string(stage) + " stage at t = " + format_number(time()) + " s"};
   }
   return Ok{};

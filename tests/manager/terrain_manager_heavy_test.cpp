@@ -133,9 +133,10 @@ TEST(TerrainManager, PoolExhaustionQueueDrains) {
 
 // A body driven across a patch's edge (Leach & Marais left it open): a sphere
 // resting in the sand is pushed sideways at 0.4 m/s for 3 s, 1.2 m, past the edge of the
-// patch it landed on. The patch grows under it (demoted and promoted again around both, in
-// the same frame), so the sphere stays on particles in every frame, and the volume ledger
-// of all patches closes.
+// patch it landed on. A patch is asked for ahead of it, filled while it comes, and takes it
+// over; the one behind is released when its slot is needed. The sphere stays on particles in
+// every frame, no frame both demotes and promotes, and the volume ledger of all patches
+// closes.
 TEST(TerrainManager, BodyDrivenAcrossPatchEdgeStaysOnParticles) {
   test::Rig rig(test::terrain_8m("flat"));
   ASSERT_TRUE(rig.ok()) << rig.error;
@@ -143,6 +144,7 @@ TEST(TerrainManager, BodyDrivenAcrossPatchEdgeStaysOnParticles) {
   auto id = rig.add_sphere(0.1f, 5.0f, {3.0, 1.25, 4.0});
   ASSERT_TRUE(id.ok());
   auto def = small_manager_def();
+  def.slots = 2;  // the patch it is in and the one ahead
   def.granules_per_slot = 12000;
   def.patch_depth = 0.2;
   def.depth_resolution = 256;
@@ -165,6 +167,11 @@ TEST(TerrainManager, BodyDrivenAcrossPatchEdgeStaysOnParticles) {
   ASSERT_TRUE(rig.demote_all().ok()) << rig.error;
   const auto rep = rig.manager->report();
   EXPECT_GE(rep["pool"]["extensions"].get<int>(), 1);
+  // One conversion a frame: no frame (simulated time) both demotes and promotes.
+  for (const auto& a : rep["conversions"])
+    for (const auto& b : rep["conversions"])
+      if (a["kind"] == "demoted" && b["kind"] == "promoted" && a["time_s"].get<double>() < 3.99)
+        EXPECT_NE(a["time_s"].get<double>(), b["time_s"].get<double>()) << "patch " << a["patch"] << " and " << b["patch"];
   EXPECT_LT(std::abs(rep["ledger"]["total"]["error_pct"].get<double>()), 3.0) << rep["ledger"].dump(2);
   std::printf("driven: x %.2f m, %d extensions, %d of %d frames off particles, ledger %.2f %%\n", st.position.x(),
               rep["pool"]["extensions"].get<int>(), off_particles, driven, rep["ledger"]["total"]["error_pct"].get<double>());
