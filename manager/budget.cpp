@@ -75,7 +75,9 @@ Status TerrainManager::Impl::calibrate() {
   const float side = set.def.box_side, top = tile.period_y + tile.surface_offset;
   SimulationDef sd = sim_def(s);
   Slot& slot = slots.front();
-  const double dt = 1.0 / 60.0;
+  // Frames of 1/60 s, or shorter where a stiff material would need more substeps than allowed.
+  double dt = 1.0 / 60.0;
+  for (int k = 0; k < 12 && !slot.sim->substeps_for(dt); ++k) dt *= 0.5;
   double per_sub[2] = {}, spheres[2] = {};
   for (int k = 0; k < 2; ++k) {
     const float w = k == 0 ? 0.5f * side : side;

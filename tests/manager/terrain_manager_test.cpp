@@ -468,3 +468,49 @@ TEST(TerrainManager, PatchPromotedUnderARestingBoxLeavesItWhereItIs) {
   std::printf("resting box over a new patch: moved at most %.5f m (d = %.3f m)\n", moved, 2.0 * def.material.radius);
   EXPECT_LT(moved, 0.1 * 2.0 * def.material.radius) << "m";
 }
+
+// A body driven across a patch's edge (Leach & Marais left it open): a sphere
+// resting in the sand is pushed sideways at 0.4 m/s for 3 s, 1.2 m, past the edge of the
+// patch it landed on. A patch is asked for ahead of it, filled while it comes, and takes it
+// over; the one behind is released when its slot is needed. The sphere stays on particles in
+// every frame, no frame both demotes and promotes, and the volume ledger of all patches
+// closes.
+TEST(TerrainManager, BodyDrivenAcrossPatchEdgeStaysOnParticles) {
+  test::Rig rig(test::terrain_8m("flat"));
+  ASSERT_TRUE(rig.ok()) << rig.error;
+  BulletWorld& world = *rig.world;
+  auto id = rig.add_sphere(0.1f, 5.0f, {3.0, 1.25, 4.0});
+  ASSERT_TRUE(id.ok());
+  auto def = test::small_manager_def();
+  def.slots = 2;  // the patch it is in and the one ahead
+  def.granules_per_slot = 12000;
+  def.patch_depth = 0.2;
+  def.depth_resolution = 256;
+  def.lod.apron = 0.2;
+  ASSERT_TRUE(rig.start(def).ok()) << rig.error;
+  int off_particles = 0, driven = 0;
+  for (int f = 0; f < 240; ++f) {
+    if (rig.t() >= 1.0) {  // landed and settled: drive it
+      BodyState st = world.state(*id);
+      st.linear_velocity = {0.4f, st.linear_velocity.y(), 0.0f};
+      world.set_state(*id, st);
+      ++driven;
+      off_particles += world.terrain_collision(*id);
+    }
+    ASSERT_TRUE(rig.frame().ok()) << rig.error;
+  }
+  const BodyState st = world.state(*id);
+  EXPECT_GT(st.position.x(), 3.0 + 0.8) << "the sphere was driven past the first patch's edge";
+  EXPECT_EQ(off_particles, 0) << "frames the sphere spent on the heightfield instead of particles, of " << driven;
+  ASSERT_TRUE(rig.demote_all().ok()) << rig.error;
+  const auto rep = rig.manager->report();
+  EXPECT_GE(rep["pool"]["extensions"].get<int>(), 1);
+  // One conversion a frame: no frame (simulated time) both demotes and promotes.
+  for (const auto& a : rep["conversions"])
+    for (const auto& b : rep["conversions"])
+      if (a["kind"] == "demoted" && b["kind"] == "promoted" && a["time_s"].get<double>() < 3.99)
+        EXPECT_NE(a["time_s"].get<double>(), b["time_s"].get<double>()) << "patch " << a["patch"] << " and " << b["patch"];
+  EXPECT_LT(std::abs(rep["ledger"]["total"]["error_pct"].get<double>()), 3.0) << rep["ledger"].dump(2);
+  std::printf("driven: x %.2f m, %d extensions, %d of %d frames off particles, ledger %.2f %%\n", st.position.x(),
+              rep["pool"]["extensions"].get<int>(), off_particles, driven, rep["ledger"]["total"]["error_pct"].get<double>());
+}
