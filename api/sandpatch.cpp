@@ -170,6 +170,8 @@ std::vector<Error> validate(const TerrainDef& d) {
   c.knob(knobs::kLodHorizon, d.lod_horizon);
   c.knob(knobs::kLodMargin, d.lod_margin);
   c.knob(knobs::kLodApron, d.lod_apron);
+  if (d.frame_budget_ms && !(*d.frame_budget_ms > 0))
+    c.add("frame_budget_ms", num(*d.frame_budget_ms), "must be > 0 ms, +infinity for no budget, or unset for half of each step's dt");
   c.finite("gravity", d.gravity, "m/s^2");
   return c.errs;
 }

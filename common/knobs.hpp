@@ -109,6 +109,7 @@ inline constexpr std::array<Field, 31> kOtherFields = {{
     {"simulation.gravity", "TerrainDef.gravity", ""},
     {"simulation.seed", "TerrainDef.seed", ""},
     {"simulation.preset", "", "a named set of knobs; a game sets the knobs themselves"},
+    {"simulation.frame_budget_ms", "TerrainDef.frame_budget_ms", "ms > 0, or \"off\" (+infinity in the library); absent: half of each frame's dt"},
     {"simulation.scale_by_distance", "", "bands around a scene camera; a game sets particle_scale"},
     {"", "TerrainDef.gl_depth_render", "a scene run renders the demotion's depth on GL when a context can be made, else on the CPU"},
 }};

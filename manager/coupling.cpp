@@ -2,6 +2,7 @@
 // the bodies' shells in the patches' simulations, the contact forces handed to Bullet, and
 // patches falling asleep. See terrain_manager_impl.hpp.
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 
 #include "manager/shell.hpp"
@@ -28,6 +29,7 @@ Status TerrainManager::Impl::step_patches(double time, double dt) {
       s.asleep_for = 0;
       events.push_back({PatchEventKind::Woke, s.patch, time, 0, record(s).granules});
     }
+    const auto t_step = std::chrono::steady_clock::now();
     if (Status st = s.sim->step(dt); !st) {
       // The DEM names its own definition; say which knob of the terrain's trades it.
       std::vector<Error> es = st.errors();
@@ -37,6 +39,7 @@ Status TerrainManager::Impl::step_patches(double time, double dt) {
                      "simulation.steps_per_contact (TerrainDef.steps_per_contact) or the material's stiffness";
       return es;
     }
+    observe_cost(s, std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t_step).count(), dt);
     couple_after(s, dt);
     s.fade = std::min(s.fade + 1, def.fade_frames);
   }

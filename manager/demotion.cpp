@@ -100,13 +100,22 @@ Status TerrainManager::Impl::demote(Slot& slot, double time, bool gl_ok) {
   return Ok{};
 }
 
+// Texels a side of a slot's depth render: depth_texels_per_radius over its box, at least 64,
+// at most depth_resolution.
+int TerrainManager::Impl::render_resolution(const Slot& slot, const RenderBox& box) const {
+  if (!(def.depth_texels_per_radius > 0)) return def.depth_resolution;
+  const double texel = radius_world(slot) / def.depth_texels_per_radius;  // m
+  const double side = std::max(box.x1 - box.x0, box.z1 - box.z0);
+  return int(std::clamp(std::ceil(side / texel), 64.0, double(def.depth_resolution)));
+}
+
 // The surface of a set of (grown) spheres over the slot's apron, as the heightfield will take
 // it: on GL when the manager has a depth renderer and `gl_ok` (then *on_gl is set), else on
 // the CPU.
 Result<HeightImage> TerrainManager::Impl::render_surface(const Slot& slot, const RenderBox& box, const std::vector<float>& spheres,
                                                          bool gl_ok, bool* on_gl) const {
   const double sp = hf->spacing();
-  const int res = def.depth_resolution;
+  const int res = render_resolution(slot, box);
   const float x0 = box.x0, z0 = box.z0, x1 = box.x1, z1 = box.z1;
   const float du = (x1 - x0) / float(res), dv = (z1 - z0) / float(res);
   const double rx0 = slot.region.i0 * sp, rx1 = (slot.region.i0 + slot.region.ni - 1) * sp;
@@ -114,7 +123,7 @@ Result<HeightImage> TerrainManager::Impl::render_surface(const Slot& slot, const
   HeightImage img;
   if (depth && gl_ok) {
     if (Status st = gl->make_current(); !st) return st.errors();
-    auto r = depth->render(spheres.data(), spheres.size() / 4, x0, z0, x1, z1, box.floor, box.top + 1.0f);
+    auto r = depth->render(spheres.data(), spheres.size() / 4, x0, z0, x1, z1, box.floor, box.top + 1.0f, res);
     if (!r) return r.errors();
     img = std::move(*r);
     *on_gl = true;

@@ -104,7 +104,8 @@ ParticleDepthRenderer::~ParticleDepthRenderer() {
 }
 
 Result<HeightImage> ParticleDepthRenderer::render(const float* s, std::size_t n, float x0, float z0, float x1, float z1,
-                                                  float floor_y, float top_y) {
+                                                  float floor_y, float top_y, int resolution) {
+  const int res = resolution > 0 ? std::min(resolution, resolution_) : resolution_;
   if (!(x1 > x0) || !(z1 > z0) || !(top_y > floor_y) || !std::isfinite(x0 + x1 + z0 + z1 + floor_y + top_y)) {
     return Error{"", "depth render rectangle", "", "needs finite x1 > x0, z1 > z0, top_y > floor_y"};
   }
@@ -120,7 +121,7 @@ Result<HeightImage> ParticleDepthRenderer::render(const float* s, std::size_t n,
   glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, ssbo_);
 
   glBindFramebuffer(GL_FRAMEBUFFER, fbo_);
-  glViewport(0, 0, resolution_, resolution_);
+  glViewport(0, 0, res, res);
   glEnable(GL_DEPTH_TEST);
   glDepthFunc(GL_LESS);
   glDepthMask(GL_TRUE);
@@ -136,9 +137,9 @@ Result<HeightImage> ParticleDepthRenderer::render(const float* s, std::size_t n,
     glBindVertexArray(0);
     glUseProgram(0);
   }
-  HeightImage img = blank_image(resolution_, x0, z0, x1, z1, 0.0f);
+  HeightImage img = blank_image(res, x0, z0, x1, z1, 0.0f);
   glPixelStorei(GL_PACK_ALIGNMENT, 4);
-  glReadPixels(0, 0, resolution_, resolution_, GL_DEPTH_COMPONENT, GL_FLOAT, img.h.data());
+  glReadPixels(0, 0, res, res, GL_DEPTH_COMPONENT, GL_FLOAT, img.h.data());
   glBindFramebuffer(GL_FRAMEBUFFER, 0);
   const std::string errs = gl::Context::drain_errors();
   if (!errs.empty()) return Error{"", "depth render", "", "OpenGL error " + errs};

@@ -53,8 +53,9 @@ class ParticleDepthRenderer {
 
   // spheres: n × (x, y, z, radius), m, heightfield-local. The rectangle [x0, x1] × [z0, z1]
   // is imaged; floor_y and top_y (m) bound the heights (top_y above every sphere top).
+  // `resolution` texels a side, at most resolution() (0: resolution()).
   Result<HeightImage> render(const float* spheres_xyzr, std::size_t n, float x0, float z0, float x1, float z1,
-                             float floor_y, float top_y);
+                             float floor_y, float top_y, int resolution = 0);
 
   int resolution() const { return resolution_; }
 

@@ -205,6 +205,7 @@ Result<GranuleTile> make_granule_tile(const GranuleTileDef& def) {
   double t = 0;
   for (; t < def.settle_max_time; t += frame) {
     if (Status s = sim->step(frame); !s) return s.errors();
+    if (def.on_progress) def.on_progress(t + frame, def.settle_max_time);
     if (t > 0.25 && sim->max_granule_speed() < def.settle_speed) break;
   }
   tile.settle_time = t;

@@ -46,6 +46,9 @@ struct GranuleTileDef {
   // each settling their own at start-up (seconds to minutes).
   int steps_per_contact = 20;
   float surface_probe = 0;      // m, probe radius of the surface the cut is calibrated against (depth_conversion.hpp lower_by_probe)
+  // Called after every settling frame with the simulated seconds settled so far and
+  // settle_max_time (a bound: settling stops earlier once at rest). Not part of the key.
+  std::function<void(double settled_s, double max_s)> on_progress;
   float settle_friction = -1;   // μ while settling (< 0: the material's). Lower packs denser; the packing then
                                 // also holds with the material's higher μ.
 };

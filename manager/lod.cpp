@@ -47,6 +47,7 @@ std::vector<PatchRequest> predict_contacts(const Heightfield& hf, const std::vec
         r.x1 = hi.x() + def.apron;
         r.z1 = hi.z() + def.apron;
         r.time_to_contact = t;
+        r.apron = def.apron;
         r.speed = (m.velocity + g * t).norm();
         r.bodies = {b};
         out.push_back(std::move(r));
@@ -72,6 +73,7 @@ std::vector<PatchRequest> merge_requests(std::vector<PatchRequest> rs, double ma
         u.z1 = std::max(rs[a].z1, rs[b].z1);
         if (u.width() > max_side || u.depth() > max_side) continue;
         u.time_to_contact = std::min(rs[a].time_to_contact, rs[b].time_to_contact);
+        u.apron = std::min(rs[a].apron, rs[b].apron);
         u.speed = std::max(rs[a].speed, rs[b].speed);
         u.bodies = rs[a].bodies;
         u.bodies.insert(u.bodies.end(), rs[b].bodies.begin(), rs[b].bodies.end());

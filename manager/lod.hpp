@@ -44,6 +44,9 @@ struct PatchRequest {
   // promotion (by distance from the camera, TerrainManagerDef::scale_bands). A patch that grows
   // under a body keeps its own.
   double particle_scale = 0;
+  // m: the apron on every side of the contacts' footprint (LodDef::apron; 0 for requests made
+  // with request_patch). The frame budget may trim it (TerrainManagerDef::frame_budget_ms).
+  double apron = 0;
   double width() const { return x1 - x0; }
   double depth() const { return z1 - z0; }
   bool overlaps(const PatchRequest& o) const { return x0 < o.x1 && o.x0 < x1 && z0 < o.z1 && o.z0 < z1; }

@@ -115,10 +115,40 @@ double TerrainManager::Impl::max_merged_side() const {
 // bedrock. (A body falling just past the terrain's edge, or onto bare rock, asks for a
 // patch that cannot exist; before, promote() failed the whole frame with an error.)
 bool TerrainManager::Impl::has_soil(const PatchRequest& r) const {
-  auto reg = patch_region(*hf, r, set_for(scale_for(r)).cells);
+  const double s = scale_for(r);
+  auto reg = region_for(r, s);
   if (!reg) return false;
   float lo = 0, hi = 0;
-  return floor_of(*reg, &lo, &hi) < hi;
+  return floor_of(*reg, s, &lo, &hi) < hi;
+}
+
+// The region a request is promoted over at scale s: patch_region (whole tile periods), moved
+// clear of the live patches' regions where the rounding pushed it into one (a patch asked for
+// ahead of another abuts it: they share the boundary's samples, not cells).
+Result<GridRegion> TerrainManager::Impl::region_for(const PatchRequest& r, double s) const {
+  auto reg = patch_region(*hf, r, set_for(s).cells);
+  if (!reg) return reg;
+  GridRegion g = *reg;
+  for (const Slot& sl : slots) {
+    if (!sl.live()) continue;
+    const GridRegion& R = sl.region;
+    const bool over_i = g.i0 < R.i0 + R.ni - 1 && R.i0 < g.i0 + g.ni - 1;
+    const bool over_j = g.j0 < R.j0 + R.nj - 1 && R.j0 < g.j0 + g.nj - 1;
+    if (!over_i || !over_j) continue;
+    // The smallest move along one axis that leaves them sharing at most a line of samples.
+    const int moves[4] = {R.i0 + R.ni - 1 - g.i0, R.i0 - (g.i0 + g.ni - 1), R.j0 + R.nj - 1 - g.j0, R.j0 - (g.j0 + g.nj - 1)};
+    int best = -1;
+    for (int k = 0; k < 4; ++k) {
+      const bool along_i = k < 2;
+      const int lo = along_i ? g.i0 + moves[k] : g.j0 + moves[k];
+      const int hi = lo + (along_i ? g.ni : g.nj) - 1;
+      if (lo < 0 || hi > (along_i ? hf->samples_x() : hf->samples_z()) - 1) continue;
+      if (best < 0 || std::abs(moves[k]) < std::abs(moves[best])) best = k;
+    }
+    if (best < 0) return Error{"", "patch request", "", "no room beside the live patch"};
+    (best < 2 ? g.i0 : g.j0) += moves[best];
+  }
+  return g;
 }
 
 bool TerrainManager::Impl::covered(const PatchRequest& r) const {
@@ -138,12 +168,15 @@ bool TerrainManager::Impl::overlaps_patch(const PatchRequest& r) const {
   return false;
 }
 
-// A body in a patch heading past its edge (its predicted contact reaches beyond the
-// region): the patch grows to cover both, if the slot holds the grown patch (estimated from
-// its granules per area, with 20 % to spare). The patch is demoted now (what the body did
-// is written to the heightfield) and the grown request goes to the front of the queue, so
-// it is promoted in this frame from the slot just freed: nothing is lost, and the body
-// stays on particles. Returns whether it did.
+// A body in a patch heading past its edge (its predicted contact reaches beyond the region):
+// a patch is asked for ahead of it, abutting the one it is in, over the part of its request
+// that the patch does not cover on the side it passes most. It goes to the front of the
+// queue; filled in chunks over the next frames (at once when the body would reach it within
+// two frames), it takes the body over when it holds most of the body's footprint (one carrier
+// per body, coupling.cpp), and the patch left behind is released when a request needs its
+// slot (release_idle) or after idle_timeout. Nothing is demoted and filled again in one frame
+// (before, the patch was demoted and the union promoted in the same frame: a whole patch's
+// work twice in one frame). Returns whether it asked.
 Result<bool> TerrainManager::Impl::extend(const PatchRequest& r, double time) {
   for (Slot& s : slots) {
     if ((s.state != SlotState::Active && s.state != SlotState::Asleep) || !rect(s).overlaps(r)) continue;
@@ -152,22 +185,55 @@ Result<bool> TerrainManager::Impl::extend(const PatchRequest& r, double time) {
     // two granule diameters of the patch's edge: a body settling near the middle whose
     // apron pokes out by a few mm must not make the patch grow.
     // A side of the patch on the terrain's edge cannot be crossed (requests are clipped there).
-    const double m = 4.0 * radius_world(s), ap = def.lod.apron, e = 1e-6;
-    const int tile_cells = set_for(s.scale).cells;
+    const double m = 4.0 * radius_world(s), ap = r.apron, e = 1e-6;
     const PatchRequest t = terrain_rect(*hf);
-    const bool in_x0 = a.x0 <= t.x0 + e || r.x0 + ap >= a.x0 + m, in_x1 = a.x1 >= t.x1 - e || r.x1 - ap <= a.x1 - m;
-    const bool in_z0 = a.z0 <= t.z0 + e || r.z0 + ap >= a.z0 + m, in_z1 = a.z1 >= t.z1 - e || r.z1 - ap <= a.z1 - m;
-    if (in_x0 && in_x1 && in_z0 && in_z1) return false;
+    const double past[4] = {a.x0 <= t.x0 + e ? -1.0 : (a.x0 + m) - (r.x0 + ap), a.x1 >= t.x1 - e ? -1.0 : (r.x1 - ap) - (a.x1 - m),
+                            a.z0 <= t.z0 + e ? -1.0 : (a.z0 + m) - (r.z0 + ap), a.z1 >= t.z1 - e ? -1.0 : (r.z1 - ap) - (a.z1 - m)};
+    const int side = int(std::max_element(past, past + 4) - past);
+    if (!(past[side] > 0)) return false;
+    // The part ahead, at least one tile period deep (patch_region rounds it to whole periods,
+    // and promote() moves it clear of the patch it abuts).
+    const double period = set_for(s.scale).cells * double(hf->spacing());
     PatchRequest u = r;
-    u.x0 = std::min(a.x0, r.x0), u.z0 = std::min(a.z0, r.z0), u.x1 = std::max(a.x1, r.x1), u.z1 = std::max(a.z1, r.z1);
-    const double grow = (u.x1 - u.x0 + 2 * hf->spacing() * tile_cells) * (u.z1 - u.z0 + 2 * hf->spacing() * tile_cells) /
-                        std::max(1e-9, (a.x1 - a.x0) * (a.z1 - a.z0));
-    if (double(record(s).granules) * grow * 1.2 > double(def.granules_per_slot)) return false;
-    if (Status st = demote(s, time, false); !st) return st.errors();
+    switch (side) {
+      case 0: u.x1 = a.x0, u.x0 = std::min(r.x0, a.x0 - period); break;
+      case 1: u.x0 = a.x1, u.x1 = std::max(r.x1, a.x1 + period); break;
+      case 2: u.z1 = a.z0, u.z0 = std::min(r.z0, a.z0 - period); break;
+      default: u.z0 = a.z1, u.z1 = std::max(r.z1, a.z1 + period); break;
+    }
+    clip_to_terrain(*hf, u);
+    if (u.x1 - u.x0 < 1e-6 || u.z1 - u.z0 < 1e-6 || overlaps_patch(u) || !has_soil(u)) return false;
+    for (const PatchRequest& q : queue)
+      if (q.overlaps(u)) return false;  // asked already
     u.time_to_contact = 0;
-    u.particle_scale = s.scale;  // the grown patch keeps its scale
+    u.apron = 0;  // the budget may not trim it away from the patch it abuts
+    u.particle_scale = budget_on() ? 0.0 : s.scale;  // its scale, or the budget's choice again
     queue.insert(queue.begin(), u);
+    events.push_back({PatchEventKind::Requested, -1, time, 0, 0});
     ++extensions;
+    return true;
+  }
+  return false;
+}
+
+// A ready patch no body is over any more (its bodies moved on to a patch ahead, or away) is
+// demoted to free its slot for a request waiting for one. Returns whether it freed one.
+Result<bool> TerrainManager::Impl::release_idle(double time) {
+  for (Slot& s : slots) {
+    if (!s.ready() || s.carried.empty()) continue;  // a patch no body has reached yet is kept
+    bool used = false;
+    for (const Carried& c : s.carried) used = used || (c.enabled && world->alive(c.body));
+    const PatchRequest a = rect(s);
+    const double pad = double(def.lod.apron) * 0.5;
+    for (RigidBodyId b : world->bodies()) {
+      Eigen::Vector3d lo, hi;
+      world->bounds(b, &lo, &hi);
+      used = used || (lo.x() < a.x1 + pad && hi.x() > a.x0 - pad && lo.z() < a.z1 + pad && hi.z() > a.z0 - pad &&
+                      lo.y() < hf->origin_y() + s.top_local + engage_height);
+    }
+    if (used) continue;
+    if (Status st = demote(s, time, false); !st) return st.errors();
+    ++released;
     return true;
   }
   return false;

@@ -26,6 +26,20 @@ using ojson = nlohmann::ordered_json;
 }  // namespace
 
 RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
+  if (opt.frame_budget_ms) {  // the scene as if it said so (its hash in the report follows)
+    if (!(*opt.frame_budget_ms > 0)) {
+      RunResult r;
+      r.code = ExitCode::BadInput;
+      r.stage = "options";
+      r.message = "--frame-budget " + format_number(*opt.frame_budget_ms) + ": must be a number of ms > 0, or off";
+      return r;
+    }
+    SceneDef s = scene;
+    s.simulation.frame_budget_ms = opt.frame_budget_ms;
+    RunOptions o = opt;
+    o.frame_budget_ms.reset();
+    return run_scene(s, o);
+  }
   RunResult res;
   auto fail = [&](ExitCode code, const std::string& stage, const std::string& msg) {
     res.code = code;
@@ -59,7 +73,12 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
   const long long frames = std::max(1LL, (long long)steps);
 
   std::string failed_part;
-  auto made = make_world(scene, threads, backend, &failed_part);
+  // Start-up: the tiles a run settles (seconds on a first run; read back from the tile cache
+  // later) print their progress as the frames do.
+  ProgressPrinter progress(opt.progress, frames, dt);
+  auto made = make_world(scene, threads, backend, &failed_part, [&](const std::string& what, double done, double max, double wall) {
+    progress.note(what, done / max, wall);
+  });
   if (!made) return fail(ExitCode::BadInput, failed_part, made.message());
   World& world = **made;
   const Heightfield& hf = world.heightfield();
@@ -81,7 +100,6 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
   FrameWriter images(hf, manager);
   std::size_t images_skipped = 0;
   std::vector<std::string> written;
-  ProgressPrinter progress(opt.progress, frames, dt);
 
   auto export_heightfield = [&](const HeightfieldOutputDef& o, long long frame, double t) -> Status {
     const fs::path p = out_dir / expand_pattern(o.file, frame, t, format_ext(o.format));

@@ -1,5 +1,6 @@
 #include "manager/run_outputs.hpp"
 
+#include <algorithm>
 #include <cstdio>
 #include <fstream>
 #include <unistd.h>
@@ -53,6 +54,8 @@ ProgressPrinter::ProgressPrinter(ProgressStyle style, long long frames, double d
 }
 void ProgressPrinter::update(long long frame, double wall_s, bool final) {
   if (style_ == ProgressStyle::None) return;
+  if (!note_what_.empty() && style_ == ProgressStyle::Bar) std::fputc('\n', stderr);  // the start-up's bar stays
+  note_what_.clear();
   const double sim = double(frame) * dt_, total = double(frames_) * dt_;
   const double rtf = wall_s > 0 ? sim / wall_s : 0.0;
   const int pct = frames_ > 0 ? int(100 * frame / frames_) : 100;
@@ -68,6 +71,28 @@ void ProgressPrinter::update(long long frame, double wall_s, bool final) {
     if (pct < next_pct_) return;
     next_pct_ = pct / 10 * 10 + 10;
     std::fprintf(stderr, "progress %3d%%  t = %.2f / %.2f s  real-time factor %.2fx\n", pct, sim, total, rtf);
+  }
+  std::fflush(stderr);
+}
+
+void ProgressPrinter::note(const std::string& what, double fraction, double wall_s) {
+  if (style_ == ProgressStyle::None) return;
+  const double f = std::clamp(fraction, 0.0, 1.0);
+  const int pct = int(100 * f);
+  // What is left at the rate so far (settling stops at rest, often before its bound: an upper
+  // estimate).
+  const double left = f > 0.02 ? wall_s * (1.0 - f) / f : -1;
+  char eta[48] = "";
+  if (left >= 0) std::snprintf(eta, sizeof eta, ", at most %.0f s left", left);
+  if (what != note_what_) note_what_ = what, note_pct_ = 0, last_wall_ = -1;
+  if (style_ == ProgressStyle::Bar) {
+    if (wall_s - last_wall_ < 0.1 && pct < 100) return;
+    last_wall_ = wall_s;
+    std::fprintf(stderr, "\r%s: %3d%% (%.1f s%s)   ", what.c_str(), pct, wall_s, eta);
+  } else {
+    if (pct < note_pct_) return;
+    note_pct_ = pct / 10 * 10 + 10;
+    std::fprintf(stderr, "start-up: %s: %3d%% (%.1f s%s)\n", what.c_str(), pct, wall_s, eta);
   }
   std::fflush(stderr);
 }

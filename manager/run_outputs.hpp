@@ -30,6 +30,9 @@ class ProgressPrinter {
  public:
   ProgressPrinter(ProgressStyle style, long long frames, double dt);
   void update(long long frame, double wall_s, bool final = false);
+  // A start-up step: `what`, done (a fraction, an upper bound's) and wall seconds so far, with
+  // an estimate of what is left; a line every 10 % (a bar on a terminal).
+  void note(const std::string& what, double fraction, double wall_s);
 
  private:
   ProgressStyle style_;
@@ -37,6 +40,8 @@ class ProgressPrinter {
   double dt_;
   double last_wall_ = -1;
   int next_pct_ = 0;
+  std::string note_what_;
+  int note_pct_ = 0;
 };
 
 // Images of the run: one GL context and one scene renderer, made on the first image. With

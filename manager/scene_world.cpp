@@ -112,6 +112,7 @@ api::TerrainDef terrain_def(const SceneDef& scene, int threads, const std::strin
   t.particle_scale = sim.particle_scale;
   t.steps_per_contact = sim.steps_per_contact;
   t.max_substeps = sim.max_substeps;
+  t.frame_budget_ms = sim.frame_budget_ms;
   t.slots = sim.pool.slots;
   t.granules_per_slot = sim.pool.granules_per_slot;
   t.soil_depth = scene.terrain.soil_depth.value_or(knobs::kSoilDepth.def);
@@ -146,7 +147,8 @@ TerrainManagerDef manager_def(const SceneDef& scene, const Heightfield& hf, int 
 }
 
 Result<std::unique_ptr<World>> make_world(const SceneDef& scene, int threads, const std::string& backend,
-                                          std::string* stage) {
+                                          std::string* stage,
+                                          const std::function<void(const std::string&, double, double, double)>& on_settle) {
   std::string unused;
   std::string& part = stage ? *stage : unused;
   part = "terrain";
@@ -187,6 +189,7 @@ Result<std::unique_ptr<World>> make_world(const SceneDef& scene, int threads, co
   }
   TerrainManagerDef md;
   if (scene.simulation.granular_patches) md = manager_def(scene, hf, threads, backend);
+  md.on_settle = on_settle;
   auto world = World::create(std::move(*hf_result), vec3f(scene.simulation.gravity));
   if (!world) return world.errors();
   if (scene.simulation.granular_patches) {

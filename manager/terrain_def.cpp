@@ -26,6 +26,9 @@ TerrainManagerDef manager_def(const api::TerrainDef& def) {
   m.lod.horizon = def.lod_horizon;
   m.lod.margin = def.lod_margin;
   m.lod.apron = def.lod_apron;
+  // The frame budget: unset = half of each frame's dt; +infinity = none.
+  if (!def.frame_budget_ms) m.frame_budget_fraction = 0.5;
+  else m.frame_budget_ms = *def.frame_budget_ms;
   m.gravity = {def.gravity[0], def.gravity[1], def.gravity[2]};
   m.seed = def.seed;
   return m;

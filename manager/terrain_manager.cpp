@@ -64,7 +64,14 @@ Result<std::unique_ptr<TerrainManager>> TerrainManager::create(const TerrainMana
   knob("max_substeps", def.max_substeps, knobs::kMaxSubsteps);
   knob("pool.granules_per_slot", def.granules_per_slot, knobs::kGranulesPerSlot);
   knob("patch_depth", def.patch_depth, knobs::kPatchDepth);
+  if (!(def.frame_budget_ms > 0)) bad("frame_budget_ms", def.frame_budget_ms, "must be > 0 ms (infinity: no budget)");
+  if (!(def.budget_substep_ms >= 0 && def.budget_substep_ms < 1e6)) bad("budget_substep_ms", def.budget_substep_ms, "must be in [0, 1e6) ms");
+  if (!(def.budget_sphere_ns >= 0 && def.budget_sphere_ns < 1e9)) bad("budget_sphere_ns", def.budget_sphere_ns, "must be in [0, 1e9) ns");
+  if (!(def.frame_budget_fraction >= 0 && def.frame_budget_fraction <= 100))
+    bad("frame_budget_fraction", def.frame_budget_fraction, "must be in [0, 100] (0: frame_budget_ms applies)");
   if (!(def.surface_probe >= 0 && def.surface_probe <= 4)) bad("surface_probe", def.surface_probe, "must be in [0, 4] sphere radii");
+  if (!(def.depth_texels_per_radius >= 0 && def.depth_texels_per_radius <= 1e3))
+    bad("depth_texels_per_radius", def.depth_texels_per_radius, "must be in [0, 1000] (0: depth_resolution always)");
   if (def.fill_granules_per_frame < 1) bad("fill_granules_per_frame", def.fill_granules_per_frame, "must be >= 1");
   if (!errs.empty()) return errs;
 
@@ -76,9 +83,13 @@ Result<std::unique_ptr<TerrainManager>> TerrainManager::create(const TerrainMana
   I.hf = &hf;
   I.world = &world;
   I.camera = def.camera;
-  // The first pre-settled tile of every scale (filling.cpp).
+  // The first pre-settled tile of every scale (filling.cpp); with a budget, the coarser scales
+  // it may choose (budget.cpp) take their base scale's tiles.
   for (double scale : I.scales())
     if (Status st = I.add_tile_set(scale); !st) return st.errors();
+  for (double scale : I.all_scales())
+    if (std::none_of(I.tile_sets.begin(), I.tile_sets.end(), [&](const TileSet& t) { return t.scale == scale; }))
+      I.derive_tile_set(scale);
   // The pool: every slot allocated now at full capacity, on the chosen backend.
   if (def.backend == "gl") {
     auto ctx = gl::Context::create();
@@ -91,7 +102,7 @@ Result<std::unique_ptr<TerrainManager>> TerrainManager::create(const TerrainMana
   // widest patch it can hold, a single layer of granules 2 bounding radii thick.
   // With scale bands: the finest scale's domain is the tallest (sim units), the coarsest's
   // terrain grid the widest (samples).
-  const std::vector<double> all_scales = I.scales();
+  const std::vector<double> all_scales = I.all_scales();
   const double s_min = *std::min_element(all_scales.begin(), all_scales.end());
   const double s_max = *std::max_element(all_scales.begin(), all_scales.end());
   SimulationDef cap = I.sim_def(s_min);
@@ -123,6 +134,11 @@ Result<std::unique_ptr<TerrainManager>> TerrainManager::create(const TerrainMana
   I.records.resize(I.slots.size());
   // The demotion's depth render on GL, decided now (without a context it renders on the CPU).
   if (Status st = I.make_depth_renderer(); !st) return st.errors();
+  // With a budget, the DEM's rate on this machine before any patch has run.
+  if (I.budget_on()) {
+    I.current();
+    if (Status st = I.calibrate(); !st) return st.errors();
+  }
   return m;
 }
 
@@ -173,6 +189,8 @@ bool TerrainManager::soil_force(RigidBodyId body, Eigen::Vector3f* force, Eigen:
   *torque = it->second.torque;
   return true;
 }
+
+double TerrainManager::budget_ms(double dt) const { return impl_->budget_ms(dt); }
 
 void TerrainManager::set_camera(const Eigen::Vector3d& position) { impl_->camera = position; }
 
@@ -341,7 +359,8 @@ nlohmann::ordered_json TerrainManager::report() const {
                {"queued_requests", int(I.queue.size())},
                {"peak_queued_requests", I.peak_queue},
                {"lapsed_requests", I.lapsed_requests},
-               {"extensions", I.extensions}};
+               {"extensions", I.extensions},
+               {"released", I.released}};
   nlohmann::ordered_json tiles = nlohmann::ordered_json::array();
   for (const TileSet& set : I.tile_sets)
     for (const GranuleTile& t : set.tiles)
@@ -361,6 +380,24 @@ nlohmann::ordered_json TerrainManager::report() const {
                         {"settled", I.tiles_from[int(TileCacheOutcome::Source::Settled)]},
                         {"notes", I.tile_cache_notes}};
   if (!I.gl_note.empty()) r["depth_render_note"] = I.gl_note;
+  // The frame budget: what it chose for every patch and what it cost (docs/cli.md).
+  {
+    int degraded = 0;
+    for (const auto& e : I.budget_log) degraded += e["rung"].get<int>() > 0;
+    ojson b = {{"on", I.budget_on()}};
+    if (I.def.frame_budget_fraction > 0) b["frame_budget_fraction"] = I.def.frame_budget_fraction;
+    else if (I.budget_on()) b["frame_budget_ms"] = I.def.frame_budget_ms;
+    b["cost_model"] = {{"substep_ms", I.cost_a_ms},
+                       {"substep_sphere_ns", I.cost_b_ms * 1e6},
+                       {"calibrated_substep_ms", I.calibrated_a_ms},
+                       {"calibrated_substep_sphere_ns", I.calibrated_b_ms * 1e6},
+                       {"load", I.load}};
+    b["patches_degraded"] = degraded;
+    b["overruns"] = I.budget_overruns;
+    b["waited_request_frames"] = I.budget_waits;
+    b["patches"] = I.budget_log;
+    r["budget"] = b;
+  }
   return r;
 }
 

@@ -25,6 +25,7 @@
 
 #include <Eigen/Core>
 #include <cstdint>
+#include <functional>
 #include <limits>
 #include <memory>
 #include <string>
@@ -88,15 +89,36 @@ struct TerrainManagerDef {
   double sleep_time = knobs::kSleepTime.def;   // s, ... for this long
   double idle_timeout = knobs::kIdleTimeout.def;  // s asleep before demotion (Leach & Marais: two minutes)
   LodDef lod;                                  // contact prediction
+  // The frame budget (docs/manager.md "Frame budget"): wall-clock ms a frame's patches may
+  // take. A new patch is promoted at the finest particle scale and widest extent (its scale
+  // × 1, 1.5, 2, 3, 4; the apron ×1 or ×½) whose predicted DEM cost, with the patches already
+  // awake, fits in 80 % of it (the rest is the frame's other stages); a request that fits
+  // nowhere waits in the queue while other patches live, and goes ahead at the coarsest rung
+  // when none does (counted as an overrun). Infinity: no budget (every patch as requested).
+  // frame_budget_fraction > 0 sets the budget to that fraction of each frame's dt instead.
+  double frame_budget_ms = std::numeric_limits<double>::infinity();
+  double frame_budget_fraction = 0;
+  // The budget's cost model pinned (both > 0): a DEM frame costs n_sub (substep_ms + sphere_ns
+  // 1e-6 × spheres) ms, never measured, so its choices are the same on every machine (tests,
+  // replays). 0: measured at creation and followed while running (budget.cpp).
+  double budget_substep_ms = 0, budget_sphere_ns = 0;
   int fill_granules_per_frame = 4096;          // upload bound per frame
   int fade_frames = 30;                        // frames over which a new patch fades in
-  int depth_resolution = 1024;                 // texels per side of the demotion depth render
+  int depth_resolution = 1024;                 // most texels per side of the demotion depth render ...
+  // ... which takes this many texels per granule sphere radius over the patch's apron (a
+  // sphere's cap is 8 texels across; the heightfield sample's hat mean averages thousands):
+  // a 5 m apron of r = 4 cm granules renders 500² texels, not 1024². 0: always depth_resolution.
+  double depth_texels_per_radius = 4;
   double surface_probe = 2.0;                  // probe radius of the rendered surface, × sphere radius (depth_conversion.hpp)
   bool use_gl = true;                          // depth render on GL (else, or if no context, on the CPU)
   // On-disk cache of pre-settled granule tiles (manager/tile_cache.hpp): "" = the default
   // ($SANDPATCH_TILE_CACHE, else $XDG_CACHE_HOME/sandpatch/tiles, else ~/.cache/sandpatch/tiles),
   // "off" = none, anything else = that directory. A tile read back is bit-identical to a settled one.
   std::string tile_cache;
+  // Told what start-up (and a deeper tile later) is settling and how far: `what` names the
+  // tile, done_s of at most max_s simulated seconds (settling stops earlier once at rest),
+  // wall_s since it began. The run's progress line prints it (docs/cli.md).
+  std::function<void(const std::string& what, double done_s, double max_s, double wall_s)> on_settle;
   std::string backend = "cpu";                 // DEM backend of the pool: cpu (OpenMP) or gl (compute shaders)
   int threads = int(knobs::kThreads.def);      // DEM threads, 0 = OpenMP default
   Eigen::Vector3d gravity{0.0, -9.81, 0.0};    // m/s²
@@ -132,6 +154,8 @@ class TerrainManager {
   // Moves the camera the scale bands are measured from (m, world); patches already live keep
   // their scale.
   void set_camera(const Eigen::Vector3d& position);
+  // ms the frame budget allows a frame of dt seconds (infinity: no budget).
+  double budget_ms(double dt) const;
   // Demotes every patch now (end of a run that wants the final terrain).
   Status demote_all(double time, Profile& profile);
 

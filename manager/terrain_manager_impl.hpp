@@ -6,6 +6,7 @@
 //   filling.cpp          activation: tiles, promotion (heightfield -> granules), uploads
 //   coupling.cpp         dem and sleep: carriers, shells, forces to and from Bullet
 //   demotion.cpp         demotion: depth render, heightfield write, bodies set down, ledger
+//   budget.cpp           the frame budget: what patches cost, the scale and extent of a new one
 // Each stage function runs inside its Profile timer (manager/profile.hpp), opened by the
 // sequencer.
 #pragma once
@@ -59,7 +60,8 @@ struct TerrainManager::Impl {
   // ---- planning (planning.cpp) ----
   std::unordered_map<std::int64_t, int> still_frames;  // frames each body (body_key) has been at rest
   int lapsed_requests = 0;  // queued requests dropped because no body predicted contact there any more
-  int extensions = 0;       // patches grown under a body heading past their edge
+  int extensions = 0;       // patches asked for ahead of a body heading past its patch's edge
+  int released = 0;         // patches no body was over, demoted for a request waiting for a slot
 
   // ---- the pool ----
   // The GL context (the GL backend's and the demotion's depth render's, made by create())
@@ -170,6 +172,35 @@ struct TerrainManager::Impl {
     return p;
   }
 
+  // ---- the frame budget (budget.cpp) ----
+  // The cost model (budget.cpp): ms of a frame = load × substeps × (a + b × spheres).
+  double cost_a_ms = 0.02, cost_b_ms = 1e-4;  // ms per substep, and per substep and sphere
+  double calibrated_a_ms = 0, calibrated_b_ms = 0;
+  double load = 1;             // measured / predicted, followed frame by frame
+  struct BudgetChoice {
+    bool fits = true;          // within the budget (else: the coarsest rung, which did not fit)
+    double requested_scale = 1, scale = 1;
+    PatchRequest req;          // as promoted (apron trimmed)
+    int granules = 0;          // predicted
+    int rung = 0;              // 0 = as requested
+    double predicted_ms = 0, available_ms = 0, budget_ms = 0;
+  };
+  std::vector<nlohmann::ordered_json> budget_log;  // one entry per promotion (the report's budget.patches)
+  long long budget_waits = 0;      // request-frames a request waited in the queue because it did not fit
+  int budget_overruns = 0;         // promotions that did not fit and went ahead (nothing else live)
+  bool pinned() const { return def.budget_substep_ms > 0 && def.budget_sphere_ns > 0; }
+  bool budget_on() const { return def.frame_budget_fraction > 0 || std::isfinite(def.frame_budget_ms); }
+  double budget_ms(double dt) const;  // ms, infinity when off
+  double substeps(double dt) const;                  // DEM substeps of a frame of dt s
+  double predict_ms(double spheres, double dt) const;  // a patch's DEM ms per frame
+  double live_cost_ms(double dt) const;  // predicted DEM ms of the awake and filling patches
+  void observe_cost(const Slot& s, double wall_ms, double dt);
+  Status calibrate();
+  // The scales tiles are made for: scales(), and with a budget each one's coarser rungs.
+  std::vector<double> all_scales() const;
+  int predict_granules(const PatchRequest& r, double s) const;
+  BudgetChoice choose(const PatchRequest& r, double dt, double others_ms) const;
+
   // ---- creation (terrain_manager.cpp) ----
   // The demotion's GL depth render when def.use_gl: the context (the GL backend's, or a new
   // one) and the renderer; without them, gl_note says why and demotions render on the CPU.
@@ -180,24 +211,37 @@ struct TerrainManager::Impl {
   // ones (or grows a patch under a body heading past its edge) and orders the queue.
   Status plan(double time);
   double scale_for(const PatchRequest& r) const;
-  // The floor of a patch over `region` (planning.hpp patch_floor, with def's depths).
-  double floor_of(const GridRegion& region, float* lo, float* hi) const {
-    return patch_floor(*hf, region, def.patch_depth, def.soil_depth, def.bedrock_height, lo, hi);
+  // m: the granules under a patch's lowest surface point at particle scale s: patch_depth; at
+  // the coarser scales a frame budget may choose, at least two granules (4 bounding radii,
+  // 2.22 r each, world); at most soil_depth.
+  double patch_depth_at(double s) const {
+    const std::vector<double> own = scales();
+    const bool coarser_rung = std::find(own.begin(), own.end(), s) == own.end();
+    const double two_granules = coarser_rung ? 4.0 * 2.22 * double(def.material.radius) * s : 0.0;
+    return std::min(def.soil_depth, std::max(def.patch_depth, two_granules));
+  }
+  // The floor of a patch over `region` at scale s (planning.hpp patch_floor, with def's depths).
+  double floor_of(const GridRegion& region, double s, float* lo, float* hi) const {
+    return patch_floor(*hf, region, patch_depth_at(s), def.soil_depth, def.bedrock_height, lo, hi);
   }
   double max_merged_side() const;
   bool has_soil(const PatchRequest& r) const;
+  Result<GridRegion> region_for(const PatchRequest& r, double s) const;
   bool covered(const PatchRequest& r) const;
   bool overlaps_patch(const PatchRequest& r) const;
   Result<bool> extend(const PatchRequest& r, double time);
+  Result<bool> release_idle(double time);
 
   // ---- filling (filling.cpp): Stage::Activation ----
   // Serves the queue while slots are free, then uploads a chunk of every filling patch.
   Status activate(double time, double dt);
   Status add_tile_set(double scale);
+  void derive_tile_set(double scale);
   int tile_layers(double fill_depth) const;
   Result<const GranuleTile*> tile_for(TileSet& set, double fill_depth);
   SimulationDef sim_def(double scale) const;
   Status promote(Slot& slot, const PatchRequest& req, double time);
+  Status clear_bodies(Slot& slot, const ParticleScale& sc, const GranuleShape& shape, double s);
   Status upload(Slot& slot, std::size_t budget, double time);
 
   // ---- coupling (coupling.cpp): Stage::Dem and Stage::Sleep ----
@@ -230,6 +274,7 @@ struct TerrainManager::Impl {
   };
   Result<HeightImage> render_surface(const Slot& slot, const RenderBox& box, const std::vector<float>& spheres, bool gl_ok,
                                      bool* on_gl) const;
+  int render_resolution(const Slot& slot, const RenderBox& box) const;
   void set_bodies_down(const Slot& slot, double time);
   void close_ledger(const Slot& slot, PatchRecord& rec, bool on_gl);
 };

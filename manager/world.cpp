@@ -248,8 +248,9 @@ Status World::check_bodies(const char* stage) {
       continue;
     const std::string& name = bullet_->definition(id).name;
     failed_stage_ = stage;
-    return Error{"", "body",
-                 name.empty() ? "{" + std::to_string(id.index) + ", " + std::to_string(id.generation) + "}" : "'" + name + "'",
+    std::string who = name.empty() ? std::to_string(id.index) + ", " + std::to_string(id.generation) : name;
+    who = name.empty() ? std::string(1, '{').append(who).append("}") : std::string(1, '\'').append(who).append("'");
+    return Error{"", "body", who,
                  "has a non-finite state after the " + std::string(stage) + " stage at t = " + format_number(time()) + " s"};
   }
   return Ok{};
@@ -316,9 +317,21 @@ Status World::step(double dt, int substeps) {
   }
   ++steps_at_dt_;
   ++steps_;
-  last_frame_ = {std::chrono::duration<double, std::milli>(Clock::now() - f0).count(), conversion};
+  const bool awake = manager_ && (manager_->active_patches() > manager_->asleep_patches());
+  const double budget = manager_ ? manager_->budget_ms(dt) : std::numeric_limits<double>::infinity();
+  last_frame_ = {std::chrono::duration<double, std::milli>(Clock::now() - f0).count(), conversion, awake, budget};
   if (frame_ms_.size() < kFrameWindow) frame_ms_.push_back(last_frame_.wall_ms);
   else frame_ms_[std::size_t(steps_ - 1) % kFrameWindow] = last_frame_.wall_ms;
+  if (awake) {
+    if (awake_ms_.size() < kFrameWindow) awake_ms_.push_back(last_frame_.wall_ms);
+    else awake_ms_[std::size_t(awake_frames_) % kFrameWindow] = last_frame_.wall_ms;
+    ++awake_frames_;
+  }
+  budget_ms_ = budget;
+  if (std::isfinite(budget)) {
+    over_budget_ += last_frame_.wall_ms > budget;
+    max_over_budget_ = std::max(max_over_budget_, last_frame_.wall_ms / budget);
+  }
   frame_max_ms_ = std::max(frame_max_ms_, last_frame_.wall_ms);
   if (conversion) conversion_max_ms_ = std::max(conversion_max_ms_, last_frame_.wall_ms), ++conversion_frames_;
   return Ok{};
@@ -374,6 +387,15 @@ nlohmann::ordered_json World::report() const {
                  {"conversion_frames", conv_frames},
                  {"conversion_max_ms", conv_max},
                  {"conversion_max_over_median", med > 0 ? conv_max / med : 0.0}};
+  // Frames with a patch simulating, and the frame budget (of the last frame; docs/cli.md).
+  const double awake_med = median(awake_ms_);
+  r["frames"]["patch_awake_frames"] = awake_frames_;
+  r["frames"]["patch_awake_median_ms"] = awake_med;
+  r["frames"]["max_over_patch_awake_median"] = awake_med > 0 ? mx / awake_med : 0.0;
+  if (std::isfinite(budget_ms_)) r["frames"]["budget_ms"] = budget_ms_;
+  else r["frames"]["budget_ms"] = "off";
+  r["frames"]["over_budget"] = over_budget_;
+  r["frames"]["max_over_budget"] = max_over_budget_;
 
   ojson bodies = ojson::array();
   int live = 0, spawned = 0, resting = 0;

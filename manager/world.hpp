@@ -139,6 +139,8 @@ class World {
   struct FrameRecord {
     double wall_ms = 0;    // the step, all stages (a caller's outputs are not in it)
     bool conversion = false;  // a promotion, an upload or a demotion ran in it
+    bool patch_awake = false;  // a patch was simulating (filling, or ready and not asleep)
+    double budget_ms = 0;      // the frame budget (infinity: none)
   };
   const FrameRecord& last_frame() const { return last_frame_; }
   // The report's median is over the last kFrameWindow steps (memory stays bounded in a game
@@ -198,6 +200,11 @@ class World {
   FrameRecord last_frame_;
   double frame_max_ms_ = 0, conversion_max_ms_ = 0;
   long long conversion_frames_ = 0;
+  std::vector<double> awake_ms_;       // ring of the last kFrameWindow steps with a patch awake
+  long long awake_frames_ = 0;
+  double budget_ms_ = std::numeric_limits<double>::infinity();  // of the last frame
+  long long over_budget_ = 0;          // frames longer than their budget
+  double max_over_budget_ = 0;         // the longest frame / its budget
   int filling_ = 0;                    // patches promoted and not yet ready
   int peak_granules_ = 0;
   double time_base_ = 0, dt_ = 0;      // s

@@ -23,6 +23,8 @@ class DemBackend {
   virtual Status set_body_state(BodyId b, Vec3 position, Quat orientation, Vec3 velocity, Vec3 angular_velocity) = 0;
   virtual Status set_body_enabled(BodyId b, bool enabled) = 0;
   virtual Status step(double dt_frame) = 0;
+  // DEM substeps a frame of dt_frame seconds takes (dt_sub <= t_c / N), or the error step() gives.
+  virtual Result<int> substeps_for(double dt_frame) const = 0;
   virtual bool asleep() const = 0;
   virtual void wake() = 0;
 
@@ -52,6 +54,7 @@ class DemBackendOf final : public DemBackend {
   Status set_body_state(BodyId b, Vec3 p, Quat q, Vec3 v, Vec3 w) override { return sim_.set_body_state(b, p, q, v, w); }
   Status set_body_enabled(BodyId b, bool e) override { return sim_.set_body_enabled(b, e); }
   Status step(double dt) override { return sim_.step(dt); }
+  Result<int> substeps_for(double dt) const override { return sim_.substeps_for(dt); }
   bool asleep() const override { return sim_.asleep(); }
   void wake() override { sim_.wake(); }
   Vec3 body_velocity(BodyId b) const override { return sim_.body_velocity(b); }

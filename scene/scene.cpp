@@ -333,6 +333,15 @@ SceneSimulationDef parse_simulation(Ctx& c, const json& j) {
   o.knob("particle_scale", s.particle_scale, knobs::kParticleScale);
   o.knob("steps_per_contact", s.steps_per_contact, knobs::kStepsPerContact);
   o.knob("max_substeps", s.max_substeps, knobs::kMaxSubsteps);
+  if (const json* bj = o.get("frame_budget_ms")) {
+    if (bj->is_string() && bj->get<std::string>() == "off") {
+      s.frame_budget_ms = std::numeric_limits<double>::infinity();
+    } else if (bj->is_string()) {
+      c.error(o.at("frame_budget_ms"), show(*bj), "must be a number of ms in (0, 1e+06] or \"off\"");
+    } else if (auto x = read_number(c, *bj, o.at("frame_budget_ms"), {0.0, 1e6, true, false, "ms"})) {
+      s.frame_budget_ms = *x;
+    }
+  }
   if (const json* lj = o.get("lod")) {
     Obj p(c, *lj, o.at("lod"));
     p.knob("horizon", s.lod.horizon, knobs::kLodHorizon);
@@ -837,6 +846,11 @@ nlohmann::json scene_to_json(const SceneDef& s) {
   // Only when one was applied (every field above already holds its values), so scenes without
   // a preset keep their canonical JSON and hash.
   if (!sim.preset.empty()) j["simulation"]["preset"] = sim.preset;
+  // Only when given (absent: half of dt), so scenes without one keep their canonical JSON.
+  if (sim.frame_budget_ms) {
+    if (std::isinf(*sim.frame_budget_ms)) j["simulation"]["frame_budget_ms"] = "off";
+    else j["simulation"]["frame_budget_ms"] = *sim.frame_budget_ms;
+  }
   if (sim.scale_by_distance) {
     json bands = json::array();
     for (const auto& b : sim.scale_by_distance->bands)

@@ -205,6 +205,9 @@ struct SceneSimulationDef {
   double particle_scale = knobs::kParticleScale.def;  // render size / simulated size (Leach §4.3)
   int steps_per_contact = int(knobs::kStepsPerContact.def);  // N: the DEM substeps at dt <= t_c / N (t_c: contact time)
   int max_substeps = int(knobs::kMaxSubsteps.def);  // most DEM substeps per frame, 0 = max(64, 64 N / 20)
+  // ms of wall time a frame's patches may take (docs/manager.md "Frame budget"); absent: half
+  // of dt; "off" (infinity here): none.
+  std::optional<double> frame_budget_ms;
   LodSectionDef lod;
   std::optional<ScaleByDistanceDef> scale_by_distance;  // instead of one particle_scale for every patch
   SleepDef sleep;

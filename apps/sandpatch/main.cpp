@@ -19,8 +19,10 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <functional>
 #include <iostream>
+#include <limits>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
@@ -76,6 +78,7 @@ struct RunCli {
   double seconds = -1;
   long long frames = -1;
   int threads = -1;
+  std::string frame_budget;
   bool quiet = false;
 };
 
@@ -89,6 +92,8 @@ void add_run(CLI::App& app, RunCli& a) {
   o_sec->excludes(o_frames);
   run->add_option("--backend", a.backend, "DEM backend")->check(CLI::IsMember({"cpu", "gl"}));
   run->add_option("--threads", a.threads, "Worker threads (0 = all)")->check(CLI::NonNegativeNumber);
+  run->add_option("--frame-budget", a.frame_budget,
+                  "Wall-clock ms a frame's patches may take, or off (overrides simulation.frame_budget_ms)");
   run->add_flag("--quiet", a.quiet, "No progress output");
 }
 
@@ -139,6 +144,13 @@ int run_and_report(const std::string& scene_path, const std::function<RunOptions
   return code(ExitCode::Ok);
 }
 
+// --frame-budget's number (ms); NaN when it is not one, which run_scene refuses naming the option.
+double parse_budget(const std::string& s) {
+  char* end = nullptr;
+  const double v = std::strtod(s.c_str(), &end);
+  return end && *end == '\0' && end != s.c_str() ? v : std::numeric_limits<double>::quiet_NaN();
+}
+
 int cmd_run(const RunCli& a, int argc, char** argv) {
   return run_and_report(a.scene, [&](const SceneDef&) {
     RunOptions opt;
@@ -147,6 +159,8 @@ int cmd_run(const RunCli& a, int argc, char** argv) {
     opt.frames = a.frames;
     opt.backend = a.backend;
     opt.threads = a.threads;
+    if (a.frame_budget == "off") opt.frame_budget_ms = std::numeric_limits<double>::infinity();
+    else if (!a.frame_budget.empty()) opt.frame_budget_ms = parse_budget(a.frame_budget);
     opt.progress = a.quiet ? ProgressStyle::None : ProgressStyle::Auto;
     return opt;
   }, argc, argv);

@@ -25,6 +25,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <string>
 #include <utility>
 #include <variant>
@@ -170,6 +171,11 @@ struct TerrainDef {
   double lod_horizon = 0.5;                    // s, how far ahead, (0, 10]
   double lod_margin = 0.05;                    // m, clearance that already counts as contact, [0, 100]
   double lod_apron = 1.0;                      // m, added around the contact footprint on every side, [0, 1000]
+  // -- the frame budget (docs/manager.md "Frame budget"): wall-clock ms a step's patches may
+  //    take; new patches are promoted coarser or smaller, or wait, to keep within it (the
+  //    report's "budget" says what it chose). Unset: half of each step's dt. +infinity: none
+  //    (every patch at particle_scale and the full apron). Otherwise > 0.
+  std::optional<double> frame_budget_ms;
   Vec3 gravity = {0.0, -9.81, 0.0};            // m/s², finite
   std::uint64_t seed = 1;                      // all randomness
 };

@@ -2,6 +2,7 @@
 // public header only (include/sandpatch/sandpatch.hpp): no internals.
 #pragma once
 
+#include <limits>
 #include <sandpatch/sandpatch.hpp>
 
 namespace sandpatch::api::test {
@@ -31,6 +32,8 @@ inline TerrainDef sand_def() {
   d.slots = 1;
   d.granules_per_slot = 6000;
   d.patch_depth = 0.3;
+  // No frame budget: its choices follow the machine's clock, and these tests compare states.
+  d.frame_budget_ms = std::numeric_limits<double>::infinity();
   return d;
 }
 

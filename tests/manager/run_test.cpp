@@ -78,6 +78,7 @@ TEST(Run, FinalStateHashIsDeterministic) {
     opt.out_dir = fresh_dir("det" + std::to_string(k)).string();
     opt.seconds = 1.0;
     opt.threads = threads[k];
+    opt.frame_budget_ms = std::numeric_limits<double>::infinity();  // the budget's choices follow the clock
     opt.progress = ProgressStyle::None;
     RunResult r = run_scene(*scene, opt);
     ASSERT_EQ(r.code, ExitCode::Ok) << r.message;

@@ -373,3 +373,144 @@ TEST(TerrainManager, DepthRenderDecidedAtCreation) {
   ASSERT_EQ(ledger.size(), 1u);
   EXPECT_EQ(ledger[0]["depth_render"], on_gl ? "gl" : "cpu");
 }
+
+// A patch promoted under a box driven across the heightfield (the box's own: it asks for one
+// when it moves): the fill leaves room for the box (filling.cpp clear_bodies), so the box
+// keeps its height (before, the fill's top granules overlapped its shell and threw it up:
+// 0.46 m in 0.3 s).
+TEST(TerrainManager, PatchPromotedUnderADrivenBoxDoesNotLaunchIt) {
+  test::Rig rig(test::terrain_8m("flat"));
+  ASSERT_TRUE(rig.ok()) << rig.error;
+  BulletWorld& world = *rig.world;
+  RigidBodyDef box;
+  box.shape.kind = RigidShapeKind::Box;
+  box.shape.half_extents = {0.2f, 0.1f, 0.2f};
+  box.mass = 20.0f;
+  box.position = {2.5, 1.0 + 0.1, 4.0};
+  auto id = rig.core->add_body(box);
+  ASSERT_TRUE(id.ok());
+  TerrainManagerDef def = test::small_manager_def();
+  def.lod.apron = 0.3;
+  ASSERT_TRUE(rig.start(def).ok()) << rig.error;
+  // Set down (its first frames on the heightfield may ask for a patch), then at rest on the
+  // heightfield with no patch.
+  ASSERT_TRUE(rig.frames(30).ok()) << rig.error;
+  ASSERT_TRUE(rig.demote_all().ok()) << rig.error;
+  ASSERT_TRUE(rig.frames(15).ok()) << rig.error;
+  ASSERT_EQ(rig.manager->active_patches(), 0);
+  const double y_rest = world.state(*id).position.y();
+  // Pushed along +x by 0.8 m g, more than the friction it meets on the heightfield.
+  const Eigen::Vector3f push(0.8f * 20.0f * 9.81f, 0.0f, 0.0f);
+  // Its lowest point (the bounds' bottom): pushed at the centre of mass against friction at
+  // its base, the box pitches by a degree or two while it ploughs, which moves its centre by
+  // millimetres; a fill overlapping it lifts it whole.
+  auto bottom = [&] {
+    Eigen::Vector3d lo, hi;
+    world.bounds(*id, &lo, &hi);
+    return lo.y();
+  };
+  double y_before = bottom(), y_min = 1e9, y_max = -1e9, vy_max = 0;
+  int ready_frame = -1;
+  for (int f = 0; f < 30; ++f) {
+    world.apply_force(*id, push, Eigen::Vector3f::Zero());
+    ASSERT_TRUE(rig.frame().ok()) << rig.error;
+    const BodyState st = world.state(*id);
+    if (ready_frame < 0 && rig.manager->ready_patches() > 0) ready_frame = f;
+    if (ready_frame < 0) {
+      y_before = bottom();
+      continue;
+    }
+    y_min = std::min(y_min, bottom());
+    y_max = std::max(y_max, bottom());
+    vy_max = std::max(vy_max, double(std::abs(st.linear_velocity.y())));
+  }
+  ASSERT_GE(ready_frame, 0) << "the moving box asked for a patch";
+  EXPECT_FALSE(world.terrain_collision(*id)) << "the patch carries it";
+  const double d = 2.0 * def.material.radius;  // m, a sphere's diameter
+  const BodyState s1 = world.state(*id);
+  std::printf("driven box: centre at rest y = %.4f m; bottom %.4f m when its patch became ready (frame %d), then %.4f .. "
+              "%.4f m (d = %.3f m), |vy| <= %.3f m/s; x = %.3f m, vx = %.3f m/s at the end\n",
+              y_rest, y_before, ready_frame, y_min, y_max, d, vy_max, s1.position.x(), s1.linear_velocity.x());
+  EXPECT_LT(y_max - y_before, 0.1 * d) << "thrown up by the fill";
+  EXPECT_LT(y_before - y_min, 0.5 * d) << "sunk into the fill";
+  EXPECT_LT(vy_max, 0.2) << "m/s";
+  EXPECT_GT(s1.position.x(), 2.55) << "it moved";
+}
+
+// A body resting on the heightfield when a patch is promoted under it (a tool's request)
+// moves less than a tenth of a granule sphere's diameter.
+TEST(TerrainManager, PatchPromotedUnderARestingBoxLeavesItWhereItIs) {
+  test::Rig rig(test::terrain_8m("hills"));
+  ASSERT_TRUE(rig.ok()) << rig.error;
+  BulletWorld& world = *rig.world;
+  RigidBodyDef box;
+  box.shape.kind = RigidShapeKind::Box;
+  box.shape.half_extents = {0.2f, 0.1f, 0.2f};
+  box.mass = 20.0f;
+  box.position = {4.0, 1.0 + 0.15, 4.0};
+  auto id = rig.core->add_body(box);
+  ASSERT_TRUE(id.ok());
+  TerrainManagerDef def = test::small_manager_def();
+  ASSERT_TRUE(rig.start(def).ok()) << rig.error;
+  ASSERT_TRUE(rig.frames(60).ok()) << rig.error;
+  ASSERT_TRUE(rig.demote_all().ok()) << rig.error;
+  ASSERT_TRUE(rig.frames(30).ok()) << rig.error;
+  const BodyState s0 = world.state(*id);
+  ASSERT_LT(s0.linear_velocity.norm(), 0.05f) << "at rest";
+  rig.manager->request_patch(3.6, 3.6, 4.4, 4.4, rig.t());
+  double moved = 0;
+  ASSERT_TRUE(rig.frames(30, [&] {
+                moved = std::max(moved, (world.state(*id).position - s0.position).norm());
+                return false;
+              }).ok())
+      << rig.error;
+  ASSERT_EQ(rig.manager->ready_patches(), 1);
+  std::printf("resting box over a new patch: moved at most %.5f m (d = %.3f m)\n", moved, 2.0 * def.material.radius);
+  EXPECT_LT(moved, 0.1 * 2.0 * def.material.radius) << "m";
+}
+
+// A body driven across a patch's edge (Leach & Marais left it open): a sphere
+// resting in the sand is pushed sideways at 0.4 m/s for 3 s, 1.2 m, past the edge of the
+// patch it landed on. A patch is asked for ahead of it, filled while it comes, and takes it
+// over; the one behind is released when its slot is needed. The sphere stays on particles in
+// every frame, no frame both demotes and promotes, and the volume ledger of all patches
+// closes.
+TEST(TerrainManager, BodyDrivenAcrossPatchEdgeStaysOnParticles) {
+  test::Rig rig(test::terrain_8m("flat"));
+  ASSERT_TRUE(rig.ok()) << rig.error;
+  BulletWorld& world = *rig.world;
+  auto id = rig.add_sphere(0.1f, 5.0f, {3.0, 1.25, 4.0});
+  ASSERT_TRUE(id.ok());
+  auto def = test::small_manager_def();
+  def.slots = 2;  // the patch it is in and the one ahead
+  def.granules_per_slot = 12000;
+  def.patch_depth = 0.2;
+  def.depth_resolution = 256;
+  def.lod.apron = 0.2;
+  ASSERT_TRUE(rig.start(def).ok()) << rig.error;
+  int off_particles = 0, driven = 0;
+  for (int f = 0; f < 240; ++f) {
+    if (rig.t() >= 1.0) {  // landed and settled: drive it
+      BodyState st = world.state(*id);
+      st.linear_velocity = {0.4f, st.linear_velocity.y(), 0.0f};
+      world.set_state(*id, st);
+      ++driven;
+      off_particles += world.terrain_collision(*id);
+    }
+    ASSERT_TRUE(rig.frame().ok()) << rig.error;
+  }
+  const BodyState st = world.state(*id);
+  EXPECT_GT(st.position.x(), 3.0 + 0.8) << "the sphere was driven past the first patch's edge";
+  EXPECT_EQ(off_particles, 0) << "frames the sphere spent on the heightfield instead of particles, of " << driven;
+  ASSERT_TRUE(rig.demote_all().ok()) << rig.error;
+  const auto rep = rig.manager->report();
+  EXPECT_GE(rep["pool"]["extensions"].get<int>(), 1);
+  // One conversion a frame: no frame (simulated time) both demotes and promotes.
+  for (const auto& a : rep["conversions"])
+    for (const auto& b : rep["conversions"])
+      if (a["kind"] == "demoted" && b["kind"] == "promoted" && a["time_s"].get<double>() < 3.99)
+        EXPECT_NE(a["time_s"].get<double>(), b["time_s"].get<double>()) << "patch " << a["patch"] << " and " << b["patch"];
+  EXPECT_LT(std::abs(rep["ledger"]["total"]["error_pct"].get<double>()), 3.0) << rep["ledger"].dump(2);
+  std::printf("driven: x %.2f m, %d extensions, %d of %d frames off particles, ledger %.2f %%\n", st.position.x(),
+              rep["pool"]["extensions"].get<int>(), off_particles, driven, rep["ledger"]["total"]["error_pct"].get<double>());
+}

@@ -99,7 +99,7 @@ TEST(World, ApiAndSceneRunGiveTheSameHash) {
     "bodies": [{"name": "ball", "shape": {"type": "sphere", "radius": 0.1}, "mass": 5.0,
                 "pose": {"position": [2.0, 1.3, 2.0]}}],
     "simulation": {"dt": 0.016666666666666666, "duration": 0.5, "threads": 1,
-                   "pool": {"slots": 1, "granules_per_slot": 6000}, "lod": {"apron": 0.3}},
+                   "pool": {"slots": 1, "granules_per_slot": 6000}, "lod": {"apron": 0.3}, "frame_budget_ms": "off"},
     "outputs": {"report": false}
   })";
   auto scene = parse_scene(text, "two_doors.json", "");
@@ -124,6 +124,7 @@ TEST(World, ApiAndSceneRunGiveTheSameHash) {
   t.granules_per_slot = 6000;
   t.lod_apron = 0.3;
   t.threads = 1;
+  t.frame_budget_ms = std::numeric_limits<double>::infinity();  // as the scene: no budget (its choices follow the clock)
   t.gl_depth_render = true;  // as a scene run: the GL depth render when a context exists, else the CPU one
   auto terrain = api::Terrain::create(t);
   ASSERT_TRUE(terrain.ok()) << terrain.message();

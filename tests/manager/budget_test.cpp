@@ -1,0 +1,147 @@
+// The frame budget (manager/budget.cpp): what it chooses for a new patch, what it reports, and
+// that a budget with room to spare changes nothing. Choices that depend on a machine's speed
+// are tested with the cost model pinned (TerrainManagerDef::budget_substep_ms / _sphere_ns),
+// so they are the same on every machine and under any load.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+
+#include "manager/terrain_manager.hpp"
+#include "tests/manager/rig.hpp"
+
+namespace sandpatch {
+namespace {
+
+using ojson = nlohmann::ordered_json;
+
+// The small sphere's patch on the 8 m flat terrain, with one frame at 1/60 s.
+TerrainManagerDef budget_def(double budget_ms) {
+  TerrainManagerDef d = test::sphere_patch_def();
+  d.granules_per_slot = 12000;
+  d.lod.apron = 0.6;  // a patch of some size: the coarser rungs' tile periods are 2 and 3 times wider
+  d.frame_budget_ms = budget_ms;
+  d.budget_substep_ms = 0.01;  // pinned: 10 µs a substep ...
+  d.budget_sphere_ns = 100;    // ... and 100 ns a sphere-substep
+  return d;
+}
+
+// A 0.1 m sphere dropped from 0.3 m onto the flat sand at (4, 4); the final world hash and
+// the manager's report after `frames` frames and demote_all.
+struct Drop {
+  std::uint64_t hash = 0;
+  ojson report;
+  std::string error;
+};
+Drop drop(const TerrainManagerDef& def, int frames) {
+  Drop d;
+  test::Rig rig(test::terrain_8m("flat"));
+  if (!rig.ok()) return {0, {}, rig.error};
+  if (!rig.add_sphere(0.1f, 5.0f, {4.0, 1.0 + 0.1 + 0.3, 4.0}).ok()) return {0, {}, "add_sphere"};
+  if (!rig.start(def).ok() || !rig.frames(frames).ok() || !rig.demote_all().ok()) return {0, {}, rig.error};
+  d.hash = rig.core->state_hash();
+  d.report = rig.manager->report();
+  return d;
+}
+
+// With room to spare the budget chooses what no budget would (rung 0: the requested scale and
+// apron) and the run is bit-for-bit the same: its calibration leaves nothing in the slot.
+TEST(Budget, AGenerousBudgetChangesNothing) {
+  const Drop off = drop(test::sphere_patch_def(), 40);
+  ASSERT_TRUE(off.error.empty()) << off.error;
+  TerrainManagerDef d = test::sphere_patch_def();
+  d.frame_budget_ms = 1e5;  // measured cost model (calibrated at creation)
+  const Drop on = drop(d, 40);
+  ASSERT_TRUE(on.error.empty()) << on.error;
+  EXPECT_FALSE(off.report["budget"]["on"].get<bool>());
+  EXPECT_TRUE(on.report["budget"]["on"].get<bool>());
+  ASSERT_GE(on.report["budget"]["patches"].size(), 1u);
+  for (const auto& p : on.report["budget"]["patches"]) {
+    EXPECT_EQ(p["rung"].get<int>(), 0);
+    EXPECT_TRUE(p["fits"].get<bool>());
+    EXPECT_EQ(p["particle_scale"].get<double>(), 1.0);
+  }
+  EXPECT_EQ(on.report["budget"]["patches_degraded"].get<int>(), 0);
+  EXPECT_EQ(on.hash, off.hash) << "a budget with room to spare must not change the run";
+}
+
+// A tight budget: the patch is promoted at the finest rung whose predicted DEM cost fits 80 %
+// of the budget, and the prediction is the cost model's formula; every finer rung did not fit.
+TEST(Budget, ATightBudgetCoarsensTheNewPatchUntilItFits) {
+  // What the requested patch costs, from the report of a run without a budget: its granules.
+  TerrainManagerDef no_budget = budget_def(1.0);
+  no_budget.frame_budget_ms = std::numeric_limits<double>::infinity();
+  const Drop off = drop(no_budget, 2);
+  ASSERT_TRUE(off.error.empty()) << off.error;
+  const TerrainManagerDef d = budget_def(5.0);
+  const Drop on = drop(d, 2);
+  ASSERT_TRUE(on.error.empty()) << on.error;
+  const auto& b = on.report["budget"];
+  ASSERT_EQ(b["patches"].size(), 1u) << b.dump(1);
+  const auto& p = b["patches"][0];
+  // The sphere's r = 2.5 cm granules at 1/60 s frames; the substeps the DEM takes come from
+  // the material, so the prediction is checked against what a frame of these spheres costs.
+  const double spheres = 4.0 * p["granules_predicted"].get<double>();
+  const double per_substep = d.budget_substep_ms + d.budget_sphere_ns * 1e-6 * spheres;
+  const double substeps = p["predicted_ms"].get<double>() / per_substep;
+  EXPECT_NEAR(substeps, std::round(substeps), 1e-6) << "predicted = n_sub (a + b spheres), n_sub whole";
+  EXPECT_GE(std::round(substeps), 1.0);
+  EXPECT_NEAR(p["available_ms"].get<double>(), 0.8 * 5.0, 1e-12) << "80 % of the budget, nothing else live";
+  EXPECT_TRUE(p["fits"].get<bool>());
+  EXPECT_LE(p["predicted_ms"].get<double>(), p["available_ms"].get<double>());
+  EXPECT_GT(p["rung"].get<int>(), 0) << "5 ms cannot hold the requested patch of " << off.report["ledger"]["patches"][0]["granules"];
+  EXPECT_EQ(b["patches_degraded"].get<int>(), 1);
+  EXPECT_EQ(b["overruns"].get<int>(), 0);
+  // The granules it predicted are the ones it filled, within 25 % (the soil volume at the tile's
+  // packing against the tile's own granules cut to the surface, less those a body displaces).
+  EXPECT_NEAR(p["granules"].get<double>(), p["granules_predicted"].get<double>(), 0.25 * p["granules_predicted"].get<double>());
+}
+
+// Nothing fits and nothing else is live: the patch still comes (at the coarsest rung) and the
+// report counts the overrun with the milliseconds it needed, never a silent stall.
+TEST(Budget, NothingFitsIsReportedWithTheCostItNeeded) {
+  const Drop on = drop(budget_def(0.001), 2);
+  ASSERT_TRUE(on.error.empty()) << on.error;
+  const auto& b = on.report["budget"];
+  ASSERT_EQ(b["patches"].size(), 1u);
+  EXPECT_FALSE(b["patches"][0]["fits"].get<bool>());
+  EXPECT_EQ(b["overruns"].get<int>(), 1);
+  EXPECT_GT(b["patches"][0]["predicted_ms"].get<double>(), b["patches"][0]["available_ms"].get<double>());
+  EXPECT_EQ(b["patches"][0]["rung"].get<int>(), 3) << "the coarsest rung";
+}
+
+// Bad budgets are refused naming the field.
+TEST(Budget, BadBudgetsAreRefused) {
+  for (double v : {0.0, -1.0, std::nan("")}) {
+    test::Rig rig(test::terrain_8m("flat"));
+    TerrainManagerDef d = test::sphere_patch_def();
+    d.frame_budget_ms = v;
+    const Status s = rig.start(d);
+    ASSERT_FALSE(s.ok()) << v;
+    EXPECT_NE(s.message().find("frame_budget_ms"), std::string::npos) << s.message();
+  }
+  test::Rig rig(test::terrain_8m("flat"));
+  TerrainManagerDef d = test::sphere_patch_def();
+  d.frame_budget_fraction = -0.5;
+  const Status s = rig.start(d);
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("frame_budget_fraction"), std::string::npos) << s.message();
+}
+
+// The frames section of World's report counts the frames over the budget against the budget
+// it states, and the frames with a patch awake.
+TEST(Budget, FramesOverBudgetAreCounted) {
+  test::Rig rig(test::terrain_8m("flat"));
+  ASSERT_TRUE(rig.add_sphere(0.1f, 5.0f, {4.0, 1.0 + 0.1 + 0.3, 4.0}).ok());
+  ASSERT_TRUE(rig.start(budget_def(1e-3)).ok()) << rig.error;
+  ASSERT_TRUE(rig.frames(20).ok()) << rig.error;
+  const ojson f = rig.core->report()["frames"];
+  EXPECT_DOUBLE_EQ(f["budget_ms"].get<double>(), 1e-3);
+  EXPECT_EQ(f["over_budget"].get<long long>(), 20) << "every frame takes more than 1 µs";
+  EXPECT_GT(f["max_over_budget"].get<double>(), 1.0);
+  EXPECT_GT(f["patch_awake_frames"].get<long long>(), 0);
+  EXPECT_LE(f["patch_awake_frames"].get<long long>(), 20);
+}
+
+}  // namespace
+}  // namespace sandpatch
