@@ -79,7 +79,7 @@ struct Field {
   const char* api;    // "" = scene files only
   const char* note;
 };
-inline constexpr std::array<Field, 31> kOtherFields = {{
+inline constexpr std::array<Field, 32> kOtherFields = {{
     {"terrain.source", "TerrainDef.file, TerrainDef.procedural (+ samples_x/z, base_height, slope_x/z, amplitude, wavelength, noise_seed, octaves)", "a heightmap file or a generator"},
     {"", "TerrainDef.heights", "an array from the game; scene files name a heightmap file instead"},
     {"terrain.spacing", "TerrainDef.spacing", "with an esri_ascii source, a spacing given overrides the file's cellsize (TerrainDef.spacing_overrides_file)"},
