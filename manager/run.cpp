@@ -78,7 +78,7 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
   std::vector<std::string> warnings;
   std::vector<std::size_t> next_export(scene.outputs.heightfields.size(), 0);
   std::vector<std::size_t> next_frame(scene.outputs.frames.size(), 0);
-  FrameWriter images(hf, manager);
+  FrameWriter images(world);
   std::size_t images_skipped = 0;
   std::vector<std::string> written;
   ProgressPrinter progress(opt.progress, frames, dt);
