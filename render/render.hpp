@@ -63,7 +63,7 @@ struct RendererDef {
   // neighbours below the equator, are darker on average than the smooth heightfield they were
   // cut from; the gain brings a bed's mean brightness back to the terrain's (measured in
   // tests/render/particle_renderer_test.cpp, FadedInPatchLooksLikeTheHeightfield).
-  float particle_gain = 1.15f;
+  float particle_gain = 1.0f;
   // Screen-space ambient occlusion (shaders/render/ao.frag): radius (m, world) of the
   // neighbourhood a pixel looks at, > 0; strength in [0, 4] (0 = off); samples per pixel in [1, 64].
   float ao_radius = 1.0f;

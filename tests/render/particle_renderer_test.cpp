@@ -303,6 +303,9 @@ TEST(ParticleRenderer, CraterInAPatchShowsWithItsFootprintCutOut) {
   ParticleBuffer crater(bed_with_crater(c, w, r_g, 2 * r_g, 0.5f));
   const auto mask = disc_mask(*s.renderer, s.cam, c.x(), c.y(), 0.6);
   ASSERT_GT(masked(mask), 300);
+  s.renderer->clear_particles();
+  auto bare = s.renderer->render(s.cam);
+  ASSERT_TRUE(bare.ok());
   double change[2];  // [cut]
   for (int cut = 0; cut < 2; ++cut) {
     Image img[2];
@@ -319,6 +322,18 @@ TEST(ParticleRenderer, CraterInAPatchShowsWithItsFootprintCutOut) {
     }
     if (cut) ASSERT_TRUE(save_png(std::string(SANDPATCH_TEST_OUTPUT_DIR) + "/patch_crater.actual.png", img[1]).ok());
     change[cut] = mean_luma_change(img[0], img[1], mask);
+    if (cut) {
+      // The flat bed seen in full is about as bright as the terrain it replaces.
+      double lb = 0, lt = 0;
+      for (int y = 0; y < img[0].height; ++y)
+        for (int x = 0; x < img[0].width; ++x)
+          if (mask[std::size_t(y) * img[0].width + x]) {
+            lb += luma(img[0].pixel(x, y));
+            lt += luma(bare->pixel(x, y));
+          }
+      std::printf("flat bed mean luma %.1f, terrain %.1f\n", lb / masked(mask), lt / masked(mask));
+      EXPECT_LT(std::fabs(lb - lt) / masked(mask), 12.0);
+    }
   }
   std::printf("crater pixels %d: mean |luma change| %.1f with the footprint cut, %.1f without\n", masked(mask), change[1],
               change[0]);
