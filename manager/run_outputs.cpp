@@ -1,6 +1,10 @@
 #include "manager/run_outputs.hpp"
 
+#include <cerrno>
+#include <csignal>
 #include <cstdio>
+#include <cstdlib>
+#include <cstring>
 #include <fstream>
 #include <unistd.h>
 
@@ -242,6 +246,74 @@ Status FrameWriter::write(const render::CameraView& view, const std::string& pat
   if (!img) return img.errors();
   if (!renderer_) return Ok{};
   return render::save_png(path, img.value());
+}
+
+namespace {
+
+// `s` quoted for /bin/sh: inside single quotes, with every ' written as '\''.
+std::string shell_quote(const std::string& s) {
+  std::string q = "'";
+  for (char c : s) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return q + "'";
+}
+
+}  // namespace
+
+Status VideoWriter::available() {
+  const char* path = std::getenv("PATH");
+  std::string dirs = path ? path : "";
+  for (std::size_t a = 0; a <= dirs.size();) {
+    std::size_t b = dirs.find(':', a);
+    if (b == std::string::npos) b = dirs.size();
+    const std::string dir = dirs.substr(a, b - a);
+    if (!dir.empty() && access((dir + "/ffmpeg").c_str(), X_OK) == 0) return Ok{};
+    a = b + 1;
+  }
+  return Error{"", "", "", "ffmpeg is not installed (no executable ffmpeg on PATH; Debian package ffmpeg, "
+                           "scripts/install-deps.sh installs it)"};
+}
+
+VideoWriter::~VideoWriter() {
+  if (pipe_) pclose(pipe_);
+}
+
+Status VideoWriter::open(const std::string& path, int width, int height, double fps) {
+  if (pipe_) return Error{path, "", "", "a video is already open"};
+  if (width < 1 || height < 1 || !(fps > 0 && std::isfinite(fps)))
+    return Error{path, "", std::to_string(width) + " x " + std::to_string(height) + " at " + std::to_string(fps),
+                 "needs a size of at least 1 x 1 and a frame rate > 0"};
+  // A broken pipe (ffmpeg gone) must come back as a write error, not end the program.
+  std::signal(SIGPIPE, SIG_IGN);
+  char fps_s[64];
+  std::snprintf(fps_s, sizeof fps_s, "%.9g", fps);
+  const std::string cmd = "ffmpeg -hide_banner -loglevel error -y -f rawvideo -pix_fmt rgba -s " + std::to_string(width) +
+                          "x" + std::to_string(height) + " -r " + fps_s +
+                          " -i - -vf 'pad=ceil(iw/2)*2:ceil(ih/2)*2' -pix_fmt yuv420p " +
+                          shell_quote(!path.empty() && path[0] == '-' ? "./" + path : path);  // not an option
+  pipe_ = popen(cmd.c_str(), "w");
+  if (!pipe_) return Error{path, "", "", std::string("cannot start ffmpeg: ") + std::strerror(errno)};
+  path_ = path;
+  width_ = width;
+  height_ = height;
+  return Ok{};
+}
+
+Status VideoWriter::add(const render::Image& img) {
+  if (!pipe_) return Error{path_, "", "", "the video is not open"};
+  if (img.width != width_ || img.height != height_)
+    return Error{path_, "", std::to_string(img.width) + " x " + std::to_string(img.height),
+                 "every video frame must be " + std::to_string(width_) + " x " + std::to_string(height_)};
+  if (std::fwrite(img.rgba.data(), 1, img.rgba.size(), pipe_) != img.rgba.size())
+    return Error{path_, "", "", "ffmpeg stopped taking frames (see its messages above)"};
+  return Ok{};
+}
+
+Status VideoWriter::close() {
+  if (!pipe_) return Ok{};
+  const int rc = pclose(pipe_);
+  pipe_ = nullptr;
+  if (rc != 0) return Error{path_, "", "", "ffmpeg failed (exit status " + std::to_string(rc) + "; see its messages above)"};
+  return Ok{};
 }
 
 }  // namespace sandpatch

@@ -2,6 +2,7 @@
 // renderer), file names from output patterns, atomic writes, the progress line.
 #pragma once
 
+#include <cstdio>
 #include <filesystem>
 #include <memory>
 #include <string>
@@ -83,6 +84,30 @@ class FrameWriter {
   gl::Context* context_ = nullptr;      // the context in use (own or the manager's)
   std::unique_ptr<render::SceneRenderer> renderer_;
   std::string why_;
+};
+
+// A video piped to ffmpeg (`sandpatch run --video FILE`): RGBA frames of one size in, the
+// format from the file's extension (ffmpeg's choice of codec), yuv420p, odd sizes padded to even.
+class VideoWriter {
+ public:
+  VideoWriter() = default;
+  ~VideoWriter();
+  VideoWriter(const VideoWriter&) = delete;
+  VideoWriter& operator=(const VideoWriter&) = delete;
+  // Ok when an executable `ffmpeg` is on PATH; otherwise says so (and which package has it).
+  static Status available();
+  // Starts ffmpeg writing `path` (overwritten) at `fps` frames per second of video.
+  Status open(const std::string& path, int width, int height, double fps);
+  bool is_open() const { return pipe_ != nullptr; }
+  // One frame; its size must be the one given to open(). Errors name the path.
+  Status add(const render::Image& img);
+  // Waits for ffmpeg; its exit status other than 0 is an error naming the path.
+  Status close();
+
+ private:
+  std::FILE* pipe_ = nullptr;
+  std::string path_;
+  int width_ = 0, height_ = 0;
 };
 
 }  // namespace sandpatch

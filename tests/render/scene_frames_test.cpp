@@ -3,6 +3,8 @@
 // the ball makes changes the picture where it is.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <chrono>
 #include <cmath>
 
 #include "manager/run_outputs.hpp"
@@ -81,4 +83,27 @@ TEST(SceneFrames, DefaultSceneShowsBothBodiesWhereTheReportSaysTheyAre) {
     const std::uint8_t* n = none->pixel(x, y);
     EXPECT_GT(std::abs(a[0] - n[0]) + std::abs(a[1] - n[1]) + std::abs(a[2] - n[2]), 60) << b["name"];
   }
+  // The cost of one image of this frame at the scene camera's own 640 x 360 (docs/BENCHMARKS.md
+  // "Rendering: images of a run"): median of 5, the whole FrameWriter::render (granules
+  // copied from the simulation, bodies, shadow map, frame, ambient occlusion, read-back).
+  render::CameraView full = cam;
+  full.width = 640;
+  full.height = 360;
+  auto median_ms = [&](const render::FrameFlags& f) {
+    std::vector<double> ms;
+    for (int k = 0; k < 5; ++k) {
+      const auto t0 = std::chrono::steady_clock::now();
+      EXPECT_TRUE(images.render(full, f).ok());
+      ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+    }
+    std::sort(ms.begin(), ms.end());
+    return ms[2];
+  };
+  const double no_bodies = median_ms(bare);
+  const double all = median_ms({});
+  const auto st = images.renderer()->stats();
+  std::printf("image 640x360 on %s: median %.1f ms (%lld granules, %d bodies, shadow map %d); without the bodies and "
+              "their shadow map %.1f ms\n",
+              images.renderer()->renderer_string().c_str(), all, (long long)st.particles, st.bodies, int(st.shadows), no_bodies);
+  EXPECT_GT(st.particles, 0) << "a patch is live at 0.6 s";
 }
