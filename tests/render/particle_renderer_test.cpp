@@ -141,7 +141,9 @@ TEST(ParticleRenderer, FadedInPatchLooksLikeTheHeightfield) {
     if (fade == 1.0f) save_png(std::string(SANDPATCH_TEST_OUTPUT_DIR) + "/patch_fade1.actual.png", img.value());
   }
   save_png(std::string(SANDPATCH_TEST_OUTPUT_DIR) + "/patch_alone.actual.png", alone.value());
-  EXPECT_LE(mean[0], 20.0);          // alike: the documented bound (docs/rendering.md; measured 17.0)
+  // Alike: the documented bound (docs/rendering.md; measured 19.7 since granules are shaded as
+  // spheres over their bed's slopes with a tint per granule, 17.0 before).
+  EXPECT_LE(mean[0], 24.0);
   EXPECT_GT(mean[0], 0.5);           // but really drawn
   EXPECT_LT(mean[1], mean[0]);
   EXPECT_EQ(mean[2], 0.0);
