@@ -72,6 +72,15 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
                     format_number(kMaxRunFrames) + " steps");
   const long long frames = std::max(1LL, (long long)steps);
 
+  // The video: a camera to film, a frame rate the steps can give, ffmpeg to encode.
+  if (!opt.video.empty()) {
+    if (scene.cameras.empty())
+      return fail(ExitCode::BadInput, "options", "--video " + opt.video + ": the scene has no camera to film");
+    if (!(opt.video_fps > 0 && opt.video_fps <= 1.0 / dt * (1 + 1e-9)))
+      return fail(ExitCode::BadInput, "options", "--video-fps " + format_number(opt.video_fps) + ": must be in (0, 1 / dt = " +
+                                                      format_number(1.0 / dt) + "] frames per simulated second");
+    if (Status s = VideoWriter::available(); !s) return fail(ExitCode::BadInput, "options", "--video " + opt.video + ": " + s.message());
+  }
   std::string failed_part;
   // Start-up: the tiles a run settles (seconds on a first run; read back from the tile cache
   // later) print their progress as the frames do.
@@ -97,9 +106,11 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
   std::vector<std::string> warnings;
   std::vector<std::size_t> next_export(scene.outputs.heightfields.size(), 0);
   std::vector<std::size_t> next_frame(scene.outputs.frames.size(), 0);
-  FrameWriter images(hf, manager);
+  FrameWriter images(world);
   std::size_t images_skipped = 0;
   std::vector<std::string> written;
+  VideoWriter video;
+  long long video_frames = 0;  // video frame k shows simulated time k / video_fps
 
   auto export_heightfield = [&](const HeightfieldOutputDef& o, long long frame, double t) -> Status {
     const fs::path p = out_dir / expand_pattern(o.file, frame, t, format_ext(o.format));
@@ -130,6 +141,16 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
       if (Status s = images.write(camera_at(*cam, t), p.string()); !s) return s;
       if (images.unavailable()) ++images_skipped;
       else written.push_back(p.string());
+    }
+    while (!opt.video.empty() && double(video_frames) / opt.video_fps <= t + 1e-9) {
+      const render::CameraView cam = camera_at(scene.cameras.front(), t);
+      auto img = images.render(cam);
+      if (!img) return img.errors();
+      if (images.unavailable()) return Error{opt.video, "", "", "no image for the video: " + images.why()};
+      if (!video.is_open())
+        if (Status s = video.open(opt.video, cam.width, cam.height, opt.video_fps); !s) return s;
+      if (Status s = video.add(img.value()); !s) return s;
+      ++video_frames;
     }
     for (std::size_t k = 0; k < scene.outputs.heightfields.size(); ++k) {
       const auto& o = scene.outputs.heightfields[k];
@@ -199,6 +220,10 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
     for (const auto& o : scene.outputs.heightfields)
       if (o.at_end)
         if (Status s = export_heightfield(o, frames, t_end); !s) return fail(ExitCode::RuntimeFailure, "outputs", s.message());
+  }
+  if (video.is_open()) {
+    if (Status s = video.close(); !s) return fail(ExitCode::RuntimeFailure, "outputs", s.message());
+    written.push_back(opt.video);
   }
   if (images_skipped > 0)
     warnings.push_back("outputs.frames: " + std::to_string(images_skipped) +

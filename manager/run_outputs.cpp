@@ -1,7 +1,11 @@
 #include "manager/run_outputs.hpp"
 
 #include <algorithm>
+#include <cerrno>
+#include <csignal>
 #include <cstdio>
+#include <cstdlib>
+#include <cstring>
 #include <fstream>
 #include <unistd.h>
 
@@ -110,9 +114,54 @@ Status FrameWriter::heightfield_changed(const std::vector<GridRegion>& regions) 
   return Ok{};
 }
 
-Status FrameWriter::write(const render::CameraView& view, const std::string& path) {
-  // With the GL backend the renderer shares the simulation's context, so it can draw the
-  // particles straight from the simulation's buffers; otherwise it makes its own.
+namespace {
+
+render::BodyInstance instance(const RigidShape& shape, const Eigen::Vector3d& position, const Eigen::Quaternionf& orientation,
+                              int entry) {
+  render::BodyInstance b;
+  switch (shape.kind) {
+    case RigidShapeKind::Sphere: b.kind = render::BodyShapeKind::Sphere; break;
+    case RigidShapeKind::Box: b.kind = render::BodyShapeKind::Box; break;
+    case RigidShapeKind::Cylinder: b.kind = render::BodyShapeKind::Cylinder; break;
+    case RigidShapeKind::Capsule: b.kind = render::BodyShapeKind::Capsule; break;
+    case RigidShapeKind::Mesh: b.kind = render::BodyShapeKind::Mesh; break;
+  }
+  b.radius = shape.radius;
+  b.height = shape.height;
+  b.half_extents = shape.half_extents;
+  b.vertices = shape.vertices;
+  b.triangles = shape.triangles;
+  b.position = position;
+  b.orientation = orientation;
+  b.albedo = render::body_palette(entry);
+  return b;
+}
+
+}  // namespace
+
+std::vector<render::BodyInstance> body_instances(const World& world) {
+  std::vector<render::BodyInstance> out;
+  const BulletWorld& bw = world.bullet();
+  const auto& entries = world.entries();
+  std::vector<const RigidBodyDef*> due(entries.size(), nullptr);  // scheduled for now or earlier, not spawned yet
+  for (const auto& [entry, def] : world.pending())
+    if (entry < entries.size() && entries[entry].spawn_time <= world.time() + 1e-9) due[entry] = &def;
+  for (std::size_t k = 0; k < entries.size(); ++k) {
+    const World::Entry& e = entries[k];
+    if (due[k]) {
+      out.push_back(instance(due[k]->shape, due[k]->position, due[k]->orientation, int(k)));
+      continue;
+    }
+    if (!e.spawned() || e.removed || !world.alive(e.id)) continue;
+    const BodyState st = bw.state(e.id);
+    out.push_back(instance(bw.definition(e.id).shape, st.position, st.orientation, int(k)));
+  }
+  return out;
+}
+
+// The renderer, made on the first image (in the simulation's GL context with the GL backend,
+// so it can draw the particles straight from the simulation's buffers; otherwise its own).
+Status FrameWriter::prepare() {
   gl::Context* shared = manager_ ? manager_->gl_context() : nullptr;
   if (!renderer_ && why_.empty()) {
     if (!shared) {
@@ -125,42 +174,64 @@ Status FrameWriter::write(const render::CameraView& view, const std::string& pat
     if (!r) return r.errors();
     renderer_ = std::move(*r);
   }
-  if (!renderer_) return Ok{};
-  if (shared) return write_gpu(view, path);
+  return Ok{};
+}
+
+namespace {
+
+// A ready patch's footprint (world x0, z0, x1, z1, m): the heightfield samples it covers.
+Eigen::Vector4d footprint(const TerrainManager::PatchInfo& p, const Heightfield& hf) {
+  if (!p.ready || p.region.empty()) return Eigen::Vector4d::Zero();
+  const double h = hf.spacing();
+  return {hf.origin_x() + h * p.region.i0, hf.origin_z() + h * p.region.j0,
+          hf.origin_x() + h * (p.region.i0 + p.region.ni - 1), hf.origin_z() + h * (p.region.j0 + p.region.nj - 1)};
+}
+
+// The band over which the terrain fades into a patch: six granule diameters (m).
+float footprint_band(const TerrainManager::PatchInfo& p) { return float(12.0 * p.granule_radius_world); }
+
+}  // namespace
+
+// CPU backend: the granule spheres copied into one buffer, one source per patch so each fades
+// in on its own (Leach & Marais §5.1).
+Status FrameWriter::set_particles_cpu(std::unique_ptr<render::ParticleBuffer>& buf) {
   std::vector<float> xyzr;
   std::vector<std::pair<std::size_t, float>> groups;
+  std::vector<TerrainManager::PatchInfo> patches;
   if (manager_) {
     manager_->particles(xyzr);  // may make the manager's GL context current
     groups = manager_->particle_groups();
+    patches = manager_->patches();  // the same slot order as the groups
   }
   if (Status s = context_->make_current(); !s) return s;
-  // One buffer; one source per patch so each fades in on its own (Leach & Marais §5.1).
-  std::unique_ptr<render::ParticleBuffer> buf;
-  if (!xyzr.empty()) {
-    std::vector<Eigen::Vector4f> p(xyzr.size() / 4);
-    for (std::size_t k = 0; k < p.size(); ++k) p[k] = {xyzr[4 * k], xyzr[4 * k + 1], xyzr[4 * k + 2], xyzr[4 * k + 3]};
-    buf = std::make_unique<render::ParticleBuffer>(p);
-    std::vector<render::ParticleSource> sources;
-    std::size_t first = 0;
-    for (const auto& [count, fade] : groups) {
-      render::ParticleSource src = buf->source({hf_.origin_x(), hf_.origin_y(), hf_.origin_z()}, 1.0f, fade);
-      src.first = std::int64_t(first);
-      src.count = std::int64_t(count);
-      first += count;
-      if (count > 0) sources.push_back(src);
-    }
-    if (Status s = renderer_->set_particles(sources); !s) return s;
-  } else {
+  if (xyzr.empty()) {
     renderer_->clear_particles();
+    return Ok{};
   }
-  Status s = renderer_->render_png(view, path);
-  renderer_->clear_particles();
-  return s;
+  std::vector<Eigen::Vector4f> p(xyzr.size() / 4);
+  for (std::size_t k = 0; k < p.size(); ++k) p[k] = {xyzr[4 * k], xyzr[4 * k + 1], xyzr[4 * k + 2], xyzr[4 * k + 3]};
+  buf = std::make_unique<render::ParticleBuffer>(p);
+  std::vector<render::ParticleSource> sources;
+  std::size_t first = 0;
+  for (std::size_t g = 0; g < groups.size(); ++g) {
+    const auto& [count, fade] = groups[g];
+    render::ParticleSource src = buf->source({hf_.origin_x(), hf_.origin_y(), hf_.origin_z()}, 1.0f, fade);
+    src.first = std::int64_t(first);
+    src.count = std::int64_t(count);
+    if (g < patches.size()) {
+      src.footprint = footprint(patches[g], hf_);
+      src.footprint_band = footprint_band(patches[g]);
+    }
+    first += count;
+    if (count > 0) sources.push_back(src);
+  }
+  return renderer_->set_particles(sources);
 }
 
 // GL backend: every live patch's spheres drawn from its simulation buffer (no CPU copy).
-Status FrameWriter::write_gpu(const render::CameraView& view, const std::string& path) {
+Status FrameWriter::set_particles_gpu() {
   if (Status s = context_->make_current(); !s) return s;
+  const auto patches = manager_->patches();
   std::vector<render::ParticleSource> sources;
   for (const auto& g : manager_->gpu_particles()) {
     render::ParticleSource src;
@@ -172,12 +243,102 @@ Status FrameWriter::write_gpu(const render::CameraView& view, const std::string&
     src.origin = g.origin;
     src.scale = g.scale;
     src.fade = g.fade;
+    for (const auto& p : patches)  // the patch whose simulation frame this is
+      if (p.origin == g.origin) {
+        src.footprint = footprint(p, hf_);
+        src.footprint_band = footprint_band(p);
+      }
     if (src.count > 0) sources.push_back(src);
   }
-  if (Status s = renderer_->set_particles(sources); !s) return s;
-  Status s = renderer_->render_png(view, path);
+  return renderer_->set_particles(sources);
+}
+
+Result<render::Image> FrameWriter::render(const render::CameraView& view, const render::FrameFlags& flags) {
+  if (Status s = prepare(); !s) return s.errors();
+  if (!renderer_) return render::Image{};
+  std::unique_ptr<render::ParticleBuffer> buf;  // alive until the frame is drawn
+  const bool gpu = manager_ && manager_->gl_context();
+  if (Status s = gpu ? set_particles_gpu() : set_particles_cpu(buf); !s) return s.errors();
+  if (Status s = renderer_->set_bodies(body_instances(world_)); !s) return s.errors();
+  auto img = renderer_->render(view, flags);
   renderer_->clear_particles();
-  return s;
+  renderer_->clear_bodies();
+  return img;
+}
+
+Status FrameWriter::write(const render::CameraView& view, const std::string& path, const render::FrameFlags& flags) {
+  auto img = render(view, flags);
+  if (!img) return img.errors();
+  if (!renderer_) return Ok{};
+  return render::save_png(path, img.value());
+}
+
+namespace {
+
+// `s` quoted for /bin/sh: inside single quotes, with every ' written as '\''.
+std::string shell_quote(const std::string& s) {
+  std::string q = "'";
+  for (char c : s) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return q + "'";
+}
+
+}  // namespace
+
+Status VideoWriter::available() {
+  const char* path = std::getenv("PATH");
+  std::string dirs = path ? path : "";
+  for (std::size_t a = 0; a <= dirs.size();) {
+    std::size_t b = dirs.find(':', a);
+    if (b == std::string::npos) b = dirs.size();
+    const std::string dir = dirs.substr(a, b - a);
+    if (!dir.empty() && access((dir + "/ffmpeg").c_str(), X_OK) == 0) return Ok{};
+    a = b + 1;
+  }
+  return Error{"", "", "", "ffmpeg is not installed (no executable ffmpeg on PATH; Debian package ffmpeg, "
+                           "scripts/install-deps.sh installs it)"};
+}
+
+VideoWriter::~VideoWriter() {
+  if (pipe_) pclose(pipe_);
+}
+
+Status VideoWriter::open(const std::string& path, int width, int height, double fps) {
+  if (pipe_) return Error{path, "", "", "a video is already open"};
+  if (width < 1 || height < 1 || !(fps > 0 && std::isfinite(fps)))
+    return Error{path, "", std::to_string(width) + " x " + std::to_string(height) + " at " + std::to_string(fps),
+                 "needs a size of at least 1 x 1 and a frame rate > 0"};
+  // A broken pipe (ffmpeg gone) must come back as a write error, not end the program.
+  std::signal(SIGPIPE, SIG_IGN);
+  char fps_s[64];
+  std::snprintf(fps_s, sizeof fps_s, "%.9g", fps);
+  const std::string cmd = "ffmpeg -hide_banner -loglevel error -y -f rawvideo -pix_fmt rgba -s " + std::to_string(width) +
+                          "x" + std::to_string(height) + " -r " + fps_s +
+                          " -i - -vf 'pad=ceil(iw/2)*2:ceil(ih/2)*2' -pix_fmt yuv420p " +
+                          shell_quote(!path.empty() && path[0] == '-' ? "./" + path : path);  // not an option
+  pipe_ = popen(cmd.c_str(), "w");
+  if (!pipe_) return Error{path, "", "", std::string("cannot start ffmpeg: ") + std::strerror(errno)};
+  path_ = path;
+  width_ = width;
+  height_ = height;
+  return Ok{};
+}
+
+Status VideoWriter::add(const render::Image& img) {
+  if (!pipe_) return Error{path_, "", "", "the video is not open"};
+  if (img.width != width_ || img.height != height_)
+    return Error{path_, "", std::to_string(img.width) + " x " + std::to_string(img.height),
+                 "every video frame must be " + std::to_string(width_) + " x " + std::to_string(height_)};
+  if (std::fwrite(img.rgba.data(), 1, img.rgba.size(), pipe_) != img.rgba.size())
+    return Error{path_, "", "", "ffmpeg stopped taking frames (see its messages above)"};
+  return Ok{};
+}
+
+Status VideoWriter::close() {
+  if (!pipe_) return Ok{};
+  const int rc = pclose(pipe_);
+  pipe_ = nullptr;
+  if (rc != 0) return Error{path_, "", "", "ffmpeg failed (exit status " + std::to_string(rc) + "; see its messages above)"};
+  return Ok{};
 }
 
 }  // namespace sandpatch

@@ -2,6 +2,7 @@
 // renderer), file names from output patterns, atomic writes, the progress line.
 #pragma once
 
+#include <cstdio>
 #include <filesystem>
 #include <memory>
 #include <string>
@@ -12,6 +13,7 @@
 #include "heightfield/heightfield.hpp"
 #include "heightfield/io.hpp"
 #include "manager/terrain_manager.hpp"
+#include "manager/world.hpp"
 #include "render/render.hpp"
 #include "scene/scene.hpp"
 
@@ -44,12 +46,21 @@ class ProgressPrinter {
   int note_pct_ = 0;
 };
 
+// The world's bodies as the renderer draws them, in entry order: the live ones (shape from
+// BulletWorld::definition, pose from BulletWorld::state) and those scheduled at or before the
+// world's time but not spawned yet (a body due at t = 0 enters in the first step; the picture
+// at t = 0 shows it at its starting pose). Albedo: render::body_palette(entry index).
+std::vector<render::BodyInstance> body_instances(const World& world);
+
 // Images of the run: one GL context and one scene renderer, made on the first image. With
 // the GL backend the renderer shares the simulation's context and draws the particles
-// straight from the simulation's buffers; otherwise it makes its own context.
+// straight from the simulation's buffers; otherwise it makes its own context. Every image
+// shows the terrain, the live patches' granules (ready patches' footprints cut out of the
+// second terrain pass) and the world's bodies.
 class FrameWriter {
  public:
-  FrameWriter(const Heightfield& hf, const TerrainManager* manager) : hf_(hf), manager_(manager) {}
+  explicit FrameWriter(const World& world)
+      : world_(world), hf_(world.heightfield()), manager_(world.manager()) {}
   ~FrameWriter();
   FrameWriter(const FrameWriter&) = delete;
   FrameWriter& operator=(const FrameWriter&) = delete;
@@ -58,18 +69,50 @@ class FrameWriter {
   const std::string& why() const { return why_; }
   // Re-uploads the heightfield regions that changed (in the renderer's own context).
   Status heightfield_changed(const std::vector<GridRegion>& regions);
-  // Renders `view` (terrain and the live patches' granules) into `path`.
-  Status write(const render::CameraView& view, const std::string& path);
+  // Renders `view` (terrain, the live patches' granules, the bodies) into `path`.
+  Status write(const render::CameraView& view, const std::string& path, const render::FrameFlags& flags = {});
+  // The same frame as an image (tests, video). Errors as write(); an empty image when no
+  // context could be made (unavailable()).
+  Result<render::Image> render(const render::CameraView& view, const render::FrameFlags& flags = {});
+  // The renderer (null before the first image or when unavailable).
+  render::SceneRenderer* renderer() { return renderer_.get(); }
 
  private:
-  Status write_gpu(const render::CameraView& view, const std::string& path);
+  Status prepare();
+  Status set_particles_cpu(std::unique_ptr<render::ParticleBuffer>& buf);
+  Status set_particles_gpu();
 
+  const World& world_;
   const Heightfield& hf_;
   const TerrainManager* manager_;
   std::unique_ptr<gl::Context> ctx_;    // own context (CPU backend)
   gl::Context* context_ = nullptr;      // the context in use (own or the manager's)
   std::unique_ptr<render::SceneRenderer> renderer_;
   std::string why_;
+};
+
+// A video piped to ffmpeg (`sandpatch run --video FILE`): RGBA frames of one size in, the
+// format from the file's extension (ffmpeg's choice of codec), yuv420p, odd sizes padded to even.
+class VideoWriter {
+ public:
+  VideoWriter() = default;
+  ~VideoWriter();
+  VideoWriter(const VideoWriter&) = delete;
+  VideoWriter& operator=(const VideoWriter&) = delete;
+  // Ok when an executable `ffmpeg` is on PATH; otherwise says so (and which package has it).
+  static Status available();
+  // Starts ffmpeg writing `path` (overwritten) at `fps` frames per second of video.
+  Status open(const std::string& path, int width, int height, double fps);
+  bool is_open() const { return pipe_ != nullptr; }
+  // One frame; its size must be the one given to open(). Errors name the path.
+  Status add(const render::Image& img);
+  // Waits for ffmpeg; its exit status other than 0 is an error naming the path.
+  Status close();
+
+ private:
+  std::FILE* pipe_ = nullptr;
+  std::string path_;
+  int width_ = 0, height_ = 0;
 };
 
 }  // namespace sandpatch

@@ -79,6 +79,9 @@ class World {
   void remove_body(RigidBodyId id);
   // Removes a body no step has seen yet at once (a body refused right after it was added).
   void discard_body(RigidBodyId id);
+  // Bodies scheduled and not spawned yet: (entry index, definition), in schedule order (a
+  // renderer shows those due at the current time at their starting pose).
+  const std::vector<std::pair<std::size_t, RigidBodyDef>>& pending() const { return pending_; }
   // Live and not being removed.
   bool alive(RigidBodyId id) const;
   // Live bodies (not being removed), in slot order.

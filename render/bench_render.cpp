@@ -155,6 +155,7 @@ int run_bench_render(const BenchRenderArgs& a_in) {
     cam.near_m = 0.5f;
     cam.far_m = 500.0f;
     RendererDef def;
+    def.ao_strength = 0;  // the full grid below has no ambient-occlusion pass: compare like with like
     auto sr = SceneRenderer::create(**ctx, *hf, def);
     if (!sr) {
       std::fprintf(stderr, "bench render: %s", sr.message().c_str());

@@ -28,6 +28,9 @@ Status validate(const ParticleSource& s, int index) {
   if (!(s.scale > 0 && std::isfinite(s.scale))) es.push_back(Error{"", f + "scale", std::to_string(s.scale), "must be > 0 and finite"});
   if (!(s.fade >= 0 && s.fade <= 1)) es.push_back(Error{"", f + "fade", std::to_string(s.fade), "must be in [0, 1]"});
   if (!s.origin.allFinite()) es.push_back(Error{"", f + "origin", "non-finite", "must be finite (m)"});
+  if (!s.footprint.allFinite()) es.push_back(Error{"", f + "footprint", "non-finite", "must be finite (m) or empty"});
+  if (!(s.footprint_band >= 0 && std::isfinite(s.footprint_band)))
+    es.push_back(Error{"", f + "footprint_band", std::to_string(s.footprint_band), "must be >= 0 and finite (m)"});
   if (!es.empty()) return es;
   return Ok{};
 }
@@ -67,7 +70,8 @@ ParticleRenderer::~ParticleRenderer() { glDeleteVertexArrays(1, &vao_); }
 
 std::int64_t ParticleRenderer::draw(const std::vector<ParticleSource>& sources, const Eigen::Matrix4f& view,
                                     const Eigen::Matrix4f& proj, int viewport_height, const TerrainRenderer& terrain,
-                                    const Eigen::Vector3d& world_origin, float normal_bend) {
+                                    const Eigen::Vector3d& world_origin, float normal_bend, float color_variation,
+                                    const ShadowMap* shadow, float gain, const BedDepth* bed) {
   const unsigned p = program_.id();
   auto loc = [p](const char* name) { return glGetUniformLocation(p, name); };
   glUseProgram(p);
@@ -103,17 +107,33 @@ std::int64_t ParticleRenderer::draw(const std::vector<ParticleSource>& sources, 
   glUniform1i(loc("u_normals"), 1);
   glActiveTexture(GL_TEXTURE0);
   glUniform1f(loc("u_normal_bend"), normal_bend);
-  const GLint l_origin = loc("u_patch_origin"), l_scale = loc("u_scale"), l_fade = loc("u_fade");
+  glUniform1f(loc("u_color_variation"), color_variation);
+  bind_shadow(p, shadow ? *shadow : ShadowMap{});
+  glUniform1f(loc("u_gain"), gain);
+  glUniform1i(loc("u_bed_on"), bed && bed->texture ? 1 : 0);
+  glActiveTexture(GL_TEXTURE2);
+  glBindTexture(GL_TEXTURE_2D, bed ? bed->texture : 0);
+  glUniform1i(loc("u_bed_depth"), 2);
+  glActiveTexture(GL_TEXTURE0);
+  {
+    const Eigen::Matrix4f proj_inv = proj.inverse();
+    glUniformMatrix4fv(loc("u_proj_inv"), 1, GL_FALSE, proj_inv.data());
+  }
+  glUniform2f(loc("u_viewport"), bed ? float(bed->width) : 1.0f, bed ? float(bed->height) : 1.0f);
+  glUniform1f(loc("u_bed_scale"), bed ? bed->scale : 4.0f);
+  const GLint l_origin = loc("u_patch_origin"), l_scale = loc("u_scale"), l_fade = loc("u_fade"),
+              l_first = loc("u_first_index");
 
   glBindVertexArray(vao_);
   std::int64_t drawn = 0;
   for (const ParticleSource& s : sources) {
     assert(validate(s, 0).ok());
-    if (s.count == 0) continue;
+    if (s.count == 0 || s.fade <= 0.0f) continue;  // fade 0: nothing to show (not even depth)
     const Eigen::Vector3d o = s.origin - world_origin;
     glUniform3f(l_origin, float(o.x()), float(o.y()), float(o.z()));
     glUniform1f(l_scale, s.scale);
     glUniform1f(l_fade, s.fade);
+    glUniform1i(l_first, int(s.first & 0x7fffffff));
     glBindBuffer(GL_ARRAY_BUFFER, s.buffer);
     const std::uintptr_t base = std::uintptr_t(s.first) * std::uintptr_t(s.stride);
     glEnableVertexAttribArray(0);
@@ -135,6 +155,9 @@ std::int64_t ParticleRenderer::draw(const std::vector<ParticleSource>& sources, 
   }
   glBindVertexArray(0);
   glBindBuffer(GL_ARRAY_BUFFER, 0);
+  glActiveTexture(GL_TEXTURE2);
+  glBindTexture(GL_TEXTURE_2D, 0);
+  glActiveTexture(GL_TEXTURE0);
   glDisable(GL_BLEND);
   glDisable(GL_PROGRAM_POINT_SIZE);
   return drawn;

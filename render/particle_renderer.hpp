@@ -15,6 +15,15 @@
 namespace sandpatch::render {
 
 class TerrainRenderer;
+struct ShadowMap;
+
+// A depth pre-pass of the same particles (a depth texture of the viewport's size) the colour
+// pass estimates the bed's normal from, `scale` particle radii to each side of a pixel.
+struct BedDepth {
+  unsigned texture = 0;
+  int width = 0, height = 0;
+  float scale = 4.0f;
+};
 
 // Where one patch's particles live in a GL buffer. The buffer is the caller's (e.g. the DEM's
 // position SSBO); it must stay alive while it is set on a renderer.
@@ -29,6 +38,14 @@ struct ParticleSource {
   Eigen::Vector3d origin{0, 0, 0};  // world position (m) of the patch frame's origin
   float scale = 1.0f;          // particle scale: drawn centre = origin + scale p, radius = scale r (> 0)
   float fade = 1.0f;           // fade-in factor in [0, 1] (1 = opaque)
+  // The patch's footprint on the ground, world (x0, z0, x1, z1) in m, or empty (x1 <= x0, the
+  // default). When set, the second terrain pass (Leach & Marais §5.1) leaves the terrain out
+  // of it: there the granules are the surface, so a crater or heap carved into the bed shows
+  // instead of being covered by the heightfield it was promoted from.
+  Eigen::Vector4d footprint{0, 0, 0, 0};
+  // Inside the footprint the terrain fades out over this band (m, from the edge inward), >= 0.
+  float footprint_band = 0.0f;
+  bool has_footprint() const { return footprint[2] > footprint[0] && footprint[3] > footprint[1]; }
 };
 
 // Checks a source; errors name the field ("particles[2].stride = 8: ...").
@@ -63,10 +80,13 @@ class ParticleRenderer {
   // origin (world m), subtracted from each source's origin. Material weights come from the
   // terrain's clipmap textures (terrain.update() must have run this frame). normal_bend in
   // [0, 1]: lighting normal = normalize(mix(sphere normal, terrain normal, normal_bend)).
+  // color_variation: each granule's albedo times 1 + v u, u in [-1, 1] hashed from the
+  // granule's index (one granule's four spheres share it).
   // Returns the number of particles drawn.
   std::int64_t draw(const std::vector<ParticleSource>& sources, const Eigen::Matrix4f& view,
                     const Eigen::Matrix4f& proj, int viewport_height, const TerrainRenderer& terrain,
-                    const Eigen::Vector3d& world_origin, float normal_bend = 0.5f);
+                    const Eigen::Vector3d& world_origin, float normal_bend = 0.5f, float color_variation = 0.0f,
+                    const ShadowMap* shadow = nullptr, float gain = 1.0f, const BedDepth* bed = nullptr);
 
  private:
   ParticleRenderer() = default;

@@ -5,8 +5,13 @@
 //   1. move the clipmap windows to the camera (toroidal texel updates);
 //   2. clear colour (the background) and depth; draw the terrain (geometry clipmaps);
 //   3. when particles are set: clear depth, draw the particle splats, draw the terrain again,
-//      so particles below the surface never show and fading patches blend over the terrain;
-//   4. read the framebuffer back as an RGBA8 image (and write a PNG atomically).
+//      so particles below the surface never show and fading patches blend over the terrain
+//      (a source with a footprint keeps the terrain out of it in this pass: its granules are
+//      the surface there, craters included);
+//   4. draw the rigid bodies (depth-tested against terrain and granules);
+//   5. screen-space ambient occlusion over the whole frame (craters, gaps between granules,
+//      the ground next to a body);
+//   6. read the framebuffer back as an RGBA8 image (and write a PNG atomically).
 // Everything renders into an offscreen framebuffer of the camera's resolution through the
 // headless EGL context (gl/context.hpp); on machines with no GPU that is Mesa's llvmpipe.
 #pragma once
@@ -15,12 +20,14 @@
 #include <array>
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "common/error.hpp"
 #include "gl/context.hpp"
 #include "heightfield/heightfield.hpp"
+#include "render/bodies.hpp"
 #include "render/clipmap.hpp"
 #include "render/image.hpp"
 #include "render/particle_renderer.hpp"
@@ -28,6 +35,8 @@
 namespace sandpatch::render {
 
 class TerrainRenderer;
+class BodyRenderer;
+struct ShadowMap;
 
 struct RendererDef {
   // Clipmap layout. base_spacing <= 0 (the default here) = the heightfield's spacing;
@@ -39,11 +48,31 @@ struct RendererDef {
     return d;
   }();
   std::array<std::uint8_t, 3> background{140, 180, 230};  // sRGB bytes of the sky; no terrain colour equals it
-  Eigen::Vector3f sun_direction{0.45f, 0.8f, 0.35f};        // toward the sun (normalised on use)
-  // Particle lighting normal = normalize(mix(sphere normal, terrain normal under it, bend)), in
-  // [0, 1]: 0 is pure sphere shading; 0.5 keeps each splat's roundness while a packed bed's
-  // caps light like the surface they came from.
-  float particle_normal_bend = 0.5f;
+  Eigen::Vector3f sun_direction{-0.6f, 0.6f, 0.55f};        // toward the sun (normalised on use)
+  // Particle lighting normal = normalize(mix(sphere normal, bed normal, bend)), in [0, 1]: 0 is
+  // pure sphere shading; 0.7 keeps each splat's roundness while a bed's slopes (a crater's
+  // walls, a heap's flanks) light like slopes. The bed normal is estimated from a depth
+  // pre-pass of the granules, particle_bed_scale radii to each side of a pixel ([1, 32]); where
+  // there is none, the terrain's normal under the particle.
+  float particle_normal_bend = 0.7f;
+  float particle_bed_scale = 4.0f;
+  // Granule colour variation: each granule's albedo is scaled by 1 + v u, u uniform in
+  // [-1, 1] from a hash of its index (0 = every granule alike), in [0, 0.5].
+  float particle_color_variation = 0.12f;
+  // Granule brightness gain in [0.5, 2]: spheres lit by a low sun, with the shade of their
+  // neighbours below the equator, are darker on average than the smooth heightfield they were
+  // cut from; the gain brings a bed's mean brightness back to the terrain's (measured in
+  // tests/render/particle_renderer_test.cpp, FadedInPatchLooksLikeTheHeightfield).
+  float particle_gain = 1.0f;
+  // Screen-space ambient occlusion (shaders/render/ao.frag): radius (m, world) of the
+  // neighbourhood a pixel looks at, > 0; strength in [0, 4] (0 = off); samples per pixel in [1, 64].
+  float ao_radius = 1.0f;
+  float ao_strength = 1.5f;
+  int ao_samples = 16;
+  // Bodies cast shadows on the terrain and the granules: an orthographic depth map of the
+  // bodies seen from the sun, this many texels a side over their bounding sphere; 0 = none,
+  // else in [256, 8192].
+  int shadow_map_size = 2048;
 };
 
 // A camera in world coordinates (m), y up.
@@ -69,7 +98,16 @@ struct RenderStats {
   int active_levels = 0;
   std::int64_t texels_uploaded = 0;    // clipmap texels written for this frame (toroidal + dirty)
   std::int64_t particles = 0;          // splats drawn
+  int bodies = 0;                      // rigid bodies drawn
+  std::int64_t body_triangles = 0;
+  bool shadows = false;                // the bodies' shadow map was drawn
   double frame_ms = 0;                 // wall time of the frame including glFinish (CPU time on llvmpipe)
+};
+
+// What one frame draws besides the terrain and the particles set.
+struct FrameFlags {
+  bool bodies = true;     // the bodies set with set_bodies()
+  bool body_ids = false;  // bodies unlit in body_id_color(k) (render/body_renderer.hpp), no ambient occlusion: for tests
 };
 
 class SceneRenderer {
@@ -84,9 +122,18 @@ class SceneRenderer {
 
   // Renders one frame and reads it back (top row first). The context given to create() must be
   // current on the calling thread.
-  Result<Image> render(const CameraView& camera);
+  Result<Image> render(const CameraView& camera, const FrameFlags& flags = {});
   // render() and save_png() (atomic: temporary file + rename). Errors name the path.
-  Status render_png(const CameraView& camera, const std::string& path);
+  Status render_png(const CameraView& camera, const std::string& path, const FrameFlags& flags = {});
+
+  // Where the world point p (m) lands in render(camera)'s image: pixel coordinates (x to the
+  // right, y down, pixel centres at +0.5) and the eye distance (m); nullopt when p is behind
+  // the camera. Same matrices as render() (automatic clip planes included).
+  struct Projected {
+    Eigen::Vector2d pixel;
+    double depth_m = 0;
+  };
+  std::optional<Projected> project(const CameraView& camera, const Eigen::Vector3d& p) const;
 
   // The heightfield samples in `dirty` changed (a demoted patch, a track): only the clipmap
   // texels that depend on them are rewritten (now; the context must be current).
@@ -98,6 +145,11 @@ class SceneRenderer {
   Status set_particles(const std::vector<ParticleSource>& sources);
   void clear_particles() { particles_.clear(); }
 
+  // Rigid bodies to draw from now on (replaces the previous set; copied). Errors name the body
+  // and field (bodies[k].radius); nothing changes on error.
+  Status set_bodies(std::vector<BodyInstance> bodies);
+  void clear_bodies() { bodies_.clear(); }
+
   RenderStats stats() const { return stats_; }
   const RendererDef& def() const { return def_; }
   TerrainRenderer& terrain() { return *terrain_; }
@@ -106,14 +158,27 @@ class SceneRenderer {
  private:
   SceneRenderer() = default;
   void ensure_framebuffer(int w, int h);
+  struct Matrices {
+    Eigen::Matrix4f view, proj;
+    Eigen::Vector3f eye;  // local m
+  };
+  Matrices matrices(const CameraView& cam) const;
+  // Draws the bodies' shadow map (when there are bodies to draw and shadows are on).
+  ShadowMap shadow_pass(const Eigen::Vector3d& origin);
 
   gl::Context* ctx_ = nullptr;
   const Heightfield* hf_ = nullptr;
   RendererDef def_;
   std::unique_ptr<TerrainRenderer> terrain_;
   std::unique_ptr<ParticleRenderer> particle_renderer_;
+  std::unique_ptr<BodyRenderer> body_renderer_;
+  gl::Program ao_program_;
   std::vector<ParticleSource> particles_;
-  unsigned fbo_ = 0, color_rb_ = 0, depth_rb_ = 0;
+  std::vector<BodyInstance> bodies_;
+  // The scene renders into fbo_ (colour and depth textures); the ambient-occlusion pass reads
+  // them and writes ao_fbo_ (colour renderbuffer), which is read back.
+  unsigned fbo_ = 0, color_tex_ = 0, depth_tex_ = 0, bed_tex_ = 0, ao_fbo_ = 0, ao_rb_ = 0, empty_vao_ = 0;
+  unsigned shadow_fbo_ = 0, shadow_tex_ = 0;
   int fb_w_ = 0, fb_h_ = 0;
   std::int64_t pending_texels_ = 0;  // written by heightfield_changed() since the last frame
   RenderStats stats_;

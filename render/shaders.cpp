@@ -27,6 +27,14 @@ Result<gl::Program> build_particle_program() {
   return gl::Program::graphics("shaders/render/particles.{vert,frag}", with_common("render/particles.vert"),
                                with_common("render/particles.frag"));
 }
+Result<gl::Program> build_body_program() {
+  return gl::Program::graphics("shaders/render/body.{vert,frag}", with_common("render/body.vert"),
+                               with_common("render/body.frag"));
+}
+Result<gl::Program> build_ao_program() {
+  return gl::Program::graphics("shaders/render/ao.{vert,frag}", with_common("render/ao.vert"),
+                               with_common("render/ao.frag"));
+}
 Result<gl::Program> build_full_grid_program() {
   return gl::Program::graphics("shaders/render/full_grid.{vert,frag}", with_common("render/full_grid.vert"),
                                with_common("render/full_grid.frag"));

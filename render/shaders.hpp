@@ -11,5 +11,7 @@ namespace sandpatch::render {
 Result<gl::Program> build_terrain_program();
 Result<gl::Program> build_particle_program();
 Result<gl::Program> build_full_grid_program();
+Result<gl::Program> build_body_program();
+Result<gl::Program> build_ao_program();
 
 }  // namespace sandpatch::render

@@ -3,6 +3,7 @@
 
 #include <GL/glcorearb.h>
 
+#include <algorithm>
 #include <cmath>
 
 #include "render/shaders.hpp"
@@ -14,6 +15,16 @@ namespace {
 GLint loc(unsigned prog, const char* name) { return glGetUniformLocation(prog, name); }
 
 }  // namespace
+
+void bind_shadow(unsigned p, const ShadowMap& s) {
+  glActiveTexture(GLenum(GL_TEXTURE0 + kShadowUnit));
+  glBindTexture(GL_TEXTURE_2D, s.on ? s.texture : 0);
+  glActiveTexture(GL_TEXTURE0);
+  glUniform1i(loc(p, "u_shadow_map"), kShadowUnit);
+  glUniform1i(loc(p, "u_shadow_on"), s.on ? 1 : 0);
+  glUniformMatrix4fv(loc(p, "u_shadow_matrix"), 1, GL_FALSE, s.matrix.data());
+  glUniform1f(loc(p, "u_shadow_bias"), s.bias);
+}
 
 Result<std::unique_ptr<TerrainRenderer>> TerrainRenderer::create(const Heightfield& hf, const ClipmapDef& def_in) {
   ClipmapDef def = def_in;
@@ -209,9 +220,11 @@ void TerrainRenderer::draw(const Eigen::Matrix4f& view_proj, bool cull) {
   draw_selection();
 }
 
-void TerrainRenderer::redraw() { draw_selection(); }
+void TerrainRenderer::redraw(const std::vector<Eigen::Vector4f>& cuts, const std::vector<float>& bands) {
+  draw_selection(cuts, bands);
+}
 
-void TerrainRenderer::draw_selection() {
+void TerrainRenderer::draw_selection(const std::vector<Eigen::Vector4f>& cuts, const std::vector<float>& bands) {
   const unsigned p = program_.id();
   glUseProgram(p);
   glEnable(GL_DEPTH_TEST);
@@ -235,6 +248,17 @@ void TerrainRenderer::draw_selection() {
   glUniform1f(loc(p, "u_base_spacing"), def_.base_spacing);
   glUniform1i(loc(p, "u_levels"), def_.levels);
   glUniform3f(loc(p, "u_sun_dir"), sun_.x(), sun_.y(), sun_.z());
+  bind_shadow(p, shadow_);
+  const int n_cuts = std::min(int(cuts.size()), kMaxCuts);
+  glUniform1i(loc(p, "u_cut_count"), n_cuts);
+  if (n_cuts > 0) {
+    std::vector<float> b(std::size_t(n_cuts), 0.0f);
+    for (int k = 0; k < n_cuts && k < int(bands.size()); ++k) b[std::size_t(k)] = bands[std::size_t(k)];
+    glUniform4fv(loc(p, "u_cuts"), n_cuts, cuts.front().data());
+    glUniform1fv(loc(p, "u_cut_band"), n_cuts, b.data());
+    glEnable(GL_BLEND);
+    glBlendFunc(GL_SRC_ALPHA, GL_ONE_MINUS_SRC_ALPHA);
+  }
   const GLint l_origin = loc(p, "u_piece_origin"), l_level = loc(p, "u_level"), l_spacing = loc(p, "u_spacing"),
               l_coarser = loc(p, "u_has_coarser");
   int current = -1;
@@ -252,6 +276,7 @@ void TerrainRenderer::draw_selection() {
   }
   glBindVertexArray(0);
   glActiveTexture(GL_TEXTURE0);
+  glDisable(GL_BLEND);
   for (int k = 0; k < 4; ++k) glDisable(GLenum(GL_CLIP_DISTANCE0 + k));
 }
 

@@ -30,6 +30,18 @@
 
 namespace sandpatch::render {
 
+// The bodies' shadow map as the terrain and particle shaders read it (common.glsl
+// sp_sun_visibility): a depth texture with compare mode, the local -> [0, 1]^3 matrix, a bias.
+struct ShadowMap {
+  bool on = false;
+  unsigned texture = 0;
+  Eigen::Matrix4f matrix = Eigen::Matrix4f::Identity();
+  float bias = 0;
+};
+// Binds `s` to the current program (texture unit kShadowUnit).
+inline constexpr int kShadowUnit = 5;
+void bind_shadow(unsigned program, const ShadowMap& s);
+
 class TerrainRenderer {
  public:
   // hf must outlive the renderer; def.base_spacing <= 0 means hf.spacing(). Needs a current
@@ -51,8 +63,11 @@ class TerrainRenderer {
   // Selects the pieces for this view (select_clipmap with the viewer of the last update()) and
   // draws them into the bound framebuffer with depth testing. view_proj: local -> clip.
   void draw(const Eigen::Matrix4f& view_proj, bool cull = true);
-  // Draws the last selection again (Leach's second terrain pass).
-  void redraw();
+  // Draws the last selection again (Leach's second terrain pass), leaving out the rectangles
+  // `cuts` (local x0, z0, x1, z1, m; at most kMaxCuts, the rest are ignored): inside a cut the
+  // terrain fades out (alpha-blended) over `bands[k]` m from its edge.
+  static constexpr int kMaxCuts = 32;
+  void redraw(const std::vector<Eigen::Vector4f>& cuts = {}, const std::vector<float>& bands = {});
 
   const ClipmapSelection& selection() const { return selection_; }
   const ClipmapDef& def() const { return def_; }
@@ -65,6 +80,8 @@ class TerrainRenderer {
   unsigned materials_texture() const { return tex_[2]; }
   int first_active_level() const;
   void set_sun_direction(const Eigen::Vector3f& toward_sun) { sun_ = toward_sun.normalized(); }
+  // The bodies' shadows on the terrain from now on (off: ShadowMap{}).
+  void set_shadow(const ShadowMap& s) { shadow_ = s; }
   const Eigen::Vector3f& sun_direction() const { return sun_; }
 
   // Reads back one layer of a texture array for tests: 0 elevation (1 float a texel),
@@ -80,7 +97,7 @@ class TerrainRenderer {
   std::int64_t write_rect(int level, const LevelRect& r);
   const Mesh& mesh_for(const ClipmapPiece& p);
   Mesh make_mesh(const std::vector<int>& xy, const std::vector<unsigned>& idx);
-  void draw_selection();
+  void draw_selection(const std::vector<Eigen::Vector4f>& cuts = {}, const std::vector<float>& bands = {});
 
   const Heightfield* hf_ = nullptr;
   ClipmapDef def_;
@@ -90,8 +107,9 @@ class TerrainRenderer {
   std::vector<LevelRect> windows_;
   Eigen::Vector3f viewer_{0, 0, 0};
   Eigen::Matrix4f view_proj_ = Eigen::Matrix4f::Identity();
-  Eigen::Vector3f sun_ = Eigen::Vector3f(0.45f, 0.8f, 0.35f).normalized();
+  Eigen::Vector3f sun_ = Eigen::Vector3f(-0.6f, 0.6f, 0.55f).normalized();
   ClipmapSelection selection_;
+  ShadowMap shadow_;
   std::map<std::pair<int, int>, Mesh> meshes_;  // grid meshes by (cells_x, cells_z)
   Mesh degenerate_[2];  // one border side along x, along z
   std::int64_t texels_total_ = 0;

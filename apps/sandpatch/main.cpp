@@ -1,5 +1,6 @@
 // sandpatch: the command-line program (docs/cli.md).
 //   sandpatch run [SCENE] [--out DIR] [--seconds S | --frames N] [--backend cpu|gl] [--threads T]
+//                 [--video FILE [--video-fps F]]
 //   sandpatch render [SCENE] --at T [--camera NAME] [--image FILE] [--out DIR]
 //   sandpatch check SCENE
 //   sandpatch info
@@ -74,7 +75,8 @@ int cmd_info() {
 // ---- run and render: a scene run to the end (run) or to time T with a picture (render) ----
 
 struct RunCli {
-  std::string scene, out_dir, backend;
+  std::string scene, out_dir, backend, video;
+  double video_fps = 30;
   double seconds = -1;
   long long frames = -1;
   int threads = -1;
@@ -95,6 +97,8 @@ void add_run(CLI::App& app, RunCli& a) {
   run->add_option("--frame-budget", a.frame_budget,
                   "Wall-clock ms a frame's patches may take, or off (overrides simulation.frame_budget_ms)");
   run->add_flag("--quiet", a.quiet, "No progress output");
+  run->add_option("--video", a.video, "Also write a video of the scene's first camera to this file, through ffmpeg");
+  run->add_option("--video-fps", a.video_fps, "Video frames per simulated second (default 30; at most 1 / dt)");
 }
 
 struct RenderCli {
@@ -162,6 +166,8 @@ int cmd_run(const RunCli& a, int argc, char** argv) {
     if (a.frame_budget == "off") opt.frame_budget_ms = std::numeric_limits<double>::infinity();
     else if (!a.frame_budget.empty()) opt.frame_budget_ms = parse_budget(a.frame_budget);
     opt.progress = a.quiet ? ProgressStyle::None : ProgressStyle::Auto;
+    opt.video = a.video;
+    opt.video_fps = a.video_fps;
     return opt;
   }, argc, argv);
 }

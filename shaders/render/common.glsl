@@ -23,7 +23,7 @@ float sp_fbm(vec2 p) {
 // Colour of material k (0 sand, 1 gravel, 2 soil, 3 grass) at local position p = (x, z) (m).
 vec3 sp_material_color(int k, vec2 p) {
   if (k == 0) {  // sand: warm yellow, fine ripples
-    return vec3(0.80, 0.69, 0.48) * (0.88 + 0.24 * sp_fbm(p * 1.7));
+    return vec3(0.80, 0.69, 0.48) * (0.93 + 0.14 * sp_fbm(p * 1.7));
   } else if (k == 1) {  // gravel: grey stones, one brightness per 0.25 m cell
     float cell = sp_hash01(ivec2(floor(p * 4.0)));
     return vec3(0.52, 0.51, 0.49) * (0.75 + 0.45 * cell);
@@ -53,4 +53,27 @@ uniform vec3 u_sun_dir;
 vec3 sp_shade(vec3 albedo, vec3 n) {
   float diffuse = max(dot(n, u_sun_dir), 0.0);
   return albedo * (0.35 + 0.75 * diffuse);
+}
+// The same with the sun's share scaled by its visibility in [0, 1] (1 = lit, 0 = in shadow).
+vec3 sp_shade_visible(vec3 albedo, vec3 n, float visibility) {
+  float diffuse = max(dot(n, u_sun_dir), 0.0);
+  return albedo * (0.35 + 0.75 * diffuse * visibility);
+}
+
+// Bodies' shadows (render.cpp: an orthographic depth map of the bodies seen from the sun).
+// u_shadow_matrix: local m -> [0, 1]^3 of the map; outside it everything is lit.
+uniform bool u_shadow_on;
+uniform mat4 u_shadow_matrix;
+uniform sampler2DShadow u_shadow_map;  // depth compare, linear: 2 x 2 taps per lookup
+uniform float u_shadow_bias;           // depth units of the map
+float sp_sun_visibility(vec3 p) {
+  if (!u_shadow_on) return 1.0;
+  vec4 q = u_shadow_matrix * vec4(p, 1.0);
+  vec3 c = q.xyz / q.w;
+  if (any(lessThan(c, vec3(0.0))) || any(greaterThan(c, vec3(1.0)))) return 1.0;
+  vec2 texel = 1.0 / vec2(textureSize(u_shadow_map, 0));
+  float v = 0.0;
+  for (int j = -1; j <= 1; ++j)
+    for (int i = -1; i <= 1; ++i) v += texture(u_shadow_map, vec3(c.xy + vec2(i, j) * texel, c.z - u_shadow_bias));
+  return v / 9.0;
 }

@@ -2,17 +2,37 @@
 // Circular splat with sphere shading and the sphere's depth: the point sprite is cut to a disc,
 // the disc point lifted onto the sphere facing the eye, lit like the terrain, and its depth
 // written so splats intersect each other and the terrain correctly.
-// The normal may be bent toward the terrain's (u_normal_bend).
+// The normal may be bent (u_normal_bend) toward the bed's: the surface the granules make up,
+// estimated from a depth pre-pass of the same granules (u_bed_depth: eye positions u_bed_scale
+// granule radii to each side of the pixel, on screen), so a crater's or a heap's slopes are
+// lit as slopes; where the pre-pass is missing (no granule there) the terrain's normal.
 
 in vec3 v_center_eye;
 in float v_radius;
 in vec4 v_weights;
 in vec3 v_ground_normal;
+in float v_tint;
 
 uniform mat4 u_proj;
 uniform mat4 u_view_inv;   // eye -> local
 uniform float u_fade;      // fade-in factor in [0, 1]
 uniform float u_normal_bend;  // 0 = pure sphere normal, 1 = the terrain's normal
+uniform float u_gain;      // brightness gain (RendererDef::particle_gain)
+uniform bool u_bed_on;
+uniform sampler2D u_bed_depth;  // depth of the granules' pre-pass (window depth in [0, 1])
+uniform mat4 u_proj_inv;        // clip -> eye
+uniform vec2 u_viewport;        // pixels
+uniform float u_bed_scale;      // granule radii between the samples and the pixel
+
+// Eye position of the pre-pass surface under window position px (w = 0: no granule there).
+vec4 bed_eye(vec2 px) {
+  vec2 uv = px / u_viewport;
+  if (any(lessThan(uv, vec2(0.0))) || any(greaterThan(uv, vec2(1.0)))) return vec4(0.0);
+  float d = texture(u_bed_depth, uv).r;
+  if (d >= 1.0) return vec4(0.0);
+  vec4 p = u_proj_inv * vec4(uv * 2.0 - 1.0, d * 2.0 - 1.0, 1.0);
+  return vec4(p.xyz / p.w, 1.0);
+}
 
 out vec4 o_color;
 
@@ -29,7 +49,25 @@ void main() {
   // Sphere normal, bent toward the terrain's normal under the particle by u_normal_bend: a
   // packed bed's caps then light like the surface they make up (docs/rendering.md).
   vec3 n_sphere = normalize(mat3(u_view_inv) * n_eye);
-  vec3 n = normalize(mix(n_sphere, normalize(v_ground_normal), u_normal_bend));
+  vec3 n_bed = normalize(v_ground_normal);
+  if (u_bed_on) {
+    float l_px = max(u_bed_scale * v_radius * u_proj[1][1] * 0.5 * u_viewport.y / max(-v_center_eye.z, 1e-4), 1.5);
+    vec4 l = bed_eye(gl_FragCoord.xy - vec2(l_px, 0.0)), r = bed_eye(gl_FragCoord.xy + vec2(l_px, 0.0));
+    vec4 b = bed_eye(gl_FragCoord.xy - vec2(0.0, l_px)), t = bed_eye(gl_FragCoord.xy + vec2(0.0, l_px));
+    if (l.w * r.w * b.w * t.w > 0.0) {
+      vec3 ne = cross(r.xyz - l.xyz, t.xyz - b.xyz);
+      if (dot(ne, ne) > 1e-20) {
+        ne = normalize(ne);
+        if (ne.z < 0.0) ne = -ne;  // toward the eye
+        n_bed = normalize(mat3(u_view_inv) * ne);
+      }
+    }
+  }
+  vec3 n = normalize(mix(n_sphere, n_bed, u_normal_bend));
   vec3 p = (u_view_inv * vec4(p_eye, 1.0)).xyz;
-  o_color = vec4(sp_shade(sp_blend_materials(v_weights, p.xz), n), u_fade);
+  // Granule-scale occlusion: a sphere in a packed bed is shaded by its neighbours below its
+  // equator (factor 0.8 facing into the bed to 1 facing out of it), so each granule reads as a
+  // ball; u_gain brings the bed's mean brightness back to the terrain's.
+  float occ = u_gain * mix(0.8, 1.0, clamp(0.5 + 0.5 * dot(n_sphere, n_bed), 0.0, 1.0));
+  o_color = vec4(occ * sp_shade_visible(v_tint * sp_blend_materials(v_weights, p.xz), n, sp_sun_visibility(p)), u_fade);
 }

@@ -20,11 +20,14 @@ uniform float u_base_spacing;     // m
 uniform ivec2 u_level_origin[24]; // O_l per level
 uniform sampler2DArray u_materials;
 uniform sampler2DArray u_normals;  // terrain normals (RGBA16F)
+uniform float u_color_variation;  // albedo factor 1 + v u per granule, u in [-1, 1]
+uniform int u_first_index;        // index of this draw's first particle in its buffer
 
 out vec3 v_center_eye;
 out float v_radius;
 out vec4 v_weights;
 out vec3 v_ground_normal;   // terrain normal under the particle
+out float v_tint;           // albedo factor of this granule
 
 void main() {
   vec3 c = u_patch_origin + u_scale * a_position;
@@ -37,6 +40,9 @@ void main() {
   float d = max(-e.z, 1e-6);
   float rp = u_proj[1][1] * r / sqrt(max(d * d - r * r, 1e-12)) * 0.5 * u_viewport_h;
   gl_PointSize = max(2.0 * rp, 1.0);
+  // One factor per granule (its four spheres are consecutive), from an integer hash.
+  int granule = (u_first_index + gl_VertexID) >> 2;
+  v_tint = 1.0 + u_color_variation * (2.0 * sp_hash01(ivec2(granule, 7919)) - 1.0);
   // Material weights and terrain normal: the finest level whose window holds the particle.
   v_weights = vec4(1.0, 0.0, 0.0, 0.0);
   v_ground_normal = vec3(0.0, 1.0, 0.0);

@@ -4,6 +4,7 @@
 // material blend (common.glsl) and one light.
 
 in vec2 v_xz;
+in float v_height;   // m, local (the drawn, morphed surface)
 in float v_alpha;
 flat in int v_level;
 
@@ -12,6 +13,14 @@ uniform float u_base_spacing;       // m, s_0
 uniform int u_levels;
 uniform sampler2DArray u_normals;   // RGBA16F unit normal (x, y, z), linear, repeat
 uniform sampler2DArray u_materials; // RGBA8 weights of materials 0..3, linear, repeat
+// Footprints left out of this pass (local x0, z0, x1, z1, m): the live patches' in the second
+// terrain pass, where their granules are the surface (render.hpp).
+// Inside a footprint the terrain fades out over a band of u_cut_band[k] m from its edge
+// (alpha-blended over the granules below the surface there), so the patch has no hard seam.
+const int kMaxCuts = 32;
+uniform int u_cut_count;
+uniform vec4 u_cuts[kMaxCuts];
+uniform float u_cut_band[kMaxCuts];
 
 out vec4 o_color;
 
@@ -21,6 +30,13 @@ vec2 level_uv(int level) {
 }
 
 void main() {
+  float alpha = 1.0;
+  for (int k = 0; k < u_cut_count; ++k) {
+    vec2 inside = min(v_xz - u_cuts[k].xy, u_cuts[k].zw - v_xz);  // m from the nearest edge, per axis
+    float d = min(inside.x, inside.y);
+    if (d > 0.0) alpha = min(alpha, 1.0 - clamp(d / max(u_cut_band[k], 1e-6), 0.0, 1.0));
+  }
+  if (alpha <= 0.0) discard;
   int l = v_level;
   vec3 n = texture(u_normals, vec3(level_uv(l), float(l))).xyz;
   vec4 w = texture(u_materials, vec3(level_uv(l), float(l)));
@@ -29,5 +45,6 @@ void main() {
     w = mix(w, texture(u_materials, vec3(level_uv(l + 1), float(l + 1))), v_alpha);
   }
   n = normalize(n);
-  o_color = vec4(sp_shade(sp_blend_materials(w, v_xz), n), 1.0);
+  float vis = sp_sun_visibility(vec3(v_xz.x, v_height, v_xz.y));
+  o_color = vec4(sp_shade_visible(sp_blend_materials(w, v_xz), n, vis), alpha);
 }

@@ -20,6 +20,7 @@ uniform sampler2DArray u_elevation;     // R32F heights (m, local), one layer pe
 
 out float gl_ClipDistance[4];
 out vec2 v_xz;       // local (x, z), m
+out float v_height;  // m, local
 out float v_alpha;   // morph weight toward level l+1
 flat out int v_level;
 
@@ -53,6 +54,7 @@ void main() {
   gl_ClipDistance[2] = xz.y;
   gl_ClipDistance[3] = u_extent.y - xz.y;
   v_xz = xz;
+  v_height = h;
   v_alpha = alpha;
   v_level = u_level;
   gl_Position = u_view_proj * vec4(xz.x, h, xz.y, 1.0);
