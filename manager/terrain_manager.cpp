@@ -2,6 +2,8 @@
 // stages (each in its own source, terrain_manager_impl.hpp), the queries and the report.
 #include "manager/terrain_manager.hpp"
 
+#include "common/limits.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <numbers>
@@ -64,6 +66,13 @@ Result<std::unique_ptr<TerrainManager>> TerrainManager::create(const TerrainMana
   knob("max_substeps", def.max_substeps, knobs::kMaxSubsteps);
   knob("pool.granules_per_slot", def.granules_per_slot, knobs::kGranulesPerSlot);
   knob("patch_depth", def.patch_depth, knobs::kPatchDepth);
+  // Every slot is allocated at full capacity below: the pool's total is capped (common/limits.hpp).
+  if (knobs::kSlots.allows(def.slots) && knobs::kGranulesPerSlot.allows(def.granules_per_slot) &&
+      double(def.slots) * def.granules_per_slot > double(limits::kMaxPoolGranules))
+    errs.push_back(Error{"", "pool.slots", std::to_string(def.slots) + " × granules_per_slot " + std::to_string(def.granules_per_slot),
+                         "slots × granules_per_slot must be at most " + std::to_string(limits::kMaxPoolGranules) +
+                             " granules (every slot is allocated at full capacity)",
+                         "lower slots or granules_per_slot"});
   if (!(def.surface_probe >= 0 && def.surface_probe <= 4)) bad("surface_probe", def.surface_probe, "must be in [0, 4] sphere radii");
   if (def.fill_granules_per_frame < 1) bad("fill_granules_per_frame", def.fill_granules_per_frame, "must be >= 1");
   if (!errs.empty()) return errs;
