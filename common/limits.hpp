@@ -19,10 +19,14 @@ inline constexpr std::uint64_t kMaxGridBytes = std::uint64_t(1) << 30;
 inline constexpr std::uint64_t kMaxGridSamples = kMaxGridBytes / 4;  // 268435456 = 16384 × 16384
 
 // ---- the patch pool ----
-// Every slot is allocated at full capacity when patches are enabled; slots × granules_per_slot
-// is capped at 2^24 granules (the largest single slot the knob table allows), about 3 GiB of
-// DEM state at ~200 bytes a granule (4 spheres).
-inline constexpr std::uint64_t kMaxPoolGranules = std::uint64_t(1) << 24;
+// Every slot is allocated at full capacity when patches are enabled. A granule costs about
+// 1 KiB of DEM state (4 spheres of 104 bytes in the field lists of particles/fields.hpp, a
+// body of 140 bytes, and the CPU backend's per-sphere sort, contact and boundary arrays), so
+// a 4 GiB pool cap gives slots × granules_per_slot ≤ 2^22 = 4194304 granules (the largest
+// shipped scene, leach_3_ten_bodies_paper, holds 983040).
+inline constexpr std::uint64_t kMaxPoolBytes = std::uint64_t(4) << 30;
+inline constexpr std::uint64_t kPoolBytesPerGranule = 1024;
+inline constexpr std::uint64_t kMaxPoolGranules = kMaxPoolBytes / kPoolBytesPerGranule;
 
 // ---- meshes ----
 // An OBJ is read whole by the loader: files over 256 MiB and meshes over 2^21 triangles (the

@@ -538,5 +538,5 @@ TEST(ApiReliability, GridAndPoolOverTheirCapsAreRefusedBeforeAllocating) {
   auto u = sp::Terrain::create(p);
   ASSERT_FALSE(u.ok());
   EXPECT_EQ(u.errors()[0].field, "TerrainDef.slots") << u.message();
-  EXPECT_NE(u.message().find("at most 16777216 granules"), std::string::npos) << u.message();
+  EXPECT_NE(u.message().find("at most 4194304 granules"), std::string::npos) << u.message();
 }

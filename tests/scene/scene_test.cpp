@@ -739,7 +739,7 @@ TEST(SceneReliability, GridsArePassedTheMemoryCap) {
 
 TEST(SceneReliability, PoolIsCapped) {
   const auto r = broken("pool_too_large.json");
-  EXPECT_TRUE(has_error(r, "simulation.pool.slots", "1024 × granules_per_slot 16777216", "16777216 granules")) << all(r);
+  EXPECT_TRUE(has_error(r, "simulation.pool.slots", "1024 × granules_per_slot 16777216", "4194304 granules")) << all(r);
 }
 
 TEST(SceneReliability, MassFromATinyShapeIsRefused) {
