@@ -18,6 +18,7 @@
 #include "common/error.hpp"
 #include "common/hash.hpp"
 #include "common/knobs.hpp"
+#include "common/limits.hpp"
 #include "heightfield/heightfield.hpp"
 #include "heightfield/io.hpp"
 #include "heightfield/procedural.hpp"
@@ -117,6 +118,8 @@ std::vector<Error> validate(const TerrainDef& d) {
   if (need_grid) {
     c.integer("samples_x", d.samples_x, 2, 1048577);
     c.integer("samples_z", d.samples_z, 2, 1048577);
+    if (auto e = core::limits::check_grid_size("", "TerrainDef.samples_x × samples_z", d.samples_x, d.samples_z))
+      c.errs.push_back({e->file, e->field, e->value, e->allowed, e->detail});
   }
   if (!d.heights.empty()) {
     const long long n = (long long)(std::max(d.samples_x, 0)) * std::max(d.samples_z, 0);
@@ -156,6 +159,10 @@ std::vector<Error> validate(const TerrainDef& d) {
   c.knob(knobs::kTangentialRatio, d.material.tangential_stiffness_ratio);
   c.knob(knobs::kSlots, d.slots);
   c.knob(knobs::kGranulesPerSlot, d.granules_per_slot);
+  if (d.granular_patches && double(d.slots) * double(d.granules_per_slot) > double(core::limits::kMaxPoolGranules))
+    c.add("slots", std::to_string(d.slots) + " × granules_per_slot " + std::to_string(d.granules_per_slot),
+          "slots × granules_per_slot must be at most " + std::to_string(core::limits::kMaxPoolGranules) +
+              " granules (every slot is allocated at full capacity); lower slots or granules_per_slot");
   c.knob(knobs::kPatchDepth, d.patch_depth);
   if (knobs::kPatchDepth.allows(d.patch_depth) && std::isfinite(d.soil_depth) && d.patch_depth > d.soil_depth)
     c.add("patch_depth", num(d.patch_depth), "must be at most soil_depth (" + num(d.soil_depth) + " m)");
@@ -240,8 +247,20 @@ EventKind kind_of(core::PatchEventKind k) {
 bool eq_norm_positive(const Quat& q) {
   return double(q[0]) * q[0] + double(q[1]) * q[1] + double(q[2]) * q[2] + double(q[3]) * q[3] > 1e-12;
 }
+// Normalised in double: a float quaternion of 1e30 has a float norm² of inf, which would
+// normalise to [0, 0, 0, 0] (callers check finite and non-zero first).
+Eigen::Quaternionf eq(const Quat& q) {
+  const double n = std::sqrt(double(q[0]) * q[0] + double(q[1]) * q[1] + double(q[2]) * q[2] + double(q[3]) * q[3]);
+  return Eigen::Quaternionf(float(q[0] / n), float(q[1] / n), float(q[2] / n), float(q[3] / n));
+}
+// A velocity's magnitude against its limit (limits.hpp), the same rule as scene files.
+void speed_limit(Checker& c, const std::string& field, const Vec3f& v, double limit, const char* unit) {
+  const double n = std::sqrt(double(v[0]) * v[0] + double(v[1]) * v[1] + double(v[2]) * v[2]);
+  if (std::isfinite(n) && n > limit)
+    c.add(field, "[" + num(v[0]) + ", " + num(v[1]) + ", " + num(v[2]) + "]",
+          "the magnitude must be at most " + num(limit) + " " + unit + " (|v| = " + num(n) + ")");
+}
 Eigen::Vector3f ev(const Vec3f& v) { return {v[0], v[1], v[2]}; }
-Eigen::Quaternionf eq(const Quat& q) { return Eigen::Quaternionf(q[0], q[1], q[2], q[3]).normalized(); }
 
 }  // namespace
 
@@ -341,6 +360,9 @@ Result<BodyHandle> Terrain::add_body(const BodyDef& d) {
       c.closed("shape.height", s.height, 0.0, 1e4, "m");
       r.shape.kind = core::RigidShapeKind::Capsule;
       break;
+    default:
+      c.add("shape.kind", std::to_string(static_cast<int>(s.kind)), "must be a ShapeKind: Sphere, Box, Cylinder, Capsule or Mesh");
+      break;
     case ShapeKind::Mesh: {
       r.shape.kind = core::RigidShapeKind::Mesh;
       if (s.mesh_file.empty() == s.vertices.empty()) {
@@ -389,13 +411,15 @@ Result<BodyHandle> Terrain::add_body(const BodyDef& d) {
       break;
     }
   }
-  c.positive("mass", d.mass, 1e9, "kg");
+  c.closed("mass", d.mass, core::limits::kMinBodyMass, core::limits::kMaxBodyMass, "kg");
   c.finite("position", d.position, "m");
   c.finite("orientation", d.orientation, "");
   if (c.errs.empty() && !(eq_norm_positive(d.orientation)))
     c.add("orientation", "[0, 0, 0, 0]", "must be a non-zero quaternion [w, x, y, z]");
   c.finite("linear_velocity", d.linear_velocity, "m/s");
   c.finite("angular_velocity", d.angular_velocity, "rad/s");
+  speed_limit(c, "linear_velocity", d.linear_velocity, core::limits::kMaxBodySpeed, "m/s");
+  speed_limit(c, "angular_velocity", d.angular_velocity, core::limits::kMaxBodySpin, "rad/s");
   c.knob(knobs::kBodyFriction, d.friction);
   c.knob(knobs::kBodyRestitution, d.restitution);
   c.knob(knobs::kBodyRollingFriction, d.rolling_friction);
@@ -424,6 +448,21 @@ Result<BodyHandle> Terrain::add_body(const BodyDef& d) {
     return Error{"", "BodyDef.position", vec_str(d.position),
                  "the body's lowest point must start at or above the bedrock (world y = " + num(bedrock) + " m here)",
                  "its lowest point is at y = " + num(lo.y()) + " m" + (d.name.empty() ? "" : " (body '" + d.name + "')")};
+  }
+  // The scene files' rule too (manager/scene_world.cpp make_world): a body whose centre starts
+  // below the surface is inside the terrain, and Bullet's contact would push it further down.
+  const core::Heightfield& g = I.hf();
+  const double lx = d.position[0] - g.origin_x(), lz = d.position[2] - g.origin_z();
+  if (lx >= 0 && lz >= 0 && lx <= (g.samples_x() - 1) * double(g.spacing()) && lz <= (g.samples_z() - 1) * double(g.spacing())) {
+    const double surface = height_at(d.position[0], d.position[2]);
+    if (d.position[1] < surface) {
+      I.world->discard_body(*id);
+      return Error{"", "BodyDef.position", vec_str(d.position),
+                   "the body starts inside the terrain: its centre is below the surface (world y = " + num(surface) +
+                       " m there); it must start at or above it",
+                   "its lowest point may touch or enter the ground, its centre may not" +
+                       (d.name.empty() ? std::string() : " (body '" + d.name + "')")};
+    }
   }
   return BodyHandle{id->index, id->generation};
 }
@@ -497,6 +536,8 @@ Status Terrain::set_body_velocity(BodyHandle h, const Vec3f& linear, const Vec3f
   Checker c{"set_body_velocity.", "", {}};
   c.finite("linear", linear, "m/s");
   c.finite("angular", angular, "rad/s");
+  speed_limit(c, "linear", linear, core::limits::kMaxBodySpeed, "m/s");
+  speed_limit(c, "angular", angular, core::limits::kMaxBodySpin, "rad/s");
   if (!c.errs.empty()) return c.errs;
   core::BodyState st = impl_->bullet().state(impl_->id(h));
   st.linear_velocity = ev(linear);

@@ -11,6 +11,7 @@
 #include <string>
 
 #include "common/hash.hpp"
+#include "common/limits.hpp"
 
 namespace sandpatch {
 namespace {
@@ -34,9 +35,10 @@ const char* layer_name(Layer l) {
 
 GridRegion intersect(GridRegion a, GridRegion b) {
   const int i0 = std::max(a.i0, b.i0), j0 = std::max(a.j0, b.j0);
-  const int i1 = std::min(a.i0 + a.ni, b.i0 + b.ni), j1 = std::min(a.j0 + a.nj, b.j0 + b.nj);
+  const std::int64_t i1 = std::min(std::int64_t(a.i0) + a.ni, std::int64_t(b.i0) + b.ni);
+  const std::int64_t j1 = std::min(std::int64_t(a.j0) + a.nj, std::int64_t(b.j0) + b.nj);
   if (i1 <= i0 || j1 <= j0) return {i0, j0, 0, 0};
-  return {i0, j0, i1 - i0, j1 - j0};
+  return {i0, j0, int(i1 - i0), int(j1 - j0)};
 }
 
 Result<Heightfield> Heightfield::create(const HeightfieldDef& def) {
@@ -56,6 +58,7 @@ Result<Heightfield> Heightfield::create(const HeightfieldDef& def) {
   if (!std::isfinite(def.origin_z)) bad("origin_z", format_number(def.origin_z), "must be finite (m)");
   if (def.tile_cells < 1 || def.tile_cells > kMaxTileCells)
     bad("tile_cells", std::to_string(def.tile_cells), "must be in [1, 65536]");
+  if (auto e = limits::check_grid_size("", "samples_x × samples_z", def.samples_x, def.samples_z)) errs.push_back(*e);
   if (!std::isfinite(def.initial_height))
     bad("initial_height", format_number(def.initial_height), "must be finite (m)");
   if (errs.empty()) {
@@ -139,7 +142,8 @@ float Heightfield::layer_default(Layer l) const { return defaults_[layer_index(l
 
 bool Heightfield::contains(GridRegion r) const {
   if (r.empty()) return true;
-  return r.i0 >= 0 && r.j0 >= 0 && r.i0 + r.ni <= nx_ && r.j0 + r.nj <= nz_;
+  // In 64 bits: i0 + ni near INT_MAX must not wrap to a negative end.
+  return r.i0 >= 0 && r.j0 >= 0 && std::int64_t(r.i0) + r.ni <= nx_ && std::int64_t(r.j0) + r.nj <= nz_;
 }
 
 int Heightfield::tile_samples_x(int tx) const {

@@ -6,6 +6,8 @@
 // png_image API (16-bit linear greyscale), which needs no setjmp at all.
 #include "heightfield/io.hpp"
 
+#include "common/limits.hpp"
+
 #include <png.h>
 #include <unistd.h>
 
@@ -247,6 +249,8 @@ Result<Heightfield> load_png16(const std::string& path, const HeightmapImport& i
   if (h.width < 2 || h.height < 2)
     return file_error(path, "size", std::to_string(h.width) + " x " + std::to_string(h.height),
                       "must be at least 2 x 2 pixels");
+  // The grid cap from the header alone, before a pixel buffer is allocated.
+  if (auto e = limits::check_grid_size(path, "width × height", h.width, h.height)) return *e;
   // ---- pixels ----
   const std::size_t bytes_per_sample = h.bit_depth == 16 ? 2 : 1;
   const std::size_t row_bytes = std::size_t(h.width) * bytes_per_sample;
@@ -323,6 +327,7 @@ Result<Heightfield> load_raw_f32(const std::string& path, int samples_x, int sam
   if (samples_z < 2 || samples_z > (1 << 20) + 1)
     dim_errs.push_back(file_error(path, "samples_z", std::to_string(samples_z), "must be in [2, 1048577]"));
   if (!dim_errs.empty()) return dim_errs;
+  if (auto e = limits::check_grid_size(path, "samples_x × samples_z", samples_x, samples_z)) return *e;
   // ---- size, checked before anything is read ----
   const std::size_t n = std::size_t(samples_x) * std::size_t(samples_z);
   std::error_code ec;
@@ -422,6 +427,14 @@ Result<Heightfield> load_esri_ascii(const std::string& path, const HeightmapImpo
   if (std::isnan(cellsize)) errs.push_back(file_error(path, "cellsize", "", "missing from the header"));
   else if (!(cellsize > 0)) errs.push_back(file_error(path, "cellsize", format_number(cellsize), "must be > 0 (m)"));
   if (!errs.empty()) return errs;
+  if (auto e = limits::check_grid_size(path, "ncols × nrows", std::int64_t(ncols), std::int64_t(nrows))) return *e;
+  // The grid's geometry must be a float one: cellsize and the corner within the float range the
+  // heightfield keeps (origin and extent in m).
+  if (!import.override_spacing && !(cellsize <= 1e4))
+    return file_error(path, "cellsize", format_number(cellsize), "must be in (0, 10000] m");
+  if (!(std::abs(xll) <= 1e9) || !(std::abs(yll) <= 1e9))
+    return file_error(path, std::abs(xll) <= 1e9 ? (y_corner ? "yllcorner" : "yllcenter") : (x_corner ? "xllcorner" : "xllcenter"),
+                      format_number(std::abs(xll) <= 1e9 ? yll : xll), "must be in [-1e9, 1e9] m (the scene's world coordinates)");
 
   // ---- data: nrows x ncols numbers, first row northernmost ----
   const int nc = int(ncols), nr = int(nrows);

@@ -7,6 +7,7 @@
 #include <chrono>
 #include <cmath>
 #include <filesystem>
+#include <map>
 
 #include "common/hash.hpp"
 #include "heightfield/io.hpp"
@@ -85,7 +86,7 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
   // Start-up: the tiles a run settles (seconds on a first run; read back from the tile cache
   // later) print their progress as the frames do.
   ProgressPrinter progress(opt.progress, frames, dt);
-  auto made = make_world(scene, threads, backend, &failed_part, [&](const std::string& what, double done, double max, double wall) {
+  auto made = make_world(scene, threads, backend, &failed_part, true, [&](const std::string& what, double done, double max, double wall) {
     progress.note(what, done / max, wall);
   });
   if (!made) return fail(ExitCode::BadInput, failed_part, made.message());
@@ -112,8 +113,17 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
   VideoWriter video;
   long long video_frames = 0;  // video frame k shows simulated time k / video_fps
 
+  // Output patterns may name folders ("hf/{frame}.{ext}"): made when first written to.
+  auto make_parent = [&](const fs::path& p) -> Status {
+    std::error_code ec;
+    fs::create_directories(p.parent_path(), ec);
+    if (ec || !fs::is_directory(p.parent_path()))
+      return Error{p.string(), "", "", "cannot create the output folder " + p.parent_path().string(), ec ? ec.message() : ""};
+    return Ok{};
+  };
   auto export_heightfield = [&](const HeightfieldOutputDef& o, long long frame, double t) -> Status {
     const fs::path p = out_dir / expand_pattern(o.file, frame, t, format_ext(o.format));
+    if (Status made_dir = make_parent(p); !made_dir) return made_dir;
     Status s = Ok{};
     switch (o.format) {
       case HeightfieldFormat::Png16: s = save_png16(p.string(), hf); break;
@@ -138,6 +148,7 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
       if (!due) continue;
       const CameraDef* cam = scene.find_camera(o.camera);
       const fs::path p = out_dir / expand_pattern(o.file, frame, t, "png", o.camera);
+      if (Status made_dir = make_parent(p); !made_dir) return made_dir;
       if (Status s = images.write(camera_at(*cam, t), p.string()); !s) return s;
       if (images.unavailable()) ++images_skipped;
       else written.push_back(p.string());
@@ -160,6 +171,22 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
     return Ok{};
   };
 
+  // A body that crosses a patch's apron (simulation.lod.apron) in one frame outruns the patch
+  // machinery: its patch cannot be ready where it lands, and the heightfield takes the contact.
+  // Not refused (the speed is inside the scene's limit), reported once per body.
+  const double follow_speed = sim.lod.apron / dt;  // m/s
+  std::map<std::string, double> too_fast;            // body name → fastest speed seen (m/s)
+  auto note_fast_bodies = [&] {
+    if (!manager) return;
+    for (RigidBodyId id : world.bodies()) {
+      const double v = double(world.bullet().state(id).linear_velocity.norm());
+      if (v > follow_speed) {
+        double& m = too_fast[world.bullet().definition(id).name];
+        m = std::max(m, v);
+      }
+    }
+  };
+
   const auto t_start = Clock::now();
   if (Status s = write_outputs(0, 0.0); !s) return fail(ExitCode::RuntimeFailure, "outputs", s.message());
   for (long long frame = 0; frame < frames; ++frame) {
@@ -169,6 +196,7 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
     const double dem_ms_before = world.profile().timer(Stage::Dem).total_ms;
     if (Status st = world.step(dt, sim.substeps); !st)
       return fail(ExitCode::RuntimeFailure, world.failed_stage(), st.message());
+    note_fast_bodies();
     if (Status s = write_outputs(frame + 1, world.time()); !s) return fail(ExitCode::RuntimeFailure, "outputs", s.message());
     if (opt.on_frame) {
       FrameSample fs;
@@ -225,6 +253,10 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
     if (Status s = video.close(); !s) return fail(ExitCode::RuntimeFailure, "outputs", s.message());
     written.push_back(opt.video);
   }
+  for (const auto& [name, v] : too_fast)
+    warnings.push_back("bodies." + name + ": reached " + format_number(v) + " m/s, faster than the patches can follow (" +
+                       "simulation.lod.apron / dt = " + format_number(follow_speed) +
+                       " m/s): where it met the ground the heightfield, not granules, took the contact");
   if (images_skipped > 0)
     warnings.push_back("outputs.frames: " + std::to_string(images_skipped) +
                        " image(s) not written: no OpenGL context: " + images.why());

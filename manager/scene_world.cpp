@@ -147,7 +147,7 @@ TerrainManagerDef manager_def(const SceneDef& scene, const Heightfield& hf, int 
 }
 
 Result<std::unique_ptr<World>> make_world(const SceneDef& scene, int threads, const std::string& backend,
-                                          std::string* stage,
+                                          std::string* stage, bool patches,
                                           const std::function<void(const std::string&, double, double, double)>& on_settle) {
   std::string unused;
   std::string& part = stage ? *stage : unused;
@@ -187,12 +187,30 @@ Result<std::unique_ptr<World>> make_world(const SceneDef& scene, int threads, co
     if (!def) return def.errors();
     body_defs.push_back(std::move(*def));
   }
+  // Bodies are added at their spawn time: Bullet's own checks run now, on a scratch world, so
+  // that a body it would refuse is bad input before frame 0 and not a failure mid-run.
+  {
+    part = "bodies";
+    auto scratch = BulletWorld::create(hf, vec3f(scene.simulation.gravity));
+    if (!scratch) return scratch.errors();
+    for (std::size_t i = 0; i < body_defs.size(); ++i) {
+      auto id = (*scratch)->add_body(body_defs[i]);
+      if (!id) {
+        std::vector<Error> es = id.errors();
+        for (Error& e : es) {
+          e.file = scene.source_path;
+          e.field = "bodies[" + std::to_string(i) + "]" + (e.field.empty() ? "" : " (" + e.field + ")");
+        }
+        return es;
+      }
+    }
+  }
   TerrainManagerDef md;
   if (scene.simulation.granular_patches) md = manager_def(scene, hf, threads, backend);
   md.on_settle = on_settle;
   auto world = World::create(std::move(*hf_result), vec3f(scene.simulation.gravity));
   if (!world) return world.errors();
-  if (scene.simulation.granular_patches) {
+  if (scene.simulation.granular_patches && patches) {
     part = "activation";
     if (Status s = (*world)->enable_patches(md); !s) return s.errors();
   }

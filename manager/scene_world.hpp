@@ -41,9 +41,11 @@ render::CameraView camera_at(const CameraDef& camera, double t);
 // scheduled at its spawn time, the terrain manager made unless the scene turns patches off.
 // Errors are bad input (they name the scene file and field) found before anything runs;
 // `stage` (if given) is set to the part that refused: terrain, bodies or activation.
+// `patches` false builds everything but the patch pool (its settings were checked with the
+// scene file): `sandpatch check` runs this, so it refuses what run would before frame 0.
 // `on_settle` (if given) is told how far the start-up's tile settling is (TerrainManagerDef).
 Result<std::unique_ptr<World>> make_world(const SceneDef& scene, int threads, const std::string& backend,
-                                          std::string* stage = nullptr,
+                                          std::string* stage = nullptr, bool patches = true,
                                           const std::function<void(const std::string&, double, double, double)>& on_settle = {});
 
 }  // namespace sandpatch

@@ -2,6 +2,8 @@
 // stages (each in its own source, terrain_manager_impl.hpp), the queries and the report.
 #include "manager/terrain_manager.hpp"
 
+#include "common/limits.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <numbers>
@@ -69,6 +71,13 @@ Result<std::unique_ptr<TerrainManager>> TerrainManager::create(const TerrainMana
   if (!(def.budget_sphere_ns >= 0 && def.budget_sphere_ns < 1e9)) bad("budget_sphere_ns", def.budget_sphere_ns, "must be in [0, 1e9) ns");
   if (!(def.frame_budget_fraction >= 0 && def.frame_budget_fraction <= 100))
     bad("frame_budget_fraction", def.frame_budget_fraction, "must be in [0, 100] (0: frame_budget_ms applies)");
+  // Every slot is allocated at full capacity below: the pool's total is capped (common/limits.hpp).
+  if (knobs::kSlots.allows(def.slots) && knobs::kGranulesPerSlot.allows(def.granules_per_slot) &&
+      double(def.slots) * def.granules_per_slot > double(limits::kMaxPoolGranules))
+    errs.push_back(Error{"", "pool.slots", std::to_string(def.slots) + " × granules_per_slot " + std::to_string(def.granules_per_slot),
+                         "slots × granules_per_slot must be at most " + std::to_string(limits::kMaxPoolGranules) +
+                             " granules (every slot is allocated at full capacity)",
+                         "lower slots or granules_per_slot"});
   if (!(def.surface_probe >= 0 && def.surface_probe <= 4)) bad("surface_probe", def.surface_probe, "must be in [0, 4] sphere radii");
   if (!(def.depth_texels_per_radius >= 0 && def.depth_texels_per_radius <= 1e3))
     bad("depth_texels_per_radius", def.depth_texels_per_radius, "must be in [0, 1000] (0: depth_resolution always)");

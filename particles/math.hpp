@@ -8,6 +8,13 @@ namespace sandpatch {
 
 struct Vec3 {
   float x = 0, y = 0, z = 0;
+#if defined(__clang__) && __clang_major__ < 16
+  // clang before 16 lacks parenthesised aggregate initialisation (P0960), which the GLSL the
+  // DEM shares with C++ writes as vec3(x, y, z): the constructors it stands for (the sanitizer
+  // and fuzzing build uses clang 14, docs/reliability.md).
+  constexpr Vec3() = default;
+  constexpr Vec3(float x_, float y_, float z_) : x(x_), y(y_), z(z_) {}
+#endif
 };
 
 inline Vec3 operator+(Vec3 a, Vec3 b) { return {a.x + b.x, a.y + b.y, a.z + b.z}; }

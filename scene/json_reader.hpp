@@ -22,6 +22,7 @@
 
 #include "common/error.hpp"
 #include "common/knobs.hpp"
+#include "common/limits.hpp"
 
 namespace sandpatch::scene_json {
 
@@ -181,8 +182,37 @@ struct ParsedText {
   std::optional<Error> error;
 };
 
+// Byte index of the first '[' or '{' that opens level max_depth + 1 (strings skipped), or npos.
+// Run before the parser: nesting is what the DOM, its destructor and the readers recurse on,
+// so ~70,000 levels would overflow the stack (limits::kMaxJsonDepth).
+inline std::size_t too_deep_at(const std::string& text, int max_depth) {
+  int depth = 0;
+  bool in_string = false;
+  for (std::size_t i = 0; i < text.size(); ++i) {
+    const char ch = text[i];
+    if (in_string) {
+      if (ch == '\\') ++i;  // the escaped character cannot close the string
+      else if (ch == '"') in_string = false;
+    } else if (ch == '"') {
+      in_string = true;
+    } else if (ch == '[' || ch == '{') {
+      if (++depth > max_depth) return i;
+    } else if (ch == ']' || ch == '}') {
+      --depth;
+    }
+  }
+  return std::string::npos;
+}
+
 inline ParsedText parse_json_text(std::string text, const std::string& file) {
   ParsedText out;
+  if (const std::size_t at = too_deep_at(text, limits::kMaxJsonDepth); at != std::string::npos) {
+    const auto [line, col] = line_column(text, at);
+    out.error = Error{file, "line " + std::to_string(line) + ", column " + std::to_string(col), "",
+                      "arrays and objects may be nested at most " + std::to_string(limits::kMaxJsonDepth) + " deep",
+                      "nesting level " + std::to_string(limits::kMaxJsonDepth + 1) + " starts here"};
+    return out;
+  }
   // Each pass either succeeds, fails on syntax, or replaces one overflowing number by a
   // marked string and tries again.
   for (int pass = 0; pass < 10000; ++pass) {
@@ -624,6 +654,15 @@ inline void check_png16(Ctx& c, const std::string& field, const std::string& wri
             path + " has colour type " + std::to_string(colour_type) + " (colour or palette), not greyscale");
   } else if (bit_depth != 1 && bit_depth != 2 && bit_depth != 4 && bit_depth != 8 && bit_depth != 16) {
     c.error(field, json_quote(written), allowed, path + " has an invalid bit depth " + std::to_string(bit_depth));
+  }
+  // IHDR width and height (big-endian, bytes 16..23): the grid cap, from the header alone.
+  auto be32 = [&](std::size_t at) {
+    std::uint32_t v = 0;
+    for (std::size_t k = 0; k < 4; ++k) v = (v << 8) | static_cast<unsigned char>(h[at + k]);
+    return v;
+  };
+  if (auto e = limits::check_grid_size(path, "width × height", be32(16), be32(20))) {
+    c.error(field, json_quote(written), e->allowed, path + ": " + e->value + "; " + e->detail);
   }
 }
 

@@ -1,6 +1,8 @@
 // Triangle meshes for bodies: see mesh.hpp.
 #include "scene/mesh.hpp"
 
+#include "common/limits.hpp"
+
 #include <Eigen/Geometry>
 #include <tiny_obj_loader.h>
 
@@ -11,6 +13,7 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <sstream>
 #include <unordered_map>
 
 namespace sandpatch {
@@ -116,6 +119,54 @@ Result<TriangleMesh> load_obj_mesh(const std::string& path, double scale) {
   if (!fs::is_regular_file(path, ec)) return Error{path, "", "", "", "not a regular file"};
   if (!std::ifstream(path).good()) return Error{path, "", "", "", "file cannot be opened for reading"};
 
+  // The file is read whole by tinyobj: its size, then a pass over the text that refuses what
+  // tinyobj would silently read as 0 (a coordinate "nan", "inf" or not a number) and counts
+  // the faces (common/limits.hpp) before anything is built from it.
+  {
+    const auto size = fs::file_size(path, ec);
+    if (ec) return Error{path, "", "", "", "cannot read the file size: " + ec.message()};
+    if (size > limits::kMaxMeshFileBytes)
+      return Error{path, "", std::to_string(size) + " bytes",
+                   "an OBJ file of at most " + std::to_string(limits::kMaxMeshFileBytes) + " bytes",
+                   "simplify the mesh (fewer vertices and faces)"};
+    std::ifstream in(path, std::ios::binary);
+    std::string line;
+    std::uint64_t faces = 0;
+    for (std::size_t n = 1; std::getline(in, line); ++n) {
+      std::size_t b = line.find_first_not_of(" \t");
+      if (b == std::string::npos) continue;
+      if (line.compare(b, 2, "f ") == 0 || line.compare(b, 2, "f\t") == 0) {
+        // A polygon of k corners becomes k − 2 triangles.
+        std::istringstream words(line.substr(b + 1));
+        std::string w;
+        std::uint64_t corners = 0;
+        while (words >> w) ++corners;
+        faces += corners > 2 ? corners - 2 : 1;
+        if (faces > limits::kMaxMeshTriangles)
+          return Error{path, "line " + std::to_string(n), "more than " + std::to_string(limits::kMaxMeshTriangles) + " triangles",
+                       "a mesh of at most " + std::to_string(limits::kMaxMeshTriangles) + " triangles",
+                       "simplify the mesh (fewer faces)"};
+        continue;
+      }
+      if (!(line.compare(b, 2, "v ") == 0 || line.compare(b, 2, "v\t") == 0)) continue;
+      std::istringstream words(line.substr(b + 1));
+      std::string w;
+      for (int k = 0; k < 3; ++k) {
+        const bool got = static_cast<bool>(words >> w);
+        char* end = nullptr;
+        const double x = got ? std::strtod(w.c_str(), &end) : 0.0;
+        if (!got || end != w.c_str() + w.size() || !std::isfinite(x))
+          return Error{path, "line " + std::to_string(n), got ? w.substr(0, 40) : "(missing)",
+                       "three finite vertex coordinates (a vertex line is \"v x y z\")",
+                       got ? "coordinate " + std::to_string(k + 1) + " is not a finite number" : "the vertex has fewer than 3 coordinates"};
+        if (!(std::abs(x * scale) <= 1e9))
+          return Error{path, "line " + std::to_string(n), w.substr(0, 40),
+                       "vertex coordinates × scale within ±1e9 m",
+                       "coordinate " + std::to_string(k + 1) + " × scale = " + std::to_string(x * scale) + " m"};
+      }
+    }
+  }
+
   tinyobj::attrib_t attrib;
   std::vector<tinyobj::shape_t> shapes;
   std::vector<tinyobj::material_t> materials;
@@ -168,6 +219,12 @@ Result<TriangleMesh> load_obj_mesh(const std::string& path, double scale) {
     }
   }
   if (mesh.triangles.empty()) return Error{path, "", "", "at least one triangle", "the OBJ has no faces"};
+  const Eigen::Vector3f extent = mesh.bounds_max() - mesh.bounds_min();
+  if (!(extent.allFinite() && extent.maxCoeff() <= limits::kMaxMeshExtent)) {
+    char buf[96];
+    std::snprintf(buf, sizeof buf, "%.6g x %.6g x %.6g m", double(extent.x()), double(extent.y()), double(extent.z()));
+    return Error{path, "", buf, "a mesh at most 20000 m across on every axis (after scale)", "lower the scale"};
+  }
   return mesh;
 }
 

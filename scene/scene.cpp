@@ -20,11 +20,13 @@
 #include <map>
 #include <set>
 #include <sstream>
+#include <tuple>
 
 #include <Eigen/Geometry>
 #include <nlohmann/json.hpp>
 
 #include "common/hash.hpp"
+#include "common/limits.hpp"
 #include "scene/json_reader.hpp"
 #include "scene/mesh.hpp"
 
@@ -47,7 +49,8 @@ const std::vector<std::string> kHeightfieldFormats = {"png16", "raw_f32", "esri_
 
 // Value limits, one place (docs/scene-format.md lists the same).
 const Range kWorldCoord = closed(-1e9, 1e9, "m");
-const Range kSize = positive(1e4, "m");
+// Shape sizes: Bullet keeps them as float; below 1e-6 m a shape is a point to it.
+const Range kSize = closed(1e-6, 1e4, "m");
 
 TerrainDef parse_terrain(Ctx& c, const json& j) {
   TerrainDef t;
@@ -70,12 +73,20 @@ TerrainDef parse_terrain(Ctx& c, const json& j) {
         s.integer("octaves", p.octaves, 1, 16);
         s.integer("samples_x", p.samples_x, 2, 65536);
         s.integer("samples_z", p.samples_z, 2, 65536);
+        if (auto e = limits::check_grid_size(c.file, s.at("samples_x") + " × samples_z", p.samples_x, p.samples_z))
+          c.errors.push_back(*e);
       } else {
         std::string written;
         const bool raw = d.kind == TerrainSourceKind::RawF32;
         bool dims = true;
         if (raw) {
           dims = s.integer_req("samples_x", d.samples_x, 2, 65536) & s.integer_req("samples_z", d.samples_z, 2, 65536);
+          if (dims) {
+            if (auto e = limits::check_grid_size(c.file, s.at("samples_x") + " × samples_z", d.samples_x, d.samples_z)) {
+              c.errors.push_back(*e);
+              dims = false;
+            }
+          }
         }
         if (s.string_req("file", written, "the heightmap's path")) {
           d.file = resolve(c, written);
@@ -163,7 +174,7 @@ std::optional<TriangleMesh> load_body_mesh(Ctx& c, ShapeDef& s, const std::strin
   if (!r) {
     for (const auto& e : r.errors()) {
       c.error(field, json_quote(written), e.allowed.empty() ? "must be a readable Wavefront OBJ file" : "must be " + e.allowed,
-              e.file + ": " + e.detail);
+              e.file + (e.field.empty() ? "" : ", " + e.field) + (e.value.empty() ? "" : " (" + e.value + ")") + ": " + e.detail);
     }
     return std::nullopt;
   }
@@ -256,6 +267,19 @@ BodyDef parse_body(Ctx& c, const json& j, const std::string& path, std::optional
     b.mass = o.number_opt("mass", positive(1e9, "kg"));
     b.density = o.number_opt("density", positive(1e5, "kg/m^3"));
     if (!given && o.valid()) c.missing(o.at("mass"), "one of 'mass' (kg) or 'density' (kg/m^3)");
+    // The mass run gives Bullet (a float): a tiny shape or density must not make it 0.
+    const bool shape_known = b.shape.kind != ShapeKind::Mesh || b.shape.mesh_volume > 0;
+    if (b.density && shape_known && o.valid()) {
+      const double m = b.mass_value();
+      if (!(m >= limits::kMinBodyMass && m <= limits::kMaxBodyMass))
+        c.error(o.at("density"), show(*o.get("density")),
+                "density × shape volume must give a mass in [" + fmt_num(limits::kMinBodyMass) + ", " +
+                    fmt_num(limits::kMaxBodyMass) + "] kg",
+                "mass = " + fmt_num(m) + " kg (volume " + fmt_num(b.shape.volume()) + " m^3)");
+    }
+    if (b.mass && *b.mass < limits::kMinBodyMass)
+      c.error(o.at("mass"), show(*o.get("mass")), "must be in [" + fmt_num(limits::kMinBodyMass) + ", " +
+                                                      fmt_num(limits::kMaxBodyMass) + "] kg");
     if (o.has("density") && b.shape.kind == ShapeKind::Mesh && !b.shape.solid) {
       c.error(o.at("density"), show(*o.get("density")), "give 'mass' for a mesh with \"solid\": false",
               "an open surface has no volume");
@@ -284,8 +308,16 @@ BodyDef parse_body(Ctx& c, const json& j, const std::string& path, std::optional
     }
     p.finish();
   }
-  o.vec3("linear_velocity", b.linear_velocity, closed(-1e3, 1e3, "m/s"));
-  o.vec3("angular_velocity", b.angular_velocity, closed(-1e4, 1e4, "rad/s"));
+  o.vec3("linear_velocity", b.linear_velocity, closed(-limits::kMaxBodySpeed, limits::kMaxBodySpeed, "m/s"));
+  o.vec3("angular_velocity", b.angular_velocity, closed(-limits::kMaxBodySpin, limits::kMaxBodySpin, "rad/s"));
+  // The limits are on the magnitudes (common/limits.hpp), as in the library.
+  for (const auto& [key, v, limit, unit] : {std::tuple{"linear_velocity", b.linear_velocity, limits::kMaxBodySpeed, "m/s"},
+                                            std::tuple{"angular_velocity", b.angular_velocity, limits::kMaxBodySpin, "rad/s"}}) {
+    const double n = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+    if (n > limit)
+      c.error(o.at(key), show(*o.get(key)), "the magnitude must be at most " + fmt_num(limit) + " " + unit,
+              "|v| = " + fmt_num(n) + " " + unit);
+  }
   o.number("spawn_time", b.spawn_time, closed(0.0, 1e6, "s"));
   o.knob("friction", b.friction, knobs::kBodyFriction);
   o.knob("restitution", b.restitution, knobs::kBodyRestitution);
@@ -328,6 +360,11 @@ SceneSimulationDef parse_simulation(Ctx& c, const json& j) {
     Obj p(c, *pj, o.at("pool"));
     p.knob("slots", s.pool.slots, knobs::kSlots);
     p.knob("granules_per_slot", s.pool.granules_per_slot, knobs::kGranulesPerSlot);
+    if (double(s.pool.slots) * s.pool.granules_per_slot > double(limits::kMaxPoolGranules))
+      c.error(p.at("slots"), std::to_string(s.pool.slots) + " × granules_per_slot " + std::to_string(s.pool.granules_per_slot),
+              "slots × granules_per_slot must be at most " + std::to_string(limits::kMaxPoolGranules) +
+                  " granules (every slot is allocated at full capacity)",
+              "lower slots or granules_per_slot");
     p.finish();
   }
   o.knob("particle_scale", s.particle_scale, knobs::kParticleScale);

@@ -33,6 +33,7 @@
 #include "common/knobs.hpp"
 #include "gl/context.hpp"
 #include "manager/run.hpp"
+#include "manager/scene_world.hpp"
 #include "particles/gpu/bench_gl.hpp"
 #include "render/render.hpp"
 #include "scene/scene.hpp"
@@ -199,6 +200,17 @@ int cmd_check(const std::string& path) {
   auto scene = load_scene_file(path);
   if (!scene) {
     print_errors(path + ": invalid scene (" + std::to_string(scene.errors().size()) + " error(s))", scene.message());
+    return code(ExitCode::BadInput);
+  }
+  // Everything run does before its first frame but the patch pool: the terrain loaded (a
+  // heightmap's every sample, NODATA cells, its geometry), the bodies checked against it and
+  // made as Bullet bodies (docs/reliability.md).
+  std::string stage;
+  auto world = make_world(*scene, 1, to_string(scene->simulation.backend), &stage, /*patches=*/false);
+  if (!world) {
+    print_errors(path + ": invalid scene (" + std::to_string(world.errors().size()) + " error(s) at the " + stage +
+                     " stage of building the world)",
+                 world.message());
     return code(ExitCode::BadInput);
   }
   std::printf("%s: valid scene '%s' (hash %s): %zu bodies, %zu materials\n", path.c_str(), scene->name.c_str(),

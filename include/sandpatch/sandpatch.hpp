@@ -207,11 +207,11 @@ struct ShapeDef {
 struct BodyDef {
   std::string name;                            // for messages and the report
   ShapeDef shape;
-  double mass = 1.0;                           // kg, (0, 1e9]
-  Vec3 position = {0.0, 0.0, 0.0};             // m, world (above the bedrock)
+  double mass = 1.0;                           // kg, [1e-6, 1e9]
+  Vec3 position = {0.0, 0.0, 0.0};             // m, world (centre at or above the surface)
   Quat orientation = {1.0f, 0.0f, 0.0f, 0.0f}; // [w, x, y, z], normalised on creation (norm > 0)
-  Vec3f linear_velocity = {0.0f, 0.0f, 0.0f};  // m/s, world
-  Vec3f angular_velocity = {0.0f, 0.0f, 0.0f}; // rad/s, world
+  Vec3f linear_velocity = {0.0f, 0.0f, 0.0f};  // m/s, world, |v| <= 1000
+  Vec3f angular_velocity = {0.0f, 0.0f, 0.0f}; // rad/s, world, |w| <= 1e4
   double friction = 0.5;                       // μ against the heightfield, [0, 10]
   double restitution = 0.1;                    // against the heightfield, [0, 1]
   double rolling_friction = 0.05;              // rolling resistance, [0, 10]

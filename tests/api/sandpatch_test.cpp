@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstdio>
 #include <string>
+#include <vector>
 #include <sandpatch/sandpatch.hpp>
 
 #include "tests/api/terrain_defs.hpp"
@@ -106,7 +107,7 @@ TEST(Api, BadBodiesHandlesAndStepsAreRefused) {
   sp::Error e = first_error(t->add_body(b));
   EXPECT_EQ(e.field, "BodyDef.mass");
   EXPECT_EQ(e.value, "0");
-  EXPECT_EQ(e.allowed, "must be in (0, 1e+09] kg");
+  EXPECT_EQ(e.allowed, "must be in [1e-06, 1e+09] kg");
   EXPECT_EQ(e.detail, "body 'crate'");
 
   b.mass = 1;
@@ -657,4 +658,105 @@ TEST(ApiDrive, GranularForceOnARestingBodyIsItsWeight) {
   ASSERT_TRUE(f.ok());
   EXPECT_FALSE(f->carried);
   EXPECT_EQ(f->force[1], 0.0f);
+
+// ---- hostile input (docs/reliability.md) ----
+
+TEST(ApiReliability, HugeOrientationIsNormalisedInDouble) {
+  // 1e30 per component: the float norm² overflows; the body must still get the identity.
+  auto t = sp::Terrain::create(flat_def());
+  ASSERT_TRUE(t.ok()) << t.message();
+  sp::BodyDef b;
+  b.position = {5, 3, 5};
+  b.orientation = {1e30f, 0, 0, 0};
+  auto h = t->add_body(b);
+  ASSERT_TRUE(h.ok()) << h.message();
+  const auto st = t->body_state(*h);
+  ASSERT_TRUE(st.ok());
+  EXPECT_NEAR(st->orientation[0], 1.0f, 1e-6f);
+  b.orientation = {3e38f, 3e38f, -3e38f, 3e38f};  // each finite, the norm not in float
+  auto h2 = t->add_body(b);
+  ASSERT_TRUE(h2.ok()) << h2.message();
+  EXPECT_NEAR(std::abs(t->body_state(*h2)->orientation[0]), 0.5f, 1e-6f);
+  b.orientation = {std::nanf(""), 0, 0, 0};
+  EXPECT_EQ(first_error(t->add_body(b)).field, "BodyDef.orientation");
+}
+
+TEST(ApiReliability, OutOfRangeShapeKindIsRefused) {
+  auto t = sp::Terrain::create(flat_def());
+  ASSERT_TRUE(t.ok());
+  sp::BodyDef b;
+  b.position = {5, 3, 5};
+  for (int k : {-1, 5, 1000}) {
+    b.shape.kind = static_cast<sp::ShapeKind>(k);
+    const sp::Error e = first_error(t->add_body(b));
+    EXPECT_EQ(e.field, "BodyDef.shape.kind") << e.message();
+    EXPECT_EQ(e.value, std::to_string(k));
+  }
+}
+
+TEST(ApiReliability, BodyInsideTheTerrainIsRefusedAsInSceneFiles) {
+  auto t = sp::Terrain::create(flat_def());  // surface at y = 1 m, bedrock at -1 m
+  ASSERT_TRUE(t.ok());
+  sp::BodyDef b;
+  b.shape.radius = 0.5;
+  b.position = {5, 0.8, 5};  // above the bedrock, centre below the surface
+  const sp::Error e = first_error(t->add_body(b));
+  EXPECT_EQ(e.field, "BodyDef.position");
+  EXPECT_NE(e.message().find("inside the terrain"), std::string::npos) << e.message();
+  EXPECT_TRUE(t->bodies().empty());
+  b.position = {5, 1.2, 5};  // centre above, lowest point in the ground: allowed
+  EXPECT_TRUE(t->add_body(b).ok());
+  b.position = {50, -0.5, 50};  // off the terrain: nothing under it to be inside of
+  EXPECT_TRUE(t->add_body(b).ok());
+}
+
+TEST(ApiReliability, VelocitiesAreCappedAsInSceneFiles) {
+  auto t = sp::Terrain::create(flat_def());
+  ASSERT_TRUE(t.ok());
+  sp::BodyDef b;
+  b.position = {5, 3, 5};
+  b.linear_velocity = {-1e30f, 0, 0};
+  sp::Error e = first_error(t->add_body(b));
+  EXPECT_EQ(e.field, "BodyDef.linear_velocity");
+  EXPECT_NE(e.message().find("at most 1000 m/s"), std::string::npos) << e.message();
+  b.linear_velocity = {800, 0, 800};  // each component allowed, the speed not
+  EXPECT_EQ(first_error(t->add_body(b)).field, "BodyDef.linear_velocity");
+  b.linear_velocity = {0, 0, 0};
+  b.angular_velocity = {0, 2e4f, 0};
+  EXPECT_EQ(first_error(t->add_body(b)).field, "BodyDef.angular_velocity");
+  b.angular_velocity = {0, 0, 0};
+  auto h = t->add_body(b);
+  ASSERT_TRUE(h.ok());
+  EXPECT_EQ(first_error(t->set_body_velocity(*h, {0, -1e30f, 0}, {0, 0, 0})).field, "set_body_velocity.linear");
+  b.mass = 1e-30;  // a float 0 in Bullet
+  EXPECT_EQ(first_error(t->add_body(b)).field, "BodyDef.mass");
+}
+
+TEST(ApiReliability, ReadHeightsNearIntMaxIsAnError) {
+  auto t = sp::Terrain::create(flat_def());
+  ASSERT_TRUE(t.ok());
+  std::vector<float> out;
+  const int big = 2147483647;
+  EXPECT_FALSE(t->read_heights({1, 0, big, 1}, out).ok());
+  EXPECT_FALSE(t->read_heights({0, 1, 1, big}, out).ok());
+  EXPECT_FALSE(t->read_heights({big, big, big, big}, out).ok());
+  EXPECT_FALSE(t->read_heights({-big, 0, big, 1}, out).ok());
+  EXPECT_TRUE(out.empty());
+  ASSERT_TRUE(t->read_heights({40, 40, 1, 1}, out).ok());
+  EXPECT_FLOAT_EQ(out.at(0), 1.0f);
+}
+
+TEST(ApiReliability, GridAndPoolOverTheirCapsAreRefusedBeforeAllocating) {
+  sp::TerrainDef d = flat_def();
+  d.samples_x = d.samples_z = 65536;  // 16 GiB of heights
+  auto t = sp::Terrain::create(d);
+  ASSERT_FALSE(t.ok());
+  EXPECT_NE(t.message().find("at most 268435456 samples"), std::string::npos) << t.message();
+  sp::TerrainDef p = sand_def();
+  p.slots = 1024;
+  p.granules_per_slot = 16777216;
+  auto u = sp::Terrain::create(p);
+  ASSERT_FALSE(u.ok());
+  EXPECT_EQ(u.errors()[0].field, "TerrainDef.slots") << u.message();
+  EXPECT_NE(u.message().find("at most 4194304 granules"), std::string::npos) << u.message();
 }

@@ -94,3 +94,71 @@ TEST(Cli, InfoNamesTheRenderer) {
   EXPECT_NE(o.output.find("Bullet"), std::string::npos) << o.output;
   EXPECT_NE(o.output.find("threads"), std::string::npos) << o.output;
 }
+
+// ---- check runs what run runs before frame 0 (docs/reliability.md) ----
+
+namespace {
+std::string data(const std::string& rel) { return std::string(SANDPATCH_SOURCE_DIR) + "/tests/apps/data/" + rel; }
+}  // namespace
+
+TEST(CliReliability, CheckLoadsTheHeightmapAsRunDoes) {
+  // An ESRI corner of 1e300 m: the scene file is fine, the heightmap's geometry is not.
+  for (const std::string& cmd : {"check " + data("esri_corner.json"), "run " + data("esri_corner.json") + " --quiet --out /tmp/sandpatch_cli_rel"}) {
+    Outcome o = sandpatch(cmd);
+    EXPECT_EQ(o.code, 2) << cmd << o.output;
+    EXPECT_NE(o.output.find("corner_1e300.asc"), std::string::npos) << o.output;
+    EXPECT_NE(o.output.find("xllcorner"), std::string::npos) << o.output;
+  }
+  // A NODATA cell: refused naming the file, row and column, by check as by run.
+  Outcome o = sandpatch("check " + data("esri_nodata.json"));
+  EXPECT_EQ(o.code, 2) << o.output;
+  EXPECT_NE(o.output.find("nodata_cell.asc"), std::string::npos) << o.output;
+  EXPECT_NE(o.output.find("NODATA"), std::string::npos) << o.output;
+}
+
+TEST(CliReliability, CheckRefusesABodyInsideTheTerrain) {
+  Outcome o = sandpatch("check " + data("body_inside.json"));
+  EXPECT_EQ(o.code, 2) << o.output;
+  EXPECT_NE(o.output.find("inside the terrain"), std::string::npos) << o.output;
+}
+
+TEST(CliReliability, EveryShippedSceneChecksValid) {
+  for (const auto& e : fs::directory_iterator(scene(""))) {
+    if (e.path().extension() != ".json") continue;
+    Outcome o = sandpatch("check " + e.path().string());
+    EXPECT_EQ(o.code, 0) << e.path() << "\n" << o.output;
+  }
+}
+
+TEST(CliReliability, RunCreatesTheFoldersOfOutputPatterns) {
+  // tests/scene/data/full.json writes heightfields to "hf/{frame}.{ext}" (a folder) at the end.
+  const fs::path out = fs::temp_directory_path() / "sandpatch_cli_full";
+  fs::remove_all(out);
+  Outcome o = sandpatch("run " + std::string(SANDPATCH_SOURCE_DIR) + "/tests/scene/data/full.json --frames 2 --quiet --out " +
+                        out.string());
+  ASSERT_EQ(o.code, 0) << o.output;
+  bool found = false;
+  for (const auto& e : fs::directory_iterator(out / "hf")) found = found || e.path().extension() == ".raw";
+  EXPECT_TRUE(found);
+}
+
+TEST(CliReliability, ABodyFasterThanThePatchesIsAWarning) {
+  // 300 m/s a few centimetres above the ground: the run completes and says so in report.json.
+  const fs::path out = fs::temp_directory_path() / "sandpatch_cli_skim";
+  fs::remove_all(out);
+  Outcome o = sandpatch("run " + data("skimming.json") + " --quiet --out " + out.string());
+  ASSERT_EQ(o.code, 0) << o.output;
+  std::ifstream f(out / "report.json");
+  ASSERT_TRUE(f.good());
+  const auto rep = nlohmann::json::parse(f);
+  std::string warnings = rep["warnings"].dump();
+  EXPECT_NE(warnings.find("bodies.bullet: reached"), std::string::npos) << warnings;
+  EXPECT_NE(warnings.find("faster than the patches can follow"), std::string::npos) << warnings;
+}
+
+TEST(CliReliability, RunStepCountsAreChecked) {
+  // Regressions of the step count check: non-finite or huge --seconds, a tiny dt.
+  EXPECT_EQ(sandpatch("run --seconds nan --quiet").code, 2);
+  EXPECT_EQ(sandpatch("run --seconds 1e308 --quiet").code, 2);
+  EXPECT_EQ(sandpatch("check " + scene("broken/deep_nesting.json")).code, 2);
+}

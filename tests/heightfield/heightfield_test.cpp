@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <limits>
 #include <random>
 #include <vector>
 
@@ -295,4 +296,30 @@ TEST(HeightfieldHash, ByteExactAndCopiesAreDeep) {
 }
 
 }  // namespace
+// Regions near INT_MAX: i0 + ni once wrapped negative and passed the bounds check.
+TEST(HeightfieldRegions, ContainsDoesNotOverflow) {
+  HeightfieldDef d;
+  d.samples_x = d.samples_z = 9;
+  const Heightfield hf = *Heightfield::create(d);
+  const int big = std::numeric_limits<int>::max();
+  EXPECT_FALSE(hf.contains({1, 0, big, 1}));
+  EXPECT_FALSE(hf.contains({0, 1, 1, big}));
+  EXPECT_FALSE(hf.contains({big, big, big, big}));
+  EXPECT_TRUE(hf.contains({8, 8, 1, 1}));
+  EXPECT_FALSE(hf.contains({8, 8, 2, 1}));
+  const GridRegion r = intersect({5, 5, big, big}, hf.whole());
+  EXPECT_EQ(r.ni, 4);
+  EXPECT_EQ(r.nj, 4);
+}
+
+// The grid cap (common/limits.hpp): refused from the dimensions, before the tiles are allocated.
+TEST(HeightfieldCreate, GridOverTheMemoryCapIsRefused) {
+  HeightfieldDef d;
+  d.samples_x = d.samples_z = 65536;
+  auto r = Heightfield::create(d);
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.errors()[0].field, "samples_x × samples_z");
+  EXPECT_NE(r.errors()[0].message().find("at most 268435456 samples"), std::string::npos) << r.errors()[0].message();
+}
+
 }  // namespace sandpatch

@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 #include <png.h>
+#include <sys/resource.h>
 #include <unistd.h>
 
 #include <cmath>
@@ -413,5 +414,53 @@ TEST_F(HeightfieldIo, BadImportParametersNameTheField) {
   EXPECT_TRUE(contains(r.message(), "import.vertical_scale = inf")) << r.message();
 }
 
+
+// ---- memory bombs (common/limits.hpp, docs/reliability.md) ----
+
+long peak_rss_kib() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return u.ru_maxrss;
+}
+
+TEST_F(HeightfieldIo, PngHeaderBombIsRefusedBeforeAllocating) {
+  // 65 bytes whose header claims 65536 × 65536 16-bit samples (8 GiB of pixels).
+  const std::string bomb = std::string(SANDPATCH_SOURCE_DIR) + "/scenes/broken/heightmaps/bomb_65536.png";
+  const long before = peak_rss_kib();
+  auto r = load_png16(bomb, {});
+  ASSERT_FALSE(r.ok());
+  EXPECT_LT(peak_rss_kib() - before, 64 * 1024) << "peak memory grew by " << (peak_rss_kib() - before) << " KiB";
+  const std::string m = r.errors()[0].message();
+  EXPECT_TRUE(contains(m, "bomb_65536.png")) << m;
+  EXPECT_TRUE(contains(m, "65536 × 65536")) << m;
+  EXPECT_TRUE(contains(m, "at most 268435456 samples")) << m;
+}
+
+TEST_F(HeightfieldIo, EsriHeaderBombIsRefusedBeforeAllocating) {
+  write_text(path("big.asc"), "ncols 1048577\nnrows 1048577\nxllcorner 0\nyllcorner 0\ncellsize 1\n1 2 3\n");
+  const long before = peak_rss_kib();
+  auto r = load_esri_ascii(path("big.asc"), {});
+  ASSERT_FALSE(r.ok());
+  EXPECT_LT(peak_rss_kib() - before, 64 * 1024);
+  EXPECT_TRUE(contains(r.errors()[0].message(), "ncols × nrows")) << r.errors()[0].message();
+}
+
+TEST_F(HeightfieldIo, RawGridOverTheCapIsRefused) {
+  write_text(path("x.raw"), "");
+  auto r = load_raw_f32(path("x.raw"), 65536, 65536, {});
+  ASSERT_FALSE(r.ok());
+  EXPECT_TRUE(contains(r.errors()[0].message(), "at most 268435456 samples")) << r.errors()[0].message();
+}
+
+TEST_F(HeightfieldIo, EsriGeometryOutsideTheWorldIsRefused) {
+  write_text(path("c.asc"), "ncols 2\nnrows 2\nxllcorner 1e300\nyllcorner 0\ncellsize 1\n1 2\n3 4\n");
+  auto r = load_esri_ascii(path("c.asc"), {});
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.errors()[0].field, "xllcorner");
+  write_text(path("s.asc"), "ncols 2\nnrows 2\nxllcorner 0\nyllcorner 0\ncellsize 1e30\n1 2\n3 4\n");
+  auto s = load_esri_ascii(path("s.asc"), {});
+  ASSERT_FALSE(s.ok());
+  EXPECT_EQ(s.errors()[0].field, "cellsize");
+}
 }  // namespace
 }  // namespace sandpatch

@@ -113,4 +113,27 @@ TEST(SceneMesh, MissingAndEmptyFilesAreErrors) {
 }
 
 }  // namespace
+
+// Coordinates tinyobjloader would read as 0 (nan, inf, words) are refused naming the line.
+TEST(SceneMesh, NonFiniteCoordinatesNameTheLine) {
+  const std::string tet = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n";
+  ASSERT_TRUE(load_obj_mesh(write_temp("tet_ok.obj", tet), 1.0).ok());
+  for (const std::string bad : {"inf", "-inf", "nan", "NaN", "1e999", "abc", "1.0x"}) {
+    std::string text = tet;
+    text.replace(text.find("v 0 1 0"), 7, "v 0 " + bad + " 0");
+    const auto r = load_obj_mesh(write_temp("tet_bad.obj", text), 1.0);
+    ASSERT_FALSE(r.ok()) << bad;
+    EXPECT_EQ(r.errors()[0].field, "line 3") << bad;
+    EXPECT_EQ(r.errors()[0].value, bad);
+  }
+  std::string two = tet;
+  two.replace(two.find("v 0 0 1"), 7, "v 0 0");
+  EXPECT_FALSE(load_obj_mesh(write_temp("tet_two.obj", two), 1.0).ok());
+  // Finite but outside the world once scaled, or a mesh wider than 2e4 m.
+  EXPECT_FALSE(load_obj_mesh(write_temp("tet_ok2.obj", tet), 1e10).ok());
+  const auto wide = load_obj_mesh(write_temp("tet_ok3.obj", tet), 3e4);
+  ASSERT_FALSE(wide.ok());
+  EXPECT_NE(wide.errors()[0].message().find("20000 m across"), std::string::npos) << wide.errors()[0].message();
+}
+
 }  // namespace sandpatch

@@ -708,6 +708,63 @@ TEST(Scene, NameMustBeOneFileName) {
 }
 
 }  // namespace
+
+// ---- hostile input (docs/reliability.md): refused at its root, naming file and field ----
+
+TEST(SceneReliability, DeepNestingIsRefusedBeforeItIsBuilt) {
+  // 70,000 levels of '[' once overflowed the stack.
+  const auto r = broken("deep_nesting.json");
+  ASSERT_EQ(r.ok() ? 0u : r.errors().size(), 1u) << all(r);
+  EXPECT_NE(all(r).find("nested at most 256 deep"), std::string::npos) << all(r);
+  EXPECT_NE(all(r).find("line 1, column 268"), std::string::npos) << all(r);  // the 256th [ is level 257
+  // 256 levels are fine for the reader (the scene is then wrong, not unreadable).
+  const std::string ok = "{\"terrain\": " + std::string(255, '[') + std::string(255, ']') + "}";
+  const auto r2 = parse_scene(ok, "deep.json", "");
+  EXPECT_EQ(all(r2).find("nested at most"), std::string::npos) << all(r2);
+  // Brackets inside strings do not count.
+  const std::string in_string = "{\"name\": \"" + std::string(1000, '[') + "\"}";
+  EXPECT_EQ(all(parse_scene(in_string, "s.json", "")).find("nested at most"), std::string::npos);
+}
+
+TEST(SceneReliability, GridsArePassedTheMemoryCap) {
+  const auto r = broken("grid_too_large.json");
+  EXPECT_TRUE(has_error(r, "terrain.source.samples_x × samples_z", "65536 × 65536", "268435456")) << all(r);
+  const auto p = broken("png_header_bomb.json");
+  EXPECT_TRUE(has_error(p, "terrain.source.file", "heightmaps/bomb_65536.png", "268435456")) << all(p);
+  // The cap itself is allowed: 16384 × 16384.
+  const std::string at_cap = R"({"terrain": {"source": {"type": "procedural", "samples_x": 16384, "samples_z": 16384}},
+                                 "materials": [{"name": "s", "restitution": 0.3}]})";
+  EXPECT_TRUE(parse_scene(at_cap, "cap.json", "").ok()) << all(parse_scene(at_cap, "cap.json", ""));
+}
+
+TEST(SceneReliability, PoolIsCapped) {
+  const auto r = broken("pool_too_large.json");
+  EXPECT_TRUE(has_error(r, "simulation.pool.slots", "1024 × granules_per_slot 16777216", "4194304 granules")) << all(r);
+}
+
+TEST(SceneReliability, MassFromATinyShapeIsRefused) {
+  // radius 1e-6 m and density 1e-3 kg/m³: 4e-21 kg, which run once met as "mass = 0.000000".
+  const auto r = broken("zero_mass.json");
+  EXPECT_TRUE(has_error(r, "bodies[0].density", "0.001", "mass in [1e-06, 1000000000] kg")) << all(r);
+}
+
+TEST(SceneReliability, SpeedIsCappedAsAMagnitude) {
+  const auto r = broken("too_fast.json");
+  EXPECT_TRUE(has_error(r, "bodies[0].linear_velocity", "[800,0,800]", "magnitude must be at most 1000 m/s")) << all(r);
+}
+
+TEST(SceneReliability, TinyDtIsRefused) {
+  const auto r = broken("tiny_dt.json");
+  EXPECT_TRUE(has_error(r, "simulation.duration", "10", "at most 100000000 steps")) << all(r);
+}
+
+TEST(SceneReliability, MeshCoordinatesMustBeFiniteAndInRange) {
+  const auto n = broken("mesh_nan.json");
+  EXPECT_TRUE(has_error(n, "bodies[0].shape.file", "meshes/nan_vertex.obj", "line 4")) << all(n);
+  EXPECT_NE(all(n).find("not a finite number"), std::string::npos) << all(n);
+  const auto h = broken("mesh_huge.json");
+  EXPECT_TRUE(has_error(h, "bodies[0].shape.file", "meshes/huge_vertex.obj", "±1e9 m")) << all(h);
+}
 }  // namespace sandpatch
 
 namespace sandpatch {
