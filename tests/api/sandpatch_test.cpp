@@ -658,6 +658,7 @@ TEST(ApiDrive, GranularForceOnARestingBodyIsItsWeight) {
   ASSERT_TRUE(f.ok());
   EXPECT_FALSE(f->carried);
   EXPECT_EQ(f->force[1], 0.0f);
+}
 
 // ---- hostile input (docs/reliability.md) ----
 
