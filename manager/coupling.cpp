@@ -28,6 +28,7 @@ Status TerrainManager::Impl::step_patches(double time, double dt) {
       s.asleep_for = 0;
       events.push_back({PatchEventKind::Woke, s.patch, time, 0, record(s).granules});
     }
+    const auto t_step = manager_detail::Clock::now();
     if (Status st = s.sim->step(dt); !st) {
       // The DEM names its own definition; say which knob of the terrain's trades it.
       std::vector<Error> es = st.errors();
@@ -37,6 +38,7 @@ Status TerrainManager::Impl::step_patches(double time, double dt) {
                      "simulation.steps_per_contact (TerrainDef.steps_per_contact) or the material's stiffness";
       return es;
     }
+    account_step(s, manager_detail::ms_since(t_step));
     couple_after(s, dt);
     s.fade = std::min(s.fade + 1, def.fade_frames);
   }

@@ -319,6 +319,9 @@ void Simulation::wake() {
 }
 int Simulation::body_count() const { return impl_->nb; }
 int Simulation::particle_count() const { return impl_->np; }
+int Simulation::body_particle_count(BodyId b) const {
+  return b.index >= 0 && b.index < impl_->nb ? impl_->b.count[b.index] : 0;
+}
 Vec3 Simulation::body_position(BodyId b) const { return ld3(impl_->b.pos, b.index); }
 Quat Simulation::body_orientation(BodyId b) const { return ldq(impl_->b.quat, b.index); }
 Vec3 Simulation::body_velocity(BodyId b) const { return ld3(impl_->b.vel, b.index); }
