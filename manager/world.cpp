@@ -280,8 +280,8 @@ nlohmann::ordered_json World::report() const {
     if (r.contains("dem")) {
       ojson& t = r["dem"]["total"];
       const double stage_ms = profile_.timer(Stage::Dem).total_ms, step_ms = t["wall_ms"].get<double>();
-      t["stage_ms"] = stage_ms;
-      t["step_share_of_stage"] = stage_ms > 0 ? step_ms / stage_ms : 0.0;
+      t["frame_stage_ms"] = stage_ms;
+      t["step_share_of_frame_stage"] = stage_ms > 0 ? step_ms / stage_ms : 0.0;
     }
   }
   r["terrain"] = {{"samples_x", hf.samples_x()},

@@ -84,22 +84,28 @@ void Simulation::Impl::sort() {
 // order (cells z, y, x, then sorted index).
 template <class F>
 void Simulation::Impl::for_near(int i, F&& f) const {
+  // (locals: f may store through pointers the compiler cannot tell from these, which made it
+  // load the skin and the arrays' addresses again for every candidate)
   const float* P = p.pos.data();
+  const float* V = p.vel.data();
+  const std::int32_t* BODY = p.body.data();
+  const std::int32_t* CS = cell_start.data();
+  const float sk = skin;
   const Vec3 pi{P[4 * i], P[4 * i + 1], P[4 * i + 2]};
   const float ri = P[4 * i + 3];
-  const std::int32_t bi = p.body[i];
-  const bool dyn_i = p.vel[4 * i + 3] > 0.0f;
+  const std::int32_t bi = BODY[i];
+  const bool dyn_i = V[4 * i + 3] > 0.0f;
   const int c = cell[i];
   const int cx = c % gx, cy = (c / gx) % gy, cz = c / (gx * gy);
   const int x0 = cx > 0 ? cx - 1 : 0, x1 = cx < gx - 1 ? cx + 1 : gx - 1;
   for (int zz = (cz > 0 ? cz - 1 : 0); zz <= (cz < gz - 1 ? cz + 1 : gz - 1); ++zz)
     for (int yy = (cy > 0 ? cy - 1 : 0); yy <= (cy < gy - 1 ? cy + 1 : gy - 1); ++yy) {
       const int row = (zz * gy + yy) * gx;
-      for (int j = cell_start[row + x0], j1 = cell_start[row + x1 + 1]; j < j1; ++j) {
+      for (int j = CS[row + x0], j1 = CS[row + x1 + 1]; j < j1; ++j) {
         const float dx = pi.x - P[4 * j], dy = pi.y - P[4 * j + 1], dz = pi.z - P[4 * j + 2];
-        const float rs = ri + P[4 * j + 3] + skin;
-        if (dx * dx + dy * dy + dz * dz >= rs * rs || p.body[j] == bi) continue;
-        if (!dyn_i && p.vel[4 * j + 3] == 0.0f) continue;  // neither moves under forces
+        const float rs = ri + P[4 * j + 3] + sk;
+        if (dx * dx + dy * dy + dz * dz >= rs * rs || BODY[j] == bi) continue;
+        if (!dyn_i && V[4 * j + 3] == 0.0f) continue;  // neither moves under forces
         f(j);
       }
     }

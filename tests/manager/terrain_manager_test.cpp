@@ -411,9 +411,9 @@ TEST(TerrainManager, ReportsEachPatchsDemCost) {
   EXPECT_DOUBLE_EQ(t["wall_ms"].get<double>(), p["wall_ms"].get<double>());
   EXPECT_DOUBLE_EQ(t["sphere_steps_per_s"].get<double>(), p["sphere_steps_per_s"].get<double>());
   // the DEM's step calls are part of the frame's dem stage
-  EXPECT_GT(t["stage_ms"].get<double>(), 0.0);
-  EXPECT_GT(t["step_share_of_stage"].get<double>(), 0.0);
-  EXPECT_LE(t["step_share_of_stage"].get<double>(), 1.0);
+  EXPECT_GT(t["frame_stage_ms"].get<double>(), 0.0);
+  EXPECT_GT(t["step_share_of_frame_stage"].get<double>(), 0.0);
+  EXPECT_LE(t["step_share_of_frame_stage"].get<double>(), 1.0);
 }
 
 // The demotion's GL depth render is decided when the manager is made, not in its first
