@@ -29,7 +29,7 @@ Status TerrainManager::Impl::step_patches(double time, double dt) {
       s.asleep_for = 0;
       events.push_back({PatchEventKind::Woke, s.patch, time, 0, record(s).granules});
     }
-    const auto t_step = std::chrono::steady_clock::now();
+    const auto t_step = manager_detail::Clock::now();
     if (Status st = s.sim->step(dt); !st) {
       // The DEM names its own definition; say which knob of the terrain's trades it.
       std::vector<Error> es = st.errors();
@@ -39,7 +39,9 @@ Status TerrainManager::Impl::step_patches(double time, double dt) {
                      "simulation.steps_per_contact (TerrainDef.steps_per_contact) or the material's stiffness";
       return es;
     }
-    observe_cost(s, std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t_step).count(), dt);
+    const double step_ms = manager_detail::ms_since(t_step);
+    account_step(s, step_ms);
+    observe_cost(s, step_ms, dt);
     couple_after(s, dt);
     s.fade = std::min(s.fade + 1, def.fade_frames);
   }

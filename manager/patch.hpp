@@ -11,6 +11,7 @@
 
 #include <Eigen/Core>
 #include <cstddef>
+#include <cstdint>
 #include <memory>
 #include <vector>
 
@@ -59,6 +60,54 @@ struct Slot {
   explicit Slot(std::unique_ptr<DemBackend> s) : sim(std::move(s)) {}
 };
 
+// What a patch's DEM has cost (Impl::step_patches, around DemBackend::step): wall time of the
+// step calls, their substeps and sphere-steps. A sphere-step is one sphere through one
+// substep; the spheres are the granules' (4 each) and the enabled shells'. The last_* fields
+// are the last step call's; substep_dt and contacts_per_sphere are the last step's that ran
+// substeps. Read by the report and by anything that predicts what a patch costs.
+struct DemCost {
+  double wall_ms = 0;                // ms, wall, all step calls
+  std::int64_t substeps = 0;         // all step calls
+  std::int64_t sphere_steps = 0;     // sum over step calls of spheres x substeps
+  std::int64_t frames = 0;           // step calls (frames the patch was stepped awake)
+  double last_wall_ms = 0;           // ms, the last step call
+  int last_substeps = 0;             // the last step call's (0 if it found the DEM asleep)
+  int last_spheres = 0;              // spheres of the last step call
+  double substep_dt = 0;             // s (simulation time), the last substep length
+  double contacts_per_sphere = 0;    // 2 x sphere-sphere pairs touching / spheres, at the last substep
+  int patch = -1;                    // the patch these are for (a slot's record keeps the last
+                                     // patch's until the next patch's first step)
+  int granules = 0;                  // granules of the last step call
+  double contact_sphere_steps = 0;   // sum over step calls of 2 x pairs touching at its last substep x substeps
+  std::int64_t grid_rebuilds = 0;    // the DEM's grid sorts + neighbour-list rebuilds (StepStats::resorts)
+  // ms, wall, of the CPU backend's stages in the step calls (StepStats; 0 on the GL backend):
+  // the grid sort + neighbour list, the pair pass, the body stage
+  double sort_ms = 0, pair_ms = 0, body_ms = 0;
+  // sphere-steps per second of wall time in the step calls (0 before any)
+  double sphere_steps_per_s() const { return wall_ms > 0 ? double(sphere_steps) / (1e-3 * wall_ms) : 0.0; }
+  // contacts per sphere over all substeps, each frame's taken from its last substep
+  double mean_contacts_per_sphere() const { return sphere_steps > 0 ? contact_sphere_steps / double(sphere_steps) : 0.0; }
+  // One step call of `spheres` spheres that took wall_ms and ran st.substeps substeps.
+  void add(double ms, const StepStats& st, int spheres) {
+    wall_ms += ms;
+    substeps += st.substeps;
+    sphere_steps += std::int64_t(spheres) * st.substeps;
+    ++frames;
+    last_wall_ms = ms;
+    last_substeps = st.substeps;
+    last_spheres = spheres;
+    contact_sphere_steps += 2.0 * double(st.contacts) * st.substeps;
+    grid_rebuilds += st.resorts;
+    sort_ms += 1e3 * st.sort_seconds;
+    pair_ms += 1e3 * st.pair_seconds;
+    body_ms += 1e3 * st.body_seconds;
+    if (st.substeps > 0) {
+      substep_dt = st.substep_dt;
+      contacts_per_sphere = spheres > 0 ? 2.0 * double(st.contacts) / spheres : 0.0;
+    }
+  }
+};
+
 // What the demotion and the report read: the record of the patch in the slot of the same index.
 struct PatchRecord {
   int granules = 0;                   // uploaded
@@ -68,6 +117,7 @@ struct PatchRecord {
                                       // demotion renders them too, so its render error cancels where nothing moved
   float fill_rise = 0;                // m, the tile's elastic rebound (GranuleTile::rebound), world
   Ledger ledger;
+  DemCost cost;                       // its DEM's steps (coupling.cpp step_patches)
 };
 
 // Pre-settled tiles (granule_tile.hpp) of one particle scale, shallowest first. A fill deeper

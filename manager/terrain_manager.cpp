@@ -338,6 +338,61 @@ std::vector<std::pair<std::size_t, float>> TerrainManager::particle_groups() con
   return out;
 }
 
+// The DEM's cost (PatchRecord::cost), per patch in patch order and in total: spheres (granules'
+// 4 each and the enabled shells'), substeps, sphere-steps and their rate over the wall time of
+// the step calls (docs/cli.md, report "dem").
+nlohmann::ordered_json TerrainManager::Impl::dem_report() const {
+  using ojson = nlohmann::ordered_json;
+  std::vector<std::pair<const DemCost*, bool>> all;  // cost, live
+  for (const DemCost& c : earlier_costs) all.push_back({&c, false});
+  for (std::size_t k = 0; k < records.size(); ++k)
+    if (records[k].cost.patch >= 0)
+      all.push_back({&records[k].cost, slots[k].live() && slots[k].patch == records[k].cost.patch});
+  std::sort(all.begin(), all.end(), [](const auto& a, const auto& b) { return a.first->patch < b.first->patch; });
+  ojson patches = ojson::array();
+  DemCost t;
+  for (const auto& [c, live] : all) {
+    patches.push_back({{"patch", c->patch},
+                       {"live", live},
+                       {"granules", c->granules},
+                       {"spheres", c->last_spheres},
+                       {"granule_spheres", 4 * c->granules},
+                       {"shell_spheres", c->last_spheres - 4 * c->granules},
+                       {"frames", c->frames},
+                       {"substeps", c->substeps},
+                       {"substeps_per_frame", c->frames > 0 ? double(c->substeps) / double(c->frames) : 0.0},
+                       {"substep_dt_s", c->substep_dt},
+                       {"contacts_per_sphere", c->contacts_per_sphere},
+                       {"mean_contacts_per_sphere", c->mean_contacts_per_sphere()},
+                       {"sphere_steps", c->sphere_steps},
+                       {"wall_ms", c->wall_ms},
+                       {"sphere_steps_per_s", c->sphere_steps_per_s()},
+                       {"grid_rebuilds", c->grid_rebuilds},
+                       {"stage_ms", {{"sort", c->sort_ms}, {"pairs", c->pair_ms}, {"bodies", c->body_ms}}}});
+    t.wall_ms += c->wall_ms;
+    t.substeps += c->substeps;
+    t.sphere_steps += c->sphere_steps;
+    t.frames += c->frames;
+    t.contact_sphere_steps += c->contact_sphere_steps;
+    t.grid_rebuilds += c->grid_rebuilds;
+    t.sort_ms += c->sort_ms, t.pair_ms += c->pair_ms, t.body_ms += c->body_ms;
+    t.substep_dt = std::max(t.substep_dt, c->substep_dt);
+  }
+  ojson total = {{"patches", int(all.size())},
+                 {"frames", t.frames},
+                 {"substeps", t.substeps},
+                 {"substeps_per_frame", t.frames > 0 ? double(t.substeps) / double(t.frames) : 0.0},
+                 {"max_substep_dt_s", t.substep_dt},
+                 {"spheres_per_substep", t.substeps > 0 ? double(t.sphere_steps) / double(t.substeps) : 0.0},
+                 {"mean_contacts_per_sphere", t.mean_contacts_per_sphere()},
+                 {"sphere_steps", t.sphere_steps},
+                 {"wall_ms", t.wall_ms},
+                 {"sphere_steps_per_s", t.sphere_steps_per_s()},
+                 {"grid_rebuilds", t.grid_rebuilds},
+                 {"stage_ms", {{"sort", t.sort_ms}, {"pairs", t.pair_ms}, {"bodies", t.body_ms}}}};
+  return {{"patches", patches}, {"total", total}};
+}
+
 nlohmann::ordered_json TerrainManager::report() const {
   const Impl& I = *impl_;
   using ojson = nlohmann::ordered_json;
@@ -407,6 +462,7 @@ nlohmann::ordered_json TerrainManager::report() const {
     b["patches"] = I.budget_log;
     r["budget"] = b;
   }
+  r["dem"] = I.dem_report();
   return r;
 }
 

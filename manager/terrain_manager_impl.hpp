@@ -76,6 +76,7 @@ struct TerrainManager::Impl {
   int peak_queue = 0;
   std::vector<nlohmann::ordered_json> ledgers;  // closed ledgers (demoted patches)
   std::vector<GridRegion> dirty;                // written by demotions, not yet taken
+  std::vector<DemCost> earlier_costs;           // DEM costs of demoted patches whose slot took another
 
   // The demotion's GL depth render (create(): when use_gl and a context could be made; else
   // null, gl_note says why, and demotions render on the CPU).
@@ -126,6 +127,21 @@ struct TerrainManager::Impl {
   }
   PatchRecord& record(const Slot& s) { return records[std::size_t(&s - slots.data())]; }
   const PatchRecord& record(const Slot& s) const { return records[std::size_t(&s - slots.data())]; }
+  // Books one DEM step call of slot s that took wall_ms (DemCost): the granules' spheres and
+  // the enabled shells'. A new patch in the slot starts its record's cost afresh.
+  void account_step(const Slot& s, double wall_ms) {
+    DemCost& c = record(s).cost;
+    if (c.patch != s.patch) {
+      if (c.patch >= 0) earlier_costs.push_back(c);
+      c = DemCost{};
+      c.patch = s.patch;
+    }
+    c.granules = record(s).granules;
+    int spheres = 4 * record(s).granules;
+    for (const Carried& k : s.carried)
+      if (k.enabled) spheres += s.sim->body_particle_count(k.shell);
+    c.add(wall_ms, s.sim->last_step(), spheres);
+  }
   float radius_world(double s) const { return float(def.material.radius * s); }
   float radius_world(const Slot& slot) const { return radius_world(slot.scale); }
   // m³ (world) of one granule's solid at particle scale s.
@@ -277,6 +293,9 @@ struct TerrainManager::Impl {
   int render_resolution(const Slot& slot, const RenderBox& box) const;
   void set_bodies_down(const Slot& slot, double time);
   void close_ledger(const Slot& slot, PatchRecord& rec, bool on_gl);
+
+  // ---- report (terrain_manager.cpp) ----
+  nlohmann::ordered_json dem_report() const;  // the report's "dem" section
 };
 
 }  // namespace sandpatch

@@ -432,6 +432,14 @@ nlohmann::ordered_json World::report() const {
     r["granules_live"] = manager_->granules();
     const ojson m = manager_->report();  // named: iterating a temporary's items() dangles
     for (const auto& [key, value] : m.items()) r[key] = value;
+    // The frame's dem stage against the DEM's step calls in it: the rest is the coupling
+    // (carriers, shells, forces to and from Bullet).
+    if (r.contains("dem")) {
+      ojson& t = r["dem"]["total"];
+      const double stage_ms = profile_.timer(Stage::Dem).total_ms, step_ms = t["wall_ms"].get<double>();
+      t["frame_stage_ms"] = stage_ms;
+      t["step_share_of_frame_stage"] = stage_ms > 0 ? step_ms / stage_ms : 0.0;
+    }
   }
   r["terrain"] = {{"samples_x", hf.samples_x()},
                   {"samples_z", hf.samples_z()},

@@ -36,6 +36,11 @@ class DemBackend {
   virtual const GranuleShape& granule_shape() const = 0;
   virtual std::uint64_t state_hash() const = 0;
   virtual int particle_count() const = 0;
+  // Spheres of body b (a granule's 4, a shell's count); 0 for an id it does not hold.
+  virtual int body_particle_count(BodyId b) const = 0;
+  // The last step's substeps, substep dt (s), sphere-sphere contacts and grid rebuilds
+  // (StepStats; substeps = 0 when the step found the simulation asleep).
+  virtual const StepStats& last_step() const = 0;
   // GL backend: the buffer whose first member is vec4 pos[] (xyz, radius) of every sphere, for
   // drawing without a copy to the CPU; 0 on the CPU backend.
   virtual unsigned gpu_particle_buffer() const { return 0; }
@@ -64,6 +69,8 @@ class DemBackendOf final : public DemBackend {
   const GranuleShape& granule_shape() const override { return sim_.granule_shape(); }
   std::uint64_t state_hash() const override { return sim_.state_hash(); }
   int particle_count() const override { return sim_.particle_count(); }
+  int body_particle_count(BodyId b) const override { return sim_.body_particle_count(b); }
+  const StepStats& last_step() const override { return sim_.last_step(); }
   unsigned gpu_particle_buffer() const override {
     if constexpr (requires(const Sim& s) { s.particle_buffer(); }) return sim_.particle_buffer();
     return 0;

@@ -213,6 +213,7 @@ class Simulation {
   // Queries (sim units).
   int body_count() const;
   int particle_count() const;
+  int body_particle_count(BodyId b) const;       // spheres of body b; 0 for an id it does not hold
   Vec3 body_position(BodyId b) const;
   Quat body_orientation(BodyId b) const;
   Vec3 body_velocity(BodyId b) const;

@@ -5,6 +5,8 @@
 
 #include <algorithm>
 #include <cassert>
+#include <cstring>
+#include <type_traits>
 
 namespace sandpatch {
 
@@ -33,11 +35,18 @@ void Simulation::Impl::sort() {
   for (std::size_t i = 1; i < cell_start.size(); ++i) cell_start[i] += cell_start[i - 1];
   std::vector<std::int32_t> fill(cell_start.begin(), cell_start.end() - 1), dest(np);
   for (int s = 0; s < np; ++s) dest[s] = fill[c[s]]++;
+  // The np live spheres' values only (the arrays hold the slot's capacity, twice the spheres of
+  // a typical patch), through one scratch buffer kept between sorts (no allocation). Every
+  // particle field is 4-byte values (fields.hpp).
   auto permute = [&](auto& arr, int n) {
-    auto tmp = arr;
+    using T = typename std::decay_t<decltype(arr)>::value_type;
+    static_assert(sizeof(T) == sizeof(std::uint32_t));
+    const std::size_t values = std::size_t(np) * n;
+    if (sort_scratch.size() < values) sort_scratch.resize(values);
+    std::memcpy(sort_scratch.data(), arr.data(), values * sizeof(T));
+    const std::uint32_t* src = sort_scratch.data();
     for (int s = 0; s < np; ++s)
-      for (int k = 0; k < n; ++k) tmp[std::size_t(dest[s]) * n + k] = arr[std::size_t(s) * n + k];
-    arr.swap(tmp);
+      std::memcpy(&arr[std::size_t(dest[s]) * n], src + std::size_t(s) * n, std::size_t(n) * sizeof(T));
   };
 #define SP_PERMUTE(type, name, n, hashed, backend, unit) SANDPATCH_FIELD_ON(CPU, backend, permute(p.name, n);)
   SANDPATCH_PARTICLE_FIELDS(SP_PERMUTE)
@@ -46,7 +55,7 @@ void Simulation::Impl::sort() {
   cell.resize(np);
   for (int s = 0; s < np; ++s) cell[dest[s]] = c[s];
   for (int s = 0; s < np; ++s) slot_of[p.id[s]] = s;
-  pos_at_sort.assign(p.pos.begin(), p.pos.end());
+  std::copy(p.pos.begin(), p.pos.begin() + 4 * std::size_t(np), pos_at_sort.begin());
   {
     std::vector<std::uint8_t> seen(nb, 0);
     body_order.clear();
@@ -75,29 +84,39 @@ void Simulation::Impl::sort() {
 // order (cells z, y, x, then sorted index).
 template <class F>
 void Simulation::Impl::for_near(int i, F&& f) const {
+  // (locals: f may store through pointers the compiler cannot tell from these, which made it
+  // load the skin and the arrays' addresses again for every candidate)
   const float* P = p.pos.data();
+  const float* V = p.vel.data();
+  const std::int32_t* BODY = p.body.data();
+  const std::int32_t* CS = cell_start.data();
+  const float sk = skin;
   const Vec3 pi{P[4 * i], P[4 * i + 1], P[4 * i + 2]};
   const float ri = P[4 * i + 3];
-  const std::int32_t bi = p.body[i];
-  const bool dyn_i = p.vel[4 * i + 3] > 0.0f;
+  const std::int32_t bi = BODY[i];
+  const bool dyn_i = V[4 * i + 3] > 0.0f;
   const int c = cell[i];
   const int cx = c % gx, cy = (c / gx) % gy, cz = c / (gx * gy);
   const int x0 = cx > 0 ? cx - 1 : 0, x1 = cx < gx - 1 ? cx + 1 : gx - 1;
   for (int zz = (cz > 0 ? cz - 1 : 0); zz <= (cz < gz - 1 ? cz + 1 : gz - 1); ++zz)
     for (int yy = (cy > 0 ? cy - 1 : 0); yy <= (cy < gy - 1 ? cy + 1 : gy - 1); ++yy) {
       const int row = (zz * gy + yy) * gx;
-      for (int j = cell_start[row + x0], j1 = cell_start[row + x1 + 1]; j < j1; ++j) {
+      for (int j = CS[row + x0], j1 = CS[row + x1 + 1]; j < j1; ++j) {
         const float dx = pi.x - P[4 * j], dy = pi.y - P[4 * j + 1], dz = pi.z - P[4 * j + 2];
-        const float rs = ri + P[4 * j + 3] + skin;
-        if (dx * dx + dy * dy + dz * dz >= rs * rs || p.body[j] == bi) continue;
-        if (!dyn_i && p.vel[4 * j + 3] == 0.0f) continue;  // neither moves under forces
+        const float rs = ri + P[4 * j + 3] + sk;
+        if (dx * dx + dy * dy + dz * dz >= rs * rs || BODY[j] == bi) continue;
+        if (!dyn_i && V[4 * j + 3] == 0.0f) continue;  // neither moves under forces
         f(j);
       }
     }
 }
 
-// Rebuilds the CSR neighbour list (two parallel passes: count, fill) and carries each
-// pair's spring over from the old list (found by partner id).
+// Rebuilds the CSR neighbour list and carries each pair's spring over from the old list (found
+// by partner id). One search (for_near) per sphere: blocks of kListBlock spheres in parallel,
+// each block's partners gathered in sphere order into its own buffer (list_blocks, kept
+// between rebuilds), then the counts' prefix sum and a parallel copy into the CSR arrays with
+// the carry-over. (It searched twice before, once to count and once to fill: the search is
+// most of a rebuild, and a scene's patch rebuilds every few substeps; docs/BENCHMARKS.md.)
 void Simulation::Impl::build_list(const std::vector<std::int32_t>& old_slot) {
   std::vector<std::int32_t> ostart, onbr_id;
   PairArrays old;
@@ -109,40 +128,47 @@ void Simulation::Impl::build_list(const std::vector<std::int32_t>& old_slot) {
   nstart.assign(n + 1, 0);
   // i owns the pair with j: a static partner has no list, else the lower stable id
   auto owns = [&](int i, int j) { return (b.flags[p.body[j]] & kBodyStatic) || p.id[i] < p.id[j]; };
-#pragma omp parallel for num_threads(threads) schedule(dynamic, 256) if (n > 4096)
-  for (int i = 0; i < n; ++i) {
-    if (b.flags[p.body[i]] & kBodyStatic) continue;
-    int cnt = 0;
-    for_near(i, [&](int j) { cnt += owns(i, j); });
-    nstart[i + 1] = cnt;
+  const int blocks = (n + kListBlock - 1) / kListBlock;
+  if (int(list_blocks.size()) < blocks) list_blocks.resize(std::size_t(blocks));
+#pragma omp parallel for num_threads(threads) schedule(dynamic, 1) if (n > 4096)
+  for (int blk = 0; blk < blocks; ++blk) {
+    std::vector<std::int32_t>& found = list_blocks[std::size_t(blk)];
+    found.clear();
+    for (int i = blk * kListBlock, i1 = std::min(n, i + kListBlock); i < i1; ++i) {
+      if (b.flags[p.body[i]] & kBodyStatic) continue;
+      const std::size_t before = found.size();
+      for_near(i, [&](int j) {
+        if (owns(i, j)) found.push_back(j);
+      });
+      nstart[i + 1] = std::int32_t(found.size() - before);
+    }
   }
   for (int i = 0; i < n; ++i) nstart[i + 1] += nstart[i];
   nbr.resize(nstart[n]);
   nbr_id.resize(nstart[n]);
   pairs.assign(std::size_t(nstart[n]));
-#pragma omp parallel for num_threads(threads) schedule(dynamic, 256) if (n > 4096)
-  for (int i = 0; i < n; ++i) {
-    if (b.flags[p.body[i]] & kBodyStatic) continue;
-    int e = nstart[i];
-    const int id = p.id[i];
-    const int oi = id < int(old_slot.size()) ? old_slot[id] : -1;
-    const bool has_old = oi >= 0 && oi < old_np;
-    for_near(i, [&](int j) {
-      if (!owns(i, j)) return;
-      nbr[e] = j;
-      nbr_id[e] = p.id[j];
-      if (has_old)
-        for (int k = ostart[oi]; k < ostart[oi + 1]; ++k)
-          if (onbr_id[k] == p.id[j]) {
-            pairs.xi[3 * e] = old.xi[3 * k];
-            pairs.xi[3 * e + 1] = old.xi[3 * k + 1];
-            pairs.xi[3 * e + 2] = old.xi[3 * k + 2];
-            pairs.touch[e] = old.touch[k];
-            break;
-          }
-      ++e;
-    });
-    assert(e == nstart[i + 1]);
+#pragma omp parallel for num_threads(threads) schedule(dynamic, 1) if (n > 4096)
+  for (int blk = 0; blk < blocks; ++blk) {
+    const std::int32_t* found = list_blocks[std::size_t(blk)].data();
+    for (int i = blk * kListBlock, i1 = std::min(n, i + kListBlock); i < i1; ++i) {
+      const int id = p.id[i];
+      const int oi = id < int(old_slot.size()) ? old_slot[id] : -1;
+      const bool has_old = oi >= 0 && oi < old_np;
+      for (int e = nstart[i]; e < nstart[i + 1]; ++e) {
+        const int j = *found++;
+        nbr[e] = j;
+        nbr_id[e] = p.id[j];
+        if (has_old)
+          for (int k = ostart[oi]; k < ostart[oi + 1]; ++k)
+            if (onbr_id[k] == p.id[j]) {
+              pairs.xi[3 * e] = old.xi[3 * k];
+              pairs.xi[3 * e + 1] = old.xi[3 * k + 1];
+              pairs.xi[3 * e + 2] = old.xi[3 * k + 2];
+              pairs.touch[e] = old.touch[k];
+              break;
+            }
+      }
+    }
   }
 }
 

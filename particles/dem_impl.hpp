@@ -162,6 +162,11 @@ struct Simulation::Impl {
   std::vector<std::int32_t> nstart;    // np + 1
   std::vector<std::int32_t> nbr;       // sorted index of the partner
   std::vector<std::int32_t> nbr_id;    // stable id of the partner (history carry-over)
+  // build_list's scratch, kept between rebuilds: the partners found by each block of
+  // kListBlock spheres, in sphere order
+  static constexpr int kListBlock = 256;
+  std::vector<std::vector<std::int32_t>> list_blocks;
+  std::vector<std::uint32_t> sort_scratch;  // sort()'s copy of one particle field (4-byte values)
   // The pairs' contact history (fields.hpp): xi, the tangential spring (3 per entry, m), and
   // touch, 1 if the pair touched at the last substep (a touching pair without it is in its
   // first substep, new_contact).
@@ -238,8 +243,8 @@ struct Simulation::Impl {
   template <class F>
   void for_near(int i, F&& f) const;
 
-  // Rebuilds the CSR neighbour list (two parallel passes: count, fill) and carries each
-  // pair's spring over from the old list (found by partner id).
+  // Rebuilds the CSR neighbour list (one parallel search into list_blocks, then a parallel
+  // fill) and carries each pair's spring over from the old list (found by partner id).
   void build_list(const std::vector<std::int32_t>& old_slot);
 
   // ---- guard

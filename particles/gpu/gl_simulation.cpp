@@ -110,6 +110,7 @@ Status GlSimulation::Impl::configure(const SimulationDef& d, const char* cap_pre
   pst.clear();
   bst.clear();
   host_flags.clear();
+  host_count.clear();
   if (buf[kS0] != 0) {
     std::vector<std::uint32_t> zero(std::size_t(cap_p), 0u);
     glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
@@ -403,6 +404,9 @@ void GlSimulation::wake() {
 }
 int GlSimulation::body_count() const { return impl_->nb; }
 int GlSimulation::particle_count() const { return impl_->np; }
+int GlSimulation::body_particle_count(BodyId b) const {
+  return b.index >= 0 && b.index < impl_->nb ? impl_->host_count[std::size_t(b.index)] : 0;
+}
 Vec3 GlSimulation::body_position(BodyId b) const { return impl_->body_vec(kBody_pos, b); }
 Quat GlSimulation::body_orientation(BodyId b) const {
   float v[4] = {0, 0, 0, 1};

@@ -107,6 +107,7 @@ int GlSimulation::Impl::push_body(std::uint32_t flags, Vec3 x, Quat q, Vec3 v, V
   put3(bst.inv_inertia, bi, inv_inertia);
   bst.flags[bi] = flags;
   host_flags.push_back(flags);
+  host_count.push_back(count);
   bst.first[bi] = np;
   bst.count[bi] = count;
   for (int k = 0; k < count; ++k) {

@@ -57,8 +57,22 @@ TEST(Run, DefaultSceneWritesCompleteReport) {
   ASSERT_TRUE(f.good());
   const auto rep = nlohmann::json::parse(f);
   for (const char* key : {"sandpatch_version", "scene", "stages", "counts", "warnings", "final_state_hash",
-                          "real_time_factor", "frame_count", "bodies", "frames", "ledger", "pool", "conversions"})
+                          "real_time_factor", "frame_count", "bodies", "frames", "ledger", "pool", "conversions", "dem"})
     EXPECT_TRUE(rep.contains(key)) << key;
+  // The DEM's cost: the total is the patches' sum, its rate sphere-steps over the step calls' wall time.
+  const auto& dem = rep["dem"];
+  ASSERT_GE(dem["patches"].size(), 1u);
+  std::int64_t sphere_steps = 0, substeps = 0;
+  for (const auto& p : dem["patches"]) {
+    sphere_steps += p["sphere_steps"].get<std::int64_t>();
+    substeps += p["substeps"].get<std::int64_t>();
+    EXPECT_EQ(p["spheres"].get<int>(), p["granule_spheres"].get<int>() + p["shell_spheres"].get<int>());
+  }
+  EXPECT_GT(sphere_steps, 0);
+  EXPECT_EQ(dem["total"]["sphere_steps"].get<std::int64_t>(), sphere_steps);
+  EXPECT_EQ(dem["total"]["substeps"].get<std::int64_t>(), substeps);
+  const double wall_s = 1e-3 * dem["total"]["wall_ms"].get<double>();
+  EXPECT_NEAR(dem["total"]["sphere_steps_per_s"].get<double>(), double(sphere_steps) / wall_s, 1e-6 * sphere_steps / wall_s);
   EXPECT_EQ(rep["scene"]["hash"], scene->hash);
   EXPECT_EQ(rep["frame_count"].get<long long>(), std::llround(1.0 / scene->simulation.dt));
   EXPECT_TRUE(rep["stages"].contains("bodies"));

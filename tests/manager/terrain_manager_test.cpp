@@ -354,6 +354,68 @@ TEST(TerrainManager, DemotionKeepsAFallingBodysVelocity) {
   EXPECT_TRUE(world.terrain_collision(*id)) << "handed back to the heightfield";
 }
 
+// The report's DEM cost (report "dem", PatchRecord::cost) adds up frame by frame: each frame
+// a patch is stepped adds its spheres (granules x 4 + the carried sphere's shell) times the
+// substeps it ran to sphere_steps, those substeps are dt / substep_dt, the rate is
+// sphere_steps over the step calls' wall time, and the total is the sum of the patches.
+TEST(TerrainManager, ReportsEachPatchsDemCost) {
+  test::Rig rig(test::terrain_8m("flat"));
+  ASSERT_TRUE(rig.ok()) << rig.error;
+  auto id = rig.add_sphere(0.1f, 5.0f, {4.0, 1.4, 4.0});  // lands at about 0.2 s
+  ASSERT_TRUE(id.ok());
+  ASSERT_TRUE(rig.start(test::sphere_patch_def()).ok()) << rig.error;
+  std::int64_t frames = 0, substeps = 0, sphere_steps = 0;
+  int stepped = 0, with_shell = 0;
+  for (int f = 0; f < 45; ++f) {
+    ASSERT_TRUE(rig.frame().ok()) << rig.error;
+    const auto dem = rig.core->report()["dem"];
+    ASSERT_LE(dem["patches"].size(), 1u);
+    if (dem["patches"].empty()) continue;
+    const auto& p = dem["patches"][0];
+    EXPECT_EQ(p["patch"].get<int>(), 0);
+    EXPECT_TRUE(p["live"].get<bool>());
+    const int spheres = p["spheres"].get<int>(), granules = p["granules"].get<int>();
+    EXPECT_EQ(granules, rig.manager->granules());
+    EXPECT_EQ(p["granule_spheres"].get<int>(), 4 * granules);
+    EXPECT_EQ(spheres, 4 * granules + p["shell_spheres"].get<int>());
+    with_shell += p["shell_spheres"].get<int>() > 0;
+    const std::int64_t df = p["frames"].get<std::int64_t>() - frames, ds = p["substeps"].get<std::int64_t>() - substeps;
+    ASSERT_LE(df, 1) << "one step call a frame";
+    if (df == 1 && ds > 0) {
+      ++stepped;
+      EXPECT_EQ(p["sphere_steps"].get<std::int64_t>() - sphere_steps, std::int64_t(spheres) * ds) << "frame " << f;
+      EXPECT_NEAR(double(ds) * p["substep_dt_s"].get<double>(), rig.dt, 1e-12) << "substeps x substep dt = the frame's dt (s)";
+      const double cps = p["contacts_per_sphere"].get<double>();
+      EXPECT_GT(cps, 1.0) << "a settled bed of tetrahedral granules: each sphere touches others";
+      EXPECT_LT(cps, 12.0) << "no more than the kissing number of equal spheres";
+    }
+    frames += df, substeps += ds;
+    sphere_steps = p["sphere_steps"].get<std::int64_t>();
+  }
+  EXPECT_GT(stepped, 10) << "the patch was stepped";
+  EXPECT_GT(with_shell, 0) << "the sphere's shell was counted while the patch carried it";
+  ASSERT_TRUE(rig.demote_all().ok()) << rig.error;
+  const auto dem = rig.core->report()["dem"];
+  ASSERT_EQ(dem["patches"].size(), 1u);
+  const auto& p = dem["patches"][0];
+  EXPECT_FALSE(p["live"].get<bool>()) << "demoted";
+  EXPECT_EQ(p["sphere_steps"].get<std::int64_t>(), sphere_steps);
+  const double wall_s = 1e-3 * p["wall_ms"].get<double>();
+  ASSERT_GT(wall_s, 0.0);
+  EXPECT_NEAR(p["sphere_steps_per_s"].get<double>(), double(sphere_steps) / wall_s, 1e-9 * double(sphere_steps) / wall_s);
+  EXPECT_NEAR(p["substeps_per_frame"].get<double>(), double(substeps) / double(frames), 1e-12);
+  const auto& t = dem["total"];
+  EXPECT_EQ(t["patches"].get<int>(), 1);
+  EXPECT_EQ(t["sphere_steps"].get<std::int64_t>(), sphere_steps);
+  EXPECT_EQ(t["substeps"].get<std::int64_t>(), substeps);
+  EXPECT_DOUBLE_EQ(t["wall_ms"].get<double>(), p["wall_ms"].get<double>());
+  EXPECT_DOUBLE_EQ(t["sphere_steps_per_s"].get<double>(), p["sphere_steps_per_s"].get<double>());
+  // the DEM's step calls are part of the frame's dem stage
+  EXPECT_GT(t["frame_stage_ms"].get<double>(), 0.0);
+  EXPECT_GT(t["step_share_of_frame_stage"].get<double>(), 0.0);
+  EXPECT_LE(t["step_share_of_frame_stage"].get<double>(), 1.0);
+}
+
 // The demotion's GL depth render is decided when the manager is made, not in its first
 // demotion: with use_gl, before any frame has run, the manager either has its depth renderer
 // or its report says why not (depth_render_note), and its demotions then render on GL, or on
