@@ -60,8 +60,8 @@ void TerrainManager::Impl::observe_cost(const Slot& s, double wall_ms, double dt
 }
 
 // a and b from the first tile of the finest scale stepped in slot 0 at two sizes (a quarter
-// and all of the tile's area), two frames of 1/60 s each after one untimed frame (it builds
-// the grid); the fastest frame of each counts (a frame slowed by something else running
+// and all of the tile's area), three frames of 1/60 s each after three untimed ones (they
+// build the grid and let the cut tile's first moves settle); the fastest frame of each counts (a frame slowed by something else running
 // is not the DEM's cost). The slot is reset: nothing of it stays.
 Status TerrainManager::Impl::calibrate() {
   if (pinned()) {
@@ -89,9 +89,10 @@ Status TerrainManager::Impl::calibrate() {
       if (auto id = slot.sim->add_granule(g.position, g.orientation); !id) return id.errors();
     auto n = slot.sim->substeps_for(dt);
     if (!n) return n.errors();
-    if (Status st = slot.sim->step(dt); !st) return st;
+    for (int f = 0; f < 3; ++f)
+      if (Status st = slot.sim->step(dt); !st) return st;
     double best = 1e300;
-    for (int f = 0; f < 2; ++f) {
+    for (int f = 0; f < 3; ++f) {
       const auto t0 = Clock::now();
       if (Status st = slot.sim->step(dt); !st) return st;
       best = std::min(best, ms_since(t0));

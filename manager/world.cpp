@@ -332,7 +332,7 @@ Status World::step(double dt, int substeps) {
     over_budget_ += last_frame_.wall_ms > budget;
     max_over_budget_ = std::max(max_over_budget_, last_frame_.wall_ms / budget);
   }
-  frame_max_ms_ = std::max(frame_max_ms_, last_frame_.wall_ms);
+  if (last_frame_.wall_ms > frame_max_ms_) frame_max_ms_ = last_frame_.wall_ms, frame_max_at_ = t;
   if (conversion) conversion_max_ms_ = std::max(conversion_max_ms_, last_frame_.wall_ms), ++conversion_frames_;
   return Ok{};
 }
@@ -383,6 +383,7 @@ nlohmann::ordered_json World::report() const {
   const long long conv_frames = conversion_frames_;
   r["frames"] = {{"median_ms", med},
                  {"max_ms", mx},
+                 {"max_at_s", frame_max_at_},
                  {"max_over_median", med > 0 ? mx / med : 0.0},
                  {"conversion_frames", conv_frames},
                  {"conversion_max_ms", conv_max},

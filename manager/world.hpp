@@ -202,6 +202,7 @@ class World {
   std::vector<double> frame_ms_;       // ring of the last kFrameWindow steps' wall ms
   FrameRecord last_frame_;
   double frame_max_ms_ = 0, conversion_max_ms_ = 0;
+  double frame_max_at_ = 0;            // s, simulated time of the longest frame's start
   long long conversion_frames_ = 0;
   std::vector<double> awake_ms_;       // ring of the last kFrameWindow steps with a patch awake
   long long awake_frames_ = 0;
