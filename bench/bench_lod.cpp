@@ -268,7 +268,10 @@ nlohmann::json lod_bench_scene(LodBenchScene kind, int cells, int threads) {
                      {"threads", threads},
                      {"pool", {{"slots", 3}, {"granules_per_slot", 16384}}},
                      {"sleep", {{"speed_threshold", loose ? 0.1 : 0.02}, {"hold_time", loose ? 0.2 : 0.25}}},
-                     {"idle_timeout", 1000.0}};
+                     {"idle_timeout", 1000.0},
+                     // The same patches at every size (the bench compares their DEM state):
+                     // no frame budget, whose choices follow the clock.
+                     {"frame_budget_ms", "off"}};
   s["outputs"] = {{"report", false}};
   return s;
 }

@@ -761,3 +761,23 @@ TEST(ApiReliability, GridAndPoolOverTheirCapsAreRefusedBeforeAllocating) {
   EXPECT_EQ(u.errors()[0].field, "TerrainDef.slots") << u.message();
   EXPECT_NE(u.message().find("at most 4194304 granules"), std::string::npos) << u.message();
 }
+
+// The frame budget: unset (half of each step's dt), a number of ms > 0, or +infinity (none); 0,
+// a negative number and NaN are refused naming the field.
+TEST(Api, FrameBudgetMustBePositive) {
+  for (double v : {0.0, -4.0, std::nan("")}) {
+    sp::TerrainDef d = sand_def();
+    d.frame_budget_ms = v;
+    auto t = sp::Terrain::create(d);
+    ASSERT_FALSE(t.ok()) << v;
+    EXPECT_TRUE(has_field(t.errors(), "TerrainDef.frame_budget_ms")) << t.message();
+  }
+  sp::TerrainDef d = sand_def();
+  d.frame_budget_ms.reset();
+  auto t = sp::Terrain::create(d);
+  ASSERT_TRUE(t.ok()) << t.message();
+  const std::string rep = t->report_json();
+  const auto at = rep.find("\"frame_budget_fraction\"");
+  ASSERT_NE(at, std::string::npos) << "half of each step's dt";
+  EXPECT_NE(rep.substr(at, 40).find("0.5"), std::string::npos) << rep.substr(at, 40);
+}

@@ -162,3 +162,20 @@ TEST(CliReliability, RunStepCountsAreChecked) {
   EXPECT_EQ(sandpatch("run --seconds 1e308 --quiet").code, 2);
   EXPECT_EQ(sandpatch("check " + scene("broken/deep_nesting.json")).code, 2);
 }
+
+// --frame-budget: a number of ms > 0 or off; anything else is bad input (exit 2) naming it.
+TEST(Cli, FrameBudgetOption) {
+  const fs::path out = fs::temp_directory_path() / "sandpatch_cli_budget";
+  fs::remove_all(out);
+  for (const char* bad : {"0", "-3", "fast", "nan"}) {
+    Outcome o = sandpatch(std::string("run --frames 2 --quiet --frame-budget ") + bad + " --out " + out.string());
+    EXPECT_EQ(o.code, 2) << bad << ": " << o.output;
+    EXPECT_NE(o.output.find("--frame-budget"), std::string::npos) << o.output;
+  }
+  Outcome o = sandpatch("run --frames 2 --quiet --frame-budget off --out " + out.string());
+  ASSERT_EQ(o.code, 0) << o.output;
+  std::ifstream f(out / "report.json");
+  const auto rep = nlohmann::json::parse(f);
+  EXPECT_EQ(rep["frames"]["budget_ms"], "off");
+  EXPECT_FALSE(rep["budget"]["on"].get<bool>());
+}

@@ -166,7 +166,7 @@ TEST(BulletWorld, IdleTilesCostAStepNothing) {
   EXPECT_LE(l.dynamic_proxies, 1);
   EXPECT_EQ(l.pairs, s.pairs);
   EXPECT_LE(l.pairs, 2);                  // the ball against the two tiles under it
-  EXPECT_EQ(l.edge_maps, s.edge_maps);
+  EXPECT_EQ(s.edge_maps, 4);              // a terrain of at most 64 tiles builds every tile's at start-up
   EXPECT_EQ(l.edge_maps, 2);              // x in [7, 9] m, z in [3, 5] m: tiles (0, 0) and (1, 0)
   const BodyState ps = (*ws)->state(*a), pl = (*wl)->state(*b);
   EXPECT_NEAR(pl.position.y(), 0.25, 0.02);

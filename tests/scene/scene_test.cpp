@@ -858,5 +858,27 @@ TEST(SceneLoads, BadLoadsNameTheField) {
   EXPECT_TRUE(has_error(not_array, "bodies[0].loads", "", "array")) << all(not_array);
 }
 
+// simulation.frame_budget_ms: a number of ms in (0, 1e6] or "off"; anything else is refused
+// naming the field; written back by scene_to_json only when given.
+TEST(Scene, FrameBudget) {
+  auto off = parse(scene_with({{"simulation", {{"frame_budget_ms", "off"}}}}));
+  ASSERT_TRUE(off.ok()) << all(off);
+  ASSERT_TRUE(off->simulation.frame_budget_ms.has_value());
+  EXPECT_TRUE(std::isinf(*off->simulation.frame_budget_ms));
+  EXPECT_EQ(scene_to_json(*off)["simulation"]["frame_budget_ms"], "off");
+  auto eight = parse(scene_with({{"simulation", {{"frame_budget_ms", 8.0}}}}));
+  ASSERT_TRUE(eight.ok()) << all(eight);
+  EXPECT_EQ(*eight->simulation.frame_budget_ms, 8.0);
+  auto none = parse(scene_with(nlohmann::json::object()));
+  ASSERT_TRUE(none.ok());
+  EXPECT_FALSE(none->simulation.frame_budget_ms.has_value());
+  EXPECT_FALSE(scene_to_json(*none)["simulation"].contains("frame_budget_ms"));
+  for (const nlohmann::json& bad : {nlohmann::json(0.0), nlohmann::json(-1.0), nlohmann::json("fast"), nlohmann::json(2e6)}) {
+    auto r = parse(scene_with({{"simulation", {{"frame_budget_ms", bad}}}}));
+    ASSERT_FALSE(r.ok()) << bad;
+    EXPECT_NE(r.message().find("simulation.frame_budget_ms"), std::string::npos) << r.message();
+  }
+}
+
 }  // namespace
 }  // namespace sandpatch
