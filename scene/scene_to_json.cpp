@@ -1,0 +1,182 @@
+// scene_to_json (scene.hpp): a SceneDef written back as JSON, every field with its value
+// (`sandpatch stress` derives its scenes from it). The reader is scene/scene.cpp.
+#include <cmath>
+#include <nlohmann/json.hpp>
+
+#include "scene/scene.hpp"
+
+namespace sandpatch {
+
+using json = nlohmann::json;
+
+nlohmann::json scene_to_json(const SceneDef& s) {
+  json j;
+  j["version"] = kSceneFormatVersion;
+  j["name"] = s.name;
+  j["description"] = s.description;
+
+  json t;
+  json src;
+  src["type"] = to_string(s.terrain.source.kind);
+  if (s.terrain.source.kind == TerrainSourceKind::Procedural) {
+    const auto& p = s.terrain.source.procedural;
+    src["kind"] = to_string(p.kind);
+    src["height"] = p.height;
+    src["slope_x"] = p.slope_x;
+    src["slope_z"] = p.slope_z;
+    src["amplitude"] = p.amplitude;
+    src["wavelength"] = p.wavelength;
+    src["seed"] = p.seed;
+    src["octaves"] = p.octaves;
+    src["samples_x"] = p.samples_x;
+    src["samples_z"] = p.samples_z;
+  } else {
+    src["file"] = s.terrain.source.file;
+    if (s.terrain.source.kind == TerrainSourceKind::RawF32) {
+      src["samples_x"] = s.terrain.source.samples_x;
+      src["samples_z"] = s.terrain.source.samples_z;
+    }
+  }
+  t["source"] = src;
+  if (s.terrain.size) t["size"] = *s.terrain.size;
+  else t["spacing"] = s.terrain.spacing;
+  t["vertical_scale"] = s.terrain.vertical_scale;
+  t["vertical_offset"] = s.terrain.vertical_offset;
+  t["origin"] = s.terrain.origin;
+  if (s.terrain.bedrock_height) t["bedrock_height"] = *s.terrain.bedrock_height;
+  else t["soil_depth"] = s.terrain.soil_depth.value_or(knobs::kSoilDepth.def);
+  t["patch_depth"] = s.terrain.patch_depth;
+  t["material"] = s.terrain.material;
+  j["terrain"] = t;
+
+  j["materials"] = json::array();
+  for (const auto& m : s.materials) {
+    json mj;
+    mj["name"] = m.name;
+    mj["density"] = m.density;
+    mj["friction"] = m.friction;
+    if (m.damping_ratio) mj["damping_ratio"] = *m.damping_ratio;
+    else mj["restitution"] = m.restitution_value();
+    mj["stiffness"] = m.stiffness;
+    mj["tangential_stiffness_ratio"] = m.tangential_stiffness_ratio;
+    mj["granule_radius"] = m.granule_radius;
+    mj["packing_fraction"] = m.packing_fraction;
+    j["materials"].push_back(mj);
+  }
+
+  j["bodies"] = json::array();
+  for (const auto& b : s.bodies) {
+    json bj, sh;
+    bj["name"] = b.name;
+    sh["type"] = to_string(b.shape.kind);
+    switch (b.shape.kind) {
+      case ShapeKind::Sphere: sh["radius"] = b.shape.radius; break;
+      case ShapeKind::Box: sh["half_extents"] = b.shape.half_extents; break;
+      case ShapeKind::Cylinder:
+      case ShapeKind::Capsule:
+        sh["radius"] = b.shape.radius;
+        sh["height"] = b.shape.height;
+        break;
+      case ShapeKind::Mesh:
+        sh["file"] = b.shape.file;
+        sh["scale"] = b.shape.scale;
+        sh["solid"] = b.shape.solid;
+        break;
+    }
+    bj["shape"] = sh;
+    if (b.density) bj["density"] = *b.density;
+    else bj["mass"] = b.mass.value_or(0.0);
+    bj["pose"] = {{"position", b.pose.position}, {"orientation", b.pose.orientation}};
+    bj["linear_velocity"] = b.linear_velocity;
+    bj["angular_velocity"] = b.angular_velocity;
+    bj["spawn_time"] = b.spawn_time;
+    bj["friction"] = b.friction;
+    bj["restitution"] = b.restitution;
+    bj["rolling_friction"] = b.rolling_friction;
+    if (!b.loads.empty()) {
+      json loads = json::array();
+      for (const LoadDef& l : b.loads) {
+        json lj = {{"force", l.force}, {"torque", l.torque}};
+        if (l.at) lj["at"] = *l.at;
+        lj["from"] = l.from;
+        if (l.until) lj["until"] = *l.until;
+        lj["frame"] = to_string(l.frame);
+        loads.push_back(lj);
+      }
+      bj["loads"] = loads;
+    }
+    j["bodies"].push_back(bj);
+  }
+
+  const auto& sim = s.simulation;
+  j["simulation"] = {
+      {"dt", sim.dt},
+      {"substeps", sim.substeps},
+      {"duration", sim.duration},
+      {"backend", to_string(sim.backend)},
+      {"threads", sim.threads},
+      {"pool", {{"slots", sim.pool.slots}, {"granules_per_slot", sim.pool.granules_per_slot}}},
+      {"particle_scale", sim.particle_scale},
+      {"steps_per_contact", sim.steps_per_contact},
+      {"max_substeps", sim.max_substeps},
+      {"lod", {{"horizon", sim.lod.horizon}, {"margin", sim.lod.margin}, {"apron", sim.lod.apron}}},
+      {"sleep", {{"speed_threshold", sim.sleep.speed_threshold}, {"hold_time", sim.sleep.hold_time}}},
+      {"idle_timeout", sim.idle_timeout},
+      {"granular_patches", sim.granular_patches},
+      {"gravity", sim.gravity},
+      {"seed", sim.seed},
+  };
+  // Only when one was applied (every field above already holds its values), so scenes without
+  // a preset keep their canonical JSON and hash.
+  if (!sim.preset.empty()) j["simulation"]["preset"] = sim.preset;
+  // Only when given (absent: half of dt), so scenes without one keep their canonical JSON.
+  if (sim.frame_budget_ms) {
+    if (std::isinf(*sim.frame_budget_ms)) j["simulation"]["frame_budget_ms"] = "off";
+    else j["simulation"]["frame_budget_ms"] = *sim.frame_budget_ms;
+  }
+  if (sim.scale_by_distance) {
+    json bands = json::array();
+    for (const auto& b : sim.scale_by_distance->bands)
+      bands.push_back({{"max_distance", b.max_distance}, {"particle_scale", b.particle_scale}});
+    j["simulation"]["scale_by_distance"] = {{"camera", sim.scale_by_distance->camera}, {"bands", bands}};
+  }
+
+  j["cameras"] = json::array();
+  for (const auto& cam : s.cameras) {
+    json cj;
+    cj["name"] = cam.name;
+    if (cam.path.empty()) {
+      cj["position"] = cam.position;
+      cj["target"] = cam.target;
+    } else {
+      cj["path"] = json::array();
+      for (const auto& k : cam.path) {
+        cj["path"].push_back({{"time", k.time}, {"position", k.position}, {"target", k.target}});
+      }
+    }
+    cj["fov_deg"] = cam.fov_deg;
+    cj["width"] = cam.width;
+    cj["height"] = cam.height;
+    j["cameras"].push_back(cj);
+  }
+
+  json out;
+  out["frames"] = json::array();
+  for (const auto& f : s.outputs.frames) {
+    json fj{{"camera", f.camera}, {"file", f.file}};
+    if (f.every_k_frames > 0) fj["every_k_frames"] = f.every_k_frames;
+    else fj["times"] = f.times;
+    out["frames"].push_back(fj);
+  }
+  out["heightfields"] = json::array();
+  for (const auto& h : s.outputs.heightfields) {
+    json hj{{"format", to_string(h.format)}, {"at_end", h.at_end}, {"file", h.file}};
+    if (!h.times.empty()) hj["times"] = h.times;
+    out["heightfields"].push_back(hj);
+  }
+  out["report"] = s.outputs.report;
+  j["outputs"] = out;
+  return j;
+}
+
+}  // namespace sandpatch
