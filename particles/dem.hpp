@@ -237,6 +237,9 @@ class Simulation {
 
  private:
   explicit Simulation(std::unique_ptr<Impl> impl);
+  // create(); with `reuse`, once `d` is valid, the arrays sized by the capacity are taken
+  // from it (their memory kept: reset() fills the same capacity again without allocating).
+  static Result<Simulation> make(const SimulationDef& d, Impl* reuse);
   std::unique_ptr<Impl> impl_;
 };
 
