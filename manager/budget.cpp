@@ -161,8 +161,8 @@ TerrainManager::Impl::BudgetChoice TerrainManager::Impl::choose(const PatchReque
     return c;
   }
   c.fits = false;
-  // The rungs a request may take: those of the scales made at creation (a patch growing under
-  // a body, already at a rung's scale, goes on from there).
+  // The rungs a request may take: those of the scales made at creation (a patch asked for
+  // ahead of a body starts from its own requested scale).
   const std::vector<double> made = all_scales();
   for (const Rung& g : kLadder) {
     const double s = c.requested_scale * g.scale;

@@ -41,8 +41,8 @@ struct PatchRequest {
   double speed = 0;                       // m/s of the fastest body in it (a priority key)
   std::vector<int> bodies;                // indices into the BodyMotion list
   // World size / simulated size the patch is promoted at; 0: chosen by the terrain manager at
-  // promotion (by distance from the camera, TerrainManagerDef::scale_bands). A patch that grows
-  // under a body keeps its own.
+  // promotion (by distance from the camera, TerrainManagerDef::scale_bands). A patch asked for
+  // ahead of a body takes the scale of the patch the body is in (without a frame budget).
   double particle_scale = 0;
   // m: the apron on every side of the contacts' footprint (LodDef::apron; 0 for requests made
   // with request_patch). The frame budget may trim it (TerrainManagerDef::frame_budget_ms).

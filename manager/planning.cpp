@@ -80,7 +80,7 @@ Status TerrainManager::Impl::plan(double time) {
 }
 
 // The scale a request is promoted at (Leach & Marais §4.3, §6.3 scenario 2): its own (a
-// patch growing under a body keeps its scale), else the first band whose max_distance reaches
+// patch asked for ahead of a body keeps the scale of the one it is in), else the first band whose max_distance reaches
 // the 3-D distance from the camera to the request's centre on the surface (the last band's
 // beyond), else particle_scale.
 double TerrainManager::Impl::scale_for(const PatchRequest& r) const {

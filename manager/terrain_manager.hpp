@@ -67,7 +67,7 @@ struct TerrainManagerDef {
   // Otherwise a patch is promoted at the particle_scale of the first band whose max_distance
   // (m) reaches the 3-D distance from `camera` to the centre of its request on the surface
   // (beyond the last band: the last band's), and keeps it while it lives (Leach & Marais: the
-  // resolution is locked at initialisation); a patch growing under a body keeps its scale.
+  // resolution is locked at initialisation); a patch asked for ahead of a body keeps the scale of the one it is in.
   // max_distance strictly ascending. Each scale settles its own tile at start-up.
   struct ScaleBand {
     double max_distance = 0;                   // m

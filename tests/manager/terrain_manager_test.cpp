@@ -436,6 +436,16 @@ TEST(TerrainManager, DepthRenderDecidedAtCreation) {
   EXPECT_EQ(ledger[0]["depth_render"], on_gl ? "gl" : "cpu");
 }
 
+// A 20 kg box 0.4 m × 0.2 m × 0.4 m at `position` (m, world), for the promotion tests below.
+RigidBodyDef box_at(const Eigen::Vector3d& position) {
+  RigidBodyDef box;
+  box.shape.kind = RigidShapeKind::Box;
+  box.shape.half_extents = {0.2f, 0.1f, 0.2f};
+  box.mass = 20.0f;
+  box.position = position;
+  return box;
+}
+
 // A patch promoted under a box driven across the heightfield (the box's own: it asks for one
 // when it moves): the fill leaves room for the box (filling.cpp clear_bodies), so the box
 // keeps its height (before, the fill's top granules overlapped its shell and threw it up:
@@ -444,12 +454,7 @@ TEST(TerrainManager, PatchPromotedUnderADrivenBoxDoesNotLaunchIt) {
   test::Rig rig(test::terrain_8m("flat"));
   ASSERT_TRUE(rig.ok()) << rig.error;
   BulletWorld& world = *rig.world;
-  RigidBodyDef box;
-  box.shape.kind = RigidShapeKind::Box;
-  box.shape.half_extents = {0.2f, 0.1f, 0.2f};
-  box.mass = 20.0f;
-  box.position = {2.5, 1.0 + 0.1, 4.0};
-  auto id = rig.core->add_body(box);
+  auto id = rig.core->add_body(box_at({2.5, 1.0 + 0.1, 4.0}));
   ASSERT_TRUE(id.ok());
   TerrainManagerDef def = test::small_manager_def();
   def.lod.apron = 0.3;
@@ -505,12 +510,7 @@ TEST(TerrainManager, PatchPromotedUnderARestingBoxLeavesItWhereItIs) {
   test::Rig rig(test::terrain_8m("hills"));
   ASSERT_TRUE(rig.ok()) << rig.error;
   BulletWorld& world = *rig.world;
-  RigidBodyDef box;
-  box.shape.kind = RigidShapeKind::Box;
-  box.shape.half_extents = {0.2f, 0.1f, 0.2f};
-  box.mass = 20.0f;
-  box.position = {4.0, 1.0 + 0.15, 4.0};
-  auto id = rig.core->add_body(box);
+  auto id = rig.core->add_body(box_at({4.0, 1.0 + 0.15, 4.0}));
   ASSERT_TRUE(id.ok());
   TerrainManagerDef def = test::small_manager_def();
   ASSERT_TRUE(rig.start(def).ok()) << rig.error;
