@@ -43,11 +43,65 @@ double TerrainManager::Impl::predict_ms(double spheres, double dt) const {
   return load * substeps(dt) * (cost_a_ms + cost_b_ms * spheres);
 }
 
+// (a patch the budget may hold, one no body wants, leaves its room to a new one)
 double TerrainManager::Impl::live_cost_ms(double dt) const {
   double ms = 0;
   for (const Slot& s : slots)
-    if (s.state == SlotState::Active || s.state == SlotState::Filling) ms += predict_ms(slot_spheres(s, record(s).granules), dt);
+    if (s.state == SlotState::Filling || (s.state == SlotState::Active && (!budget_on() || wanted(s))))
+      ms += predict_ms(slot_spheres(s, record(s).granules), dt);
   return ms;
+}
+
+// Whether a patch is wanted this frame: it carries a body, or a body is over or heading for
+// its region (its bounds, grown by lod.margin and by how far it goes in lod.horizon at its
+// horizontal speed, overlap the region). A patch not wanted (its body left, or was removed)
+// may be held by the budget and does not count against a new patch's room.
+bool TerrainManager::Impl::wanted(const Slot& s) const {
+  for (const Carried& c : s.carried)
+    if (c.enabled) return true;
+  const PatchRequest r = rect(s);
+  for (RigidBodyId b : world->bodies()) {
+    Eigen::Vector3d lo, hi;
+    world->bounds(b, &lo, &hi);
+    const Eigen::Vector3f v = world->state(b).linear_velocity;
+    const double reach = def.lod.margin + std::hypot(double(v.x()), double(v.z())) * def.lod.horizon;
+    if (lo.x() - reach < r.x1 && hi.x() + reach > r.x0 && lo.z() - reach < r.z1 && hi.z() + reach > r.z0) return true;
+  }
+  return false;
+}
+
+// Which awake patches step this frame. Wanted patches always step. The others (settling
+// after their body left) step, the longest held first, while the predicted DEM of everything
+// stepped so far fits 80 % of the budget (the share `choose` gives the DEM); one that does not
+// fit is held this frame: not stepped, its granules where they are, its time behind the
+// frame's (nothing outside the patch reads it). A patch is held at most kMaxHeldFrames in a
+// row, so it still settles and sleeps, at a fraction of the rate. Without a budget every
+// awake patch steps, in slot order.
+std::vector<Slot*> TerrainManager::Impl::stepping_order(const std::vector<Slot*>& awake, double dt) {
+  if (!budget_on()) return awake;
+  constexpr int kMaxHeldFrames = 30;
+  std::vector<std::pair<Slot*, bool>> order;
+  for (Slot* s : awake) order.push_back({s, wanted(*s)});
+  std::stable_sort(order.begin(), order.end(), [&](const auto& a, const auto& b) {
+    if (a.second != b.second) return a.second;
+    return a.first->held > b.first->held;
+  });
+  const double avail = 0.8 * budget_ms(dt);
+  double used = 0;
+  std::vector<Slot*> step;
+  for (auto [s, want] : order) {
+    const double ms = predict_ms(s->sim->particle_count(), dt);
+    if (!want && used + ms > avail && s->held < kMaxHeldFrames) {
+      ++s->held;
+      ++budget_held;
+      budget_longest_hold = std::max(budget_longest_hold, s->held);
+      continue;
+    }
+    s->held = 0;
+    used += ms;
+    step.push_back(s);
+  }
+  return step;
 }
 
 // A patch's measured step: the load factor follows it (weight 0.2: a few frames to settle,

@@ -17,6 +17,7 @@ using manager_detail::v3;
 
 Status TerrainManager::Impl::step_patches(double time, double dt) {
   choose_carriers();
+  std::vector<Slot*> awake;
   for (auto& s : slots) {
     if (s.state != SlotState::Active && s.state != SlotState::Asleep) continue;
     if (Status st = couple_before(s, dt); !st) return st;
@@ -24,6 +25,11 @@ Status TerrainManager::Impl::step_patches(double time, double dt) {
       hold_resting_bodies(s);
       continue;
     }
+    awake.push_back(&s);
+  }
+  // (with a frame budget, a patch carrying no body may be held this frame: budget.cpp)
+  for (Slot* sp : stepping_order(awake, dt)) {
+    Slot& s = *sp;
     if (s.state == SlotState::Asleep) {
       s.state = SlotState::Active;
       s.asleep_for = 0;

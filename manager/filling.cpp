@@ -323,6 +323,7 @@ Status TerrainManager::Impl::promote(Slot& slot, const PatchRequest& req, double
   rec.granules = 0;
   slot.fade = 0;
   slot.asleep_for = 0;
+  slot.held = 0;
   slot.carried.clear();
   slot.state = SlotState::Filling;
   // Ledger: volume between the floor and the surface over the region.

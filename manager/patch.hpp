@@ -54,6 +54,7 @@ struct Slot {
   std::size_t uploaded = 0;
   int fade = 0;              // frames simulated, up to fade_frames
   double asleep_for = 0;     // s asleep and untouched
+  int held = 0;              // frames in a row the budget held it (not stepped; budget.cpp)
   std::vector<Carried> carried;
   bool live() const { return state != SlotState::Free; }
   bool ready() const { return state == SlotState::Active || state == SlotState::Asleep; }

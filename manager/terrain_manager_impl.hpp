@@ -204,6 +204,13 @@ struct TerrainManager::Impl {
   std::vector<nlohmann::ordered_json> budget_log;  // one entry per promotion (the report's budget.patches)
   long long budget_waits = 0;      // request-frames a request waited in the queue because it did not fit
   int budget_overruns = 0;         // promotions that did not fit and went ahead (nothing else live)
+  long long budget_held = 0;       // patch-frames a patch carrying no body was held (not stepped)
+  int budget_longest_hold = 0;     // frames in a row, the longest hold
+  // Which awake patches step this frame (budget.cpp): all of them without a budget; with one,
+  // the wanted ones (a body on, over or heading for them), then the others, longest held
+  // first, while they fit.
+  bool wanted(const Slot& s) const;
+  std::vector<Slot*> stepping_order(const std::vector<Slot*>& awake, double dt);
   bool pinned() const { return def.budget_substep_ms > 0 && def.budget_sphere_ns > 0; }
   bool budget_on() const { return def.frame_budget_fraction > 0 || std::isfinite(def.frame_budget_ms); }
   double budget_ms(double dt) const;  // ms, infinity when off

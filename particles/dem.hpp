@@ -11,8 +11,9 @@
 //   1. rebuild   sphere positions/velocities from the bodies
 //   2. grid      when a sphere moved more than skin/2 since the last rebuild: counting-sort
 //                the spheres by cell (cell = 2 r_max + skin, no cap) and rebuild the Verlet
-//                neighbour list from the 27 cells, carrying each pair's spring over
-//   3. contacts  each pair is computed once, by its owner's entry (lower stable id; 8 pairs at
+//                neighbour list from the cells after each sphere's (half of the 27: each
+//                pair met once), carrying each pair's spring over
+//   3. contacts  each pair is computed once, by its owner's entry (lower sorted index; 8 pairs at
 //                a time by the AVX2 kernel when the CPU has it, contact_simd.hpp, same bits),
 //                and added to both spheres' sums; slabs of two z-layers of cells, the even
 //                ones in parallel, then the odd ones: a fixed order of additions (no atomics)

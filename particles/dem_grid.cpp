@@ -80,10 +80,14 @@ void Simulation::Impl::sort() {
   build_list(old_slot);
 }
 
-// Visits the spheres j of other bodies within r_i + r_j + skin of sphere i, in a fixed
-// order (cells z, y, x, then sorted index).
+// Visits the spheres j > i (sorted order) of other bodies within r_i + r_j + skin of sphere
+// i, in a fixed order (the rows below, then sorted index): each pair of the grid is met once,
+// from its lower sorted index. The cells after i's own in the grid's (z, y, x) order that
+// can hold a partner are i's own cell and the next in its row, the row above (y + 1) and the
+// nine rows of the layer above (z + 1): five runs of contiguous sorted indices (three cells
+// in x are adjacent in the sort), half the 27-cell search of both sides.
 template <class F>
-void Simulation::Impl::for_near(int i, F&& f) const {
+void Simulation::Impl::for_forward(int i, F&& f) const {
   // (locals: f may store through pointers the compiler cannot tell from these, which made it
   // load the skin and the arrays' addresses again for every candidate)
   const float* P = p.pos.data();
@@ -98,25 +102,35 @@ void Simulation::Impl::for_near(int i, F&& f) const {
   const int c = cell[i];
   const int cx = c % gx, cy = (c / gx) % gy, cz = c / (gx * gy);
   const int x0 = cx > 0 ? cx - 1 : 0, x1 = cx < gx - 1 ? cx + 1 : gx - 1;
-  for (int zz = (cz > 0 ? cz - 1 : 0); zz <= (cz < gz - 1 ? cz + 1 : gz - 1); ++zz)
+  auto run = [&](int j, int j1) __attribute__((always_inline)) {
+    for (; j < j1; ++j) {
+      const float dx = pi.x - P[4 * j], dy = pi.y - P[4 * j + 1], dz = pi.z - P[4 * j + 2];
+      const float rs = ri + P[4 * j + 3] + sk;
+      if (dx * dx + dy * dy + dz * dz >= rs * rs || BODY[j] == bi) continue;
+      if (!dyn_i && V[4 * j + 3] == 0.0f) continue;  // neither moves under forces
+      f(j);
+    }
+  };
+  const int row0 = (cz * gy + cy) * gx;
+  run(i + 1, CS[row0 + x1 + 1]);  // the rest of i's cell and the next one in x
+  if (cy < gy - 1) {
+    const int row = row0 + gx;
+    run(CS[row + x0], CS[row + x1 + 1]);
+  }
+  if (cz < gz - 1)
     for (int yy = (cy > 0 ? cy - 1 : 0); yy <= (cy < gy - 1 ? cy + 1 : gy - 1); ++yy) {
-      const int row = (zz * gy + yy) * gx;
-      for (int j = CS[row + x0], j1 = CS[row + x1 + 1]; j < j1; ++j) {
-        const float dx = pi.x - P[4 * j], dy = pi.y - P[4 * j + 1], dz = pi.z - P[4 * j + 2];
-        const float rs = ri + P[4 * j + 3] + sk;
-        if (dx * dx + dy * dy + dz * dz >= rs * rs || BODY[j] == bi) continue;
-        if (!dyn_i && V[4 * j + 3] == 0.0f) continue;  // neither moves under forces
-        f(j);
-      }
+      const int row = ((cz + 1) * gy + yy) * gx;
+      run(CS[row + x0], CS[row + x1 + 1]);
     }
 }
 
-// Rebuilds the CSR neighbour list and carries each pair's spring over from the old list (found
-// by partner id). One search (for_near) per sphere: blocks of kListBlock spheres in parallel,
-// each block's partners gathered in sphere order into its own buffer (list_blocks, kept
-// between rebuilds), then the counts' prefix sum and a parallel copy into the CSR arrays with
-// the carry-over. (It searched twice before, once to count and once to fill: the search is
-// most of a rebuild, and a scene's patch rebuilds every few substeps; docs/BENCHMARKS.md.)
+// Rebuilds the CSR neighbour list and carries each pair's spring over from the old list. One
+// half search (for_forward) per sphere: blocks of kListBlock spheres in parallel, each block's
+// partners gathered in sphere order into its own buffer (list_blocks, kept between rebuilds),
+// then the counts' prefix sum and a parallel copy into the CSR arrays with the carry-over.
+// The pair's owner is its lower sorted index, so it may change at a re-sort: the spring is
+// then found in the partner's old list and turned round (xi is along the owner's normal and
+// relative velocity, both of which change sign with the side).
 void Simulation::Impl::build_list(const std::vector<std::int32_t>& old_slot) {
   std::vector<std::int32_t> ostart, onbr_id;
   PairArrays old;
@@ -126,8 +140,6 @@ void Simulation::Impl::build_list(const std::vector<std::int32_t>& old_slot) {
   const int n = np;
   const int old_np = ostart.empty() ? 0 : int(ostart.size()) - 1;
   nstart.assign(n + 1, 0);
-  // i owns the pair with j: a static partner has no list, else the lower stable id
-  auto owns = [&](int i, int j) { return (b.flags[p.body[j]] & kBodyStatic) || p.id[i] < p.id[j]; };
   const int blocks = (n + kListBlock - 1) / kListBlock;
   if (int(list_blocks.size()) < blocks) list_blocks.resize(std::size_t(blocks));
 #pragma omp parallel for num_threads(threads) schedule(dynamic, 1) if (n > 4096)
@@ -135,11 +147,10 @@ void Simulation::Impl::build_list(const std::vector<std::int32_t>& old_slot) {
     std::vector<std::int32_t>& found = list_blocks[std::size_t(blk)];
     found.clear();
     for (int i = blk * kListBlock, i1 = std::min(n, i + kListBlock); i < i1; ++i) {
-      if (b.flags[p.body[i]] & kBodyStatic) continue;
+      // a parked body waits apart, in contact with nothing (dem_control.hpp)
+      if (b.flags[p.body[i]] & kBodyParked) continue;
       const std::size_t before = found.size();
-      for_near(i, [&](int j) {
-        if (owns(i, j)) found.push_back(j);
-      });
+      for_forward(i, [&](int j) { found.push_back(j); });
       nstart[i + 1] = std::int32_t(found.size() - before);
     }
   }
@@ -147,26 +158,35 @@ void Simulation::Impl::build_list(const std::vector<std::int32_t>& old_slot) {
   nbr.resize(nstart[n]);
   nbr_id.resize(nstart[n]);
   pairs.assign(std::size_t(nstart[n]));
+  // the old entry of the pair (owner's old slot oi, partner id), or -1
+  auto old_entry = [&](int oi, int partner_id) {
+    if (oi < 0 || oi >= old_np) return -1;
+    for (int k = ostart[oi]; k < ostart[oi + 1]; ++k)
+      if (onbr_id[k] == partner_id) return k;
+    return -1;
+  };
 #pragma omp parallel for num_threads(threads) schedule(dynamic, 1) if (n > 4096)
   for (int blk = 0; blk < blocks; ++blk) {
     const std::int32_t* found = list_blocks[std::size_t(blk)].data();
     for (int i = blk * kListBlock, i1 = std::min(n, i + kListBlock); i < i1; ++i) {
       const int id = p.id[i];
       const int oi = id < int(old_slot.size()) ? old_slot[id] : -1;
-      const bool has_old = oi >= 0 && oi < old_np;
       for (int e = nstart[i]; e < nstart[i + 1]; ++e) {
         const int j = *found++;
+        const int jd = p.id[j];
         nbr[e] = j;
-        nbr_id[e] = p.id[j];
-        if (has_old)
-          for (int k = ostart[oi]; k < ostart[oi + 1]; ++k)
-            if (onbr_id[k] == p.id[j]) {
-              pairs.xi[3 * e] = old.xi[3 * k];
-              pairs.xi[3 * e + 1] = old.xi[3 * k + 1];
-              pairs.xi[3 * e + 2] = old.xi[3 * k + 2];
-              pairs.touch[e] = old.touch[k];
-              break;
-            }
+        nbr_id[e] = jd;
+        if (old_np == 0) continue;
+        const int oj = jd < int(old_slot.size()) ? old_slot[jd] : -1;
+        // the old owner: the lower old sorted index
+        const bool same_side = oi >= 0 && (oj < 0 || oi < oj);
+        const int k = same_side ? old_entry(oi, jd) : old_entry(oj, id);
+        if (k < 0) continue;
+        const float sgn = same_side ? 1.0f : -1.0f;
+        pairs.xi[3 * e] = sgn * old.xi[3 * k];
+        pairs.xi[3 * e + 1] = sgn * old.xi[3 * k + 1];
+        pairs.xi[3 * e + 2] = sgn * old.xi[3 * k + 2];
+        pairs.touch[e] = old.touch[k];
       }
     }
   }

@@ -156,8 +156,8 @@ struct Simulation::Impl {
 
   // Verlet neighbour list (CSR, sorted order, no cap), one entry per pair: for sphere i the
   // entries [nstart[i], nstart[i+1]) hold every sphere j of another body with
-  // |x_i - x_j| < r_i + r_j + skin at the last rebuild for which i is the pair's owner: the
-  // sphere with the lower stable id, or the only side with a list (a static partner has none).
+  // |x_i - x_j| < r_i + r_j + skin at the last rebuild for which i is the pair's owner, the
+  // lower sorted index (at least one of the two moves under forces; parked bodies have none).
   // Each entry carries the pair's tangential spring (3 floats).
   std::vector<std::int32_t> nstart;    // np + 1
   std::vector<std::int32_t> nbr;       // sorted index of the partner
@@ -238,13 +238,14 @@ struct Simulation::Impl {
   // particle field, then the neighbour list is rebuilt and the springs carried over.
   void sort();
 
-  // Visits the spheres j of other bodies within r_i + r_j + skin of sphere i, in a fixed
-  // order (cells z, y, x, then sorted index).
+  // Visits the spheres j > i (sorted order) of other bodies within r_i + r_j + skin of sphere
+  // i, in a fixed order: each pair of the grid once (dem_grid.cpp).
   template <class F>
-  void for_near(int i, F&& f) const;
+  void for_forward(int i, F&& f) const;
 
   // Rebuilds the CSR neighbour list (one parallel search into list_blocks, then a parallel
-  // fill) and carries each pair's spring over from the old list (found by partner id).
+  // fill) and carries each pair's spring over from the old list (found by partner id, turned
+  // round where the owner changed).
   void build_list(const std::vector<std::int32_t>& old_slot);
 
   // ---- guard

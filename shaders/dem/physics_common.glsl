@@ -234,14 +234,19 @@ SP_INLINE bool boundary_plane(Boundaries b, SP_TERRAIN_GRID t, int slot, vec3 p,
   }
   if (!b.terrain || outside) return false;
   // a side of the filled rectangle: inward normal, gap to the side, outside surface height
+  // (the gap first: the outside height is sampled only for a sphere within r of the side)
   vec3 inward;
   float gap;
-  float top;
-  if (slot == 1) { inward = vec3(1.0f, 0.0f, 0.0f); gap = p.x - t.fill_min_x; top = terrain_height(t, t.fill_min_x - r, p.z); }
-  else if (slot == 2) { inward = vec3(-1.0f, 0.0f, 0.0f); gap = t.fill_max_x - p.x; top = terrain_height(t, t.fill_max_x + r, p.z); }
-  else if (slot == 3) { inward = vec3(0.0f, 0.0f, 1.0f); gap = p.z - t.fill_min_z; top = terrain_height(t, p.x, t.fill_min_z - r); }
-  else { inward = vec3(0.0f, 0.0f, -1.0f); gap = t.fill_max_z - p.z; top = terrain_height(t, p.x, t.fill_max_z + r); }
+  if (slot == 1) { inward = vec3(1.0f, 0.0f, 0.0f); gap = p.x - t.fill_min_x; }
+  else if (slot == 2) { inward = vec3(-1.0f, 0.0f, 0.0f); gap = t.fill_max_x - p.x; }
+  else if (slot == 3) { inward = vec3(0.0f, 0.0f, 1.0f); gap = p.z - t.fill_min_z; }
+  else { inward = vec3(0.0f, 0.0f, -1.0f); gap = t.fill_max_z - p.z; }
   if (!(gap < r)) return false;
+  float top;
+  if (slot == 1) top = terrain_height(t, t.fill_min_x - r, p.z);
+  else if (slot == 2) top = terrain_height(t, t.fill_max_x + r, p.z);
+  else if (slot == 3) top = terrain_height(t, p.x, t.fill_min_z - r);
+  else top = terrain_height(t, p.x, t.fill_max_z + r);
   const float dy = p.y - top;
   if (dy <= 0.0f) {
     n = inward;

@@ -110,6 +110,44 @@ TEST(Budget, NothingFitsIsReportedWithTheCostItNeeded) {
   EXPECT_EQ(b["patches"][0]["rung"].get<int>(), 3) << "the coarsest rung";
 }
 
+// A patch no body wants any more (its sphere was removed while the bed still moved) is held
+// by the budget when it does not fit beside the patch under a new body: the new body's patch
+// is promoted at the requested scale (the one left behind leaves it the room) and steps every
+// frame; the other one waits, at most 30 frames in a row, so it still settles.
+TEST(Budget, APatchNoBodyWantsIsHeldWhenItDoesNotFit) {
+  // One patch's cost under the pinned model, from a run with all the room it wants.
+  const Drop one = drop(budget_def(1e5), 2);
+  ASSERT_TRUE(one.error.empty()) << one.error;
+  const double one_ms = one.report["budget"]["patches"][0]["predicted_ms"].get<double>();
+  test::Rig rig(test::terrain_8m("flat"));
+  ASSERT_TRUE(rig.ok()) << rig.error;
+  auto first = rig.add_sphere(0.1f, 5.0f, {2.0, 1.0 + 0.1 + 0.3, 4.0});
+  ASSERT_TRUE(first.ok());
+  TerrainManagerDef d = budget_def(1.5 * one_ms / 0.8);  // room for one such patch, not two
+  d.slots = 2;
+  d.threads = 1;  // (two OpenMP threads on a busy 2-core machine spin at every barrier)
+  ASSERT_TRUE(rig.start(d).ok()) << rig.error;
+  ASSERT_TRUE(rig.frames(20).ok()) << rig.error;  // landed: its patch is up and moving
+  ASSERT_EQ(rig.manager->report()["budget"]["patches"].size(), 1u);
+  rig.core->remove_body(*first);
+  ASSERT_TRUE(rig.add_sphere(0.1f, 5.0f, {6.0, 1.0 + 0.1 + 0.3, 4.0}).ok());
+  ASSERT_TRUE(rig.frames(40).ok()) << rig.error;
+  const ojson b = rig.manager->report()["budget"];
+  ASSERT_EQ(b["patches"].size(), 2u) << b.dump(1);
+  EXPECT_EQ(b["patches"][1]["rung"].get<int>(), 0) << "the patch left behind does not take the new one's room";
+  EXPECT_GT(b["held_patch_frames"].get<long long>(), 0) << b.dump(1);
+  EXPECT_LE(b["longest_hold_frames"].get<int>(), 30);
+  // The new body's patch stepped every frame it was awake: its DEM frames are the frames
+  // since it was promoted (less the ones it slept, if it did).
+  const ojson dem = rig.manager->report()["dem"]["patches"];
+  ASSERT_EQ(dem.size(), 2u) << dem.dump(1);
+  EXPECT_GT(dem[1]["frames"].get<int>(), dem[0]["frames"].get<int>() - 20)
+      << "the wanted patch steps; the one left behind waits";
+  std::printf("held %lld patch-frames, longest hold %d frames; frames stepped: left behind %d, new %d\n",
+              b["held_patch_frames"].get<long long>(), b["longest_hold_frames"].get<int>(), dem[0]["frames"].get<int>(),
+              dem[1]["frames"].get<int>());
+}
+
 // Bad budgets are refused naming the field.
 TEST(Budget, BadBudgetsAreRefused) {
   for (double v : {0.0, -1.0, std::nan("")}) {
