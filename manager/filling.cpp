@@ -2,6 +2,7 @@
 // into a pool slot (heightfield -> granules), and the granules' upload in chunks. See
 // terrain_manager_impl.hpp.
 #include <algorithm>
+#include <numbers>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -164,11 +165,24 @@ void TerrainManager::Impl::derive_tile_set(double scale) {
   }
 }
 
-// Lattice layers that settle into a tile of at least `depth` (m, sim units) of period_y.
-int TerrainManager::Impl::tile_layers(double fill_depth) const {
-  const GranuleShape shape = make_granule_shape(float(def.material.radius), 1.0f, def.material.density);
-  const double layer = 2.0 * (shape.centre_distance + shape.radius) * 0.8;  // settled layer height, about
-  return std::max(6, int(std::ceil(fill_depth * 1.6 / layer)) + 3);
+// Lattice layers that settle into a tile whose period holds a fill `fill_depth` deep (m, sim
+// units), from what a layer settles to: a lattice layer of the tile holds one granule per a × a
+// cell (a the lattice spacing make_granule_tile uses for this box), and settles at a packing
+// fraction φ (4 sphere volumes per granule over the tile's volume, GranuleTile::packing_fraction)
+// to a height v_g / (φ a²). Tiles settled with settle_friction <= 0.2 measured φ = 0.61; 0.62
+// is used, so the guess errs deep. The period stops two bounding radii under the top granule
+// centre, and the bottom layer's centres sit a bounding radius above the floor: the fill
+// depth plus a bounding radius, plus two layers for the rough top. (The guess was 0.8 × 2
+// bounding radii a layer, twice what a jittered lattice settles to: the first tile came out
+// too shallow and was settled again, deeper, which doubled a first run's start-up.)
+int TerrainManager::Impl::tile_layers(const GranuleTileDef& td, double fill_depth) const {
+  const GranuleShape shape = make_granule_shape(float(td.radius), 1.0f, def.material.density);
+  const double bound = double(shape.centre_distance + shape.radius);
+  double a = 2.0 * bound * 1.02;  // make_granule_tile's lattice spacing
+  if (td.box_side > 0) a = double(td.box_side) / std::max(1.0, std::floor(double(td.box_side) / a));
+  const double vg = 4.0 * 4.0 / 3.0 * std::numbers::pi * std::pow(double(td.radius), 3);
+  const double layer = vg / (0.62 * a * a);  // m, settled height of one lattice layer
+  return std::max(6, int(std::ceil((fill_depth + bound) / layer)) + 2);
 }
 
 // The shallowest tile of a set whose period holds a fill `depth` (m, sim units) deep.
@@ -178,7 +192,7 @@ Result<const GranuleTile*> TerrainManager::Impl::tile_for(TileSet& set, double f
   for (const GranuleTile& t : tiles)
     if (holds(t)) return &t;
   GranuleTileDef td = set.def;
-  td.layers = tile_layers(1.1 * fill_depth);
+  td.layers = tile_layers(td, fill_depth);
   for (int attempt = 0; attempt < 3; ++attempt) {
     const auto t0 = Clock::now();
     if (def.on_settle) {
@@ -189,7 +203,7 @@ Result<const GranuleTile*> TerrainManager::Impl::tile_for(TileSet& set, double f
       td.on_progress = [this, name, t0](double done, double max) { def.on_settle(name, done, max, ms_since(t0) * 1e-3); };
     }
     TileCacheOutcome from;
-    auto t = cached_granule_tile(td, tile_cache, &from);
+    auto t = cached_granule_tile(td, tile_cache, &from, tile_fallback);
     if (!from.note.empty()) tile_cache_notes.push_back(from.note);
     ++tiles_from[int(from.source)];
     tiles_settled_ms += ms_since(t0);

@@ -89,6 +89,7 @@ Result<std::unique_ptr<TerrainManager>> TerrainManager::create(const TerrainMana
   Impl& I = *m->impl_;
   I.def = def;
   I.tile_cache = def.tile_cache == "off" ? std::string() : def.tile_cache.empty() ? tile_cache_dir() : def.tile_cache;
+  if (def.tile_cache.empty() && !I.tile_cache.empty()) I.tile_fallback = tile_cache_build_dir();
   I.hf = &hf;
   I.world = &world;
   I.camera = def.camera;

@@ -53,6 +53,7 @@ struct TerrainManager::Impl {
   std::deque<TileSet> tile_sets;      // made at start-up, one per scale (references stay valid)
   double tiles_settled_ms = 0;
   std::string tile_cache;             // resolved directory ("" = no disk cache)
+  std::string tile_fallback;          // read-only directory tried after it (the build's; tile_cache.hpp)
   std::vector<std::string> tile_cache_notes;  // why a stored tile was not used or not written
   int tiles_from[3] = {};             // tiles by TileCacheOutcome::Source: disk, memory, settled
   Eigen::Vector3d camera = Eigen::Vector3d::Zero();  // m, world: the scale bands' centre
@@ -260,7 +261,7 @@ struct TerrainManager::Impl {
   Status activate(double time, double dt);
   Status add_tile_set(double scale);
   void derive_tile_set(double scale);
-  int tile_layers(double fill_depth) const;
+  int tile_layers(const GranuleTileDef& td, double fill_depth) const;
   Result<const GranuleTile*> tile_for(TileSet& set, double fill_depth);
   SimulationDef sim_def(double scale) const;
   Status promote(Slot& slot, const PatchRequest& req, double time);

@@ -104,6 +104,14 @@ std::string tile_cache_dir() {
   return {};
 }
 
+std::string tile_cache_build_dir() {
+#ifdef SANDPATCH_BUILD_TILE_DIR
+  std::error_code ec;
+  if (std::filesystem::is_directory(SANDPATCH_BUILD_TILE_DIR, ec)) return SANDPATCH_BUILD_TILE_DIR;
+#endif
+  return {};
+}
+
 std::uint64_t tile_cache_key(const GranuleTileDef& def) {
   Hasher h;
   h.pod(kVersion);
@@ -204,7 +212,8 @@ Result<GranuleTile> load_tile(const std::string& dir, std::uint64_t key) {
   return t;
 }
 
-Result<GranuleTile> cached_granule_tile(const GranuleTileDef& def, const std::string& dir, TileCacheOutcome* outcome) {
+Result<GranuleTile> cached_granule_tile(const GranuleTileDef& def, const std::string& dir, TileCacheOutcome* outcome,
+                                        const std::string& fallback) {
   TileCacheOutcome local;
   TileCacheOutcome& out = outcome ? *outcome : local;
   out = {};
@@ -222,6 +231,14 @@ Result<GranuleTile> cached_granule_tile(const GranuleTileDef& def, const std::st
   }
   // A missing file is the normal first run; anything else is worth a note.
   if (disk.error().detail != "no such tile file") out.note = disk.error().message();
+  // A read-only copy (the tiles the build settled, tile_cache_build_dir), kept in `dir` too.
+  if (!fallback.empty() && fallback != dir) {
+    if (auto b = load_tile(fallback, key)) {
+      out.source = TileCacheOutcome::Source::Disk;
+      if (Status st = save_tile(dir, key, *b); !st) out.note += (out.note.empty() ? "" : "; ") + st.error().message();
+      return b;
+    }
+  }
   bool reused = false;
   auto t = shared_granule_tile(def, &reused);
   if (!t) return t;

@@ -22,7 +22,10 @@
 //
 // Where: the directory given to cached_granule_tile; tile_cache_dir() resolves the default:
 // $SANDPATCH_TILE_CACHE ("off" or empty disables), else $XDG_CACHE_HOME/sandpatch/tiles,
-// else $HOME/.cache/sandpatch/tiles, else none (disabled).
+// else $HOME/.cache/sandpatch/tiles, else none (disabled). The terrain manager, with that
+// default, also reads the build tree's cache (tile_cache_build_dir: the build settles the
+// default scene's tiles into it with `sandpatch check --tiles`), so a first run of a fresh
+// build does not settle them; a tile found there is copied into the default directory.
 #pragma once
 
 #include <cstdint>
@@ -35,6 +38,10 @@ namespace sandpatch {
 
 // The default cache directory ("" = no disk cache), from the environment (see above).
 std::string tile_cache_dir();
+
+// The build tree's tile cache (CMake: <build>/tile_cache), "" if this binary has none or it
+// does not exist. Read only.
+std::string tile_cache_build_dir();
 
 // Key of a tile definition: the fields, the source hash and the DEM probe (see above).
 std::uint64_t tile_cache_key(const GranuleTileDef& def);
@@ -58,8 +65,10 @@ struct TileCacheOutcome {
 
 // The tile of `def`: from `dir` if a valid copy is there, else from this process's memory
 // (shared_granule_tile), else settled now; a tile not found on disk is written to `dir`.
-// `dir` empty: no disk cache (shared_granule_tile alone).
+// `dir` empty: no disk cache (shared_granule_tile alone). `fallback` (if not empty): a
+// directory read, never written, when `dir` has no copy (the build's, tile_cache_build_dir);
+// a tile found there is written to `dir`.
 Result<GranuleTile> cached_granule_tile(const GranuleTileDef& def, const std::string& dir,
-                                        TileCacheOutcome* outcome = nullptr);
+                                        TileCacheOutcome* outcome = nullptr, const std::string& fallback = {});
 
 }  // namespace sandpatch

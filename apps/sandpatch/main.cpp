@@ -33,6 +33,8 @@
 #include "common/knobs.hpp"
 #include "gl/context.hpp"
 #include "manager/run.hpp"
+#include "manager/run_outputs.hpp"
+#include "manager/terrain_manager.hpp"
 #include "manager/scene_world.hpp"
 #include "particles/gpu/bench_gl.hpp"
 #include "render/render.hpp"
@@ -191,12 +193,15 @@ int cmd_render(const RenderCli& a, int argc, char** argv) {
 
 // ---- check ----
 
-void add_check(CLI::App& app, std::string& path) {
+void add_check(CLI::App& app, std::string& path, bool& tiles) {
   auto* check = app.add_subcommand("check", "Validate a scene file and exit (0 valid, 2 invalid)");
   check->add_option("scene", path, "Scene file")->required();
+  check->add_flag("--tiles", tiles,
+                  "Also make the patch pool: settle (or read from the tile cache) the pre-settled granule tiles the "
+                  "scene needs, so that its first run starts at once");
 }
 
-int cmd_check(const std::string& path) {
+int cmd_check(const std::string& path, bool tiles) {
   auto scene = load_scene_file(path);
   if (!scene) {
     print_errors(path + ": invalid scene (" + std::to_string(scene.errors().size()) + " error(s))", scene.message());
@@ -206,7 +211,11 @@ int cmd_check(const std::string& path) {
   // heightmap's every sample, NODATA cells, its geometry), the bodies checked against it and
   // made as Bullet bodies (docs/reliability.md).
   std::string stage;
-  auto world = make_world(*scene, 1, to_string(scene->simulation.backend), &stage, /*patches=*/false);
+  // --tiles: the pool too, as run makes it (one thread: the tiles do not depend on it, and a
+  // build running beside other jobs gains nothing from two)
+  ProgressPrinter progress(ProgressStyle::Lines, 1, scene->simulation.dt);
+  auto world = make_world(*scene, 1, to_string(scene->simulation.backend), &stage, /*patches=*/tiles,
+                          [&](const std::string& what, double done, double max, double wall) { progress.note(what, done / max, wall); });
   if (!world) {
     print_errors(path + ": invalid scene (" + std::to_string(world.errors().size()) + " error(s) at the " + stage +
                      " stage of building the world)",
@@ -215,6 +224,17 @@ int cmd_check(const std::string& path) {
   }
   std::printf("%s: valid scene '%s' (hash %s): %zu bodies, %zu materials\n", path.c_str(), scene->name.c_str(),
               scene->hash.c_str(), scene->bodies.size(), scene->materials.size());
+  if (tiles) {
+    const TerrainManager* m = (*world)->manager();
+    if (!m) {
+      std::printf("%s: no granule tiles: the scene turns patches off\n", path.c_str());
+    } else {
+      const auto c = m->report()["tile"]["cache"];
+      std::printf("%s: granule tiles ready in %s (%d from disk, %d settled now)\n", path.c_str(),
+                  c["dir"].get<std::string>().empty() ? "memory only (no tile cache)" : c["dir"].get<std::string>().c_str(),
+                  c["from_disk"].get<int>(), c["settled"].get<int>());
+    }
+  }
   return code(ExitCode::Ok);
 }
 
@@ -362,11 +382,12 @@ int main(int argc, char** argv) {
   RunCli run;
   RenderCli render;
   std::string check_path;
+  bool check_tiles = false;
   BenchCli bench;
   StressCli stress;
   add_run(app, run);
   add_render(app, render);
-  add_check(app, check_path);
+  add_check(app, check_path, check_tiles);
   bool info_knobs = false;
   app.add_subcommand("info", "Print versions, thread count and the OpenGL renderer EGL finds")
       ->add_flag("--knobs", info_knobs, "Print the table of settings (scene field, library field, default, range) as markdown");
@@ -385,7 +406,7 @@ int main(int argc, char** argv) {
     std::fputs(knobs::knob_table_markdown().c_str(), stdout);  // docs/scene-format.md, docs/api.md
     return code(ExitCode::Ok);
   }
-  if (app.got_subcommand("check")) return cmd_check(check_path);
+  if (app.got_subcommand("check")) return cmd_check(check_path, check_tiles);
   if (app.got_subcommand("stress")) return cmd_stress(stress);
   if (app.got_subcommand("bench")) return cmd_bench(bench);
   if (app.got_subcommand("render")) return cmd_render(render, argc, argv);

@@ -66,6 +66,19 @@ TEST(Cli, CheckAcceptsGoodAndRefusesBrokenScenes) {
   EXPECT_NE(o.output.find("did you mean"), std::string::npos) << o.output;
 }
 
+// check --tiles makes the patch pool as run does: the default scene's tiles (settled by the
+// build into the tests' cache, so read from it here) are ready, and a broken scene is still
+// refused before anything is settled.
+TEST(Cli, CheckTilesReadiesTheScenesTiles) {
+  Outcome o = sandpatch("check --tiles " + scene("default.json"));
+  ASSERT_EQ(o.code, 0) << o.output;
+  EXPECT_NE(o.output.find("granule tiles ready in"), std::string::npos) << o.output;
+  EXPECT_NE(o.output.find("1 from disk, 0 settled now"), std::string::npos) << "the build settled them: " << o.output;
+  Outcome bad = sandpatch("check --tiles " + scene("broken/unknown_key.json"));
+  EXPECT_EQ(bad.code, 2) << bad.output;
+  EXPECT_EQ(bad.output.find("granule tiles ready"), std::string::npos) << bad.output;
+}
+
 TEST(Cli, EveryBrokenSceneExitsWithTwo) {
   int n = 0;
   for (const auto& e : fs::directory_iterator(scene("broken"))) {

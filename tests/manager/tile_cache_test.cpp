@@ -176,3 +176,27 @@ TEST(TileCache, DirectoryFromTheEnvironment) {
   EXPECT_EQ(tile_cache_dir(), "/tmp/xdg/sandpatch/tiles");
   if (saved) ::setenv("SANDPATCH_TILE_CACHE", keep.c_str(), 1);
 }
+
+// A tile the cache directory lacks is read from the read-only fallback (the build's settled
+// tiles) rather than settled, bit for bit, and copied into the cache; the fallback is never
+// written.
+TEST(TileCache, FallbackDirectoryIsReadAndCopiedNeverWritten) {
+  TempDir built("fallback_built"), user("fallback_user"), other("fallback_other");
+  const GranuleTileDef d = small_def();
+  auto settled = cached_granule_tile(d, built.path);  // what a build would have left there
+  ASSERT_TRUE(settled.ok()) << settled.message();
+  TileCacheOutcome o;
+  auto got = cached_granule_tile(d, user.path, &o, built.path);
+  ASSERT_TRUE(got.ok()) << got.message();
+  EXPECT_EQ(o.source, TileCacheOutcome::Source::Disk) << "read from the fallback, not settled";
+  EXPECT_TRUE(same_bits(*settled, *got));
+  EXPECT_TRUE(fs::exists(tile_cache_path(user.path, tile_cache_key(d)))) << "copied into the cache";
+  // A tile neither has is settled into the cache, not into the fallback.
+  GranuleTileDef d2 = d;
+  d2.seed += 1;
+  auto fresh = cached_granule_tile(d2, other.path, &o, built.path);
+  ASSERT_TRUE(fresh.ok()) << fresh.message();
+  EXPECT_NE(o.source, TileCacheOutcome::Source::Disk);
+  EXPECT_TRUE(fs::exists(tile_cache_path(other.path, tile_cache_key(d2))));
+  EXPECT_FALSE(fs::exists(tile_cache_path(built.path, tile_cache_key(d2))));
+}
