@@ -16,6 +16,7 @@
 #include <fcl/config.h>
 #include <omp.h>
 #include <png.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
@@ -58,6 +59,10 @@ void print_errors(const std::string& what, const std::string& text) {
 int cmd_info() {
   std::printf("sandpatch %s\n", SANDPATCH_VERSION);
   std::printf("threads: %d (OpenMP max), %d hardware\n", omp_get_max_threads(), omp_get_num_procs());
+  const char* policy = std::getenv("OMP_WAIT_POLICY");
+  const char* spins = std::getenv("GOMP_SPINCOUNT");
+  std::printf("OpenMP wait policy: %s%s%s\n", policy ? policy : "(libgomp's default)", spins ? ", GOMP_SPINCOUNT " : "",
+              spins ? spins : "");
   std::printf("libraries: Eigen %d.%d.%d, Bullet %d.%02d, FCL %s, libpng %s, nlohmann_json %d.%d.%d, CLI11 %s\n",
               EIGEN_WORLD_VERSION, EIGEN_MAJOR_VERSION, EIGEN_MINOR_VERSION, btGetVersion() / 100,
               btGetVersion() % 100, FCL_VERSION, PNG_LIBPNG_VER_STRING, NLOHMANN_JSON_VERSION_MAJOR,
@@ -373,7 +378,20 @@ int cmd_stress(StressCli& a) {
 
 }  // namespace
 
+// OpenMP's threads wait at the end of a parallel region. GCC's libgomp spins first (300,000
+// iterations) and sleeps after; on a machine whose cores other programs also use, a thread
+// spinning at one of a DEM substep's barriers holds the core its partner needs, and the step
+// runs several times slower than on one thread (docs/BENCHMARKS.md "OpenMP's wait policy").
+// libgomp reads its policy once, when it is loaded, so the program starts itself again with
+// OMP_WAIT_POLICY=passive unless the user chose a policy (OMP_WAIT_POLICY or GOMP_SPINCOUNT).
+void sleep_at_barriers(char** argv) {
+  if (std::getenv("OMP_WAIT_POLICY") || std::getenv("GOMP_SPINCOUNT")) return;
+  if (::setenv("OMP_WAIT_POLICY", "passive", 1) != 0) return;
+  ::execv("/proc/self/exe", argv);  // returns only if it failed: go on as we are
+}
+
 int main(int argc, char** argv) {
+  sleep_at_barriers(argv);
   CLI::App app{"Sandpatch: real-time granular terrain (hybrid heightfield / DEM level of detail)", "sandpatch"};
   app.require_subcommand(1);
   app.set_version_flag("--version", std::string("sandpatch ") + SANDPATCH_VERSION);
