@@ -171,22 +171,6 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
     return Ok{};
   };
 
-  // A body that crosses a patch's apron (simulation.lod.apron) in one frame outruns the patch
-  // machinery: its patch cannot be ready where it lands, and the heightfield takes the contact.
-  // Not refused (the speed is inside the scene's limit), reported once per body.
-  const double follow_speed = sim.lod.apron / dt;  // m/s
-  std::map<std::string, double> too_fast;            // body name → fastest speed seen (m/s)
-  auto note_fast_bodies = [&] {
-    if (!manager) return;
-    for (RigidBodyId id : world.bodies()) {
-      const double v = double(world.bullet().state(id).linear_velocity.norm());
-      if (v > follow_speed) {
-        double& m = too_fast[world.bullet().definition(id).name];
-        m = std::max(m, v);
-      }
-    }
-  };
-
   const auto t_start = Clock::now();
   if (Status s = write_outputs(0, 0.0); !s) return fail(ExitCode::RuntimeFailure, "outputs", s.message());
   for (long long frame = 0; frame < frames; ++frame) {
@@ -196,7 +180,6 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
     const double dem_ms_before = world.profile().timer(Stage::Dem).total_ms;
     if (Status st = world.step(dt, sim.substeps); !st)
       return fail(ExitCode::RuntimeFailure, world.failed_stage(), st.message());
-    note_fast_bodies();
     if (Status s = write_outputs(frame + 1, world.time()); !s) return fail(ExitCode::RuntimeFailure, "outputs", s.message());
     if (opt.on_frame) {
       FrameSample fs;
@@ -253,10 +236,6 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
     if (Status s = video.close(); !s) return fail(ExitCode::RuntimeFailure, "outputs", s.message());
     written.push_back(opt.video);
   }
-  for (const auto& [name, v] : too_fast)
-    warnings.push_back("bodies." + name + ": reached " + format_number(v) + " m/s, faster than the patches can follow (" +
-                       "simulation.lod.apron / dt = " + format_number(follow_speed) +
-                       " m/s): where it met the ground the heightfield, not granules, took the contact");
   if (images_skipped > 0)
     warnings.push_back("outputs.frames: " + std::to_string(images_skipped) +
                        " image(s) not written: no OpenGL context: " + images.why());
@@ -277,7 +256,10 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
   for (const auto& [key, value] : w.items()) r[key] = value;
   r["counts"]["patches_live_at_end"] = live_patches;
   r["outputs"] = written;
-  r["warnings"] = warnings;
+  // World's (bodies that outran the patches; the same for API users), then the run's own
+  std::vector<std::string> all = w["warnings"].get<std::vector<std::string>>();
+  all.insert(all.end(), warnings.begin(), warnings.end());
+  r["warnings"] = all;
   r.erase("final_state_hash");
   r["final_state_hash"] = w["final_state_hash"];  // last, where readers look for it
 

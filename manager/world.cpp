@@ -42,6 +42,7 @@ Status World::enable_patches(const TerrainManagerDef& def) {
   auto m = TerrainManager::create(def, *hf_, *bullet_);
   if (!m) return m.errors();
   manager_ = std::move(*m);
+  follow_apron_ = def.lod.apron;
   return Ok{};
 }
 
@@ -305,6 +306,17 @@ Status World::step(double dt, int substeps) {
     if (Status s = manager_->after_bodies(t, dt, profile_); !s) return fail("demotion", s);
     if (Status s = check_bodies("demotion"); !s) return s;
     for (const GridRegion& r : manager_->take_dirty_regions()) dirty_.push_back(r);
+    // A body that crosses more than a patch's apron in one frame outruns the patch machinery:
+    // no patch can be ready where it lands, and the heightfield takes the contact. Not an
+    // error (its speed is allowed); reported once per body with its fastest speed.
+    const double follow = follow_apron_ / dt;  // m/s
+    for (RigidBodyId id : bullet_->bodies()) {
+      const double v = double(bullet_->state(id).linear_velocity.norm());
+      if (!(v > follow)) continue;
+      const std::string& n = bullet_->definition(id).name;
+      double& m = too_fast_[n.empty() ? "body " + std::to_string(id.index) : n];
+      m = std::max(m, v);
+    }
     peak_granules_ = std::max(peak_granules_, manager_->granules());
     const auto& ev = manager_->events();
     for (std::size_t k = events_before; k < ev.size(); ++k) {
@@ -450,6 +462,14 @@ nlohmann::ordered_json World::report() const {
                   {"max_height_m", hf.origin_y() + hf.max_height()},
                   {"hash", Hasher::to_hex(hf.hash())}};
   r["bodies"] = bodies;
+  {
+    std::vector<std::string> w;
+    for (const auto& [name, v] : too_fast_)
+      w.push_back("bodies." + name + ": reached " + format_number(v) + " m/s, faster than the patches can follow (" +
+                  "simulation.lod.apron / dt = " + format_number(follow_apron_ / (dt_ > 0 ? dt_ : 1.0)) +
+                  " m/s): where it met the ground the heightfield, not granules, took the contact");
+    r["warnings"] = w;
+  }
   r["final_state_hash"] = Hasher::to_hex(state_hash());
   return r;
 }

@@ -30,6 +30,7 @@
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <string>
+#include <map>
 #include <vector>
 
 #include "common/error.hpp"
@@ -214,6 +215,10 @@ class World {
   double time_base_ = 0, dt_ = 0;      // s
   long long steps_at_dt_ = 0, steps_ = 0;
   const char* failed_stage_ = "";
+  // Bodies that outran the patch machinery (a frame's travel over the LOD apron): name (or
+  // "body N") → the fastest speed seen, m/s; the report's warnings.
+  double follow_apron_ = 0;            // m, the manager's lod.apron
+  std::map<std::string, double> too_fast_;
 };
 
 }  // namespace sandpatch

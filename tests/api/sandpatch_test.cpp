@@ -781,3 +781,27 @@ TEST(Api, FrameBudgetMustBePositive) {
   ASSERT_NE(at, std::string::npos) << "half of each step's dt";
   EXPECT_NE(rep.substr(at, 40).find("0.5"), std::string::npos) << rep.substr(at, 40);
 }
+
+// A body that crosses more than the LOD apron in one frame is reported in the report's warnings
+// to API users as to scene runs (World keeps them), naming it; a slow one is not.
+TEST(ApiReliability, BodiesFasterThanThePatchesCanFollowAreWarnedOf) {
+  auto t = sp::Terrain::create(sand_def());
+  ASSERT_TRUE(t.ok()) << t.message();
+  sp::BodyDef fast;
+  fast.name = "bullet";
+  fast.position = {0.5, 1.4, 2.0};  // 0.4 m over the sand (surface at y = 1 m)
+  fast.linear_velocity = {400, 0, 0};  // 400 m/s: 1.7 m a frame at 1/240 s, over the 1 m apron
+  auto f = t->add_body(fast);
+  ASSERT_TRUE(f.ok()) << f.message();
+  sp::BodyDef slow = fast;
+  slow.name = "pebble";
+  slow.position = {2.0, 1.4, 1.0};
+  slow.linear_velocity = {0, 0, 0};
+  ASSERT_TRUE(t->add_body(slow).ok());
+  auto st = t->step(1.0 / 240.0);
+  ASSERT_TRUE(st.ok()) << st.message();
+  const std::string r = t->report_json();
+  EXPECT_NE(r.find("bodies.bullet: reached"), std::string::npos) << r.substr(r.find("\"warnings\""), 400);
+  EXPECT_NE(r.find("faster than the patches can follow"), std::string::npos);
+  EXPECT_EQ(r.find("bodies.pebble"), std::string::npos);
+}
