@@ -390,7 +390,7 @@ int run_view(const ViewArgs& a) {
     FrameStats st;
     std::deque<std::pair<double, double>> recent;  // (wall s, simulated s) of the last second of frames
     long long shown = 0;
-    double sum_step = 0, sum_render = 0, sum_present = 0;
+    double sum_step = 0, sum_render = 0, sum_overlay = 0, sum_present = 0;
     const auto t0 = Clock::now();
     double next_due = 0;  // wall s (since t0) at which the next step is due
     std::fprintf(stderr, "view: start-up %.2f s; window %dx%d on DISPLAY=%s\n", seconds_since(t_setup), width, height, display);
@@ -443,7 +443,9 @@ int run_view(const ViewArgs& a) {
           break;
         }
         st.render_ms = seconds_since(t_r) * 1e3;
+        const auto t_o = Clock::now();
         const std::array<int, 4> panel = draw_overlay(*img, images.renderer(), view, world, scene, ctl, st);
+        const double overlay_ms = seconds_since(t_o) * 1e3;
 
         const auto t_p = Clock::now();
         release_egl();
@@ -465,6 +467,7 @@ int run_view(const ViewArgs& a) {
         ++shown;
         sum_step += stepping ? st.step_ms : 0;
         sum_render += st.render_ms;
+        sum_overlay += overlay_ms;
         sum_present += st.present_ms;
       }
       glfwPollEvents();
@@ -494,9 +497,9 @@ int run_view(const ViewArgs& a) {
     glfwMakeContextCurrent(nullptr);
     if (shown > 0)
       std::printf("view: %lld frames shown in %.2f s: average %.2f fps; %lld steps to t = %.3f s; per frame (mean): "
-                  "step %.1f ms, render %.1f ms, present %.1f ms\n",
+                  "step %.1f ms, render %.1f ms, overlay %.2f ms, present %.1f ms\n",
                   shown, wall, double(shown) / wall, world.steps(), world.time(), sum_step / double(shown),
-                  sum_render / double(shown), sum_present / double(shown));
+                  sum_render / double(shown), sum_overlay / double(shown), sum_present / double(shown));
   }
   glfwDestroyWindow(win);
   return code;
