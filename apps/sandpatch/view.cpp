@@ -342,12 +342,12 @@ int run_view(const ViewArgs& a) {
   omp_set_num_threads(threads_req > 0 ? threads_req : omp_get_num_procs());
   std::string stage;
   const auto t_setup = Clock::now();
+  int last_pct = -1;  // start-up progress: a line every 10 %
   auto made = make_world(scene, omp_get_max_threads(), backend, &stage, true,
                          [&](const std::string& what, double done, double max, double) {
-                           static int last = -1;
                            const int pct = max > 0 ? int(100 * done / max) / 10 * 10 : 0;
-                           if (pct != last) std::fprintf(stderr, "start-up: %s: %d%%\n", what.c_str(), pct);
-                           last = pct;
+                           if (pct != last_pct) std::fprintf(stderr, "start-up: %s: %d%%\n", what.c_str(), pct);
+                           last_pct = pct;
                          });
   if (!made) {
     std::fprintf(stderr, "sandpatch view: invalid scene (stage %s)\n%s\n", stage.c_str(), made.message().c_str());
@@ -390,6 +390,7 @@ int run_view(const ViewArgs& a) {
     FrameStats st;
     std::deque<std::pair<double, double>> recent;  // (wall s, simulated s) of the last second of frames
     long long shown = 0;
+    bool shot_saved = false;
     double sum_step = 0, sum_render = 0, sum_overlay = 0, sum_present = 0;
     const auto t0 = Clock::now();
     double next_due = 0;  // wall s (since t0) at which the next step is due
@@ -461,6 +462,7 @@ int run_view(const ViewArgs& a) {
             code = failed(s.message());
             break;
           }
+          shot_saved = true;
           std::printf("screenshot: %s (%dx%d), overlay panel at x %d y %d, %d x %d px\n", a.screenshot.c_str(), shot.width,
                       shot.height, panel[0], panel[1], panel[2], panel[3]);
         }
@@ -492,6 +494,9 @@ int run_view(const ViewArgs& a) {
     }
 
     const double wall = seconds_since(t0);
+    if (code == 0 && !a.screenshot.empty() && !shot_saved)
+      code = failed("--screenshot " + a.screenshot + ": not written: the window was closed, or had no pixels (minimised), "
+                    "before frame " + std::to_string(a.frames));
     glfwMakeContextCurrent(win);
     presenter.release();
     glfwMakeContextCurrent(nullptr);
