@@ -25,6 +25,7 @@ int run_view(const ViewArgs&) {
 
 #include <algorithm>
 #include <chrono>
+#include <cstdarg>
 #include <cmath>
 #include <cstdlib>
 #include <deque>
@@ -223,6 +224,21 @@ void outline_patch(render::Image& img, render::SceneRenderer& r, const render::C
   }
 }
 
+struct Line {
+  std::string text;
+  render::Rgb color = kText;
+};
+
+// printf into a string (one overlay line; longer lines are cut at 255 characters).
+__attribute__((format(printf, 1, 2))) std::string format(const char* fmt, ...) {
+  char b[256];
+  va_list args;
+  va_start(args, fmt);
+  std::vsnprintf(b, sizeof b, fmt, args);
+  va_end(args);
+  return b;
+}
+
 struct FrameStats {
   double step_ms = 0, render_ms = 0, present_ms = 0, frame_ms = 0;
   double budget_ms = 0;
@@ -240,35 +256,30 @@ std::array<int, 4> draw_overlay(render::Image& img, render::SceneRenderer* r, co
   if (r)
     for (const auto& p : patches) outline_patch(img, *r, view, world.heightfield(), p.region, state_color(p), scale + 1);
 
-  struct Line {
-    std::string text;
-    render::Rgb color = kText;
-  };
   std::vector<Line> lines;
-  char b[256];
-  auto add = [&](render::Rgb c, const char* fmt, auto... v) {
-    std::snprintf(b, sizeof b, fmt, v...);
-    lines.push_back({b, c});
-  };
-  add(kText, "sandpatch view: %s", scene.name.c_str());
-  add(kText, "t %.3f s  frame %lld  speed x%g%s", world.time(), world.steps(), ctl.speed, ctl.paused ? "  paused" : "");
-  if (std::isfinite(st.budget_ms)) add(kText, "step %.1f ms  budget %.1f ms", st.step_ms, st.budget_ms);
-  else add(kText, "step %.1f ms  budget off", st.step_ms);
-  add(kText, "frame %.1f ms (render %.1f)  %.1f fps", st.frame_ms, st.render_ms, st.fps);
-  add(kText, "real-time factor %.2fx", st.rtf);
+  lines.push_back({format("sandpatch view: %s", scene.name.c_str()), kText});
+  lines.push_back(
+      {format("t %.3f s  frame %lld  speed x%g%s", world.time(), world.steps(), ctl.speed, ctl.paused ? "  paused" : ""),
+       kText});
+  if (std::isfinite(st.budget_ms)) lines.push_back({format("step %.1f ms  budget %.1f ms", st.step_ms, st.budget_ms), kText});
+  else lines.push_back({format("step %.1f ms  budget off", st.step_ms), kText});
+  lines.push_back({format("frame %.1f ms (render %.1f)  %.1f fps", st.frame_ms, st.render_ms, st.fps), kText});
+  lines.push_back({format("real-time factor %.2fx", st.rtf), kText});
   if (m) {
-    add(kText, "patches %zu  queued %d  granules %d", patches.size(), m->queued_requests(), m->granules());
+    lines.push_back(
+        {format("patches %zu  queued %d  granules %d", patches.size(), m->queued_requests(), m->granules()), kText});
     const std::size_t shown = std::min<std::size_t>(patches.size(), 8);
     for (std::size_t k = 0; k < shown; ++k) {
       const auto& p = patches[k];
-      add(state_color(p), " #%d %s %d granules", p.patch, !p.ready ? "filling" : p.asleep ? "asleep" : "active", p.granules);
+      const char* state = !p.ready ? "filling" : p.asleep ? "asleep" : "active";
+      lines.push_back({format(" #%d %s %d granules", p.patch, state, p.granules), state_color(p)});
     }
-    if (patches.size() > shown) add(kText, " +%zu more", patches.size() - shown);
+    if (patches.size() > shown) lines.push_back({format(" +%zu more", patches.size() - shown), kText});
   } else {
-    add(kText, "patches off");
+    lines.push_back({format("patches off"), kText});
   }
-  add(kText, "drag turn  right-drag pan  wheel zoom");
-  add(kText, "space pause  n step  +/- speed  r reset  q quit");
+  lines.push_back({format("drag turn  right-drag pan  wheel zoom"), kText});
+  lines.push_back({format("space pause  n step  +/- speed  r reset  q quit"), kText});
 
   const int pad = 4 * scale, lh = render::line_height(scale);
   int w = 0;
