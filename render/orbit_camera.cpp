@@ -4,6 +4,7 @@
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
+#include <numbers>
 
 namespace sandpatch::render {
 
@@ -25,7 +26,7 @@ Eigen::Vector3d OrbitCamera::eye() const {
 
 void OrbitCamera::rotate(double dx_px, double dy_px) {
   if (!std::isfinite(dx_px) || !std::isfinite(dy_px)) return;
-  yaw = std::remainder(yaw - dx_px * kRadiansPerPixel, 2 * M_PI);
+  yaw = std::remainder(yaw - dx_px * kRadiansPerPixel, 2 * std::numbers::pi);
   pitch = std::clamp(pitch + dy_px * kRadiansPerPixel, -kMaxPitch, kMaxPitch);
 }
 
@@ -37,7 +38,7 @@ void OrbitCamera::zoom(double notches) {
 void OrbitCamera::pan(double dx_px, double dy_px, double fov_deg, int height_px) {
   if (!std::isfinite(dx_px) || !std::isfinite(dy_px) || height_px < 1 || !(fov_deg > 0 && fov_deg < 180)) return;
   // Metres per pixel at the target's depth: the view's height there is 2 d tan(fov / 2).
-  const double m_per_px = 2 * distance * std::tan(fov_deg * M_PI / 360) / height_px;
+  const double m_per_px = 2 * distance * std::tan(fov_deg * std::numbers::pi / 360) / height_px;
   const Eigen::Vector3d forward = (target - eye()).normalized();
   Eigen::Vector3d right = forward.cross(Eigen::Vector3d::UnitY());
   if (right.norm() < 1e-9) right = Eigen::Vector3d::UnitX();
