@@ -386,14 +386,14 @@ int main(int argc, char** argv) {
   StressCli stress;
   add_run(app, run);
   add_render(app, render);
-  ViewArgs view;
-  add_view(app, view);
   add_check(app, check_path);
   bool info_knobs = false;
   app.add_subcommand("info", "Print versions, thread count and the OpenGL renderer EGL finds")
       ->add_flag("--knobs", info_knobs, "Print the table of settings (scene field, library field, default, range) as markdown");
   add_bench(app, bench);
   add_stress(app, stress);
+  ViewArgs view;
+  add_view(app, view);
 
   try {
     app.parse(argc, argv);
