@@ -21,6 +21,8 @@ PACKAGES=(
   python3              # peer set-up scripts and plots
   python3-matplotlib   # frame-time plots of `sandpatch stress` (scripts/plot_frames.py)
   ffmpeg               # `sandpatch run --video`: frames piped to it and encoded
+  libglfw3-dev         # `sandpatch view`: its window, keys and mouse (built without a window if missing)
+  xvfb xauth           # xvfb-run: the viewer's test runs it on a virtual X display (CI has no screen)
   clang libclang-rt-14-dev  # the sanitizer and libFuzzer build of .ci/run (scripts/fuzz.sh)
 )
 # The peer DEM is only needed for `sandpatch bench` comparisons; pass --peers to install it.

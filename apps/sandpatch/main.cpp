@@ -1,7 +1,9 @@
 // sandpatch: the command-line program (docs/cli.md).
 //   sandpatch run [SCENE] [--out DIR] [--seconds S | --frames N] [--backend cpu|gl] [--threads T]
 //                 [--video FILE [--video-fps F]]
-//   sandpatch render [SCENE] --at T [--camera NAME] [--image FILE] [--out DIR]
+//   sandpatch render [SCENE] --at T [--camera NAME] [--image FILE] [--out DIR] [--frame-budget MS|off]
+//   sandpatch view [SCENE] [--frames N [--screenshot FILE]] [--size WxH] [--camera NAME] [--backend cpu|gl]
+//                  [--threads T] [--frame-budget MS|off]
 //   sandpatch check SCENE
 //   sandpatch info
 //   sandpatch bench dem [--granules N] [--steps S] [--repeat K] [--alternate-threads T2] [--backend cpu|gl] [--threads T] [--json]
@@ -29,6 +31,7 @@
 #include <string>
 #include <vector>
 
+#include "apps/sandpatch/view.hpp"
 #include "bench/bench.hpp"
 #include "bench/bench_tradeoff.hpp"
 #include "common/knobs.hpp"
@@ -110,7 +113,7 @@ void add_run(CLI::App& app, RunCli& a) {
 }
 
 struct RenderCli {
-  std::string scene, image, camera, out_dir;
+  std::string scene, image, camera, out_dir, frame_budget;
   double at = 0;
 };
 
@@ -121,6 +124,21 @@ void add_render(CLI::App& app, RenderCli& a) {
   rend->add_option("--camera", a.camera, "Camera of the scene (default: its first, or a view of the whole terrain)");
   rend->add_option("--image", a.image, "PNG to write (default: DIR/render_<ms>.png)");
   rend->add_option("--out", a.out_dir, "Output directory for the report (default: out/<scene name>)");
+  rend->add_option("--frame-budget", a.frame_budget,
+                   "Wall-clock ms a frame's patches may take, or off (overrides simulation.frame_budget_ms)");
+}
+
+void add_view(CLI::App& app, ViewArgs& a) {
+  auto* view = app.add_subcommand("view", "Run a scene live in a window: orbit camera, pause / step / speed, patch overlay");
+  view->add_option("scene", a.scene, "Scene file; omitted = the embedded default");
+  view->add_option("--frames", a.frames, "Advance this many frames, then exit")->check(CLI::PositiveNumber);
+  view->add_option("--screenshot", a.screenshot, "With --frames: save the window's contents after the last frame (PNG)");
+  view->add_option("--size", a.size, "Window size WxH in pixels (default 1280x720)");
+  view->add_option("--camera", a.camera, "Scene camera to start at (default: its first)");
+  view->add_option("--backend", a.backend, "DEM backend")->check(CLI::IsMember({"cpu", "gl"}));
+  view->add_option("--threads", a.threads, "Worker threads (0 = all)")->check(CLI::NonNegativeNumber);
+  view->add_option("--frame-budget", a.frame_budget,
+                   "Wall-clock ms a frame's patches may take, or off (overrides simulation.frame_budget_ms)");
 }
 
 // Loads the scene (the embedded default when scene_path is empty), runs it with the options
@@ -188,6 +206,8 @@ int cmd_render(const RenderCli& a, int argc, char** argv) {
     opt.seconds = a.at;
     opt.frames = a.at > 0 ? -1 : 1;
     opt.final_camera = a.camera;
+    if (a.frame_budget == "off") opt.frame_budget_ms = std::numeric_limits<double>::infinity();
+    else if (!a.frame_budget.empty()) opt.frame_budget_ms = parse_budget(a.frame_budget);
     char ms[32];
     std::snprintf(ms, sizeof ms, "%08lld", static_cast<long long>(std::llround(a.at * 1000)));
     opt.final_image = !a.image.empty() ? a.image
@@ -411,6 +431,8 @@ int main(int argc, char** argv) {
       ->add_flag("--knobs", info_knobs, "Print the table of settings (scene field, library field, default, range) as markdown");
   add_bench(app, bench);
   add_stress(app, stress);
+  ViewArgs view;
+  add_view(app, view);
 
   try {
     app.parse(argc, argv);
@@ -429,5 +451,6 @@ int main(int argc, char** argv) {
   if (app.got_subcommand("bench")) return cmd_bench(bench);
   if (app.got_subcommand("render")) return cmd_render(render, argc, argv);
   if (app.got_subcommand("run")) return cmd_run(run, argc, argv);
+  if (app.got_subcommand("view")) return run_view(view);
   return code(ExitCode::BadInput);
 }
