@@ -33,6 +33,7 @@ Status TerrainManager::Impl::step_patches(double time, double dt) {
     if (s.state == SlotState::Asleep) {
       s.state = SlotState::Active;
       s.asleep_for = 0;
+      s.demotion = {};  // a demotion begun while it slept starts again
       events.push_back({PatchEventKind::Woke, s.patch, time, 0, record(s).granules});
     }
     const auto t_step = manager_detail::Clock::now();

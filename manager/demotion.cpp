@@ -13,10 +13,16 @@ using manager_detail::body_key;
 using manager_detail::Clock;
 using manager_detail::ms_since;
 
+// One part a frame, of one patch: a demotion is three renders' and writes' worth of work (the
+// fill's surface, the surface now, the heights written), and doing it all in one frame was
+// the longest frame of a run. A patch asleep does not move, so its parts may come in any
+// frames; one that wakes before the last part starts again (couple: step_patches).
 Status TerrainManager::Impl::demote_idle(double time) {
+  Slot* next = nullptr;
   for (auto& s : slots)
-    if (s.state == SlotState::Asleep && s.asleep_for >= def.idle_timeout)
-      if (Status st = demote(s, time); !st) return st;
+    if (s.state == SlotState::Asleep && s.asleep_for >= def.idle_timeout && (!next || s.demotion.stage > next->demotion.stage))
+      next = &s;
+  if (next) return demote(*next, time, true, /*staged=*/true);
   return Ok{};
 }
 
@@ -47,9 +53,10 @@ void TerrainManager::Impl::granule_spheres(const Slot& slot, std::vector<float>&
 // patch grown mid-frame (extend) is demoted on the CPU: demoting on GL there left the
 // manager's context in a state where the next GL depth render failed with
 // GL_INVALID_OPERATION (measured on llvmpipe; cause not found yet).
-Status TerrainManager::Impl::demote(Slot& slot, double time, bool gl_ok) {
+Status TerrainManager::Impl::demote(Slot& slot, double time, bool gl_ok, bool staged) {
   const auto t0 = Clock::now();
   PatchRecord& rec = record(slot);
+  Slot::Demotion& w = slot.demotion;
   const double sp = hf->spacing();
   // Granule spheres in heightfield-local coordinates (m), now and as filled.
   std::vector<float> xyzr;
@@ -70,16 +77,33 @@ Status TerrainManager::Impl::demote(Slot& slot, double time, bool gl_ok) {
   box.floor = float(slot.floor_local);
   box.top = top;
   box.probe = probe;
-  bool on_gl = false;
-  auto img = render_surface(slot, box, xyzr, gl_ok, &on_gl);
-  if (!img) return img.errors();
-  auto was = rec.fill_spheres.empty() ? Result<HeightImage>(HeightImage{}) : render_surface(slot, box, filled, gl_ok, &on_gl);
-  if (!was) return was.errors();
-  // Where the surface did not move, the heights of before the promotion come back exactly
-  // (write_to_heightfield's RenderBaseline; docs/manager.md "Round trip").
-  const RenderBaseline base{&*was, &rec.before_heights, rw, rec.fill_rise};
+  // Part 1: the surface of the fill (the baseline below), 2: the surface now.
+  if (w.stage == 0) {
+    if (!rec.fill_spheres.empty()) {
+      auto was = render_surface(slot, box, filled, gl_ok, &w.on_gl);
+      if (!was) return was.errors();
+      w.was = std::move(*was);
+    }
+    w.stage = 1;
+    w.ms += ms_since(t0);
+    if (staged) return Ok{};
+  }
+  if (w.stage == 1) {
+    const auto t1 = Clock::now();
+    auto img = render_surface(slot, box, xyzr, gl_ok, &w.on_gl);
+    if (!img) return img.errors();
+    w.now = std::move(*img);
+    w.stage = 2;
+    w.ms += ms_since(t1);
+    if (staged) return Ok{};
+  }
+  // Part 3: the heights written. Where the surface did not move, the heights of before the
+  // promotion come back exactly (write_to_heightfield's RenderBaseline; docs/manager.md
+  // "Round trip").
+  const auto t2 = Clock::now();
+  const RenderBaseline base{&w.was, &rec.before_heights, rw, rec.fill_rise};
   const bool have_base = !rec.fill_spheres.empty() && rec.before_heights.size() == std::size_t(a.ni) * a.nj;
-  write_to_heightfield(*img, a, *hf, 1, have_base ? &base : nullptr);
+  write_to_heightfield(w.now, a, *hf, 1, have_base ? &base : nullptr);
   // The patch's own edge inside the apron: particles on one side, old terrain (or what
   // spilled onto it) on the other; the same Gaussian band stitches it.
   smooth_border_band(*hf, slot.region, 1);
@@ -89,14 +113,15 @@ Status TerrainManager::Impl::demote(Slot& slot, double time, bool gl_ok) {
   d.ni = std::min(hf->samples_x(), a.i0 + a.ni + 1) - d.i0;
   d.nj = std::min(hf->samples_z(), a.j0 + a.nj + 1) - d.j0;
   dirty.push_back(d);
-  close_ledger(slot, rec, on_gl);
+  close_ledger(slot, rec, w.on_gl);
   for (const Carried& c : slot.carried)
     if (c.enabled && world->alive(c.body)) world->set_terrain_collision(c.body, true);
-  events.push_back({PatchEventKind::Demoted, slot.patch, time, ms_since(t0), rec.granules});
+  events.push_back({PatchEventKind::Demoted, slot.patch, time, w.ms + ms_since(t2), rec.granules});
   slot.state = SlotState::Free;
   rec.granules = 0;
   slot.carried.clear();
   slot.patch = -1;
+  slot.demotion = {};
   return Ok{};
 }
 

@@ -338,6 +338,7 @@ Status TerrainManager::Impl::promote(Slot& slot, const PatchRequest& req, double
   slot.fade = 0;
   slot.asleep_for = 0;
   slot.held = 0;
+  slot.demotion = {};
   slot.carried.clear();
   slot.state = SlotState::Filling;
   // Ledger: volume between the floor and the surface over the region.

@@ -17,6 +17,7 @@
 
 #include "heightfield/heightfield.hpp"
 #include "manager/bullet_world.hpp"
+#include "manager/depth_conversion.hpp"
 #include "manager/granule_tile.hpp"
 #include "particles/backend.hpp"
 
@@ -55,6 +56,14 @@ struct Slot {
   int fade = 0;              // frames simulated, up to fade_frames
   double asleep_for = 0;     // s asleep and untouched
   int held = 0;              // frames in a row the budget held it (not stepped; budget.cpp)
+  // An idle demotion in progress, one part a frame (demotion.cpp): 0 nothing done yet, 1 the
+  // fill's surface rendered, 2 the surface now rendered too; the next part writes them.
+  struct Demotion {
+    int stage = 0;
+    HeightImage was, now;
+    bool on_gl = false;
+    double ms = 0;  // wall, the parts so far
+  } demotion;
   std::vector<Carried> carried;
   bool live() const { return state != SlotState::Free; }
   bool ready() const { return state == SlotState::Active || state == SlotState::Asleep; }

@@ -283,11 +283,13 @@ struct TerrainManager::Impl {
   Result<std::vector<Eigen::Vector3f>> shell_points(RigidBodyId b, double scale) const;
 
   // ---- demotion (demotion.cpp): Stage::Demotion ----
-  // Demotes every patch asleep for idle_timeout.
+  // Demotes the patches asleep for idle_timeout, one part of one patch a frame.
   Status demote_idle(double time);
   // Demotes every live patch (filling ones after uploading the rest).
   Status demote_every(double time);
-  Status demote(Slot& slot, double time, bool gl_ok = true);
+  // `staged`: one part (of three) this call, the slot's Slot::demotion keeping the rest;
+  // otherwise all that is left of it now.
+  Status demote(Slot& slot, double time, bool gl_ok = true, bool staged = false);
   void granule_spheres(const Slot& slot, std::vector<float>& xyzr) const;
   // The box a demotion renders: the slot's apron (m, heightfield-local), from the floor to
   // above the highest (grown) sphere.
