@@ -19,6 +19,9 @@
 #include <omp.h>
 #include <png.h>
 #include <unistd.h>
+#if __has_include(<valgrind/valgrind.h>)
+#include <valgrind/valgrind.h>
+#endif
 
 #include <algorithm>
 #include <cmath>
@@ -404,10 +407,19 @@ int cmd_stress(StressCli& a) {
 // runs several times slower than on one thread (docs/BENCHMARKS.md "OpenMP's wait policy").
 // libgomp reads its policy once, when it is loaded, so the program starts itself again with
 // OMP_WAIT_POLICY=passive unless the user chose a policy (OMP_WAIT_POLICY or GOMP_SPINCOUNT).
+// (Not under valgrind: its tools would lose the program at the exec.)
 void sleep_at_barriers(char** argv) {
   if (std::getenv("OMP_WAIT_POLICY") || std::getenv("GOMP_SPINCOUNT")) return;
+#if __has_include(<valgrind/valgrind.h>)
+  if (RUNNING_ON_VALGRIND) return;
+#endif
+  char self[4096];
+  const ssize_t n = ::readlink("/proc/self/exe", self, sizeof self - 1);
+  if (n <= 0 || n >= ssize_t(sizeof self - 1)) return;
+  self[n] = '\0';
   if (::setenv("OMP_WAIT_POLICY", "passive", 1) != 0) return;
-  ::execv("/proc/self/exe", argv);  // returns only if it failed: go on as we are
+  ::execv(self, argv);  // returns only if it failed: go on as we are
+  ::unsetenv("OMP_WAIT_POLICY");
 }
 
 int main(int argc, char** argv) {
