@@ -114,9 +114,9 @@ void TerrainManager::Impl::observe_cost(const Slot& s, double wall_ms, double dt
 }
 
 // a and b from the first tile of the finest scale stepped in slot 0 at two sizes (a quarter
-// and all of the tile's area), three frames of 1/60 s each after three untimed ones (they
-// build the grid and let the cut tile's first moves settle); the fastest frame of each counts (a frame slowed by something else running
-// is not the DEM's cost). The slot is reset: nothing of it stays.
+// and all of the tile's area), cut at a patch's depth as a fill is: five frames of 1/60 s each after four untimed ones (they build the grid and let the
+// cut tile's first moves settle); the fastest frame of each counts (a frame slowed by
+// something else running is not the DEM's cost). The slot is reset: nothing of it stays.
 Status TerrainManager::Impl::calibrate() {
   if (pinned()) {
     cost_a_ms = def.budget_substep_ms, cost_b_ms = def.budget_sphere_ns * 1e-6;
@@ -126,8 +126,9 @@ Status TerrainManager::Impl::calibrate() {
   TileSet& set = set_for(s);
   if (set.tiles.empty() || slots.empty()) return Ok{};
   const GranuleTile& tile = set.tiles.front();
-  const float side = set.def.box_side, top = tile.period_y + tile.surface_offset;
-  SimulationDef sd = sim_def(s);
+  const float side = set.def.box_side;
+  const float top = std::min(tile.period_y + tile.surface_offset, float(patch_depth_at(s) / s));
+  SimulationDef sd = sim_def(s);  // (a patch's: its skin too)
   Slot& slot = slots.front();
   // Frames of 1/60 s, or shorter where a stiff material would need more substeps than allowed.
   double dt = 1.0 / 60.0;
@@ -143,10 +144,10 @@ Status TerrainManager::Impl::calibrate() {
       if (auto id = slot.sim->add_granule(g.position, g.orientation); !id) return id.errors();
     auto n = slot.sim->substeps_for(dt);
     if (!n) return n.errors();
-    for (int f = 0; f < 3; ++f)
+    for (int f = 0; f < 4; ++f)
       if (Status st = slot.sim->step(dt); !st) return st;
     double best = 1e300;
-    for (int f = 0; f < 3; ++f) {
+    for (int f = 0; f < 5; ++f) {
       const auto t0 = Clock::now();
       if (Status st = slot.sim->step(dt); !st) return st;
       best = std::min(best, ms_since(t0));
