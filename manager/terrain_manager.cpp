@@ -291,6 +291,7 @@ std::vector<TerrainManager::PatchInfo> TerrainManager::patches() const {
     PatchInfo p;
     p.patch = s.patch;
     p.region = s.region;
+    p.apron = s.apron;
     p.origin = s.origin;
     p.particle_scale = s.scale;
     p.granule_radius_world = double(s.sim->def().particle_radius) * p.particle_scale;

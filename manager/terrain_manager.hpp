@@ -183,6 +183,7 @@ class TerrainManager {
   struct PatchInfo {
     int patch = -1;                            // id (PatchEvent::patch)
     GridRegion region;                         // heightfield samples it covers
+    GridRegion apron;                          // region + the band its demotion may write
     Eigen::Vector3d origin = Eigen::Vector3d::Zero();  // m, world: its simulation's (0, 0, 0)
     double particle_scale = 1;                 // world size / simulated size, fixed while it lives
     double granule_radius_world = 0;           // m, sphere radius of its granules as the world sees them

@@ -129,7 +129,7 @@ struct TerrainManager::Impl {
   const PatchRecord& record(const Slot& s) const { return records[std::size_t(&s - slots.data())]; }
   // Books one DEM step call of slot s that took wall_ms (DemCost): the granules' spheres and
   // the enabled shells'. A new patch in the slot starts its record's cost afresh.
-  void account_step(const Slot& s, double wall_ms) {
+  void account_step(const Slot& s, double wall_ms, const StepStats* stats = nullptr) {
     DemCost& c = record(s).cost;
     if (c.patch != s.patch) {
       if (c.patch >= 0) earlier_costs.push_back(c);
@@ -140,7 +140,7 @@ struct TerrainManager::Impl {
     int spheres = 4 * record(s).granules;
     for (const Carried& k : s.carried)
       if (k.enabled) spheres += s.sim->body_particle_count(k.shell);
-    c.add(wall_ms, s.sim->last_step(), spheres);
+    c.add(wall_ms, stats ? *stats : s.sim->last_step(), spheres);
   }
   float radius_world(double s) const { return float(def.material.radius * s); }
   float radius_world(const Slot& slot) const { return radius_world(slot.scale); }
