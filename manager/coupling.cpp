@@ -46,6 +46,7 @@ Status TerrainManager::Impl::step_patches(double time, double dt) {
       prescribed = prescribed || (c.enabled && c.prescribed);
     }
     StepStats frame_stats;
+    bool frame_stepped = true;
     if (!prescribed) {
       if (Status st = s.sim->step(dt); !st) return name_knobs(st);
     } else {
@@ -54,6 +55,7 @@ Status TerrainManager::Impl::step_patches(double time, double dt) {
       // substeps one DEM step each (the same substep dt, float(dt / n), the same state).
       auto n = s.sim->substeps_for(dt);
       if (!n) return name_knobs(n.errors());
+      int stepped = 0;
       for (int k = 0; k < *n; ++k) {
         if (Status st = s.sim->step(dt / *n); !st) return name_knobs(st);
         const StepStats& one = s.sim->last_step();
@@ -68,21 +70,25 @@ Status TerrainManager::Impl::step_patches(double time, double dt) {
         frame_stats.pair_seconds += one.pair_seconds;
         frame_stats.body_seconds += one.body_seconds;
         frame_stats.sort_seconds += one.sort_seconds;
+        stepped += one.substeps > 0;
         for (Carried& c : s.carried)
           if (c.enabled && c.prescribed && one.substeps > 0) {
             c.f_sum += eig(s.sim->body_force(c.shell)).cast<double>();
             c.t_sum += eig(s.sim->body_torque(c.shell)).cast<double>();
           }
       }
+      // The mean over the substeps that ran (the DEM may fall asleep within the frame; none
+      // ran: the force of before stands, couple_after keeps it).
       for (Carried& c : s.carried) {
-        c.f_sum /= double(*n);
-        c.t_sum /= double(*n);
+        c.f_sum /= double(std::max(stepped, 1));
+        c.t_sum /= double(std::max(stepped, 1));
       }
+      frame_stepped = stepped > 0;
     }
     const double step_ms = manager_detail::ms_since(t_step);
     account_step(s, step_ms, prescribed ? &frame_stats : nullptr);
     observe_cost(s, step_ms, dt);
-    couple_after(s, dt);
+    couple_after(s, dt, frame_stepped);
     s.fade = std::min(s.fade + 1, def.fade_frames);
   }
   return Ok{};
@@ -306,7 +312,7 @@ void TerrainManager::Impl::hold_resting_bodies(Slot& slot) {
     }
 }
 
-void TerrainManager::Impl::couple_after(Slot& slot, double dt) {
+void TerrainManager::Impl::couple_after(Slot& slot, double dt, bool stepped) {
   const double s = slot.scale;
   for (Carried& c : slot.carried) {
     if (!c.enabled || !world->alive(c.body)) continue;
@@ -314,8 +320,10 @@ void TerrainManager::Impl::couple_after(Slot& slot, double dt) {
       // Nothing moves a kinematic or static body: the mean contact force over the frame is
       // only read (particles/scale.hpp: F_w = s F_sim, T_w = s^2 T_sim, mass ratio 1).
       const ParticleScale& ps = slot.sim->def().scale;
-      c.force = eig(ps.force_to_world(v3(Eigen::Vector3f(c.f_sum.cast<float>()))));
-      c.torque = eig(ps.torque_to_world(v3(Eigen::Vector3f(c.t_sum.cast<float>()))));
+      if (stepped) {
+        c.force = eig(ps.force_to_world(v3(Eigen::Vector3f(c.f_sum.cast<float>()))));
+        c.torque = eig(ps.torque_to_world(v3(Eigen::Vector3f(c.t_sum.cast<float>()))));
+      }
       soil[body_key(c.body)] = {c.force, c.torque};
       continue;
     }

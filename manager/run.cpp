@@ -187,6 +187,11 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
     }
   };
 
+  RunCsv csv;  // the time series: kept as .part files until the run ends well
+  if (!opt.csv.empty() || !scene.outputs.csv.empty()) {
+    const fs::path p = !opt.csv.empty() ? fs::path(opt.csv) : out_dir / scene.outputs.csv;
+    if (Status s = csv.open(p); !s) return fail(ExitCode::BadInput, "outputs", s.message());
+  }
   const auto t_start = Clock::now();
   if (Status s = write_outputs(0, 0.0); !s) return fail(ExitCode::RuntimeFailure, "outputs", s.message());
   for (long long frame = 0; frame < frames; ++frame) {
@@ -198,6 +203,7 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
       return fail(ExitCode::RuntimeFailure, world.failed_stage(), st.message());
     note_fast_bodies();
     if (Status s = write_outputs(frame + 1, world.time()); !s) return fail(ExitCode::RuntimeFailure, "outputs", s.message());
+    if (Status s = csv.frame(world, world.time()); !s) return fail(ExitCode::RuntimeFailure, "outputs", s.message());
     if (opt.on_frame) {
       FrameSample fs;
       fs.frame = frame;
@@ -252,6 +258,11 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
   if (video.is_open()) {
     if (Status s = video.close(); !s) return fail(ExitCode::RuntimeFailure, "outputs", s.message());
     written.push_back(opt.video);
+  }
+  if (csv.is_open()) {
+    if (Status s = csv.close(); !s) return fail(ExitCode::RuntimeFailure, "outputs", s.message());
+    written.push_back(csv.bodies_file().string());
+    written.push_back(RunCsv::patches_path(csv.bodies_file()).string());
   }
   for (const auto& [name, v] : too_fast)
     warnings.push_back("bodies." + name + ": reached " + format_number(v) + " m/s, faster than the patches can follow (" +

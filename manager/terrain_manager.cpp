@@ -299,6 +299,11 @@ std::vector<TerrainManager::PatchInfo> TerrainManager::patches() const {
     p.granules = impl_->record(s).granules;
     p.ready = s.ready();
     p.asleep = s.state == SlotState::Asleep;
+    if (const DemCost& c = impl_->record(s).cost; c.patch == s.patch) {
+      p.last_substeps = c.last_substeps;
+      p.last_spheres = c.last_spheres;
+      p.last_step_ms = c.last_wall_ms;
+    }
     out.push_back(p);
   }
   return out;

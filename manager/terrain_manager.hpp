@@ -191,6 +191,10 @@ class TerrainManager {
     int granules = 0;                          // uploaded
     bool ready = false;                        // filled (simulating or asleep)
     bool asleep = false;
+    // Its DEM's last step call (0 when it has not stepped since its promotion): substeps,
+    // spheres (granules' and enabled shells') and wall ms.
+    int last_substeps = 0, last_spheres = 0;
+    double last_step_ms = 0;
   };
   std::vector<PatchInfo> patches() const;
   const std::vector<PatchEvent>& events() const;

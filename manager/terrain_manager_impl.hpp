@@ -271,7 +271,8 @@ struct TerrainManager::Impl {
   bool lying(RigidBodyId b, const Eigen::Vector3d& lo, const Eigen::Vector3d& hi) const;
   Status couple_before(Slot& slot, double dt);
   void hold_resting_bodies(Slot& slot);
-  void couple_after(Slot& slot, double dt);
+  // `stepped`: the DEM ran a substep this frame (else a kinematic shell's force stands).
+  void couple_after(Slot& slot, double dt, bool stepped = true);
   Result<std::vector<Eigen::Vector3f>> shell_points(RigidBodyId b, double scale) const;
 
   // ---- demotion (demotion.cpp): Stage::Demotion ----

@@ -49,8 +49,19 @@ Status World::enable_patches(const TerrainManagerDef& def) {
 
 Result<RigidBodyId> World::add_body(const RigidBodyDef& def) {
   auto id = bullet_->add_body(def);
-  if (id) entries_.push_back({def.name, time(), *id, false});
+  if (id) {
+    entries_.push_back({def.name, time(), *id, false});
+    enter_kinematic(entries_.size() - 1, def);
+  }
   return id;
+}
+
+// A kinematic body enters moving at its definition's velocities, held until changed.
+void World::enter_kinematic(std::size_t entry, const RigidBodyDef& def) {
+  if (def.motion != RigidMotion::Kinematic) return;
+  if (kinematic_.size() < entries_.size()) kinematic_.resize(entries_.size());
+  kinematic_[entry].v = def.linear_velocity;
+  kinematic_[entry].w = def.angular_velocity;
 }
 
 Result<RigidBodyId> World::adopt_body(btRigidBody* body, const std::string& name) {
@@ -519,6 +530,7 @@ Status World::step(double dt, int substeps) {
       auto id = bullet_->add_body(it->second);
       if (!id) return fail("spawn", id.errors());
       e.id = *id;
+      enter_kinematic(it->first, it->second);
       it = pending_.erase(it);
     }
   }

@@ -233,6 +233,7 @@ class World {
   Status check_dynamic(RigidBodyId id) const;
   Status check_kinematic(RigidBodyId id, const char* field) const;
   void drive_kinematic(double t, double dt);
+  void enter_kinematic(std::size_t entry, const RigidBodyDef& def);
   void keep_original_heights();
 
 
