@@ -6,6 +6,7 @@
 #include <cmath>
 
 #include "manager/shell.hpp"
+#include "particles/granule.hpp"
 #include "manager/terrain_manager_impl.hpp"
 
 namespace sandpatch {
@@ -275,6 +276,23 @@ Status TerrainManager::Impl::couple_before(Slot& slot, double dt) {
     const double reach = 0.5 * (bhi - blo).norm();
     const bool at_rest = st.linear_velocity.norm() <= def.sleep_speed && st.angular_velocity.norm() * reach <= def.sleep_speed;
     if (c.prescribed) {
+      // A prescribed shell is never slowed by the granules: faster than one can be stopped
+      // within 2 granule radii (speed sqrt(m_pt / k_n) > 2 r, the DEM's overlap guard for an
+      // immovable body, particles/dem.hpp, off in patches) it may push granules through its
+      // sphere surface. Not refused (the path is the caller's): reported (tools_too_fast).
+      {
+        const GranuleShape& g = slot.sim->granule_shape();
+        const double m_pt = point_effective_mass(g.mass, g.inertia, g.centre_distance);
+        const double kn = slot.sim->def().material.normal_stiffness, r = slot.sim->def().particle_radius;
+        const double limit = s * 2.0 * r * std::sqrt(kn / m_pt);  // m/s, world
+        const double speed = st.linear_velocity.norm() + st.angular_velocity.norm() * reach;
+        if (m_pt > 0 && speed > limit) {
+          FastTool& f = fast_tools[body_key(b)];
+          f.name = world->definition(b).name;
+          if (speed > f.speed) f.speed = speed, f.limit = limit;
+          ++f.frames;
+        }
+      }
       // The shell starts the frame at Bullet's pose with the prescribed velocities, and the
       // DEM moves it along them over the frame's substeps to where Bullet takes the body (a
       // straight line; the rotation at a constant rate): it follows the body through the

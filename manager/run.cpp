@@ -268,6 +268,14 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
     warnings.push_back("bodies." + name + ": reached " + format_number(v) + " m/s, faster than the patches can follow (" +
                        "simulation.lod.apron / dt = " + format_number(follow_speed) +
                        " m/s): where it met the ground the heightfield, not granules, took the contact");
+  if (manager)
+    if (const ojson mr = manager->report(); mr.contains("tools_too_fast"))
+      for (const auto& f : mr["tools_too_fast"])
+        warnings.push_back("bodies." + f["body"].get<std::string>() + ": moved into a patch at up to " +
+                           format_number(f["max_speed_m_s"].get<double>()) + " m/s in " +
+                           std::to_string(f["frames"].get<long long>()) + " frame(s), faster than its granules can be stopped (" +
+                           format_number(f["limit_m_s"].get<double>()) +
+                           " m/s: 2 granule radii of overlap at the material's stiffness): granules may have passed through it");
   if (images_skipped > 0)
     warnings.push_back("outputs.frames: " + std::to_string(images_skipped) +
                        " image(s) not written: no OpenGL context: " + images.why());

@@ -469,6 +469,14 @@ nlohmann::ordered_json TerrainManager::report() const {
     r["budget"] = b;
   }
   r["dem"] = I.dem_report();
+  // Kinematic and static bodies that moved faster into a patch than its granules can stop
+  // (coupling.cpp couple_before): their shells may have pushed granules through themselves.
+  if (!I.fast_tools.empty()) {
+    ojson ft = ojson::array();
+    for (const auto& [key, f] : I.fast_tools)
+      ft.push_back({{"body", f.name}, {"max_speed_m_s", f.speed}, {"limit_m_s", f.limit}, {"frames", f.frames}});
+    r["tools_too_fast"] = ft;
+  }
   return r;
 }
 

@@ -16,6 +16,7 @@
 #include <chrono>
 #include <cstdint>
 #include <deque>
+#include <map>
 #include <memory>
 #include <numbers>
 #include <string>
@@ -107,6 +108,14 @@ struct TerrainManager::Impl {
     Eigen::Vector3f force, torque;
   };
   std::unordered_map<std::int64_t, SoilForce> soil;
+  // Kinematic and static bodies whose shell moved into a patch faster than its granules can
+  // stop (body_key -> record): the report's tools_too_fast.
+  struct FastTool {
+    std::string name;
+    double speed = 0, limit = 0;  // m/s, world: the fastest seen, and the limit then
+    long long frames = 0;         // frames over the limit
+  };
+  std::map<std::int64_t, FastTool> fast_tools;
   std::unordered_set<std::int64_t> shells_sampled;  // bodies whose shell was sampled ahead (body_key)
 
   // m (world): a body's shell joins a patch when the body's lowest point is within half of
