@@ -260,7 +260,7 @@ TEST(WorldLoads, ApiForcesAndSceneLoadsGiveTheSameHash) {
     "bodies": [{"name": "ball", "shape": {"type": "sphere", "radius": 0.1}, "mass": 5.0,
                 "pose": {"position": [2.0, 1.3, 2.0]},
                 "loads": [{"force": [60.0, 0.0, 5.0], "torque": [0.0, 0.2, 0.0], "from": 0.1, "until": 0.4}]}],
-    "simulation": {"dt": 0.016666666666666666, "duration": 0.5, "threads": 1,
+    "simulation": {"dt": 0.016666666666666666, "duration": 0.5, "threads": 1, "frame_budget_ms": "off",
                    "pool": {"slots": 1, "granules_per_slot": 6000}, "lod": {"apron": 0.3}},
     "outputs": {"report": false}
   })";
@@ -288,6 +288,7 @@ TEST(WorldLoads, ApiForcesAndSceneLoadsGiveTheSameHash) {
   t.lod_apron = 0.3;
   t.threads = 1;
   t.gl_depth_render = true;
+  t.frame_budget_ms = std::numeric_limits<double>::infinity();
   auto terrain = api::Terrain::create(t);
   ASSERT_TRUE(terrain.ok()) << terrain.message();
   api::BodyDef b;
