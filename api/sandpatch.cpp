@@ -411,7 +411,9 @@ Result<BodyHandle> Terrain::add_body(const BodyDef& d) {
       break;
     }
   }
-  c.closed("mass", d.mass, core::limits::kMinBodyMass, core::limits::kMaxBodyMass, "kg");
+  if (d.motion != BodyMotion::Dynamic && d.motion != BodyMotion::Kinematic && d.motion != BodyMotion::Static)
+    c.add("motion", std::to_string(static_cast<int>(d.motion)), "must be a BodyMotion: Dynamic, Kinematic or Static");
+  if (d.motion == BodyMotion::Dynamic) c.closed("mass", d.mass, core::limits::kMinBodyMass, core::limits::kMaxBodyMass, "kg");
   c.finite("position", d.position, "m");
   c.finite("orientation", d.orientation, "");
   if (c.errs.empty() && !(eq_norm_positive(d.orientation)))
@@ -428,7 +430,10 @@ Result<BodyHandle> Terrain::add_body(const BodyDef& d) {
   r.shape.radius = float(s.radius);
   r.shape.height = float(s.height);
   r.shape.half_extents = {float(s.half_extents[0]), float(s.half_extents[1]), float(s.half_extents[2])};
-  r.mass = float(d.mass);
+  r.motion = d.motion == BodyMotion::Kinematic ? core::RigidMotion::Kinematic
+             : d.motion == BodyMotion::Static  ? core::RigidMotion::Static
+                                               : core::RigidMotion::Dynamic;
+  r.mass = d.motion == BodyMotion::Dynamic ? float(d.mass) : 0.0f;
   r.position = {d.position[0], d.position[1], d.position[2]};
   r.orientation = eq(d.orientation);
   r.linear_velocity = ev(d.linear_velocity);
@@ -516,8 +521,19 @@ Result<BodyState> Terrain::body_state(BodyHandle h) const {
   return out;
 }
 
+namespace {
+Eigen::Vector3d evd(const Vec3& v) { return {v[0], v[1], v[2]}; }
+}  // namespace
+
+// A static body never moves: set_body_transform and set_body_velocity refuse it.
+static Status refuse_static(const core::World& w, core::RigidBodyId id, const std::string& call) {
+  if (w.bullet().motion(id) != core::RigidMotion::Static) return Ok{};
+  return Error{"", call + ".body", "'" + w.bullet().definition(id).name + "' (static)", "must not be a static body: it never moves", ""};
+}
+
 Status Terrain::set_body_transform(BodyHandle h, const Vec3& position, const Quat& orientation) {
   if (Status s = impl_->check(h); !s) return s;
+  if (Status s = refuse_static(*impl_->world, impl_->id(h), "set_body_transform"); !s) return s;
   Checker c{"set_body_transform.", "", {}};
   c.finite("position", position, "m");
   c.finite("orientation", orientation, "");
@@ -533,17 +549,82 @@ Status Terrain::set_body_transform(BodyHandle h, const Vec3& position, const Qua
 
 Status Terrain::set_body_velocity(BodyHandle h, const Vec3f& linear, const Vec3f& angular) {
   if (Status s = impl_->check(h); !s) return s;
+  if (Status s = refuse_static(*impl_->world, impl_->id(h), "set_body_velocity"); !s) return s;
   Checker c{"set_body_velocity.", "", {}};
   c.finite("linear", linear, "m/s");
   c.finite("angular", angular, "rad/s");
   speed_limit(c, "linear", linear, core::limits::kMaxBodySpeed, "m/s");
   speed_limit(c, "angular", angular, core::limits::kMaxBodySpin, "rad/s");
   if (!c.errs.empty()) return c.errs;
+  if (impl_->world->bullet().motion(impl_->id(h)) == core::RigidMotion::Kinematic) {
+    if (core::Status s = impl_->world->set_kinematic_velocity(impl_->id(h), ev(linear), ev(angular)); !s)
+      return convert(s.errors(), "set_body_velocity.");
+    return Ok{};
+  }
   core::BodyState st = impl_->bullet().state(impl_->id(h));
   st.linear_velocity = ev(linear);
   st.angular_velocity = ev(angular);
   impl_->bullet().set_state(impl_->id(h), st);
   return Ok{};
+}
+
+// The lowest point of body `id` at a pose must be at or above the bedrock (surface − soil_depth).
+static std::optional<Error> below_bedrock(const Terrain& t, const core::World& w, double soil_depth, core::RigidBodyId id,
+                                          const std::string& field, const Vec3& p, const Eigen::Quaternionf& q) {
+  const double low = p[1] - core::World::extent_below(w.bullet().definition(id).shape, q);
+  const double bedrock = t.height_at(p[0], p[2]) - soil_depth;
+  if (low >= bedrock) return std::nullopt;
+  return Error{"", field, vec_str(p),
+               "the body's lowest point must stay at or above the bedrock (world y = " + num(bedrock) + " m here)",
+               "its lowest point would be at y = " + num(low) + " m"};
+}
+
+Status Terrain::set_kinematic_target(BodyHandle h, const Vec3& position, const Quat& orientation) {
+  Impl& I = *impl_;
+  if (Status s = I.check(h); !s) return s;
+  Checker c{"set_kinematic_target.", "", {}};
+  c.finite("position", position, "m");
+  c.finite("orientation", orientation, "");
+  if (c.errs.empty() && !eq_norm_positive(orientation))
+    c.add("orientation", "[0, 0, 0, 0]", "must be a non-zero quaternion [w, x, y, z]");
+  if (!c.errs.empty()) return c.errs;
+  if (I.world->bullet().motion(I.id(h)) != core::RigidMotion::Kinematic)
+    return Error{"", "set_kinematic_target.body", "'" + I.world->bullet().definition(I.id(h)).name + "' (" +
+                 core::to_string(I.world->bullet().motion(I.id(h))) + ")", "must be a kinematic body (BodyDef.motion)", ""};
+  if (auto e = below_bedrock(*this, *I.world, I.def.soil_depth, I.id(h), "set_kinematic_target.position", position, eq(orientation)))
+    return *e;
+  if (core::Status s = I.world->set_kinematic_target(I.id(h), evd(position), eq(orientation)); !s)
+    return convert(s.errors(), "set_kinematic_target.");
+  return Ok{};
+}
+
+Status Terrain::set_keyframes(BodyHandle h, const std::vector<Keyframe>& keys) {
+  Impl& I = *impl_;
+  if (Status s = I.check(h); !s) return s;
+  if (I.world->bullet().motion(I.id(h)) != core::RigidMotion::Kinematic)
+    return Error{"", "set_keyframes.body", "'" + I.world->bullet().definition(I.id(h)).name + "' (" +
+                 core::to_string(I.world->bullet().motion(I.id(h))) + ")", "must be a kinematic body (BodyDef.motion)", ""};
+  std::vector<core::World::Keyframe> ks;
+  for (const Keyframe& k : keys) {
+    core::World::Keyframe w;
+    w.t = k.t;
+    w.position = evd(k.position);
+    w.orientation = Eigen::Quaterniond(k.orientation[0], k.orientation[1], k.orientation[2], k.orientation[3]);
+    ks.push_back(w);
+  }
+  std::vector<Error> errs = convert(core::World::check_keyframes(ks, "keyframes"), "");
+  for (std::size_t k = 0; k < keys.size() && errs.empty(); ++k)
+    if (auto e = below_bedrock(*this, *I.world, I.def.soil_depth, I.id(h), "keyframes[" + std::to_string(k) + "].position",
+                               keys[k].position, eq(keys[k].orientation)))
+      errs.push_back(*e);
+  if (!errs.empty()) return errs;
+  const auto& entries = I.world->entries();
+  for (std::size_t e = 0; e < entries.size(); ++e)
+    if (!entries[e].removed && entries[e].id.index == h.index && entries[e].id.generation == h.generation) {
+      if (core::Status s = I.world->set_keyframes(e, std::move(ks)); !s) return convert(s.errors(), "");
+      return Ok{};
+    }
+  return Error{"", "body", std::to_string(h.index), "must be a live body of this terrain", ""};
 }
 
 std::vector<BodyHandle> Terrain::bodies() const {
@@ -554,9 +635,6 @@ std::vector<BodyHandle> Terrain::bodies() const {
 
 // ---- driving bodies (World::apply_force, apply_torque, apply_impulse) ----
 
-namespace {
-Eigen::Vector3d evd(const Vec3& v) { return {v[0], v[1], v[2]}; }
-}  // namespace
 
 Status Terrain::apply_force(BodyHandle h, const Vec3f& force, const Vec3* world_point) {
   if (Status s = impl_->check(h); !s) return s;
@@ -584,6 +662,20 @@ Result<BodyForces> Terrain::granular_force(BodyHandle h) const {
   if (Status s = impl_->check(h); !s) return s.errors();
   const core::World::SoilForce f = impl_->world->soil_force(impl_->id(h));
   return BodyForces{{f.force.x(), f.force.y(), f.force.z()}, {f.torque.x(), f.torque.y(), f.torque.z()}, f.carried};
+}
+
+Result<BodyContact> Terrain::body_contact(BodyHandle h) const {
+  if (Status s = impl_->check(h); !s) return s.errors();
+  const core::World::Contact c = impl_->world->contact(impl_->id(h));
+  BodyContact out;
+  out.granular_force = {c.granular.force.x(), c.granular.force.y(), c.granular.force.z()};
+  out.granular_torque = {c.granular.torque.x(), c.granular.torque.y(), c.granular.torque.z()};
+  out.on_particles = c.granular.carried;
+  out.heightfield_force = {c.heightfield_force.x(), c.heightfield_force.y(), c.heightfield_force.z()};
+  out.sinkage = c.sinkage;
+  out.lowest_y = c.lowest_y;
+  out.original_surface_y = c.original_surface_y;
+  return out;
 }
 
 // ---- the step ----

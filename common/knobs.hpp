@@ -79,7 +79,7 @@ struct Field {
   const char* api;    // "" = scene files only
   const char* note;
 };
-inline constexpr std::array<Field, 32> kOtherFields = {{
+inline constexpr std::array<Field, 34> kOtherFields = {{
     {"terrain.source", "TerrainDef.file, TerrainDef.procedural (+ samples_x/z, base_height, slope_x/z, amplitude, wavelength, noise_seed, octaves)", "a heightmap file or a generator"},
     {"", "TerrainDef.heights", "an array from the game; scene files name a heightmap file instead"},
     {"terrain.spacing", "TerrainDef.spacing", "with an esri_ascii source, a spacing given overrides the file's cellsize (TerrainDef.spacing_overrides_file)"},
@@ -94,7 +94,9 @@ inline constexpr std::array<Field, 32> kOtherFields = {{
     {"materials[].packing_fraction", "", "validated, not used: the pre-settled tile measures its own φ"},
     {"bodies[].name", "BodyDef.name", ""},
     {"bodies[].shape", "BodyDef.shape", "mesh: an OBJ file in both; the library also takes vertices and triangles"},
-    {"bodies[].mass", "BodyDef.mass", ""},
+    {"bodies[].motion", "BodyDef.motion", "not a number: dynamic, kinematic or static (BodyMotion in the library)"},
+    {"bodies[].keyframes", "Terrain::set_keyframes, set_kinematic_target", "a kinematic body's poses over time; a game may also give one target pose per step"},
+    {"bodies[].mass", "BodyDef.mass", "dynamic bodies only"},
     {"bodies[].density", "", "the library takes the mass"},
     {"bodies[].pose", "BodyDef.position, BodyDef.orientation", "[w, x, y, z] in both; scene files also take euler_deg"},
     {"bodies[].linear_velocity", "BodyDef.linear_velocity", ""},

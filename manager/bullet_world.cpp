@@ -5,6 +5,7 @@
 #include <BulletCollision/CollisionShapes/btHeightfieldTerrainShape.h>
 #include <BulletCollision/CollisionShapes/btTriangleInfoMap.h>
 #include <LinearMath/btConvexHullComputer.h>
+#include <LinearMath/btTransformUtil.h>
 #include <btBulletDynamicsCommon.h>
 
 #include <algorithm>
@@ -66,6 +67,11 @@ struct BulletWorld::Impl {
     int generation = 0;
     RigidBodyDef def;
     bool terrain = true;  // collides with the heightfield
+    // Kinematic: the pose at the start of the next frame and its end (Bullet-local), set by
+    // set_kinematic_target and used up by step_frame.
+    bool has_target = false;
+    btTransform from, to;
+    btVector3 terrain_impulse{0, 0, 0};  // N s, world: the heightfield's contacts in the frame so far
     std::unique_ptr<btCollisionShape> shape;
     std::unique_ptr<btTriangleMesh> mesh;  // mesh bodies keep their triangles alive
     std::unique_ptr<btDefaultMotionState> motion;
@@ -77,6 +83,7 @@ struct BulletWorld::Impl {
   };
   std::vector<Body> bodies;
   std::vector<int> free_slots;
+  float last_frame_dt = 0;  // s, the last step_frame's dt
 
   // A body into a free slot (generation bumped) or a new one.
   RigidBodyId insert(Body&& b) {
@@ -144,6 +151,34 @@ struct BulletWorld::Impl {
     tr.setIdentity();
     tr.setOrigin(centre);
     t.object->setWorldTransform(tr);
+  }
+
+  // Adds the impulses (N s) the last Bullet step's contacts between a body and a terrain
+  // tile applied to the body: Bullet's normal m_normalWorldOnB points from B to A, A gets
+  // +n·j and B −n·j; the friction impulses along their own directions the same way.
+  void gather_terrain_impulses() {
+    const int nm = dispatcher->getNumManifolds();
+    for (int k = 0; k < nm; ++k) {
+      const btPersistentManifold* pm = dispatcher->getManifoldByIndexInternal(k);
+      const btCollisionObject* a = pm->getBody0();
+      const btCollisionObject* b = pm->getBody1();
+      const bool a_terrain = a->getCollisionShape()->getShapeType() == TERRAIN_SHAPE_PROXYTYPE;
+      const bool b_terrain = b->getCollisionShape()->getShapeType() == TERRAIN_SHAPE_PROXYTYPE;
+      if (a_terrain == b_terrain) continue;
+      const btCollisionObject* body = a_terrain ? b : a;
+      const float sign = a_terrain ? -1.0f : 1.0f;  // the body is B: it gets −n·j
+      Body* owner = nullptr;
+      for (Body& x : bodies)
+        if (x.rb == body) owner = &x;
+      if (!owner) continue;
+      btVector3 j(0, 0, 0);
+      for (int c = 0; c < pm->getNumContacts(); ++c) {
+        const btManifoldPoint& pt = pm->getContactPoint(c);
+        j += pt.m_normalWorldOnB * pt.m_appliedImpulse + pt.m_lateralFrictionDir1 * pt.m_appliedImpulseLateral1 +
+             pt.m_lateralFrictionDir2 * pt.m_appliedImpulseLateral2;
+      }
+      owner->terrain_impulse += sign * j;
+    }
   }
 
   static constexpr std::size_t kEagerEdgeTiles = 64;  // at most about 1 s at start-up
@@ -242,7 +277,8 @@ BulletWorld::~BulletWorld() {
 Result<RigidBodyId> BulletWorld::add_body(const RigidBodyDef& def) {
   auto& m = *impl_;
   const std::string field = "bodies." + def.name;
-  if (!(def.mass > 0.0f) || !std::isfinite(def.mass)) {
+  const bool dynamic = def.motion == RigidMotion::Dynamic;
+  if (dynamic && (!(def.mass > 0.0f) || !std::isfinite(def.mass))) {
     return Error{"", field + ".mass", std::to_string(def.mass), "must be finite and > 0 (kg)"};
   }
   Impl::Body b;
@@ -265,8 +301,8 @@ Result<RigidBodyId> BulletWorld::add_body(const RigidBodyDef& def) {
     }
   }
   btVector3 inertia(0, 0, 0);
-  b.shape->calculateLocalInertia(def.mass, inertia);
-  if (s.kind == RigidShapeKind::Mesh) {
+  if (dynamic) b.shape->calculateLocalInertia(def.mass, inertia);
+  if (dynamic && s.kind == RigidShapeKind::Mesh) {
     // Bullet's hull inertia is its bounding box's (a tessellated sphere would get 2/3 m R²
     // instead of 2/5 m R²): use the closed mesh's exact tensor (scene/mesh.hpp), whose
     // diagonal in the mesh axes is the body's principal inertia when those axes are principal
@@ -284,20 +320,30 @@ Result<RigidBodyId> BulletWorld::add_body(const RigidBodyDef& def) {
   const Eigen::Quaternionf q = def.orientation.normalized();
   tr.setRotation(btQuaternion(q.x(), q.y(), q.z(), q.w()));
   b.motion = std::make_unique<btDefaultMotionState>(tr);
-  btRigidBody::btRigidBodyConstructionInfo ci(def.mass, b.motion.get(), b.shape.get(), inertia);
+  // Kinematic and static bodies have no mass for Bullet (inverse mass 0: nothing moves them).
+  btRigidBody::btRigidBodyConstructionInfo ci(dynamic ? def.mass : 0.0f, b.motion.get(), b.shape.get(), inertia);
   ci.m_friction = def.friction;
   ci.m_restitution = def.restitution;
   ci.m_rollingFriction = def.rolling_friction;
   ci.m_spinningFriction = def.rolling_friction;
   b.body = std::make_unique<btRigidBody>(ci);
-  b.body->setLinearVelocity(bt(def.linear_velocity));
-  b.body->setAngularVelocity(bt(def.angular_velocity));
-  // Continuous collision for fast bodies: sweep a sphere of half the smallest extent.
-  btVector3 lo, hi;
-  b.shape->getAabb(btTransform::getIdentity(), lo, hi);
-  const float min_extent = (hi - lo).minAxis() >= 0 ? (hi - lo)[(hi - lo).minAxis()] : 0.1f;
-  b.body->setCcdMotionThreshold(0.05f * min_extent);
-  b.body->setCcdSweptSphereRadius(0.5f * min_extent);
+  if (dynamic) {
+    b.body->setLinearVelocity(bt(def.linear_velocity));
+    b.body->setAngularVelocity(bt(def.angular_velocity));
+    // Continuous collision for fast bodies: sweep a sphere of half the smallest extent.
+    btVector3 lo, hi;
+    b.shape->getAabb(btTransform::getIdentity(), lo, hi);
+    const float min_extent = (hi - lo).minAxis() >= 0 ? (hi - lo)[(hi - lo).minAxis()] : 0.1f;
+    b.body->setCcdMotionThreshold(0.05f * min_extent);
+    b.body->setCcdSweptSphereRadius(0.5f * min_extent);
+  } else if (def.motion == RigidMotion::Kinematic) {
+    // Bullet reads a kinematic body's pose from its motion state at every step and derives its
+    // velocity from the change; it must never be deactivated.
+    b.body->setCollisionFlags(b.body->getCollisionFlags() | btCollisionObject::CF_KINEMATIC_OBJECT);
+    b.body->setActivationState(DISABLE_DEACTIVATION);
+  } else {
+    b.body->setCollisionFlags(b.body->getCollisionFlags() | btCollisionObject::CF_STATIC_OBJECT);
+  }
   b.rb = b.body.get();
   m.world->addRigidBody(b.rb, Impl::kGroupBody, Impl::kGroupBody | Impl::kGroupTerrain);
   b.def = def;
@@ -460,18 +506,45 @@ std::vector<RigidBodyId> BulletWorld::bodies() const {
 
 int BulletWorld::body_count() const { return int(impl_->bodies.size() - impl_->free_slots.size()); }
 
-void BulletWorld::step(float dt) {
-  assert(dt > 0.0f);
-  impl_->ensure_edges(dt);
-  // maxSubSteps = 0: Bullet steps exactly dt once, with no internal accumulator.
-  impl_->world->stepSimulation(dt, 0, dt);
+void BulletWorld::step(float dt) { step_frame(dt, 1); }
+
+const char* to_string(RigidMotion m) {
+  switch (m) {
+    case RigidMotion::Dynamic: return "dynamic";
+    case RigidMotion::Kinematic: return "kinematic";
+    case RigidMotion::Static: return "static";
+  }
+  return "?";
 }
 
 void BulletWorld::step_frame(float dt, int substeps) {
   assert(dt > 0.0f && substeps >= 1);
   const float sub = dt / float(substeps);
+  auto& m = *impl_;
+  for (auto& b : m.bodies) b.terrain_impulse.setZero();
+  // One Bullet step of `sub` (maxSubSteps = 0: exactly once, no internal accumulator), the
+  // kinematic bodies' motion states first moved to where they are at its end (substep k of n).
+  auto one = [&](int k) {
+    for (auto& b : m.bodies) {
+      if (!b.rb || !b.has_target) continue;
+      const float u = float(k + 1) / float(substeps);
+      btTransform tr;
+      tr.setOrigin(b.from.getOrigin().lerp(b.to.getOrigin(), u));
+      tr.setRotation(k + 1 == substeps ? b.to.getRotation() : b.from.getRotation().slerp(b.to.getRotation(), u));
+      if (k + 1 == substeps) tr.setOrigin(b.to.getOrigin());
+      b.rb->getMotionState()->setWorldTransform(tr);
+    }
+    m.ensure_edges(sub);
+    m.world->stepSimulation(sub, 0, sub);
+    m.gather_terrain_impulses();
+  };
+  auto finish = [&]() {
+    for (auto& b : m.bodies) b.has_target = false;
+    m.last_frame_dt = dt;
+  };
   if (substeps == 1) {
-    step(sub);
+    one(0);
+    finish();
     return;
   }
   // The force and torque each body holds now (N, N m; apply_force's, or the game's on an
@@ -510,8 +583,9 @@ void BulletWorld::step_frame(float dt, int substeps) {
         h.rb->applyCentralForce(h.force);
         h.rb->applyTorque(h.torque);
       }
-    step(sub);
+    one(k);
   }
+  finish();
 }
 
 void BulletWorld::terrain_changed() {
@@ -590,7 +664,8 @@ const RigidBodyDef& BulletWorld::definition(RigidBodyId id) const {
 
 void BulletWorld::set_state(RigidBodyId id, const BodyState& s) {
   assert(alive(id));
-  btRigidBody& rb = *impl_->bodies[id.index].rb;
+  auto& body = impl_->bodies[id.index];
+  btRigidBody& rb = *body.rb;
   btTransform tr;
   const Eigen::Vector3d local = s.position - impl_->origin;
   tr.setOrigin(btVector3(float(local.x()), float(local.y()), float(local.z())));
@@ -598,9 +673,45 @@ void BulletWorld::set_state(RigidBodyId id, const BodyState& s) {
   tr.setRotation(btQuaternion(q.x(), q.y(), q.z(), q.w()));
   rb.setWorldTransform(tr);
   if (rb.getMotionState()) rb.getMotionState()->setWorldTransform(tr);
+  if (body.def.motion != RigidMotion::Dynamic) {
+    // A teleport: no velocity from the jump (Bullet derives a kinematic body's velocity from
+    // its interpolation transform to its motion state's), and any target given before is void.
+    rb.setInterpolationWorldTransform(tr);
+    body.has_target = false;
+  }
   rb.setLinearVelocity(bt(s.linear_velocity));
   rb.setAngularVelocity(bt(s.angular_velocity));
   rb.activate(true);
+}
+
+RigidMotion BulletWorld::motion(RigidBodyId id) const {
+  assert(alive(id));
+  return impl_->bodies[id.index].def.motion;
+}
+
+void BulletWorld::set_kinematic_target(RigidBodyId id, const Eigen::Vector3d& position,
+                                       const Eigen::Quaternionf& orientation, float dt) {
+  assert(alive(id) && dt > 0);
+  auto& b = impl_->bodies[id.index];
+  if (b.def.motion != RigidMotion::Kinematic) return;
+  btTransform to;
+  const Eigen::Vector3d local = position - impl_->origin;
+  to.setOrigin(btVector3(float(local.x()), float(local.y()), float(local.z())));
+  const Eigen::Quaternionf q = orientation.normalized();
+  to.setRotation(btQuaternion(q.x(), q.y(), q.z(), q.w()));
+  b.from = b.rb->getWorldTransform();
+  b.to = to;
+  b.has_target = true;
+  btVector3 v, w;
+  btTransformUtil::calculateVelocity(b.from, b.to, dt, v, w);
+  b.rb->setLinearVelocity(v);
+  b.rb->setAngularVelocity(w);
+}
+
+Eigen::Vector3f BulletWorld::terrain_force(RigidBodyId id) const {
+  assert(alive(id));
+  const float t = impl_->last_frame_dt;
+  return t > 0 ? Eigen::Vector3f(eig(impl_->bodies[id.index].terrain_impulse) / t) : Eigen::Vector3f::Zero();
 }
 
 }  // namespace sandpatch

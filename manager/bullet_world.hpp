@@ -38,10 +38,16 @@ struct RigidShape {
   std::vector<std::array<int, 3>> triangles;             // indices into vertices (mesh, closed)
 };
 
+// How a body moves: by the forces on it (dynamic), along a pose prescribed every frame
+// (kinematic: it pushes what it meets and nothing pushes it back), or not at all (static).
+enum class RigidMotion { Dynamic, Kinematic, Static };
+const char* to_string(RigidMotion m);  // "dynamic", "kinematic", "static"
+
 struct RigidBodyDef {
   std::string name;
   RigidShape shape;
-  float mass = 1.0f;                                     // kg (> 0)
+  RigidMotion motion = RigidMotion::Dynamic;
+  float mass = 1.0f;                                     // kg (> 0; dynamic only, ignored otherwise)
   Eigen::Vector3d position = Eigen::Vector3d::Zero();    // m, world
   Eigen::Quaternionf orientation = Eigen::Quaternionf::Identity();
   Eigen::Vector3f linear_velocity = Eigen::Vector3f::Zero();   // m/s
@@ -137,8 +143,28 @@ class BulletWorld {
   float mass(RigidBodyId id) const;                   // kg
   Eigen::Vector3f principal_inertia(RigidBodyId id) const;  // kg m², body frame (Bullet's shape axes)
   const RigidBodyDef& definition(RigidBodyId id) const;
-  // Overwrites the body's state (after a patch integrated it). Wakes the body.
+  // Overwrites the body's state (after a patch integrated it). Wakes the body. A kinematic
+  // body is teleported (its velocities are the prescribed ones until the next target).
   void set_state(RigidBodyId id, const BodyState& state);
+
+  // ---- kinematic and static bodies ----
+  RigidMotion motion(RigidBodyId id) const;
+  // The pose (m, world) a kinematic body reaches at the end of the next step_frame(dt, n):
+  // its velocities become (target − now) / dt and the angle of the rotation between the two
+  // over dt, at once (contact prediction and the patches read them in the same frame), and
+  // each of the n substeps moves it along the straight line and the slerp between the two
+  // poses, so Bullet's contacts see it move (Bullet derives a kinematic body's velocity from
+  // its motion state's change over the substep). Without a target a kinematic body holds still.
+  void set_kinematic_target(RigidBodyId id, const Eigen::Vector3d& position, const Eigen::Quaternionf& orientation,
+                            float dt);
+
+  // ---- contact with the heightfield ----
+  // Mean force (N, world) the heightfield's contacts applied to the body over the last step()
+  // or step_frame(): the normal and friction impulses of Bullet's contact points between the
+  // body and the terrain tiles, summed and divided by the step's duration. Zero off the
+  // heightfield (and always for kinematic and static bodies, which Bullet does not collide
+  // with the static terrain).
+  Eigen::Vector3f terrain_force(RigidBodyId id) const;
 
  private:
   BulletWorld() = default;

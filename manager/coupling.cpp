@@ -6,6 +6,7 @@
 #include <cmath>
 
 #include "manager/shell.hpp"
+#include "particles/granule.hpp"
 #include "manager/terrain_manager_impl.hpp"
 
 namespace sandpatch {
@@ -37,19 +38,65 @@ Status TerrainManager::Impl::step_patches(double time, double dt) {
       events.push_back({PatchEventKind::Woke, s.patch, time, 0, record(s).granules});
     }
     const auto t_step = manager_detail::Clock::now();
-    if (Status st = s.sim->step(dt); !st) {
-      // The DEM names its own definition; say which knob of the terrain's trades it.
+    // The DEM names its own definition; say which knob of the terrain's trades it.
+    auto name_knobs = [](Status st) {
       std::vector<Error> es = st.errors();
       for (Error& e : es)
         if (e.field == "step.dt_frame")
           e.detail = "lower the frame's dt, raise simulation.max_substeps (TerrainDef.max_substeps), lower "
                      "simulation.steps_per_contact (TerrainDef.steps_per_contact) or the material's stiffness";
       return es;
+    };
+    bool prescribed = false;
+    for (Carried& c : s.carried) {
+      c.f_sum.setZero();
+      c.t_sum.setZero();
+      prescribed = prescribed || (c.enabled && c.prescribed);
+    }
+    StepStats frame_stats;
+    bool frame_stepped = true;
+    if (!prescribed) {
+      if (Status st = s.sim->step(dt); !st) return name_knobs(st);
+    } else {
+      // A kinematic or static shell gets no momentum from the granules, so the soil's force on
+      // it is summed from the DEM's contact force substep by substep: the frame runs as its n
+      // substeps one DEM step each (the same substep dt, float(dt / n), the same state).
+      auto n = s.sim->substeps_for(dt);
+      if (!n) return name_knobs(n.errors());
+      int stepped = 0;
+      for (int k = 0; k < *n; ++k) {
+        if (Status st = s.sim->step(dt / *n); !st) return name_knobs(st);
+        const StepStats& one = s.sim->last_step();
+        frame_stats.substeps += one.substeps;
+        frame_stats.substep_dt = one.substeps > 0 ? one.substep_dt : frame_stats.substep_dt;
+        frame_stats.contacts = one.contacts;
+        frame_stats.wall_contacts = one.wall_contacts;
+        frame_stats.neighbour_entries = one.neighbour_entries;
+        frame_stats.resorts += one.resorts;
+        frame_stats.slept = one.slept;
+        frame_stats.guard_seconds += one.guard_seconds;
+        frame_stats.pair_seconds += one.pair_seconds;
+        frame_stats.body_seconds += one.body_seconds;
+        frame_stats.sort_seconds += one.sort_seconds;
+        stepped += one.substeps > 0;
+        for (Carried& c : s.carried)
+          if (c.enabled && c.prescribed && one.substeps > 0) {
+            c.f_sum += eig(s.sim->body_force(c.shell)).cast<double>();
+            c.t_sum += eig(s.sim->body_torque(c.shell)).cast<double>();
+          }
+      }
+      // The mean over the substeps that ran (the DEM may fall asleep within the frame; none
+      // ran: the force of before stands, couple_after keeps it).
+      for (Carried& c : s.carried) {
+        c.f_sum /= double(std::max(stepped, 1));
+        c.t_sum /= double(std::max(stepped, 1));
+      }
+      frame_stepped = stepped > 0;
     }
     const double step_ms = manager_detail::ms_since(t_step);
-    account_step(s, step_ms);
+    account_step(s, step_ms, prescribed ? &frame_stats : nullptr);
     observe_cost(s, step_ms, dt);
-    couple_after(s, dt);
+    couple_after(s, dt, frame_stepped);
     s.fade = std::min(s.fade + 1, def.fade_frames);
   }
   return Ok{};
@@ -61,7 +108,7 @@ void TerrainManager::Impl::update_sleep(double time, double dt) {
       s.state = SlotState::Asleep;
       // The bodies it carries stop with it (they keep no residual drift while it sleeps).
       for (const auto& c : s.carried)
-        if (c.enabled && world->alive(c.body)) {
+        if (c.enabled && !c.prescribed && world->alive(c.body)) {
           BodyState b = world->state(c.body);
           b.linear_velocity.setZero();
           b.angular_velocity.setZero();
@@ -142,7 +189,7 @@ void TerrainManager::Impl::choose_carriers() {
     // was cut to (sunk into the granules of a patch just demoted), and the top granules of a
     // fill reach about a granule radius above that surface; a shell started there was thrown
     // out at 1-3 m/s (measured in the hundred-bodies case). It is taken when it moves.
-    if (lying(b, lo, hi) || settling(b)) {
+    if (world->motion(b) == RigidMotion::Dynamic && (lying(b, lo, hi) || settling(b))) {
       if (prev_area >= 0) next[body_key(b)] = prev->second;  // nor handed to another one
       continue;
     }
@@ -156,6 +203,10 @@ void TerrainManager::Impl::choose_carriers() {
 // on the heightfield jitter resting bodies at about sleep_speed).
 bool TerrainManager::Impl::lying(RigidBodyId b, const Eigen::Vector3d& lo, const Eigen::Vector3d& hi) const {
   const BodyState st = world->state(b);
+  // A kinematic body moving along its prescribed path is not lying anywhere, however slowly
+  // it goes (a plate pressed into the soil at a few cm/s).
+  if (world->motion(b) == RigidMotion::Kinematic && (st.linear_velocity.squaredNorm() > 0 || st.angular_velocity.squaredNorm() > 0))
+    return false;
   const double reach = 0.5 * (hi - lo).norm(), slow = 10.0 * def.sleep_speed;
   if (st.linear_velocity.norm() >= slow || st.angular_velocity.norm() * reach >= slow) return false;
   double s_max = 0;
@@ -193,14 +244,23 @@ Status TerrainManager::Impl::couple_before(Slot& slot, double dt) {
       ShellDef sh;
       for (const auto& p : *pts) sh.offsets.push_back(v3(p));
       sh.radii = {def.material.radius};
-      sh.motion = MotionType::Dynamic;
-      sh.mass = world->mass(b);  // the body enters with its own mass (mass ratio 1)
-      sh.inertia = v3(Eigen::Vector3f(world->principal_inertia(b) / float(s * s)));
+      const bool prescribed = world->motion(b) != RigidMotion::Dynamic;
+      if (prescribed) {
+        sh.motion = MotionType::Kinematic;  // kinematic and static bodies: the granules do not move it
+      } else {
+        sh.motion = MotionType::Dynamic;
+        sh.mass = world->mass(b);  // the body enters with its own mass (mass ratio 1)
+        sh.inertia = v3(Eigen::Vector3f(world->principal_inertia(b) / float(s * s)));
+      }
       sh.position = slot.sim->def().scale.position_to_sim({st.position.x(), st.position.y(), st.position.z()});
       sh.orientation = quat(st.orientation);
       auto id = slot.sim->add_shell(sh);
       if (!id) return id.errors();
-      slot.carried.push_back({b, *id, true, Eigen::Vector3f::Zero(), Eigen::Vector3f::Zero()});
+      Carried nc{b, *id, true, Eigen::Vector3f::Zero(), Eigen::Vector3f::Zero()};
+      nc.prescribed = prescribed;
+      nc.set_position = st.position;
+      nc.set_orientation = st.orientation;
+      slot.carried.push_back(nc);
       it = slot.carried.end() - 1;
     }
     Carried& c = *it;
@@ -222,7 +282,37 @@ Status TerrainManager::Impl::couple_before(Slot& slot, double dt) {
     world->bounds(b, &blo, &bhi);
     const double reach = 0.5 * (bhi - blo).norm();
     const bool at_rest = st.linear_velocity.norm() <= def.sleep_speed && st.angular_velocity.norm() * reach <= def.sleep_speed;
-    if (at_rest && !fresh && !reenabled) continue;
+    if (c.prescribed) {
+      // A prescribed shell is never slowed by the granules: faster than one can be stopped
+      // within 2 granule radii (speed sqrt(m_pt / k_n) > 2 r, the DEM's overlap guard for an
+      // immovable body, particles/dem.hpp, off in patches) it may push granules through its
+      // sphere surface. Not refused (the path is the caller's): reported (tools_too_fast).
+      {
+        const GranuleShape& g = slot.sim->granule_shape();
+        const double m_pt = point_effective_mass(g.mass, g.inertia, g.centre_distance);
+        const double kn = slot.sim->def().material.normal_stiffness, r = slot.sim->def().particle_radius;
+        const double limit = s * 2.0 * r * std::sqrt(kn / m_pt);  // m/s, world
+        const double speed = st.linear_velocity.norm() + st.angular_velocity.norm() * reach;
+        if (m_pt > 0 && speed > limit) {
+          FastTool& f = fast_tools[body_key(b)];
+          f.name = world->definition(b).name;
+          if (speed > f.speed) f.speed = speed, f.limit = limit;
+          ++f.frames;
+        }
+      }
+      // The shell starts the frame at Bullet's pose with the prescribed velocities, and the
+      // DEM moves it along them over the frame's substeps to where Bullet takes the body (a
+      // straight line; the rotation at a constant rate): it follows the body through the
+      // frame instead of jumping once per frame. Still and where it was last put: left alone
+      // (setting it would keep the patch awake).
+      const bool still = st.linear_velocity.squaredNorm() == 0 && st.angular_velocity.squaredNorm() == 0;
+      const bool moved = (st.position - c.set_position).norm() > 0 || !st.orientation.isApprox(c.set_orientation, 0);
+      if (still && !moved && !fresh && !reenabled) continue;
+      c.set_position = st.position;
+      c.set_orientation = st.orientation;
+    } else if (at_rest && !fresh && !reenabled) {
+      continue;
+    }
     const Vec3 p = slot.sim->def().scale.position_to_sim({st.position.x(), st.position.y(), st.position.z()});
     if (Status e = slot.sim->set_body_state(c.shell, p, quat(st.orientation), v3(Eigen::Vector3f(st.linear_velocity / float(s))),
                                            v3(st.angular_velocity));
@@ -238,17 +328,30 @@ Status TerrainManager::Impl::couple_before(Slot& slot, double dt) {
 // the support force, so they stay where the patch left them.
 void TerrainManager::Impl::hold_resting_bodies(Slot& slot) {
   for (const Carried& c : slot.carried)
-    if (c.enabled && world->alive(c.body)) {
+    if (c.enabled && c.prescribed && world->alive(c.body)) {
+      soil[body_key(c.body)] = {c.force, c.torque};  // the granules rest as they last pushed it
+    } else if (c.enabled && world->alive(c.body)) {
       const Eigen::Vector3f f = -world->mass(c.body) * def.gravity.cast<float>();
       world->apply_force(c.body, f, Eigen::Vector3f::Zero());
       soil[body_key(c.body)] = {f, Eigen::Vector3f::Zero()};
     }
 }
 
-void TerrainManager::Impl::couple_after(Slot& slot, double dt) {
+void TerrainManager::Impl::couple_after(Slot& slot, double dt, bool stepped) {
   const double s = slot.scale;
-  for (const Carried& c : slot.carried) {
+  for (Carried& c : slot.carried) {
     if (!c.enabled || !world->alive(c.body)) continue;
+    if (c.prescribed) {
+      // Nothing moves a kinematic or static body: the mean contact force over the frame is
+      // only read (particles/scale.hpp: F_w = s F_sim, T_w = s^2 T_sim, mass ratio 1).
+      const ParticleScale& ps = slot.sim->def().scale;
+      if (stepped) {
+        c.force = eig(ps.force_to_world(v3(Eigen::Vector3f(c.f_sum.cast<float>()))));
+        c.torque = eig(ps.torque_to_world(v3(Eigen::Vector3f(c.t_sum.cast<float>()))));
+      }
+      soil[body_key(c.body)] = {c.force, c.torque};
+      continue;
+    }
     // Mean contact force and torque over the frame from the shell's change of momentum.
     const Eigen::Vector3f v1 = eig(slot.sim->body_velocity(c.shell)) * float(s);
     const Eigen::Vector3f w1 = eig(slot.sim->body_angular_velocity(c.shell));

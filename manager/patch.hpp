@@ -31,6 +31,14 @@ struct Carried {
   sandpatch::BodyId shell;
   bool enabled = true;
   Eigen::Vector3f v0 = Eigen::Vector3f::Zero(), w0 = Eigen::Vector3f::Zero();  // world velocities at the frame start
+  // A kinematic or static body: its shell is kinematic in the DEM (it pushes the granules,
+  // they do not move it), its pose set from Bullet's, and the soil's force on it is the mean
+  // of the DEM's contact force over the frame's substeps (sim units, summed in f_sum, t_sum).
+  bool prescribed = false;
+  Eigen::Vector3d set_position = Eigen::Vector3d::Zero();  // m, world: the pose last given to the shell
+  Eigen::Quaternionf set_orientation = Eigen::Quaternionf::Identity();
+  Eigen::Vector3d f_sum = Eigen::Vector3d::Zero(), t_sum = Eigen::Vector3d::Zero();
+  Eigen::Vector3f force = Eigen::Vector3f::Zero(), torque = Eigen::Vector3f::Zero();  // N, N m world: the last frame's mean
 };
 
 // Volume of the patch's soil (m³): the heightfield's before promotion, the granules' while

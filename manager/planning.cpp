@@ -29,7 +29,11 @@ Status TerrainManager::Impl::plan(double time) {
     // lies on the terrain and disturbs nothing: it asks for no patch. Without this rule a
     // resting body asked again after every demotion and a queue never drained.
     const double reach = 0.5 * (m.hi - m.lo).norm();
-    const bool still = st.linear_velocity.norm() <= def.sleep_speed && st.angular_velocity.norm() * reach <= def.sleep_speed;
+    // (A kinematic body moving along its prescribed path, however slowly, is not resting.)
+    const bool prescribed_moving = world->motion(b) == RigidMotion::Kinematic &&
+                                   (st.linear_velocity.squaredNorm() > 0 || st.angular_velocity.squaredNorm() > 0);
+    const bool still = !prescribed_moving && st.linear_velocity.norm() <= def.sleep_speed &&
+                       st.angular_velocity.norm() * reach <= def.sleep_speed;
     int& frames_still = still_frames[body_key(b)];
     frames_still = still ? frames_still + 1 : 0;
     if (frames_still >= 2 || settling(b)) continue;

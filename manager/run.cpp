@@ -171,6 +171,11 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
     return Ok{};
   };
 
+  RunCsv csv;  // the time series: kept as .part files until the run ends well
+  if (!opt.csv.empty() || !scene.outputs.csv.empty()) {
+    const fs::path p = !opt.csv.empty() ? fs::path(opt.csv) : out_dir / scene.outputs.csv;
+    if (Status s = csv.open(p); !s) return fail(ExitCode::BadInput, "outputs", s.message());
+  }
   const auto t_start = Clock::now();
   if (Status s = write_outputs(0, 0.0); !s) return fail(ExitCode::RuntimeFailure, "outputs", s.message());
   for (long long frame = 0; frame < frames; ++frame) {
@@ -181,6 +186,7 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
     if (Status st = world.step(dt, sim.substeps); !st)
       return fail(ExitCode::RuntimeFailure, world.failed_stage(), st.message());
     if (Status s = write_outputs(frame + 1, world.time()); !s) return fail(ExitCode::RuntimeFailure, "outputs", s.message());
+    if (Status s = csv.frame(world, world.time()); !s) return fail(ExitCode::RuntimeFailure, "outputs", s.message());
     if (opt.on_frame) {
       FrameSample fs;
       fs.frame = frame;
@@ -236,6 +242,19 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
     if (Status s = video.close(); !s) return fail(ExitCode::RuntimeFailure, "outputs", s.message());
     written.push_back(opt.video);
   }
+  if (csv.is_open()) {
+    if (Status s = csv.close(); !s) return fail(ExitCode::RuntimeFailure, "outputs", s.message());
+    written.push_back(csv.bodies_file().string());
+    written.push_back(RunCsv::patches_path(csv.bodies_file()).string());
+  }
+  if (manager)
+    if (const ojson mr = manager->report(); mr.contains("tools_too_fast"))
+      for (const auto& f : mr["tools_too_fast"])
+        warnings.push_back("bodies." + f["body"].get<std::string>() + ": moved into a patch at up to " +
+                           format_number(f["max_speed_m_s"].get<double>()) + " m/s in " +
+                           std::to_string(f["frames"].get<long long>()) + " frame(s), faster than its granules can be stopped (" +
+                           format_number(f["limit_m_s"].get<double>()) +
+                           " m/s: 2 granule radii of overlap at the material's stiffness): granules may have passed through it");
   if (images_skipped > 0)
     warnings.push_back("outputs.frames: " + std::to_string(images_skipped) +
                        " image(s) not written: no OpenGL context: " + images.why());

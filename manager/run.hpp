@@ -43,6 +43,9 @@ struct RunOptions {
   std::string final_camera;   // camera for final_image ("" = the scene's first, or a default view)
   std::string video;          // when set: a video of the scene's first camera piped to ffmpeg (run_outputs.hpp VideoWriter)
   double video_fps = 30;      // video frames per simulated second, in (0, 1 / dt]
+  // When set: the run's time series to this file (and its stem + "_patches.csv"), instead of
+  // the scene's outputs.csv (relative to the output directory). RunCsv, docs/cli.md "CSV".
+  std::string csv;
   // Called at the end of every frame of the frame loop (after its frame time is measured,
   // so the callback's own time is not in frame_ms; it is in the run's wall_s).
   std::function<void(const FrameSample&)> on_frame;

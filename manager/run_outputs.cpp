@@ -341,4 +341,107 @@ Status VideoWriter::close() {
   return Ok{};
 }
 
+// ---- RunCsv ----
+
+namespace {
+std::filesystem::path temp_of(const std::filesystem::path& p) { return std::filesystem::path(p.string() + ".part"); }
+
+// A name as one CSV field: quoted (quotes doubled) when it holds a comma, a quote or a line break.
+std::string csv_field(const std::string& s) {
+  if (s.find_first_of(",\"\n\r") == std::string::npos) return s;
+  std::string q = "\"";
+  for (char c : s) q += c == '"' ? std::string("\"\"") : std::string(1, c);
+  return q + "\"";
+}
+}  // namespace
+
+std::filesystem::path RunCsv::patches_path(const std::filesystem::path& bodies) {
+  std::filesystem::path p = bodies;
+  const std::string stem = p.extension() == ".csv" ? p.stem().string() : p.filename().string();
+  return p.replace_filename(stem + "_patches.csv");
+}
+
+const char* RunCsv::body_header() {
+  return "t,body,x,y,z,qw,qx,qy,qz,vx,vy,vz,wx,wy,wz,granular_fx,granular_fy,granular_fz,granular_tx,granular_ty,"
+         "granular_tz,heightfield_fx,heightfield_fy,heightfield_fz,sinkage,on_particles";
+}
+const char* RunCsv::patch_header() { return "t,patch,state,granules,spheres,substeps,step_ms"; }
+
+Status RunCsv::open(const std::filesystem::path& bodies) {
+  discard();
+  path_ = bodies;
+  patches_ = patches_path(bodies);
+  for (const auto& p : {path_, patches_}) {
+    std::error_code ec;
+    if (p.has_parent_path()) std::filesystem::create_directories(p.parent_path(), ec);
+  }
+  bodies_ = std::fopen(temp_of(path_).c_str(), "wb");
+  if (!bodies_) return Error{path_.string(), "", "", "must be a writable file", "cannot create " + temp_of(path_).string()};
+  patch_rows_ = std::fopen(temp_of(patches_).c_str(), "wb");
+  if (!patch_rows_) {
+    discard();
+    return Error{patches_.string(), "", "", "must be a writable file", "cannot create " + temp_of(patches_).string()};
+  }
+  std::fprintf(bodies_, "%s\n", body_header());
+  std::fprintf(patch_rows_, "%s\n", patch_header());
+  return Ok{};
+}
+
+Status RunCsv::frame(const World& world, double t) {
+  if (!is_open()) return Ok{};
+  for (const World::Entry& e : world.entries()) {
+    if (e.removed || !e.spawned() || !world.alive(e.id)) continue;
+    const BodyState s = world.bullet().state(e.id);
+    const World::Contact c = world.contact(e.id);
+    const auto& q = s.orientation;
+    std::fprintf(bodies_,
+                 "%.9g,%s,%.9g,%.9g,%.9g,%.7g,%.7g,%.7g,%.7g,%.7g,%.7g,%.7g,%.7g,%.7g,%.7g,%.7g,%.7g,%.7g,%.7g,%.7g,%.7g,%.7g,"
+                 "%.7g,%.7g,%.9g,%d\n",
+                 t, csv_field(e.name).c_str(), s.position.x(), s.position.y(), s.position.z(), double(q.w()), double(q.x()),
+                 double(q.y()), double(q.z()), double(s.linear_velocity.x()), double(s.linear_velocity.y()),
+                 double(s.linear_velocity.z()), double(s.angular_velocity.x()), double(s.angular_velocity.y()),
+                 double(s.angular_velocity.z()), double(c.granular.force.x()), double(c.granular.force.y()),
+                 double(c.granular.force.z()), double(c.granular.torque.x()), double(c.granular.torque.y()),
+                 double(c.granular.torque.z()), double(c.heightfield_force.x()), double(c.heightfield_force.y()),
+                 double(c.heightfield_force.z()), c.sinkage, c.granular.carried ? 1 : 0);
+  }
+  if (const TerrainManager* m = world.manager())
+    for (const auto& p : m->patches())
+      std::fprintf(patch_rows_, "%.9g,%d,%s,%d,%d,%d,%.6g\n", t, p.patch,
+                   !p.ready ? "filling" : p.asleep ? "asleep" : "active", p.granules, p.last_spheres,
+                   p.asleep ? 0 : p.last_substeps, p.asleep ? 0.0 : p.last_step_ms);
+  if (std::ferror(bodies_) || std::ferror(patch_rows_)) return Error{path_.string(), "", "", "must be writable", "write failed"};
+  return Ok{};
+}
+
+Status RunCsv::close() {
+  if (!is_open()) return Ok{};
+  const bool bad = std::fclose(bodies_) != 0;
+  const bool bad_p = std::fclose(patch_rows_) != 0;
+  bodies_ = patch_rows_ = nullptr;
+  std::error_code ec;
+  if (!bad) std::filesystem::rename(temp_of(path_), path_, ec);
+  if (bad || ec) {
+    discard();
+    return Error{path_.string(), "", "", "must be writable", ec ? ec.message() : "write failed"};
+  }
+  if (!bad_p) std::filesystem::rename(temp_of(patches_), patches_, ec);
+  if (bad_p || ec) {
+    discard();
+    return Error{patches_.string(), "", "", "must be writable", ec ? ec.message() : "write failed"};
+  }
+  return Ok{};
+}
+
+void RunCsv::discard() {
+  if (bodies_) std::fclose(bodies_);
+  if (patch_rows_) std::fclose(patch_rows_);
+  bodies_ = patch_rows_ = nullptr;
+  std::error_code ec;
+  if (!path_.empty()) std::filesystem::remove(temp_of(path_), ec);
+  if (!patches_.empty()) std::filesystem::remove(temp_of(patches_), ec);
+}
+
+RunCsv::~RunCsv() { discard(); }
+
 }  // namespace sandpatch

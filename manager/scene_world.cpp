@@ -66,6 +66,9 @@ Result<RigidBodyDef> to_rigid_body(const SceneDef& scene, std::size_t index) {
   const BodyDef& b = scene.bodies[index];
   RigidBodyDef d;
   d.name = b.name;
+  d.motion = b.motion == MotionKind::Kinematic ? RigidMotion::Kinematic
+             : b.motion == MotionKind::Static  ? RigidMotion::Static
+                                               : RigidMotion::Dynamic;
   d.mass = float(b.mass_value());
   d.position = {b.pose.position[0], b.pose.position[1], b.pose.position[2]};
   const auto& q = b.pose.orientation;
@@ -169,6 +172,7 @@ Result<std::unique_ptr<World>> make_world(const SceneDef& scene, int threads, co
   const double w = (hf.samples_x() - 1) * double(hf.spacing()), d = (hf.samples_z() - 1) * double(hf.spacing());
   for (std::size_t i = 0; i < scene.bodies.size(); ++i) {
     const BodyDef& b = scene.bodies[i];
+    if (b.motion != MotionKind::Dynamic) continue;  // Bullet does not push a kinematic or static body out of the ground
     const double x = b.pose.position[0] - hf.origin_x(), z = b.pose.position[2] - hf.origin_z();
     if (x < 0 || z < 0 || x > w || z > d) continue;  // no terrain under it
     const double surface = hf.origin_y() + hf.sample(float(x), float(z));
@@ -217,6 +221,24 @@ Result<std::unique_ptr<World>> make_world(const SceneDef& scene, int threads, co
   for (std::size_t i = 0; i < body_defs.size(); ++i) {
     const std::size_t entry = (*world)->schedule_body(body_defs[i], scene.bodies[i].spawn_time);
     if (!scene.bodies[i].loads.empty()) (*world)->set_loads(entry, to_loads(scene.bodies[i]));
+    if (!scene.bodies[i].keyframes.empty()) {
+      std::vector<World::Keyframe> keys;
+      for (const KeyframeDef& k : scene.bodies[i].keyframes) {
+        World::Keyframe w;
+        w.t = k.t;
+        w.position = {k.position[0], k.position[1], k.position[2]};
+        w.orientation = Eigen::Quaterniond(k.orientation[0], k.orientation[1], k.orientation[2], k.orientation[3]);
+        keys.push_back(w);
+      }
+      if (Status s = (*world)->set_keyframes(entry, std::move(keys)); !s) {
+        std::vector<Error> es = s.errors();
+        for (Error& e : es) {
+          e.file = scene.source_path;
+          e.field = "bodies[" + std::to_string(i) + "]." + e.field;
+        }
+        return es;
+      }
+    }
   }
   return world;
 }

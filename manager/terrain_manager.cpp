@@ -292,6 +292,7 @@ std::vector<TerrainManager::PatchInfo> TerrainManager::patches() const {
     PatchInfo p;
     p.patch = s.patch;
     p.region = s.region;
+    p.apron = s.apron;
     p.origin = s.origin;
     p.particle_scale = s.scale;
     p.granule_radius_world = double(s.sim->def().particle_radius) * p.particle_scale;
@@ -299,6 +300,11 @@ std::vector<TerrainManager::PatchInfo> TerrainManager::patches() const {
     p.granules = impl_->record(s).granules;
     p.ready = s.ready();
     p.asleep = s.state == SlotState::Asleep;
+    if (const DemCost& c = impl_->record(s).cost; c.patch == s.patch) {
+      p.last_substeps = c.last_substeps;
+      p.last_spheres = c.last_spheres;
+      p.last_step_ms = c.last_wall_ms;
+    }
     out.push_back(p);
   }
   return out;
@@ -466,6 +472,14 @@ nlohmann::ordered_json TerrainManager::report() const {
     r["budget"] = b;
   }
   r["dem"] = I.dem_report();
+  // Kinematic and static bodies that moved faster into a patch than its granules can stop
+  // (coupling.cpp couple_before): their shells may have pushed granules through themselves.
+  if (!I.fast_tools.empty()) {
+    ojson ft = ojson::array();
+    for (const auto& [key, f] : I.fast_tools)
+      ft.push_back({{"body", f.name}, {"max_speed_m_s", f.speed}, {"limit_m_s", f.limit}, {"frames", f.frames}});
+    r["tools_too_fast"] = ft;
+  }
   return r;
 }
 

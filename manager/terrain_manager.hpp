@@ -183,6 +183,7 @@ class TerrainManager {
   struct PatchInfo {
     int patch = -1;                            // id (PatchEvent::patch)
     GridRegion region;                         // heightfield samples it covers
+    GridRegion apron;                          // region + the band its demotion may write
     Eigen::Vector3d origin = Eigen::Vector3d::Zero();  // m, world: its simulation's (0, 0, 0)
     double particle_scale = 1;                 // world size / simulated size, fixed while it lives
     double granule_radius_world = 0;           // m, sphere radius of its granules as the world sees them
@@ -190,6 +191,10 @@ class TerrainManager {
     int granules = 0;                          // uploaded
     bool ready = false;                        // filled (simulating or asleep)
     bool asleep = false;
+    // Its DEM's last step call (0 when it has not stepped since its promotion): substeps,
+    // spheres (granules' and enabled shells') and wall ms.
+    int last_substeps = 0, last_spheres = 0;
+    double last_step_ms = 0;
   };
   std::vector<PatchInfo> patches() const;
   const std::vector<PatchEvent>& events() const;

@@ -16,6 +16,7 @@
 #include <chrono>
 #include <cstdint>
 #include <deque>
+#include <map>
 #include <memory>
 #include <numbers>
 #include <string>
@@ -108,6 +109,14 @@ struct TerrainManager::Impl {
     Eigen::Vector3f force, torque;
   };
   std::unordered_map<std::int64_t, SoilForce> soil;
+  // Kinematic and static bodies whose shell moved into a patch faster than its granules can
+  // stop (body_key -> record): the report's tools_too_fast.
+  struct FastTool {
+    std::string name;
+    double speed = 0, limit = 0;  // m/s, world: the fastest seen, and the limit then
+    long long frames = 0;         // frames over the limit
+  };
+  std::map<std::int64_t, FastTool> fast_tools;
   std::unordered_set<std::int64_t> shells_sampled;  // bodies whose shell was sampled ahead (body_key)
 
   // m (world): a body's shell joins a patch when the body's lowest point is within half of
@@ -130,7 +139,7 @@ struct TerrainManager::Impl {
   const PatchRecord& record(const Slot& s) const { return records[std::size_t(&s - slots.data())]; }
   // Books one DEM step call of slot s that took wall_ms (DemCost): the granules' spheres and
   // the enabled shells'. A new patch in the slot starts its record's cost afresh.
-  void account_step(const Slot& s, double wall_ms) {
+  void account_step(const Slot& s, double wall_ms, const StepStats* stats = nullptr) {
     DemCost& c = record(s).cost;
     if (c.patch != s.patch) {
       if (c.patch >= 0) earlier_costs.push_back(c);
@@ -141,7 +150,7 @@ struct TerrainManager::Impl {
     int spheres = 4 * record(s).granules;
     for (const Carried& k : s.carried)
       if (k.enabled) spheres += s.sim->body_particle_count(k.shell);
-    c.add(wall_ms, s.sim->last_step(), spheres);
+    c.add(wall_ms, stats ? *stats : s.sim->last_step(), spheres);
   }
   float radius_world(double s) const { return float(def.material.radius * s); }
   float radius_world(const Slot& slot) const { return radius_world(slot.scale); }
@@ -279,7 +288,8 @@ struct TerrainManager::Impl {
   bool lying(RigidBodyId b, const Eigen::Vector3d& lo, const Eigen::Vector3d& hi) const;
   Status couple_before(Slot& slot, double dt);
   void hold_resting_bodies(Slot& slot);
-  void couple_after(Slot& slot, double dt);
+  // `stepped`: the DEM ran a substep this frame (else a kinematic shell's force stands).
+  void couple_after(Slot& slot, double dt, bool stepped = true);
   Result<std::vector<Eigen::Vector3f>> shell_points(RigidBodyId b, double scale) const;
 
   // ---- demotion (demotion.cpp): Stage::Demotion ----

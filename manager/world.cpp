@@ -50,8 +50,19 @@ Status World::enable_patches(const TerrainManagerDef& def) {
 
 Result<RigidBodyId> World::add_body(const RigidBodyDef& def) {
   auto id = bullet_->add_body(def);
-  if (id) entries_.push_back({def.name, time(), *id, false});
+  if (id) {
+    entries_.push_back({def.name, time(), *id, false});
+    enter_kinematic(entries_.size() - 1, def);
+  }
   return id;
+}
+
+// A kinematic body enters moving at its definition's velocities, held until changed.
+void World::enter_kinematic(std::size_t entry, const RigidBodyDef& def) {
+  if (def.motion != RigidMotion::Kinematic) return;
+  if (kinematic_.size() < entries_.size()) kinematic_.resize(entries_.size());
+  kinematic_[entry].v = def.linear_velocity;
+  kinematic_[entry].w = def.angular_velocity;
 }
 
 Result<RigidBodyId> World::adopt_body(btRigidBody* body, const std::string& name) {
@@ -130,6 +141,28 @@ Status World::check_body(RigidBodyId id) const {
                "must be a live body of this world (removed, or never added)"};
 }
 
+Status World::check_dynamic(RigidBodyId id) const {
+  const RigidMotion m = bullet_->motion(id);
+  if (m == RigidMotion::Dynamic) return Ok{};
+  const std::string& name = bullet_->definition(id).name;
+  return Error{"", "body", "'" + name + "' (" + to_string(m) + ")",
+               "must be a dynamic body: loads and impulses do not move a kinematic or static body",
+               m == RigidMotion::Kinematic ? "drive it with set_kinematic_target, set_kinematic_velocity or keyframes" : ""};
+}
+
+Status World::check_kinematic(RigidBodyId id, const char* field) const {
+  if (Status s = check_body(id); !s) return s;
+  const RigidMotion m = bullet_->motion(id);
+  if (m == RigidMotion::Kinematic) return Ok{};
+  return Error{"", field, "'" + bullet_->definition(id).name + "' (" + to_string(m) + ")", "must be a kinematic body"};
+}
+
+std::size_t World::entry_of(RigidBodyId id) const {
+  for (std::size_t k = 0; k < entries_.size(); ++k)
+    if (!entries_[k].removed && same(entries_[k].id, id)) return k;
+  return entries_.size();
+}
+
 void World::accumulate(RigidBodyId id, const Eigen::Vector3f& force, const Eigen::Vector3f& torque) {
   for (Held& h : held_)
     if (same(h.id, id)) {
@@ -142,6 +175,7 @@ void World::accumulate(RigidBodyId id, const Eigen::Vector3f& force, const Eigen
 
 Status World::apply_force(RigidBodyId id, const Eigen::Vector3f& force, const Eigen::Vector3d* world_point) {
   if (Status s = check_body(id); !s) return s;
+  if (Status s = check_dynamic(id); !s) return s;
   std::vector<Error> errs;
   if (auto e = check_load("force", force, "N")) errs.push_back(*e);
   Eigen::Vector3f torque = Eigen::Vector3f::Zero();
@@ -163,6 +197,7 @@ Status World::apply_force(RigidBodyId id, const Eigen::Vector3f& force, const Ei
 
 Status World::apply_torque(RigidBodyId id, const Eigen::Vector3f& torque) {
   if (Status s = check_body(id); !s) return s;
+  if (Status s = check_dynamic(id); !s) return s;
   if (auto e = check_load("torque", torque, "N m")) return *e;
   accumulate(id, Eigen::Vector3f::Zero(), torque);
   return Ok{};
@@ -170,6 +205,7 @@ Status World::apply_torque(RigidBodyId id, const Eigen::Vector3f& torque) {
 
 Status World::apply_impulse(RigidBodyId id, const Eigen::Vector3f& impulse, const Eigen::Vector3d* world_point) {
   if (Status s = check_body(id); !s) return s;
+  if (Status s = check_dynamic(id); !s) return s;
   std::vector<Error> errs;
   if (auto e = check_load("impulse", impulse, "N s")) errs.push_back(*e);
   BodyState st = bullet_->state(id);
@@ -218,6 +254,218 @@ void World::apply_scene_loads(double t) {
       accumulate(id, f, tq);
     }
   }
+}
+
+// ---- kinematic bodies ----
+
+World::Keyframe World::keyframe_at(const std::vector<Keyframe>& keys, double t) {
+  if (t <= keys.front().t) return keys.front();
+  for (std::size_t k = 1; k < keys.size(); ++k) {
+    const Keyframe& a = keys[k - 1];
+    const Keyframe& b = keys[k];
+    if (t >= b.t) continue;
+    const double u = (t - a.t) / (b.t - a.t);
+    Keyframe out;
+    out.t = t;
+    out.position = a.position + u * (b.position - a.position);
+    out.orientation = a.orientation.slerp(u, b.orientation);
+    return out;
+  }
+  return keys.back();
+}
+
+std::vector<Error> World::check_keyframes(const std::vector<Keyframe>& keys, const std::string& field) {
+  std::vector<Error> es;
+  if (keys.empty()) es.push_back({"", field, "[]", "must hold at least one keyframe"});
+  for (std::size_t k = 0; k < keys.size(); ++k) {
+    const Keyframe& f = keys[k];
+    const std::string at = field + "[" + std::to_string(k) + "]";
+    if (!std::isfinite(f.t) || f.t < 0)
+      es.push_back({"", at + ".t", format_number(f.t), "must be finite and >= 0 (s)"});
+    else if (k > 0 && std::isfinite(keys[k - 1].t) && !(f.t > keys[k - 1].t))
+      es.push_back({"", at + ".t", format_number(f.t),
+                    "must be greater than the keyframe before it (" + format_number(keys[k - 1].t) + " s): times strictly increasing"});
+    if (!f.position.allFinite() || f.position.cwiseAbs().maxCoeff() > 1e7)
+      es.push_back({"", at + ".position", vec_str(f.position), "must be finite, each coordinate within 1e7 (m, world)"});
+    const double n = f.orientation.coeffs().norm();
+    if (!f.orientation.coeffs().allFinite() || !(n > 1e-6))
+      es.push_back({"", at + ".orientation",
+                    "[" + format_number(f.orientation.w()) + ", " + format_number(f.orientation.x()) + ", " +
+                        format_number(f.orientation.y()) + ", " + format_number(f.orientation.z()) + "]",
+                    "must be a finite quaternion [w, x, y, z] with a norm > 0"});
+  }
+  return es;
+}
+
+Status World::set_keyframes(std::size_t entry, std::vector<Keyframe> keys) {
+  if (entry >= entries_.size()) return Error{"", "entry", std::to_string(entry), "must be a body of this world"};
+  if (auto es = check_keyframes(keys, "keyframes"); !es.empty()) return es;
+  for (Keyframe& k : keys) k.orientation.normalize();
+  if (kinematic_.size() < entries_.size()) kinematic_.resize(entries_.size());
+  kinematic_[entry].keys = std::move(keys);
+  kinematic_[entry].placed = false;
+  return Ok{};
+}
+
+Status World::set_kinematic_target(RigidBodyId id, const Eigen::Vector3d& position, const Eigen::Quaternionf& orientation) {
+  if (Status s = check_kinematic(id, "body"); !s) return s;
+  std::vector<Error> es;
+  if (!position.allFinite() || position.cwiseAbs().maxCoeff() > 1e7)
+    es.push_back({"", "position", vec_str(position), "must be finite, each coordinate within 1e7 (m, world)"});
+  if (!orientation.coeffs().allFinite() || !(orientation.coeffs().norm() > 1e-6))
+    es.push_back({"", "orientation",
+                  "[" + format_number(orientation.w()) + ", " + format_number(orientation.x()) + ", " +
+                      format_number(orientation.y()) + ", " + format_number(orientation.z()) + "]",
+                  "must be a finite quaternion [w, x, y, z] with a norm > 0"});
+  if (!es.empty()) return es;
+  const std::size_t e = entry_of(id);
+  if (kinematic_.size() < entries_.size()) kinematic_.resize(entries_.size());
+  Kinematic& k = kinematic_[e];
+  k.has_target = true;
+  k.target = position;
+  k.target_q = orientation.normalized();
+  return Ok{};
+}
+
+Status World::set_kinematic_velocity(RigidBodyId id, const Eigen::Vector3f& linear, const Eigen::Vector3f& angular) {
+  if (Status s = check_kinematic(id, "body"); !s) return s;
+  std::vector<Error> es;
+  if (!linear.allFinite() || linear.norm() > 1000.0f)
+    es.push_back({"", "linear", vec_str(linear), "must be finite with |v| <= 1000 (m/s)"});
+  if (!angular.allFinite() || angular.norm() > 1e4f)
+    es.push_back({"", "angular", vec_str(angular), "must be finite with |w| <= 1e4 (rad/s)"});
+  if (!es.empty()) return es;
+  const std::size_t e = entry_of(id);
+  if (kinematic_.size() < entries_.size()) kinematic_.resize(entries_.size());
+  kinematic_[e].v = linear;
+  kinematic_[e].w = angular;
+  return Ok{};
+}
+
+// Every kinematic body's pose at the end of the frame [t, t + dt] handed to Bullet (which
+// moves it there over the frame's substeps): its keyframes', its target, or its velocity's.
+void World::drive_kinematic(double t, double dt) {
+  if (kinematic_.size() < entries_.size()) kinematic_.resize(entries_.size());
+  for (std::size_t k = 0; k < entries_.size(); ++k) {
+    const Entry& e = entries_[k];
+    if (e.removed || !e.spawned() || !alive(e.id) || bullet_->motion(e.id) != RigidMotion::Kinematic) continue;
+    Kinematic& kin = kinematic_[k];
+    BodyState st = bullet_->state(e.id);
+    Eigen::Vector3d p;
+    Eigen::Quaternionf q;
+    if (!kin.keys.empty()) {
+      if (!kin.placed) {  // where its keyframes have it when it enters
+        const Keyframe now = keyframe_at(kin.keys, t);
+        st.position = now.position;
+        st.orientation = now.orientation.cast<float>();
+        st.linear_velocity.setZero();
+        st.angular_velocity.setZero();
+        bullet_->set_state(e.id, st);
+        kin.placed = true;
+      }
+      const Keyframe end = keyframe_at(kin.keys, t + dt);
+      p = end.position;
+      q = end.orientation.cast<float>();
+    } else if (kin.has_target) {
+      p = kin.target;
+      q = kin.target_q;
+      kin.has_target = false;
+    } else {
+      p = st.position + dt * kin.v.cast<double>();
+      q = st.orientation;
+      const float angle = kin.w.norm() * float(dt);
+      if (angle > 0) q = Eigen::Quaternionf(Eigen::AngleAxisf(angle, kin.w.normalized())) * q;
+      q.normalize();
+    }
+    bullet_->set_kinematic_target(e.id, p, q, float(dt));
+  }
+}
+
+// ---- reading the soil ----
+
+double World::lowest_point(RigidBodyId id) const {
+  const BodyState st = bullet_->state(id);
+  return st.position.y() - extent_below(bullet_->definition(id).shape, st.orientation);
+}
+
+double World::extent_below(const RigidShape& s, const Eigen::Quaternionf& q) {
+  const Eigen::Matrix3d R = q.cast<double>().normalized().toRotationMatrix();
+  const Eigen::Vector3d up = R.row(1).transpose();  // body-frame coordinates of world y: y_world = up · p_body
+  double below = 0;  // m, from the centre of mass down to the lowest point
+  switch (s.kind) {
+    case RigidShapeKind::Sphere: below = s.radius; break;
+    case RigidShapeKind::Box:
+      below = std::abs(up.x()) * s.half_extents.x() + std::abs(up.y()) * s.half_extents.y() +
+              std::abs(up.z()) * s.half_extents.z();
+      break;
+    case RigidShapeKind::Cylinder: {  // axis on body y: the rim's lowest point
+      const double ay = std::abs(up.y()), across = std::sqrt(std::max(0.0, 1.0 - ay * ay));
+      below = ay * 0.5 * s.height + across * s.radius;
+      break;
+    }
+    case RigidShapeKind::Capsule: below = std::abs(up.y()) * 0.5 * s.height + s.radius; break;
+    case RigidShapeKind::Mesh:
+      for (const auto& v : s.vertices) below = std::max(below, -up.dot(v.cast<double>()));
+      break;
+  }
+  return below;
+}
+
+double World::original_height(double x, double z) const {
+  const Heightfield& hf = *hf_;
+  const float lx = float(x - hf.origin_x()), lz = float(z - hf.origin_z());
+  if (original_tiles_.empty()) return hf.origin_y() + hf.sample(lx, lz);
+  // Heightfield::sample's cell and weights, read from the kept tile where there is one.
+  auto locate = [&](float c, int n, int& i, float& u) {
+    float f = c / hf.spacing();
+    if (!(f > 0)) f = 0;
+    if (f > float(n - 1)) f = float(n - 1);
+    i = std::min(static_cast<int>(f), n - 2);
+    u = f - float(i);
+  };
+  int i, j;
+  float u, v;
+  locate(lx, hf.samples_x(), i, u);
+  locate(lz, hf.samples_z(), j, v);
+  const int C = hf.tile_cells(), tx = i / C, tz = j / C;
+  const auto it = original_tiles_.find(std::size_t(tz) * hf.tiles_x() + tx);
+  if (it == original_tiles_.end()) return hf.origin_y() + hf.sample(lx, lz);
+  const int nx = hf.tile_samples_x(tx);
+  const float* p = it->second.data() + std::size_t(j - tz * C) * nx + (i - tx * C);
+  const float h00 = p[0], h10 = p[1], h01 = p[nx], h11 = p[nx + 1];
+  return hf.origin_y() + double((1 - u) * (1 - v) * h00 + u * (1 - v) * h10 + (1 - u) * v * h01 + u * v * h11);
+}
+
+// Before a demotion may write the heightfield: every tile under a live patch's apron (and the
+// sample beyond it the border band reaches) is copied once, as it was.
+void World::keep_original_heights() {
+  if (!manager_) return;
+  const Heightfield& hf = *hf_;
+  const int C = hf.tile_cells();
+  for (const auto& p : manager_->patches()) {
+    const GridRegion& a = p.apron;
+    const int i0 = std::max(0, a.i0 - 2), i1 = std::min(hf.samples_x() - 1, a.i0 + a.ni + 1);
+    const int j0 = std::max(0, a.j0 - 2), j1 = std::min(hf.samples_z() - 1, a.j0 + a.nj + 1);
+    for (int tz = std::max(0, (j0 - 1) / C); tz <= std::min(hf.tiles_z() - 1, j1 / C); ++tz)
+      for (int tx = std::max(0, (i0 - 1) / C); tx <= std::min(hf.tiles_x() - 1, i1 / C); ++tx) {
+        const std::size_t key = std::size_t(tz) * hf.tiles_x() + tx;
+        if (original_tiles_.count(key)) continue;
+        const float* d = hf.tile_data(tx, tz);
+        original_tiles_[key].assign(d, d + std::size_t(hf.tile_samples_x(tx)) * hf.tile_samples_z(tz));
+      }
+  }
+}
+
+World::Contact World::contact(RigidBodyId id) const {
+  Contact c;
+  if (!alive(id)) return c;
+  c.granular = soil_force(id);
+  c.heightfield_force = bullet_->terrain_force(id);
+  const BodyState st = bullet_->state(id);
+  c.lowest_y = lowest_point(id);
+  c.original_surface_y = original_height(st.position.x(), st.position.z());
+  c.sinkage = c.original_surface_y - c.lowest_y;
+  return c;
 }
 
 World::SoilForce World::soil_force(RigidBodyId id) const {
@@ -283,9 +531,11 @@ Status World::step(double dt, int substeps) {
       auto id = bullet_->add_body(it->second);
       if (!id) return fail("spawn", id.errors());
       e.id = *id;
+      enter_kinematic(it->first, it->second);
       it = pending_.erase(it);
     }
   }
+  drive_kinematic(t, dt);  // before the lod stage: contact prediction sees the prescribed velocities
   apply_scene_loads(t);  // the body frame's loads turn with the body as it starts the frame
   if (manager_) {
     if (Status s = manager_->before_bodies(t, dt, profile_); !s) return fail("dem", s);
@@ -303,6 +553,7 @@ Status World::step(double dt, int substeps) {
     if (Status s = check_bodies("bodies"); !s) return s;
   }
   if (manager_) {
+    keep_original_heights();
     if (Status s = manager_->after_bodies(t, dt, profile_); !s) return fail("demotion", s);
     if (Status s = check_bodies("demotion"); !s) return s;
     for (const GridRegion& r : manager_->take_dirty_regions()) dirty_.push_back(r);
@@ -351,6 +602,7 @@ Status World::step(double dt, int substeps) {
 
 Status World::demote_all() {
   if (!manager_) return Ok{};
+  keep_original_heights();
   if (Status s = manager_->demote_all(time(), profile_); !s) return fail("demotion", s);
   for (const GridRegion& r : manager_->take_dirty_regions()) dirty_.push_back(r);
   return Ok{};
@@ -426,10 +678,13 @@ nlohmann::ordered_json World::report() const {
       b["linear_velocity_m_s"] = vec_json(s.linear_velocity);
       b["angular_velocity_rad_s"] = vec_json(s.angular_velocity);
       b["at_rest"] = rest;
-      const SoilForce soil = soil_force(e.id);
-      b["carried_by_patch"] = soil.carried;
-      b["granular_force_N"] = vec_json(soil.force);
-      b["granular_torque_N_m"] = vec_json(soil.torque);
+      const Contact c = contact(e.id);
+      b["motion"] = to_string(bullet_->motion(e.id));
+      b["carried_by_patch"] = c.granular.carried;
+      b["granular_force_N"] = vec_json(c.granular.force);
+      b["granular_torque_N_m"] = vec_json(c.granular.torque);
+      b["heightfield_force_N"] = vec_json(c.heightfield_force);
+      b["sinkage_m"] = c.sinkage;
     }
     bodies.push_back(b);
   }

@@ -31,6 +31,7 @@
 #include <nlohmann/json.hpp>
 #include <string>
 #include <map>
+#include <unordered_map>
 #include <vector>
 
 #include "common/error.hpp"
@@ -116,6 +117,32 @@ class World {
   // The loads of the body at entry `entry` (entries()), from its spawn on; replaces any before.
   void set_loads(std::size_t entry, std::vector<Load> loads);
 
+  // ---- kinematic and static bodies (RigidBodyDef::motion) ----
+  // A kinematic body moves along what is prescribed for each frame, in this order of
+  // precedence: its keyframes (set_keyframes), a target pose for the end of the next step
+  // (set_kinematic_target, used once), a velocity held until changed (set_kinematic_velocity);
+  // with none it holds still. Each is refused, naming the argument, for a body that is not
+  // alive or not kinematic ("body") and for non-finite values.
+  struct Keyframe {
+    double t = 0;                                                 // s, simulated time
+    Eigen::Vector3d position = Eigen::Vector3d::Zero();           // m, world (centre of mass)
+    Eigen::Quaterniond orientation = Eigen::Quaterniond::Identity();  // normalised here
+  };
+  // The pose at time t (s) of keyframes `keys` (non-empty, times increasing): linear in the
+  // position and slerp in the orientation between the keyframes around t, the first before
+  // them, the last after them.
+  static Keyframe keyframe_at(const std::vector<Keyframe>& keys, double t);
+  // Checks keyframes: at least one; t finite, >= 0 and strictly increasing; positions finite
+  // and within 1e7 m; orientations finite with a norm > 0. Errors name `field`[k].t/.position/.orientation.
+  static std::vector<Error> check_keyframes(const std::vector<Keyframe>& keys, const std::string& field);
+  // The keyframes of the kinematic body at entry `entry` (entries()): it is placed at the
+  // pose of the time it enters, then follows them (set_kinematic_target every frame).
+  Status set_keyframes(std::size_t entry, std::vector<Keyframe> keys);
+  // The pose (m, world) the body reaches at the end of the next step.
+  Status set_kinematic_target(RigidBodyId id, const Eigen::Vector3d& position, const Eigen::Quaternionf& orientation);
+  // m/s and rad/s (world), |v| <= 1000, |w| <= 1e4, held for every following step.
+  Status set_kinematic_velocity(RigidBodyId id, const Eigen::Vector3f& linear, const Eigen::Vector3f& angular);
+
   // ---- the soil's force ----
   struct SoilForce {
     Eigen::Vector3f force = Eigen::Vector3f::Zero();   // N, world: mean contact force of the granules over the last step
@@ -125,6 +152,27 @@ class World {
   // What the granular patch carrying the body did to it in the last step (zeros, not carried,
   // when none did, before the first step, or when the body is not alive).
   SoilForce soil_force(RigidBodyId id) const;
+
+  // What the ground did to a body in the last step (docs/api.md "Reading the soil").
+  struct Contact {
+    SoilForce granular;                                        // the patch's granules on its shell
+    Eigen::Vector3f heightfield_force = Eigen::Vector3f::Zero();  // N, world: Bullet's heightfield contacts, mean over the step
+    // Sinkage (m): the original surface height under the centre of mass (the heightfield as it
+    // was before any patch wrote it, bilinear at the centre's x, z) minus the body's lowest
+    // point (world y). > 0: the body is that deep below where the surface was; < 0: its
+    // clearance above it.
+    double sinkage = 0;
+    double lowest_y = 0;                                       // m, world: the lowest point of its shape
+    double original_surface_y = 0;                             // m, world
+  };
+  Contact contact(RigidBodyId id) const;
+  // The heightfield's height (m, world) at world (x, z) as it was before any demotion wrote
+  // it (the tiles a patch may write are copied first), bilinear like Heightfield::sample.
+  double original_height(double x, double z) const;
+  // The lowest point (world y, m) of the body's shape at its current pose.
+  double lowest_point(RigidBodyId id) const;
+  // How far (m, >= 0) a shape at orientation q reaches below its centre of mass.
+  static double extent_below(const RigidShape& shape, const Eigen::Quaternionf& q);
 
   // ---- the frame ----
   // Moves the camera the manager's scale bands are measured from (m, world).
@@ -182,6 +230,12 @@ class World {
   void apply_scene_loads(double t);
 
   Status fail(const char* stage, Status s);
+  std::size_t entry_of(RigidBodyId id) const;  // entries_.size() when none
+  Status check_dynamic(RigidBodyId id) const;
+  Status check_kinematic(RigidBodyId id, const char* field) const;
+  void drive_kinematic(double t, double dt);
+  void enter_kinematic(std::size_t entry, const RigidBodyDef& def);
+  void keep_original_heights();
 
 
   // Declaration order is destruction order reversed: the manager refers to the Bullet world
@@ -200,6 +254,17 @@ class World {
   };
   std::vector<Held> held_;    // in the order bodies were first loaded
   std::vector<std::vector<Load>> loads_;  // by entry index (scene loads)
+  struct Kinematic {                      // what drives a kinematic body, by entry index
+    std::vector<Keyframe> keys;
+    bool placed = false;                  // put at its keyframes' pose when it entered
+    bool has_target = false;
+    Eigen::Vector3d target = Eigen::Vector3d::Zero();
+    Eigen::Quaternionf target_q = Eigen::Quaternionf::Identity();
+    Eigen::Vector3f v = Eigen::Vector3f::Zero(), w = Eigen::Vector3f::Zero();
+  };
+  std::vector<Kinematic> kinematic_;
+  // Elevation tiles as they were before a demotion first wrote them (tile index -> samples).
+  std::unordered_map<std::size_t, std::vector<float>> original_tiles_;
   std::vector<double> frame_ms_;       // ring of the last kFrameWindow steps' wall ms
   FrameRecord last_frame_;
   double frame_max_ms_ = 0, conversion_max_ms_ = 0;

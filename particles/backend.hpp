@@ -30,6 +30,9 @@ class DemBackend {
 
   virtual Vec3 body_velocity(BodyId b) const = 0;
   virtual Vec3 body_angular_velocity(BodyId b) const = 0;
+  // Contact force (N) and torque about the centre of mass (N m) on body b in the last substep.
+  virtual Vec3 body_force(BodyId b) const = 0;
+  virtual Vec3 body_torque(BodyId b) const = 0;
   // Sphere centres by stable particle id (granules' spheres first when they were added first).
   virtual std::vector<Vec3> particle_positions() const = 0;
   virtual const SimulationDef& def() const = 0;
@@ -64,6 +67,8 @@ class DemBackendOf final : public DemBackend {
   void wake() override { sim_.wake(); }
   Vec3 body_velocity(BodyId b) const override { return sim_.body_velocity(b); }
   Vec3 body_angular_velocity(BodyId b) const override { return sim_.body_angular_velocity(b); }
+  Vec3 body_force(BodyId b) const override { return sim_.body_force(b); }
+  Vec3 body_torque(BodyId b) const override { return sim_.body_torque(b); }
   std::vector<Vec3> particle_positions() const override { return sim_.particle_positions(); }
   const SimulationDef& def() const override { return sim_.def(); }
   const GranuleShape& granule_shape() const override { return sim_.granule_shape(); }

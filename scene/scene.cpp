@@ -45,6 +45,7 @@ const std::vector<std::string> kProceduralKinds = {"flat", "plane", "hills", "no
 const std::vector<std::string> kShapeKinds = {"sphere", "box", "cylinder", "capsule", "mesh"};
 const std::vector<std::string> kBackends = {"cpu", "gl"};
 const std::vector<std::string> kLoadFrames = {"world", "body"};
+const std::vector<std::string> kBodyMotions = {"dynamic", "kinematic", "static"};
 const std::vector<std::string> kHeightfieldFormats = {"png16", "raw_f32", "esri_ascii"};
 
 // Value limits, one place (docs/scene-format.md lists the same).
@@ -222,10 +223,42 @@ LoadDef parse_load(Ctx& c, const json& j, const std::string& path) {
   return l;
 }
 
+// "orientation" (a unit quaternion) or "euler_deg" of object `p` into q.
+void parse_orientation(Ctx& c, Obj& p, std::array<double, 4>& q_out) {
+  if (p.both("orientation", "euler_deg")) return;
+  if (const json* q = p.get("orientation")) {
+    if (auto v = read_numbers<4>(c, *q, p.at("orientation"), closed(-1.0 - 1e-3, 1.0 + 1e-3, ""))) {
+      const double n = std::sqrt((*v)[0] * (*v)[0] + (*v)[1] * (*v)[1] + (*v)[2] * (*v)[2] + (*v)[3] * (*v)[3]);
+      if (std::abs(n - 1.0) > 1e-3) {
+        c.error(p.at("orientation"), show(*q), "must be a unit quaternion [w, x, y, z] (|q| = 1 ± 0.001)",
+                "|q| = " + fmt_num(n));
+      } else {
+        q_out = {(*v)[0] / n, (*v)[1] / n, (*v)[2] / n, (*v)[3] / n};
+      }
+    }
+  }
+  if (const json* e = p.get("euler_deg")) {
+    if (auto v = read_numbers<3>(c, *e, p.at("euler_deg"), closed(-720.0, 720.0, "deg"))) q_out = euler_deg_to_quaternion(*v);
+  }
+}
+
+// One keyframe of a kinematic body (docs/scene-format.md "keyframes").
+KeyframeDef parse_keyframe(Ctx& c, const json& j, const std::string& path) {
+  KeyframeDef k;
+  Obj o(c, j, path);
+  o.number_req("t", k.t, closed(0.0, 1e6, "s"));
+  o.vec3_req("position", k.position, kWorldCoord);
+  parse_orientation(c, o, k.orientation);
+  o.finish();
+  return k;
+}
+
 BodyDef parse_body(Ctx& c, const json& j, const std::string& path, std::optional<TriangleMesh>& mesh) {
   BodyDef b;
   Obj o(c, j, path);
   o.string_req("name", b.name, "a unique name");
+  o.enumeration("motion", b.motion, kBodyMotions);
+  const bool dynamic = b.motion == MotionKind::Dynamic;
   if (const json* sj = o.require("shape", "an object with \"type\": " + join(kShapeKinds, " | "))) {
     Obj s(c, *sj, o.at("shape"));
     auto& sh = b.shape;
@@ -262,7 +295,13 @@ BodyDef parse_body(Ctx& c, const json& j, const std::string& path, std::optional
     }
     s.finish();
   }
-  if (!o.both("mass", "density")) {
+  if (!dynamic) {
+    // Nothing moves a kinematic or static body: it has no mass to give.
+    for (const char* key : {"mass", "density"})
+      if (o.has(key))
+        c.error(o.at(key), show(*o.get(key)),
+                "leave it out: a " + std::string(to_string(b.motion)) + " body has no mass (nothing moves it)");
+  } else if (!o.both("mass", "density")) {
     const bool given = o.has("mass") || o.has("density");
     b.mass = o.number_opt("mass", positive(1e9, "kg"));
     b.density = o.number_opt("density", positive(1e5, "kg/m^3"));
@@ -288,24 +327,7 @@ BodyDef parse_body(Ctx& c, const json& j, const std::string& path, std::optional
   if (const json* pj = o.get("pose")) {
     Obj p(c, *pj, o.at("pose"));
     p.vec3("position", b.pose.position, kWorldCoord);
-    if (!p.both("orientation", "euler_deg")) {
-      if (const json* q = p.get("orientation")) {
-        if (auto v = read_numbers<4>(c, *q, p.at("orientation"), closed(-1.0 - 1e-3, 1.0 + 1e-3, ""))) {
-          const double n = std::sqrt((*v)[0] * (*v)[0] + (*v)[1] * (*v)[1] + (*v)[2] * (*v)[2] + (*v)[3] * (*v)[3]);
-          if (std::abs(n - 1.0) > 1e-3) {
-            c.error(p.at("orientation"), show(*q), "must be a unit quaternion [w, x, y, z] (|q| = 1 ± 0.001)",
-                    "|q| = " + fmt_num(n));
-          } else {
-            b.pose.orientation = {(*v)[0] / n, (*v)[1] / n, (*v)[2] / n, (*v)[3] / n};
-          }
-        }
-      }
-      if (const json* e = p.get("euler_deg")) {
-        if (auto v = read_numbers<3>(c, *e, p.at("euler_deg"), closed(-720.0, 720.0, "deg"))) {
-          b.pose.orientation = euler_deg_to_quaternion(*v);
-        }
-      }
-    }
+    parse_orientation(c, p, b.pose.orientation);
     p.finish();
   }
   o.vec3("linear_velocity", b.linear_velocity, closed(-limits::kMaxBodySpeed, limits::kMaxBodySpeed, "m/s"));
@@ -322,11 +344,56 @@ BodyDef parse_body(Ctx& c, const json& j, const std::string& path, std::optional
   o.knob("friction", b.friction, knobs::kBodyFriction);
   o.knob("restitution", b.restitution, knobs::kBodyRestitution);
   o.knob("rolling_friction", b.rolling_friction, knobs::kBodyRollingFriction);
-  if (const json* lj = o.get("loads")) {
+  if (const json* kj = o.get("keyframes")) {
+    if (b.motion != MotionKind::Kinematic) {
+      c.error(o.at("keyframes"), "keyframes", "only a kinematic body follows keyframes (\"motion\": \"kinematic\")",
+              "this body is " + std::string(to_string(b.motion)));
+    } else if (kj->is_array() && (kj->empty() || kj->size() > std::size_t(kMaxKeyframesPerBody))) {
+      c.error(o.at("keyframes"), std::to_string(kj->size()) + " keyframes",
+              "must hold 1 to " + std::to_string(kMaxKeyframesPerBody) + " keyframes");
+    } else {
+      for_each_element(c, *kj, o.at("keyframes"),
+                       [&](const json& e, const std::string& p) { b.keyframes.push_back(parse_keyframe(c, e, p)); });
+      for (std::size_t k = 1; k < b.keyframes.size(); ++k)
+        if (!(b.keyframes[k].t > b.keyframes[k - 1].t))
+          c.error(o.at("keyframes") + "[" + std::to_string(k) + "].t", fmt_num(b.keyframes[k].t),
+                  "must be greater than the keyframe before it (" + fmt_num(b.keyframes[k - 1].t) +
+                      " s): times strictly increasing");
+      if (o.has("pose"))
+        c.error(o.at("pose"), show(*o.get("pose")), "leave it out: a body with keyframes starts at their pose",
+                "its pose at spawn_time is the keyframes'");
+    }
+  }
+  if (b.motion == MotionKind::Static) {
+    for (const char* key : {"linear_velocity", "angular_velocity"})
+      if (o.has(key) && o.valid() && (key[0] == 'l' ? b.linear_velocity : b.angular_velocity) != Vec3d{0.0, 0.0, 0.0})
+        c.error(o.at(key), show(*o.get(key)), "must be [0, 0, 0] or left out: a static body never moves");
+  }
+  if (!dynamic && o.has("loads"))
+    c.error(o.at("loads"), show(*o.get("loads")), "leave it out: loads move only a dynamic body",
+            "this body is " + std::string(to_string(b.motion)) + (b.motion == MotionKind::Kinematic ? "; give it keyframes" : ""));
+  else if (const json* lj = o.get("loads")) {
     if (lj->is_array() && lj->size() > std::size_t(kMaxLoadsPerBody))
       c.error(o.at("loads"), std::to_string(lj->size()) + " loads", "at most " + std::to_string(kMaxLoadsPerBody) + " loads per body");
     else
       for_each_element(c, *lj, o.at("loads"), [&](const json& e, const std::string& p) { b.loads.push_back(parse_load(c, e, p)); });
+  }
+  if (!b.keyframes.empty()) {  // the pose at spawn_time: the keyframes', as the run places it
+    const auto& ks = b.keyframes;
+    std::size_t k = 0;
+    while (k + 1 < ks.size() && ks[k + 1].t <= b.spawn_time) ++k;
+    const KeyframeDef& a = ks[k];
+    b.pose.position = a.position;
+    b.pose.orientation = a.orientation;
+    if (k + 1 < ks.size() && b.spawn_time > a.t) {
+      const KeyframeDef& n = ks[k + 1];
+      const double u = (b.spawn_time - a.t) / (n.t - a.t);
+      for (int i = 0; i < 3; ++i) b.pose.position[i] = a.position[i] + u * (n.position[i] - a.position[i]);
+      const Eigen::Quaterniond qa(a.orientation[0], a.orientation[1], a.orientation[2], a.orientation[3]);
+      const Eigen::Quaterniond qn(n.orientation[0], n.orientation[1], n.orientation[2], n.orientation[3]);
+      const Eigen::Quaterniond q = qa.slerp(u, qn);
+      b.pose.orientation = {q.w(), q.x(), q.y(), q.z()};
+    }
   }
   o.finish();
   return b;
@@ -498,6 +565,11 @@ OutputsDef parse_outputs(Ctx& c, const json& j) {
     });
   }
   o.boolean("report", out.report);
+  if (o.has("csv")) {
+    o.string("csv", out.csv);
+    if (out.csv.empty() || out.csv.find("..") != std::string::npos || out.csv.front() == '/')
+      c.error(o.at("csv"), json_quote(out.csv), "must be a file name relative to the run's output directory (no '..')");
+  }
   o.finish();
   return out;
 }
@@ -643,6 +715,7 @@ const SimulationPreset* find_simulation_preset(const std::string& name) {
 const char* to_string(Backend b) { return kBackends[static_cast<int>(b)].c_str(); }
 const char* to_string(HeightfieldFormat f) { return kHeightfieldFormats[static_cast<int>(f)].c_str(); }
 const char* to_string(LoadFrame f) { return kLoadFrames[static_cast<int>(f)].c_str(); }
+const char* to_string(MotionKind m) { return kBodyMotions[static_cast<int>(m)].c_str(); }
 
 Result<SceneDef> parse_scene(const std::string& json_text, const std::string& source_name,
                              const std::string& base_dir) {
@@ -783,6 +856,20 @@ std::vector<Error> check_bodies_against_terrain(
                         "the body's lowest point must start at or above the bedrock (world y = " + fmt_num(bedrock) +
                             " m under x = " + fmt_num(x) + ", z = " + fmt_num(z) + ")",
                         "body below bedrock: its lowest point is at y = " + fmt_num(low) + " m"});
+    }
+    // A kinematic body goes where its keyframes send it: none may put it through the bedrock.
+    for (std::size_t k = 0; k < b.keyframes.size(); ++k) {
+      BodyDef at = b;
+      at.pose.position = b.keyframes[k].position;
+      at.pose.orientation = b.keyframes[k].orientation;
+      const double kx = at.pose.position[0], kz = at.pose.position[2];
+      const double rock = bedrock_world_height(kx, kz), klow = at.pose.position[1] - body_extent_below(at);
+      if (klow < rock)
+        errors.push_back({scene.source_path, "bodies[" + std::to_string(i) + "].keyframes[" + std::to_string(k) + "].position",
+                          json(at.pose.position).dump(),
+                          "the body's lowest point must stay at or above the bedrock (world y = " + fmt_num(rock) +
+                              " m under x = " + fmt_num(kx) + ", z = " + fmt_num(kz) + ")",
+                          "at t = " + fmt_num(b.keyframes[k].t) + " s its lowest point would be at y = " + fmt_num(klow) + " m"});
     }
   }
   return errors;

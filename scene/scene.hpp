@@ -142,9 +142,24 @@ struct LoadDef {
   LoadFrame frame = LoadFrame::World;          // body: force and torque turn with the body
 };
 
+// How a body moves (docs/scene-format.md "motion"): by the forces on it, along its keyframes
+// (or its velocities, held), or not at all.
+enum class MotionKind { Dynamic, Kinematic, Static };
+
+// A kinematic body's pose at simulated time t; between keyframes the position is linear and
+// the orientation a slerp, before the first and after the last they hold.
+inline constexpr int kMaxKeyframesPerBody = 100000;
+struct KeyframeDef {
+  double t = 0.0;                              // s, strictly increasing
+  Vec3d position = {0.0, 0.0, 0.0};            // m, world
+  std::array<double, 4> orientation = {1.0, 0.0, 0.0, 0.0};  // unit quaternion [w, x, y, z] (or euler_deg in the file)
+};
+
 struct BodyDef {
   std::string name;                            // unique
   ShapeDef shape;
+  MotionKind motion = MotionKind::Dynamic;
+  std::vector<KeyframeDef> keyframes;          // kinematic only; the pose comes from them
   std::optional<double> mass;                  // kg        } exactly one of the two is set
   std::optional<double> density;               // kg/m³     }
   PoseDef pose;
@@ -280,6 +295,9 @@ struct OutputsDef {
   std::vector<FrameOutputDef> frames;
   std::vector<HeightfieldOutputDef> heightfields;
   bool report = true;                          // write report.json
+  // The run's time series (docs/cli.md "CSV"): one row per frame per body in this file, one
+  // per frame per live patch in its stem + "_patches.csv"; "" = none.
+  std::string csv;
 };
 
 // ---- the scene ----
@@ -340,5 +358,6 @@ const char* to_string(ShapeKind k);
 const char* to_string(Backend b);
 const char* to_string(HeightfieldFormat f);
 const char* to_string(LoadFrame f);
+const char* to_string(MotionKind m);
 
 }  // namespace sandpatch

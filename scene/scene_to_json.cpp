@@ -84,9 +84,16 @@ nlohmann::json scene_to_json(const SceneDef& s) {
         break;
     }
     bj["shape"] = sh;
+    bj["motion"] = to_string(b.motion);
     if (b.density) bj["density"] = *b.density;
-    else bj["mass"] = b.mass.value_or(0.0);
-    bj["pose"] = {{"position", b.pose.position}, {"orientation", b.pose.orientation}};
+    else if (b.motion == MotionKind::Dynamic) bj["mass"] = b.mass.value_or(0.0);
+    if (b.keyframes.empty()) {
+      bj["pose"] = {{"position", b.pose.position}, {"orientation", b.pose.orientation}};
+    } else {
+      json ks = json::array();
+      for (const KeyframeDef& k : b.keyframes) ks.push_back({{"t", k.t}, {"position", k.position}, {"orientation", k.orientation}});
+      bj["keyframes"] = ks;
+    }
     bj["linear_velocity"] = b.linear_velocity;
     bj["angular_velocity"] = b.angular_velocity;
     bj["spawn_time"] = b.spawn_time;
@@ -175,6 +182,7 @@ nlohmann::json scene_to_json(const SceneDef& s) {
     out["heightfields"].push_back(hj);
   }
   out["report"] = s.outputs.report;
+  if (!s.outputs.csv.empty()) out["csv"] = s.outputs.csv;
   j["outputs"] = out;
   return j;
 }

@@ -1,6 +1,6 @@
 // sandpatch: the command-line program (docs/cli.md).
 //   sandpatch run [SCENE] [--out DIR] [--seconds S | --frames N] [--backend cpu|gl] [--threads T]
-//                 [--video FILE [--video-fps F]]
+//                 [--video FILE [--video-fps F]] [--csv FILE]
 //   sandpatch render [SCENE] --at T [--camera NAME] [--image FILE] [--out DIR] [--frame-budget MS|off]
 //   sandpatch view [SCENE] [--frames N [--screenshot FILE]] [--size WxH] [--camera NAME] [--backend cpu|gl]
 //                  [--threads T] [--frame-budget MS|off]
@@ -89,7 +89,7 @@ int cmd_info() {
 // ---- run and render: a scene run to the end (run) or to time T with a picture (render) ----
 
 struct RunCli {
-  std::string scene, out_dir, backend, video;
+  std::string scene, out_dir, backend, video, csv;
   double video_fps = 30;
   double seconds = -1;
   long long frames = -1;
@@ -113,6 +113,7 @@ void add_run(CLI::App& app, RunCli& a) {
   run->add_flag("--quiet", a.quiet, "No progress output");
   run->add_option("--video", a.video, "Also write a video of the scene's first camera to this file, through ffmpeg");
   run->add_option("--video-fps", a.video_fps, "Video frames per simulated second (default 30; at most 1 / dt)");
+  run->add_option("--csv", a.csv, "Also write each body's pose, velocity, soil forces and sinkage per frame to this CSV file (patches: its stem + _patches.csv)");
 }
 
 struct RenderCli {
@@ -197,6 +198,7 @@ int cmd_run(const RunCli& a, int argc, char** argv) {
     opt.progress = a.quiet ? ProgressStyle::None : ProgressStyle::Auto;
     opt.video = a.video;
     opt.video_fps = a.video_fps;
+    opt.csv = a.csv;
     return opt;
   }, argc, argv);
 }

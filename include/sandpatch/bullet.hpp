@@ -14,8 +14,9 @@
 // While adopted, the body's gravity is the terrain's and its transform is relative to
 // Terrain::origin() (world − origin; the same as world with the default origin 0, 0, 0);
 // giving it back restores the game's gravity and world coordinates and changes nothing else.
-// Shapes: sphere, box, y-axis cylinder and capsule, convex hull; static bodies and other
-// shapes are refused naming btRigidBody.shape / btRigidBody.mass. The game must use the same
+// Shapes: sphere, box, y-axis cylinder and capsule, convex hull; static and kinematic bodies
+// (copy those with body_def, which maps them to BodyMotion) and other shapes are refused
+// naming btRigidBody.shape / btRigidBody.mass. The game must use the same
 // Bullet as libsandpatch (Debian's libbullet-dev, float): adopt() checks sizeof(btScalar),
 // BT_BULLET_VERSION and sizeof(btRigidBody) and refuses a mismatch (btRigidBody.abi).
 //
@@ -46,8 +47,9 @@ namespace sandpatch::api::bullet {
 // The BodyDef of a Bullet body: sphere, box, cylinder (y axis), capsule (y axis) or convex
 // hull (as a mesh: its triangles are computed by Bullet's btConvexHullComputer; like every
 // mesh it is re-centred on its centroid, so give hulls centred on the body's origin); mass from the
-// inverse mass (a static body, inverse mass 0, is refused), pose, velocities, friction,
-// restitution, rolling friction. Other shapes are refused with an error naming the shape.
+// inverse mass (inverse mass 0: BodyMotion::Kinematic for a CF_KINEMATIC_OBJECT body, else
+// BodyMotion::Static), pose, velocities, friction, restitution, rolling friction. Other
+// shapes are refused with an error naming the shape. (adopt() takes dynamic bodies only.)
 inline Result<BodyDef> body_def(const btRigidBody& rb, const std::string& name = "") {
   BodyDef d;
   d.name = name;
@@ -112,9 +114,12 @@ inline Result<BodyDef> body_def(const btRigidBody& rb, const std::string& name =
       return Error{"", "btRigidBody.shape", shape->getName(),
                    "must be a btSphereShape, btBoxShape, btCylinderShape, btCapsuleShape or btConvexHullShape", ""};
   }
-  if (!(rb.getInvMass() > 0))
-    return Error{"", "btRigidBody.mass", "0 (static)", "only dynamic bodies (inverse mass > 0) can be handed over", ""};
-  d.mass = 1.0 / rb.getInvMass();
+  if (rb.getInvMass() > 0) {
+    d.mass = 1.0 / rb.getInvMass();
+  } else {
+    // Inverse mass 0: a kinematic body (CF_KINEMATIC_OBJECT) or a static one.
+    d.motion = rb.isKinematicObject() ? BodyMotion::Kinematic : BodyMotion::Static;
+  }
   const btTransform& tr = rb.getWorldTransform();
   d.position = {tr.getOrigin().x(), tr.getOrigin().y(), tr.getOrigin().z()};
   const btQuaternion q = tr.getRotation();

@@ -204,10 +204,18 @@ struct ShapeDef {
   std::vector<int> triangles;
 };
 
+// How a body moves (docs/api.md "Kinematic and static bodies"):
+//   Dynamic    by gravity, contacts, the soil and the loads put on it
+//   Kinematic  along the pose prescribed each step (set_kinematic_target, set_body_velocity,
+//              set_keyframes): it pushes bodies and granules, nothing pushes it back
+//   Static     never moves (it still holds up bodies and granules)
+enum class BodyMotion { Dynamic, Kinematic, Static };
+
 struct BodyDef {
   std::string name;                            // for messages and the report
   ShapeDef shape;
-  double mass = 1.0;                           // kg, [1e-6, 1e9]
+  BodyMotion motion = BodyMotion::Dynamic;
+  double mass = 1.0;                           // kg, [1e-6, 1e9] (dynamic; ignored for kinematic and static)
   Vec3 position = {0.0, 0.0, 0.0};             // m, world (centre at or above the surface)
   Quat orientation = {1.0f, 0.0f, 0.0f, 0.0f}; // [w, x, y, z], normalised on creation (norm > 0)
   Vec3f linear_velocity = {0.0f, 0.0f, 0.0f};  // m/s, world, |v| <= 1000
@@ -238,6 +246,27 @@ struct BodyForces {
   Vec3f force{};                               // N, world
   Vec3f torque{};                              // N m, world, about the centre of mass
   bool carried = false;                        // a patch carried the body in the last step (else zeros)
+};
+
+// What the ground did to a body in the last step (Terrain::body_contact).
+struct BodyContact {
+  Vec3f granular_force{};                      // N, world: the granules' contact force on its shell, mean over the step
+  Vec3f granular_torque{};                     // N m, world, about the centre of mass
+  bool on_particles = false;                   // a patch carried the body in the last step (else the two above are 0)
+  Vec3f heightfield_force{};                   // N, world: Bullet's heightfield contacts (normal + friction), mean over the step
+  // m: the original surface height under the centre of mass (the heightfield before any patch
+  // wrote it, bilinear at the centre's x, z) minus the body's lowest point; > 0 below that
+  // surface, < 0 the clearance above it.
+  double sinkage = 0;
+  double lowest_y = 0;                         // m, world: the lowest point of the body's shape
+  double original_surface_y = 0;               // m, world: the original surface under its centre
+};
+
+// A pose of a kinematic body at simulated time t (Terrain::set_keyframes).
+struct Keyframe {
+  double t = 0;                                // s, >= 0, strictly increasing over the list
+  Vec3 position{};                             // m, world (centre of mass)
+  Quat orientation{1.0f, 0.0f, 0.0f, 0.0f};    // [w, x, y, z], normalised (norm > 0)
 };
 
 // ---------------------------------------------------------------------------------------
@@ -336,8 +365,26 @@ class SANDPATCH_API Terrain {
   bool alive(BodyHandle h) const;
   Result<BodyState> body_state(BodyHandle h) const;
   // Teleports the body (wakes it). Position m world, orientation [w, x, y, z] (normalised).
+  // Refused for a static body.
   Status set_body_transform(BodyHandle h, const Vec3& position, const Quat& orientation);
+  // A dynamic body's velocities now; a kinematic body's prescribed velocities, held for every
+  // following step until changed (its pose advances by them). Refused for a static body.
   Status set_body_velocity(BodyHandle h, const Vec3f& linear, const Vec3f& angular);
+  // ---- kinematic bodies ----
+  // The pose (m, world; [w, x, y, z]) a kinematic body reaches at the end of the next step();
+  // it moves there in a straight line and a slerp over the step, at the velocities that takes,
+  // which bodies and granules it meets see. Used once; the body then holds still, moves by its
+  // set_body_velocity, or follows its keyframes (which take precedence over both).
+  // Refused, naming the argument: a body that is not kinematic, non-finite values, a zero
+  // quaternion, a lowest point below the bedrock (surface − soil_depth) at the target.
+  Status set_kinematic_target(BodyHandle h, const Vec3& position, const Quat& orientation);
+  // Keyframes of a kinematic body (replacing any before): its pose at simulated time t is
+  // linear in the position and slerp in the orientation between the keyframes around t, the
+  // first's before them and the last's after them; the next step() puts it at the pose of the
+  // current time and it follows them from there. Refused, naming keyframes[k].t / .position /
+  // .orientation: none given, non-finite values, times not strictly increasing or < 0, a zero
+  // quaternion, a lowest point below the bedrock.
+  Status set_keyframes(BodyHandle h, const std::vector<Keyframe>& keyframes);
   std::vector<BodyHandle> bodies() const;
 
   // ---- driving bodies ----
@@ -347,8 +394,8 @@ class SANDPATCH_API Terrain {
   // cleared: call them every step for a lasting push. An impulse (N s, world) changes the
   // velocities at once: Δv = J / m, and at a world point Δω = I⁻¹ ((p − c) × J).
   // Refused, naming the argument ("apply_force.force") and its value: a stale handle,
-  // non-finite values, a magnitude above 1e9 (N, N m, N s), a point farther than 1e4 m from
-  // the centre of mass.
+  // a kinematic or static body ("apply_force.body"), non-finite values, a magnitude above 1e9
+  // (N, N m, N s), a point farther than 1e4 m from the centre of mass.
   Status apply_force(BodyHandle h, const Vec3f& force, const Vec3* world_point = nullptr);
   Status apply_torque(BodyHandle h, const Vec3f& torque);
   Status apply_impulse(BodyHandle h, const Vec3f& impulse, const Vec3* world_point = nullptr);
@@ -357,6 +404,9 @@ class SANDPATCH_API Terrain {
   // carried = false when no patch carried it (on the heightfield, in the air, before the
   // first step).
   Result<BodyForces> granular_force(BodyHandle h) const;
+  // Everything the ground did to the body in the last step: the granules' force and torque,
+  // the heightfield's contact force, and the sinkage below the original surface (BodyContact).
+  Result<BodyContact> body_contact(BodyHandle h) const;
 
   // Low-level entry of sandpatch::api::bullet::adopt (include/sandpatch/bullet.hpp): use that.
   // `bt_rigid_body` is a btRigidBody*; `abi` describes the Bullet the caller was compiled

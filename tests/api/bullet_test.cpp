@@ -101,10 +101,15 @@ TEST(ApiBullet, ShapesConvertOrAreRefusedByName) {
   EXPECT_EQ(f.errors().front().field, "btRigidBody.shape");
   EXPECT_EQ(f.errors().front().value, "Cone");
 
+  // Inverse mass 0: a static body, or a kinematic one when flagged so; the copy moves the same way.
   GameBody fixed(new btSphereShape(0.5f), 0.0f, btVector3(2, 3, 2));
   auto s = sp::bullet::body_def(*fixed.body);
-  ASSERT_FALSE(s.ok());
-  EXPECT_EQ(s.errors().front().field, "btRigidBody.mass");
+  ASSERT_TRUE(s.ok()) << s.message();
+  EXPECT_EQ(s->motion, sp::BodyMotion::Static);
+  fixed.body->setCollisionFlags(fixed.body->getCollisionFlags() | btCollisionObject::CF_KINEMATIC_OBJECT);
+  auto k = sp::bullet::body_def(*fixed.body);
+  ASSERT_TRUE(k.ok()) << k.message();
+  EXPECT_EQ(k->motion, sp::BodyMotion::Kinematic);
 }
 
 // In place, no patches: the game's own btRigidBody (not a copy) falls under Terrain::step and
