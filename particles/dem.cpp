@@ -347,6 +347,12 @@ Vec3 Simulation::body_angular_velocity(BodyId b) const { return ld3(impl_->b.ome
 Vec3 Simulation::body_force(BodyId b) const { return ld3(impl_->b.force, b.index); }
 Vec3 Simulation::body_torque(BodyId b) const { return ld3(impl_->b.torque, b.index); }
 const StepStats& Simulation::last_step() const { return impl_->stats; }
+void Simulation::set_energy_ledger(bool on) {
+  if (on && !impl_->ledger) impl_->ledger_normal = impl_->ledger_friction = 0;
+  impl_->ledger = on;
+}
+double Simulation::dissipated_normal() const { return impl_->ledger_normal; }
+double Simulation::dissipated_friction() const { return impl_->ledger_friction; }
 Status Simulation::set_threads(int threads) {
   if (threads < 0)
     return Error{"", "Simulation::set_threads.threads", std::to_string(threads), "must be >= 0 (0 = OpenMP's default)", ""};

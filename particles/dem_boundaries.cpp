@@ -46,7 +46,16 @@ __attribute__((noinline)) void Simulation::Impl::boundary_contacts(const GatherC
     const float cnw = cn0 / std::sqrt(invm_i);
     // new_contact: the first substep of this plane contact
     const ContactParams cp{kn, cnw, kt, ctr * cnw, mu, dt, g.first_law && fresh};
+    const float xi2_old = dot(xi, xi);
     const ContactForce cf = contact_force(cp, nrm, ri - dist, v, xi);
+    if (ledger) {
+      double dn = 0, dfr = 0;
+      ledger_terms(kn, kt, ri - dist, nrm, v, dt, xi2_old, cf.f, cf.ft, xi, dn, dfr);
+#pragma omp atomic
+      ledger_normal += dn;
+#pragma omp atomic
+      ledger_friction += dfr;
+    }
     xe[0] = xi.x;
     xe[1] = xi.y;
     xe[2] = xi.z;

@@ -43,6 +43,8 @@ void Simulation::Impl::contacts(float dt) {
   std::int64_t npairs = 0;
   const int n = np;
   law = {kn, cn0, kt, ctr, mu};  // for gather_sphere
+  const bool led = ledger;
+  double led_n = 0, led_f = 0;
 
   // not touching: the spring is forgotten
   auto part = [&](int e, float* xe) __attribute__((always_inline)) {
@@ -61,7 +63,7 @@ void Simulation::Impl::contacts(float dt) {
   };
 #pragma omp parallel num_threads(threads) if (n > 4096)
   {
-  if (simd_pairs) {
+  if (simd_pairs && !ledger) {
   // pair pass, AVX2: the same walk; touching pairs are collected per thread into batches of
   // 8 and evaluated by the kernel (same results, contact_simd.hpp), then added to the sums in
   // pair order (the pass reads no sum, so the additions are those of the scalar pass). A
@@ -134,7 +136,7 @@ void Simulation::Impl::contacts(float dt) {
   } else {
   // pair pass: each entry computes its pair once
   for (int parity = 0; parity < 2; ++parity) {
-#pragma omp for schedule(dynamic, 1) reduction(+ : npairs)
+#pragma omp for schedule(dynamic, 1) reduction(+ : npairs, led_n, led_f)
   for (int c = parity; c < nchunks; c += 2) {
   for (int i = CS[c], i1 = CS[c + 1]; i < i1; ++i) {
     const int e0 = NS[i], e1 = NS[i + 1];
@@ -176,7 +178,9 @@ void Simulation::Impl::contacts(float dt) {
       Vec3 xi{xe[0], xe[1], xe[2]};  // zero for a new contact; carried over on rebuilds
       const ContactParams cp{kn, cn, kt, ctr * cn, mu, dt, first_law && TCH[e] == 0};  // new_contact: first substep
       TCH[e] = 1;
+      const float xi2_old = dot(xi, xi);
       ContactForce cf = contact_force(cp, nrm, rs - dist, v, xi);
+      if (led) ledger_terms(kn, kt, rs - dist, nrm, v, dt, xi2_old, cf.f, cf.ft, xi, led_n, led_f);
       xe[0] = xi.x;
       xe[1] = xi.y;
       xe[2] = xi.z;
@@ -187,6 +191,8 @@ void Simulation::Impl::contacts(float dt) {
   }
   }  // scalar pair pass
   }  // omp parallel
+  ledger_normal += led_n;
+  ledger_friction += led_f;
   stats.contacts = npairs;
   stats.neighbour_entries = nstart.empty() ? 0 : nstart[np];
 }

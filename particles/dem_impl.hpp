@@ -208,6 +208,21 @@ struct Simulation::Impl {
   float pred_gain = 0.5f;              // velocity predictor gain of this substep (predictor_gain)
   bool first_law = false;              // this substep applies the first-substep dashpot (timing_on)
   StepStats stats;
+  // Energy ledger (Simulation::set_energy_ledger; diagnostic, not state): J dissipated since it
+  // was switched on by the normal dashpot and by friction (slip and tangential damper), pairs
+  // and boundary planes. While on, the pair pass takes the scalar law.
+  bool ledger = false;
+  double ledger_normal = 0, ledger_friction = 0;
+  // The work one contact of contact_force dissipated this substep (J): normal dashpot
+  // (k_n delta - f_n) v_n dt (>= 0; the clamped force's, k_n delta v_n, while separating) and
+  // friction -f_t . v dt - (the tangential spring's energy change), xi2_old = |xi|^2 before;
+  // f, ft the contact's total and tangential force (ContactForce).
+  static void ledger_terms(float kn, float kt, float delta, Vec3 nrm, Vec3 v, float dt, float xi2_old, Vec3 f,
+                           Vec3 ft, Vec3 xi_new, double& dn, double& dfr) {
+    const double vn = dot(v, nrm), fn = dot(f, nrm);
+    dn += (double(kn) * delta - fn) * vn * dt;
+    dfr += -double(dot(ft, v)) * dt - 0.5 * double(kt) * (double(dot(xi_new, xi_new)) - xi2_old);
+  }
 
   // ---- setup
   void size_grid();
