@@ -118,6 +118,7 @@ struct CraterFrame {
   double body_kinetic = 0, body_potential = 0;  // J, sphere (potential: gravity, relative)
   double bed_kinetic = 0, bed_potential = 0;    // J, granules (potential: gravity, relative)
   double elastic = 0;     // J, energy in the contact springs (normal and tangential; relative)
+  double elastic_tangential = 0;  // J, of which in the tangential springs (relative)
   double normal_damping = 0, friction = 0;      // J dissipated since the release
 };
 

@@ -4,7 +4,7 @@
 // with --trace, the sphere per frame. The experiments of docs/validation.md run it.
 //   sandpatch_impact [--radius R] [--density RHO] [--height H] [--stiffness KN] [--granule-radius r]
 //                    [--granule-density RHO_G] [--friction MU] [--restitution E] [--depth D]
-//                    [--side L] [--spacing S] [--frame-dt DT] [--seconds T] [--scale s]
+//                    [--unloading LAMBDA] [--side L] [--spacing S] [--frame-dt DT] [--seconds T] [--scale s]
 //                    [--steps-per-contact N] [--substeps K] [--seed N] [--threads N] [--trace]
 // Units: m, kg/m^3, N/m, s. Exit 0 ok, 1 runtime failure, 2 bad arguments.
 #include <algorithm>
@@ -38,6 +38,7 @@ int run_dem(const DropDef& d, const TradeoffKnobs& k) {
   c.material.friction = d.friction;
   c.material.restitution = d.restitution;
   c.material.normal_stiffness = d.stiffness;
+  c.material.unloading_stiffness_ratio = d.unloading_ratio;
   c.knobs = k;
   c.knobs.patch_radii = d.terrain_side / d.sphere_radius;
   c.knobs.seed = d.settle_seed ? d.settle_seed : 1;
@@ -77,7 +78,7 @@ int run_dem(const DropDef& d, const TradeoffKnobs& k) {
     fr = nlohmann::json::array();
     for (const CraterFrame& f : r->frames)
       fr.push_back({f.t, f.bottom, f.vy, f.body_kinetic, f.body_potential, f.bed_kinetic, f.bed_potential, f.elastic,
-                    f.normal_damping, f.friction});
+                    f.normal_damping, f.friction, f.elastic_tangential});
   }
   std::cout << j.dump() << "\n";
   return 0;
@@ -122,6 +123,7 @@ int main(int argc, char** argv) {
     else if (a == "--granule-density") d.granule_density = float(v);
     else if (a == "--friction") d.friction = float(v);
     else if (a == "--restitution") d.restitution = float(v);
+    else if (a == "--unloading") d.unloading_ratio = float(v);
     else if (a == "--depth") d.patch_depth = v;
     else if (a == "--side") d.terrain_side = v;
     else if (a == "--spacing") d.spacing = float(v);

@@ -139,8 +139,10 @@ Result<CraterResult> run_impact(Sim& sim, const CraterDef& d, const SettledBed& 
       double ke0, pe0;
       bed_sums(&ke0, &pe0);
       const double ball_pe0 = Mb * gs * double(sim.body_position(*body).y);
-      const double el0 = sim.potential_energy() - pe0 - ball_pe0;
       sim.set_energy_ledger(true);
+      const double et0 = sim.tangential_spring_energy();
+      bool first_frame = true;
+      double el_base = 0;  // the springs at the first substep (the resting bed's), J
       auto record = [&]() {
         CraterFrame fr;
         fr.t = sim.time() - t_release;
@@ -156,7 +158,10 @@ Result<CraterResult> run_impact(Sim& sim, const CraterDef& d, const SettledBed& 
         bed_sums(&ke, &pe);
         fr.bed_kinetic = ke;
         fr.bed_potential = pe - pe0;
-        fr.elastic = sim.potential_energy() - pe - ball_pe - el0;
+        const double el = sim.normal_spring_energy() + sim.tangential_spring_energy();
+        if (first_frame && sim.time() > t_release) el_base = el, first_frame = false;
+        fr.elastic = sim.time() > t_release ? el - el_base : 0.0;
+        fr.elastic_tangential = sim.tangential_spring_energy() - et0;
         fr.normal_damping = sim.dissipated_normal();
         fr.friction = sim.dissipated_friction();
         out.frames.push_back(fr);
@@ -274,6 +279,7 @@ Result<CraterResult> measure_crater(const CraterDef& d, CraterBeds* beds) {
     // Settled with mu <= 0.2, as the manager settles its tiles (terrain_manager.cpp): denser, closer
     // to sand at rest, which the sphere then displaces into a rim rather than compacts.
     sd.material.friction = std::min(0.2f, d.material.friction);
+    sd.material.unloading_stiffness_ratio = 1.0f;  // settled linear, as the manager settles its tiles
     auto sim = Simulation::create(sd);
     if (!sim) return sim.errors();
     if (auto st = add_lattice_bed(*sim, lb); !st) return st.errors();

@@ -35,6 +35,7 @@ void probe_dt(const DropDef& d, const TradeoffKnobs& k, double* dt, double* tc) 
   sd.material.normal_stiffness = d.stiffness;
   sd.material.restitution = d.restitution;
   sd.material.friction = d.friction;
+  sd.material.unloading_stiffness_ratio = d.unloading_ratio;
   sd.accuracy_steps_per_contact = k.steps_per_contact;
   sd.max_substeps = 100000;
   sd.max_overlap_fraction = 0;
@@ -88,6 +89,7 @@ Result<DropResult> measure_drop(const DropDef& d, const TradeoffKnobs& k) {
   md.material.friction = d.friction;
   md.material.restitution = d.restitution;
   md.material.stiffness = d.stiffness;
+  md.material.unloading_stiffness_ratio = d.unloading_ratio;
   md.particle_scale = k.particle_scale;
   md.steps_per_contact = k.steps_per_contact;
   md.slots = 1;

@@ -52,6 +52,7 @@ struct DropDef {
   float friction = 0.5f;
   float restitution = 0.3f;
   float stiffness = 2.0e4f;
+  float unloading_ratio = 1.0f;      // Material::unloading_stiffness_ratio (1: linear normal spring)
   int threads = 0;                   // DEM threads, 0 = OpenMP default
   std::string tile_cache;            // TerrainManagerDef::tile_cache ("" = $SANDPATCH_TILE_CACHE or the default)
   std::uint64_t settle_seed = 0;     // 0: knobs.seed; else the tile's settling seed (TerrainManagerDef::seed)

@@ -51,6 +51,9 @@ struct GranularMaterial {
   float restitution = float(knobs::kRestitution.def);  // e
   float stiffness = float(knobs::kStiffness.def);  // k_n, N/m
   float tangential_stiffness_ratio = float(knobs::kTangentialRatio.def);  // k_t / k_n
+  // Hysteretic normal spring of the patches (Material::unloading_stiffness_ratio; 1 = linear;
+  // CPU backend only). Not a scene field yet; the pre-settled tiles are settled linear.
+  float unloading_stiffness_ratio = 1.0f;
 };
 
 struct TerrainManagerDef {

@@ -236,6 +236,10 @@ class Simulation {
   void set_energy_ledger(bool on);
   double dissipated_normal() const;    // J
   double dissipated_friction() const;  // J
+  double tangential_spring_energy() const;  // J in the tangential springs (pairs and planes; part of potential_energy)
+  // J recoverable from the normal springs at the last substep (ledger on only; 1/2 k_n delta^2 each, or
+  // the hysteretic spring's f_el^2 / (2 kn2)); potential_energy() counts 1/2 k_n delta^2 whatever the law
+  double normal_spring_energy() const;
   // OpenMP threads of the following steps (0 = OpenMP's default); the results do not depend
   // on it. Negative counts are refused.
   Status set_threads(int threads);

@@ -165,6 +165,7 @@ void Simulation::Impl::build_list(const std::vector<std::int32_t>& old_slot) {
               pairs.xi[3 * e + 1] = old.xi[3 * k + 1];
               pairs.xi[3 * e + 2] = old.xi[3 * k + 2];
               pairs.touch[e] = old.touch[k];
+              pairs.dmax[e] = old.dmax[k];
               break;
             }
       }
