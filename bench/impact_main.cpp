@@ -17,6 +17,7 @@
 #include <nlohmann/json.hpp>
 
 #include "bench/bench_tradeoff.hpp"
+#include "bench/impact.hpp"
 #include "bench/tradeoff_drop.hpp"
 
 using namespace sandpatch;
@@ -84,6 +85,51 @@ int run_dem(const DropDef& d, const TradeoffKnobs& k) {
   return 0;
 }
 
+// --series: docs/validation.md's series (drop heights 0.05 ... 0.8 m at the given density, and
+// densities 800, 2500, 7800 kg/m^3 from 0.2 m), one JSON line per point, then the fits against
+// Uehara et al. (2003) (mu = tan 35.9 deg, the repose angle measured at friction 0.5).
+int run_series(const DropDef& d, const TradeoffKnobs& k) {
+  ImpactSeriesDef sd;
+  sd.base = d;
+  sd.knobs = k;
+  sd.heights = {0.05, 0.1, 0.2, 0.4, 0.8};
+  sd.densities = {800, 2500, 7800};
+  sd.density_height = 0.2;
+  auto r = run_impact_series(sd);
+  if (!r) {
+    std::cerr << "sandpatch_impact: " << r.message() << "\n";
+    return 1;
+  }
+  const double mu = std::tan(35.9 * 3.14159265358979 / 180.0);
+  const double Db = 2 * (d.sphere_radius + double(d.granule_radius) * k.particle_scale);
+  auto point = [&](const ImpactPoint& p) {
+    nlohmann::ordered_json j;
+    j["h"] = p.drop_height;
+    j["rho_b"] = p.density;
+    j["depth"] = p.depth;
+    j["H"] = p.total_drop;
+    j["uehara_depth"] = uehara_depth(mu, p.density, r->bulk_density, Db, p.drop_height);
+    j["impact_speed"] = p.drop.impact_speed;
+    j["rebound_ratio"] = p.drop.rebound_ratio;
+    j["rebound_bottom"] = p.drop.rebound_bottom;
+    j["crater_depth"] = p.drop.depth;
+    j["wall_s"] = p.drop.wall_seconds;
+    std::cout << j.dump() << "\n";
+  };
+  for (const ImpactPoint& p : r->by_height) point(p);
+  for (const ImpactPoint& p : r->by_density) point(p);
+  nlohmann::ordered_json f;
+  f["bulk_density"] = r->bulk_density;
+  f["ball_diameter_soil"] = Db;
+  f["depth_vs_H"] = {{"exponent", r->depth_vs_total_drop.exponent}, {"se", r->depth_vs_total_drop.exponent_se},
+                     {"prefactor", r->depth_vs_total_drop.prefactor}, {"n", r->depth_vs_total_drop.n}};
+  f["depth_vs_rho"] = {{"exponent", r->depth_vs_density.exponent}, {"se", r->depth_vs_density.exponent_se},
+                       {"prefactor", r->depth_vs_density.prefactor}, {"n", r->depth_vs_density.n}};
+  f["worst_rebound"] = r->worst_rebound;
+  std::cout << f.dump() << "\n";
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -94,7 +140,7 @@ int main(int argc, char** argv) {
   d.stiffness = 1.5e5f;
   d.threads = 1;
   d.max_substeps = 100000;
-  bool dem = false;
+  bool dem = false, series = false;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--trace") {
@@ -103,6 +149,10 @@ int main(int argc, char** argv) {
     }
     if (a == "--dem") {
       dem = true;
+      continue;
+    }
+    if (a == "--series") {
+      series = true;
       continue;
     }
     if (i + 1 >= argc) {
@@ -141,6 +191,7 @@ int main(int argc, char** argv) {
     }
   }
   if (dem) return run_dem(d, k);
+  if (series) return run_series(d, k);
   auto r = measure_drop(d, k);
   if (!r) {
     std::cerr << "sandpatch_impact: " << r.message() << "\n";
