@@ -185,6 +185,7 @@ int main(int argc, char** argv) {
     else if (a == "--seed") d.settle_seed = std::uint64_t(v);
     else if (a == "--threads") d.threads = int(v);
     else if (a == "--slot") k.granules_per_slot = int(v);
+    else if (a == "--after") d.after_demotion = v;
     else {
       std::cerr << "sandpatch_impact: unknown option " << a << "\n";
       return 2;
@@ -216,6 +217,8 @@ int main(int argc, char** argv) {
   j["deepest"] = r->deepest;
   j["sphere_sink"] = r->sphere_sink;
   j["crater_depth"] = r->depth;
+  j["axis_depth_after"] = r->axis_depth_after;
+  j["shift_after_demotion"] = r->shift_after_demotion;
   j["far_field_dh"] = r->far_field_dh;
   j["granules"] = r->granules;
   j["dt"] = r->dt;

@@ -182,6 +182,14 @@ Result<DropResult> measure_drop(const DropDef& d, const TradeoffKnobs& k) {
   out.sphere_sink = d.surface_height - (world.bullet().state(*body).position.y() - R);
   if (Status st = world.demote_all(); !st) return st.errors();
   out.wall_seconds = seconds_since(t1);
+  {
+    const int ic = int(std::lround(c / d.spacing));
+    out.axis_depth_after = d.surface_height - terrain->height(ic, ic);
+    const Eigen::Vector3d p0 = world.bullet().state(*body).position;
+    for (int f = 0; f < int(std::lround(d.after_demotion / dt)); ++f)
+      if (Status st = world.step(dt, k.substeps); !st) return st.errors();
+    out.shift_after_demotion = (world.bullet().state(*body).position - p0).norm();
+  }
   out.sim_seconds = frames * dt;
   out.dem_seconds = world.profile().timer(Stage::Dem).total_ms / 1000.0;
   out.pool_bytes = m.pool_bytes();

@@ -56,6 +56,7 @@ struct DropDef {
   int threads = 0;                   // DEM threads, 0 = OpenMP default
   std::string tile_cache;            // TerrainManagerDef::tile_cache ("" = $SANDPATCH_TILE_CACHE or the default)
   std::uint64_t settle_seed = 0;     // 0: knobs.seed; else the tile's settling seed (TerrainManagerDef::seed)
+  double after_demotion = 0;          // s of frames run after demote_all (DropResult::shift_after_demotion)
   int max_substeps = 0;              // DEM substeps a frame may take (0: the manager's default)
   bool trace = false;                // record DropResult::frames (one per frame)
 };
@@ -106,6 +107,11 @@ struct DropResult {
   double settle_time = 0;
   double deepest = 0;          // m, deepest point of the sphere's bottom below the surface during the run
   std::vector<DropFrame> frames;  // def.trace
+  // After demote_all: the heightfield's depth at the drop axis below the original surface (m;
+  // the crater written under the body), and how far the sphere moved over after_demotion
+  // seconds of frames on the heightfield alone (m; 0 when after_demotion is 0).
+  double axis_depth_after = 0;
+  double shift_after_demotion = 0;
 };
 
 // Errors: "DropDef.<field>" / "DropDef.knobs.<field>" for a bad definition, the heightfield's or
