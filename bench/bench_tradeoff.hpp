@@ -103,6 +103,23 @@ struct CraterDef {
   // manager cuts patches from pre-settled tiles the same way); 0 = the patch itself.
   double settle_patch_radii = 0;
   int threads = 0;                   // OpenMP threads, 0 = default
+  // Record CraterResult::frames, one per frame of frame_dt, with the energy ledger on (CPU
+  // backend only; Simulation::set_energy_ledger).
+  bool trace = false;
+  double frame_dt = 1.0 / 120.0;     // s per step() of the impact
+};
+
+// One frame of the impact straight on the DEM (world units, energies in J of the simulation:
+// at particle scale 1 the world's). Energies relative to the release.
+struct CraterFrame {
+  double t = 0;           // s since release
+  double bottom = 0;      // m, sphere's lowest point above the mean surface around the axis
+  double vy = 0;          // m/s, sphere's vertical velocity
+  double body_kinetic = 0, body_potential = 0;  // J, sphere (potential: gravity, relative)
+  double bed_kinetic = 0, bed_potential = 0;    // J, granules (potential: gravity, relative)
+  double elastic = 0;     // J, energy in the contact springs (normal and tangential; relative)
+  double elastic_tangential = 0;  // J, of which in the tangential springs (relative)
+  double normal_damping = 0, friction = 0;      // J dissipated since the release
 };
 
 struct CraterResult {
@@ -121,6 +138,7 @@ struct CraterResult {
   double final_speed = 0;     // m/s world, fastest granule at the end
   double sphere_sink = 0;     // m, sphere bottom below the original mean surface at the end
   std::vector<double> dh;     // m per bin (Δh), -1e300 where a bin was empty
+  std::vector<CraterFrame> frames;  // CraterDef::trace
 };
 
 // Settled beds kept between calls of one sweep (same scale, seed and settled size): granule

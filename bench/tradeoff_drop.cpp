@@ -35,6 +35,7 @@ void probe_dt(const DropDef& d, const TradeoffKnobs& k, double* dt, double* tc) 
   sd.material.normal_stiffness = d.stiffness;
   sd.material.restitution = d.restitution;
   sd.material.friction = d.friction;
+  sd.material.unloading_stiffness_ratio = d.unloading_ratio;
   sd.accuracy_steps_per_contact = k.steps_per_contact;
   sd.max_substeps = 100000;
   sd.max_overlap_fraction = 0;
@@ -88,6 +89,7 @@ Result<DropResult> measure_drop(const DropDef& d, const TradeoffKnobs& k) {
   md.material.friction = d.friction;
   md.material.restitution = d.restitution;
   md.material.stiffness = d.stiffness;
+  md.material.unloading_stiffness_ratio = d.unloading_ratio;
   md.particle_scale = k.particle_scale;
   md.steps_per_contact = k.steps_per_contact;
   md.slots = 1;
@@ -100,8 +102,9 @@ Result<DropResult> measure_drop(const DropDef& d, const TradeoffKnobs& k) {
   md.use_gl = false;                     // the CPU depth render (same contract, no GL context needed)
   md.backend = k.backend;
   md.threads = d.threads;
-  md.seed = k.seed;
+  md.seed = d.settle_seed ? d.settle_seed : k.seed;
   md.tile_cache = d.tile_cache;
+  if (d.max_substeps > 0) md.max_substeps = d.max_substeps;
   const auto t0 = Clock::now();
   if (Status st = world.enable_patches(md); !st) return st.errors();
   TerrainManager& m = *world.manager();
@@ -125,6 +128,9 @@ Result<DropResult> measure_drop(const DropDef& d, const TradeoffKnobs& k) {
   const int frames = int(std::lround(d.run_seconds / dt));
   if (!k.lod) m.request_patch(0, 0, d.terrain_side, d.terrain_side, 0.0);
   const auto t1 = Clock::now();
+  const double weight = double(b.mass) * 9.81;  // N
+  bool hit = false, turned = false;  // the soil has pushed the sphere; it has since stopped going down
+  double last_still = 0;  // s, the last frame end at which the sphere was still faster than 1 % of v_in
   for (int f = 0; f < frames; ++f) {
     const double t = world.time();
     Status st = world.step(dt, k.substeps);
@@ -141,13 +147,49 @@ Result<DropResult> measure_drop(const DropDef& d, const TradeoffKnobs& k) {
       return out;
     }
     out.granules = std::max(out.granules, m.granules());
+    const BodyState bs = world.bullet().state(*body);
+    Eigen::Vector3f force = Eigen::Vector3f::Zero(), torque = Eigen::Vector3f::Zero();
+    if (!m.soil_force(*body, &force, &torque)) force.setZero();
+    DropFrame fr;
+    fr.t = world.time();
+    fr.bottom = bs.position.y() - R - d.surface_height;
+    fr.vy = bs.linear_velocity.y();
+    fr.fy = force.y();
+    if (!hit && fr.fy > 0.1 * weight) {  // not the round-off of a free flight's momentum balance
+      hit = true;
+      out.impact_speed = out.frames.empty() ? std::sqrt(2 * 9.81 * d.drop_height) : std::abs(out.frames.back().vy);
+    }
+    if (hit) {
+      out.rebound_speed = std::max(out.rebound_speed, fr.vy);
+      if (!turned && fr.vy >= 0) turned = true, out.rebound_bottom = fr.bottom;
+      if (turned) out.rebound_bottom = std::max(out.rebound_bottom, fr.bottom);
+      if (bs.linear_velocity.norm() > 0.01 * out.impact_speed) last_still = fr.t;
+    }
+    out.deepest = std::max(out.deepest, -fr.bottom);
+    out.frames.push_back(fr);
   }
+  if (hit) {
+    double t_hit = 0;
+    for (const DropFrame& fr : out.frames)
+      if (fr.fy > 0.1 * weight) { t_hit = fr.t - dt; break; }
+    out.rebound_ratio = out.impact_speed > 0 ? out.rebound_speed / out.impact_speed : 0;
+    out.settle_time = last_still - t_hit;
+  }
+  if (!d.trace) out.frames.clear();
   bool asleep = m.active_patches() > 0;
   for (const auto& pi : m.patches()) asleep = asleep && pi.asleep;
   out.asleep_at_end = asleep;
   out.sphere_sink = d.surface_height - (world.bullet().state(*body).position.y() - R);
   if (Status st = world.demote_all(); !st) return st.errors();
   out.wall_seconds = seconds_since(t1);
+  {
+    const int ic = int(std::lround(c / d.spacing));
+    out.axis_depth_after = d.surface_height - terrain->height(ic, ic);
+    const Eigen::Vector3d p0 = world.bullet().state(*body).position;
+    for (int f = 0; f < int(std::lround(d.after_demotion / dt)); ++f)
+      if (Status st = world.step(dt, k.substeps); !st) return st.errors();
+    out.shift_after_demotion = (world.bullet().state(*body).position - p0).norm();
+  }
   out.sim_seconds = frames * dt;
   out.dem_seconds = world.profile().timer(Stage::Dem).total_ms / 1000.0;
   out.pool_bytes = m.pool_bytes();

@@ -52,8 +52,21 @@ struct DropDef {
   float friction = 0.5f;
   float restitution = 0.3f;
   float stiffness = 2.0e4f;
+  float unloading_ratio = 1.0f;      // Material::unloading_stiffness_ratio (1: linear normal spring)
   int threads = 0;                   // DEM threads, 0 = OpenMP default
   std::string tile_cache;            // TerrainManagerDef::tile_cache ("" = $SANDPATCH_TILE_CACHE or the default)
+  std::uint64_t settle_seed = 0;     // 0: knobs.seed; else the tile's settling seed (TerrainManagerDef::seed)
+  double after_demotion = 0;          // s of frames run after demote_all (DropResult::shift_after_demotion)
+  int max_substeps = 0;              // DEM substeps a frame may take (0: the manager's default)
+  bool trace = false;                // record DropResult::frames (one per frame)
+};
+
+// One frame of the sphere as Bullet has it at the frame's end (world units).
+struct DropFrame {
+  double t = 0;       // s, simulated, end of the frame (release at 0)
+  double bottom = 0;  // m, the sphere's lowest point above the original surface (negative: below)
+  double vy = 0;      // m/s, vertical velocity (up +)
+  double fy = 0;      // N, vertical soil force on it over the frame (TerrainManager::soil_force)
 };
 
 struct DropResult {
@@ -81,6 +94,24 @@ struct DropResult {
   double contact_time = 0;     // s, its t_c
   bool asleep_at_end = false;  // every patch asleep at the end of the run
   std::vector<double> dh;      // m, mean Δh per radial bin (-1e300: no sample)
+  // The impact, from Bullet's state at the frame ends: impact speed |vy| of the last frame
+  // before the soil first pushed the sphere (m/s; sqrt(2 g H) up to a frame's free fall), the
+  // largest upward speed after it (m/s, 0 when it never moved up) and their ratio, the
+  // highest its lowest point came once it had stopped going down, relative to the original
+  // surface (m; its lowest point at that time when it never rose again), and
+  // the time from the first soil force until its speed stays below 1 % of the impact speed (s).
+  double impact_speed = 0;
+  double rebound_speed = 0;
+  double rebound_ratio = 0;
+  double rebound_bottom = 0;
+  double settle_time = 0;
+  double deepest = 0;          // m, deepest point of the sphere's bottom below the surface during the run
+  std::vector<DropFrame> frames;  // def.trace
+  // After demote_all: the heightfield's depth at the drop axis below the original surface (m;
+  // the crater written under the body), and how far the sphere moved over after_demotion
+  // seconds of frames on the heightfield alone (m; 0 when after_demotion is 0).
+  double axis_depth_after = 0;
+  double shift_after_demotion = 0;
 };
 
 // Errors: "DropDef.<field>" / "DropDef.knobs.<field>" for a bad definition, the heightfield's or

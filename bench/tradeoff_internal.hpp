@@ -62,6 +62,10 @@ struct Row {
   double error_a = std::numeric_limits<double>::quiet_NaN();  // pile: angle; crater: depth (relative)
   double error_b = std::numeric_limits<double>::quiet_NaN();  // crater, drop: rim volume (relative)
   double error_v = std::numeric_limits<double>::quiet_NaN();  // drop: crater volume (relative)
+  // drop: |d - d_exp| / d_exp, d the ball's final penetration (its lowest point below the
+  // surface + the shell spheres' radius) and d_exp Uehara et al.'s (2003) law for this ball and
+  // bed (bench/impact.hpp, docs/validation.md)
+  double error_experiment = std::numeric_limits<double>::quiet_NaN();
   bool pareto = false;
   double scatter = std::numeric_limits<double>::quiet_NaN();  // noise repeats: |x - x_twin| / ref
 };

@@ -63,7 +63,8 @@ void add_setting(const Row& row, std::string& csv, ojson& settings) {
          "," + f(timed ? row.dt / row.contact_time : NAN) + "," + f(row.ran ? row.sim_s : NAN) + "," +
          f(row.ran ? row.wall_s : NAN) + "," + f(cost) + "," + f(rtf) + "," + f(pile && row.ran ? row.angle : NAN) +
          "," + f(depth) + "," + f(cvol) + "," + f(rvol) + "," + f(rh) + "," + f(crad) + "," + f(row.error) + "," +
-         f(row.error_a) + "," + f(row.error_b) + "," + f(row.error_v) + "," + (row.pareto ? "1" : "0") + ",\"" +
+         f(row.error_a) + "," + f(row.error_b) + "," + f(row.error_v) + "," + f(row.error_experiment) + "," +
+         (row.pareto ? "1" : "0") + ",\"" +
          why + "\"\n";
   ojson j = {{"id", row.set.id},
              {"case", to_string(row.set.kind)},
@@ -132,6 +133,7 @@ void add_setting(const Row& row, std::string& csv, ojson& settings) {
     j[crater || drop ? "error_depth" : "error_angle"] = jnum(row.error_a);
     if (crater || drop) j["error_rim"] = jnum(row.error_b);
     if (drop) j["error_crater_volume"] = jnum(row.error_v);
+    if (drop) j["error_vs_experiment"] = jnum(row.error_experiment);
     j["pareto"] = row.pareto;
     if (row.set.noise) j["seed_scatter"] = jnum(row.scatter);
   }
@@ -209,7 +211,7 @@ int write_report(const BenchTradeoffArgs& a, const fs::path& out, const std::vec
       "id,case,particle_scale,steps_per_contact,patch_radii,backend,substeps,granules_per_slot,lod,lod_apron_m,seed,"
       "reference,noise,ran,outcome,granules,dt_s,dt_over_tc,sim_s,wall_s,wall_s_per_sim_s,real_time_factor,angle_deg,"
       "depth_m,crater_volume_m3,rim_volume_m3,rim_height_m,crater_radius_m,error,error_angle_or_depth,error_rim,"
-      "error_crater_volume,pareto,skipped\n";
+      "error_crater_volume,error_vs_experiment,pareto,skipped\n";
   ojson settings = ojson::array();
   for (const auto& row : rows) add_setting(row, csv, settings);
   const double load_after = load_average();

@@ -232,6 +232,7 @@ SimulationDef TerrainManager::Impl::sim_def(double scale) const {
   sd.material.restitution = def.material.restitution;
   sd.material.friction = def.material.friction;
   sd.material.tangential_stiffness_ratio = def.material.tangential_stiffness_ratio;
+  sd.material.unloading_stiffness_ratio = def.material.unloading_stiffness_ratio;
   sd.gravity_world = v3(Eigen::Vector3f(def.gravity.cast<float>()));
   sd.sleep_speed = float(def.sleep_speed / scale);
   sd.sleep_time = float(def.sleep_time);

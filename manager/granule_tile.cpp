@@ -272,6 +272,8 @@ std::uint64_t granule_tile_def_hash(const GranuleTileDef& def) {
   const Material& m = def.material;
   h.pod(m.density), h.pod(m.normal_stiffness), h.pod(m.restitution), h.pod(m.friction), h.pod(m.shear);
   h.pod(m.tangential_stiffness_ratio), h.pod(m.tangential_damping_ratio);
+  // the hysteretic normal spring settles its own tiles; the linear spring's keys stay as they were
+  if (m.unloading_stiffness_ratio != 1.0f) h.pod(m.unloading_stiffness_ratio);
   h.pod(def.radius), h.pod(def.columns), h.pod(def.box_side), h.pod(def.layers), h.pod(def.seed);
   h.pod(def.settle_max_time), h.pod(def.settle_speed), h.pod(def.gravity.x), h.pod(def.gravity.y), h.pod(def.gravity.z);
   h.pod(def.surface_probe), h.pod(def.settle_friction), h.pod(def.steps_per_contact);

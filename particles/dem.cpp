@@ -347,6 +347,30 @@ Vec3 Simulation::body_angular_velocity(BodyId b) const { return ld3(impl_->b.ome
 Vec3 Simulation::body_force(BodyId b) const { return ld3(impl_->b.force, b.index); }
 Vec3 Simulation::body_torque(BodyId b) const { return ld3(impl_->b.torque, b.index); }
 const StepStats& Simulation::last_step() const { return impl_->stats; }
+void Simulation::set_energy_ledger(bool on) {
+  if (on && !impl_->ledger) impl_->ledger_normal = impl_->ledger_friction = 0;
+  impl_->ledger = on;
+}
+double Simulation::dissipated_normal() const { return impl_->ledger_normal; }
+double Simulation::dissipated_friction() const { return impl_->ledger_friction; }
+double Simulation::normal_spring_energy() const { return impl_->ledger_spring_pairs + impl_->ledger_spring_walls; }
+double Simulation::tangential_spring_energy() const {
+  const Impl& s = *impl_;
+  const double kt = double(s.def.material.normal_stiffness) * s.def.material.tangential_stiffness_ratio;
+  double e = 0;
+  const std::size_t entries = s.nstart.empty() ? 0 : std::size_t(s.nstart[s.np]);
+  for (std::size_t k = 0; k < entries; ++k) {
+    const float* x = &s.pairs.xi[3 * k];
+    e += 0.5 * kt * (double(x[0]) * x[0] + double(x[1]) * x[1] + double(x[2]) * x[2]);
+  }
+  for (int i = 0; i < s.np; ++i)
+    for (int k = 0; k < kWallSlots; ++k) {
+      if (!(s.p.wall_mask[i] & (1u << k))) continue;
+      const float* x = &s.p.wall_xi[(std::size_t(i) * kWallSlots + k) * 3];
+      e += 0.5 * kt * (double(x[0]) * x[0] + double(x[1]) * x[1] + double(x[2]) * x[2]);
+    }
+  return e;
+}
 Status Simulation::set_threads(int threads) {
   if (threads < 0)
     return Error{"", "Simulation::set_threads.threads", std::to_string(threads), "must be >= 0 (0 = OpenMP's default)", ""};

@@ -226,6 +226,21 @@ class Simulation {
   double potential_energy() const;               // J, gravity (rel. y = 0) + elastic springs
   double max_granule_speed() const;              // m/s, max |v| + |w| d over granules
   const StepStats& last_step() const;
+  // Energy ledger (a diagnostic of the CPU backend; the state and its hash do not depend on
+  // it): while on, every contact's dissipated work is summed, J (sim units) since the last
+  // switch on: by the normal dashpot ((k_n delta - f_n) v_n dt per contact and substep, the
+  // clamped force's included) and by friction (-f_t . v dt less the tangential spring's energy
+  // change: slip and the tangential damper). The pair pass then runs the scalar law (same
+  // results as the AVX2 kernel). kinetic_energy() + potential_energy() (gravity and springs) +
+  // these two stays the energy at the switch, up to the integrator's own error and states set
+  // from outside (set_body_state).
+  void set_energy_ledger(bool on);
+  double dissipated_normal() const;    // J
+  double dissipated_friction() const;  // J
+  double tangential_spring_energy() const;  // J in the tangential springs (pairs and planes; part of potential_energy)
+  // J recoverable from the normal springs at the last substep (ledger on only; 1/2 k_n delta^2 each, or
+  // the hysteretic spring's f_el^2 / (2 kn2)); potential_energy() counts 1/2 k_n delta^2 whatever the law
+  double normal_spring_energy() const;
   // OpenMP threads of the following steps (0 = OpenMP's default); the results do not depend
   // on it. Negative counts are refused.
   Status set_threads(int threads);

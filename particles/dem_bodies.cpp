@@ -76,6 +76,7 @@ Simulation::Impl::GatherCtx Simulation::Impl::gather_ctx() const {
   }
   return {law, p.pos.data(), p.vel.data(), p.omega.data(), const_cast<float*>(acc.data()->v),
           const_cast<float*>(p.wall_xi.data()), const_cast<std::uint32_t*>(p.wall_mask.data()),
+          const_cast<float*>(p.wall_dmax.data()), law.kn * std::max(1.0f, def.material.unloading_stiffness_ratio),
           physics::Boundaries{def.floor_height, def.side_walls, !def.terrain.empty(), def.bounds_min, def.bounds_max},
           def.floor_height, first_law, x0, x1, z0, z1};
 }

@@ -46,7 +46,22 @@ __attribute__((noinline)) void Simulation::Impl::boundary_contacts(const GatherC
     const float cnw = cn0 / std::sqrt(invm_i);
     // new_contact: the first substep of this plane contact
     const ContactParams cp{kn, cnw, kt, ctr * cnw, mu, dt, g.first_law && fresh};
-    const ContactForce cf = contact_force(cp, nrm, ri - dist, v, xi);
+    const float xi2_old = dot(xi, xi);
+    float* dme = g.WD + std::size_t(i) * kWallSlots + slot;
+    const float dm_old = fresh ? 0.0f : *dme;
+    float dm = dm_old;
+    const ContactForce cf = contact_force_h(cp, g.kn2, nrm, ri - dist, v, xi, dm);
+    if (g.kn2 > kn) *dme = dm;
+    if (ledger) {
+      double dn = 0, dfr = 0, du = 0;
+      ledger_terms(kn, g.kn2, kt, ri - dist, dm_old, dm, nrm, v, dt, xi2_old, cf.f, cf.ft, xi, dn, dfr, du);
+#pragma omp atomic
+      ledger_normal += dn;
+#pragma omp atomic
+      ledger_friction += dfr;
+#pragma omp atomic
+      ledger_spring_walls += du;
+    }
     xe[0] = xi.x;
     xe[1] = xi.y;
     xe[2] = xi.z;

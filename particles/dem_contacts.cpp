@@ -43,10 +43,17 @@ void Simulation::Impl::contacts(float dt) {
   std::int64_t npairs = 0;
   const int n = np;
   law = {kn, cn0, kt, ctr, mu};  // for gather_sphere
+  const bool led = ledger;
+  const bool hysteretic = mat.unloading_stiffness_ratio > 1.0f;
+  const float kn2 = hysteretic ? kn * mat.unloading_stiffness_ratio : kn;  // unloading stiffness, N/m
+  float* DM = pairs.dmax.data();
+  double led_n = 0, led_f = 0, led_u = 0;
+  if (led) ledger_spring_walls = 0;  // summed again by this substep's boundary contacts
 
   // not touching: the spring is forgotten
   auto part = [&](int e, float* xe) __attribute__((always_inline)) {
     TCH[e] = 0;
+    if (hysteretic) DM[e] = 0.0f;
     if (xe[0] != 0.0f || xe[1] != 0.0f || xe[2] != 0.0f) xe[0] = xe[1] = xe[2] = 0.0f;
   };
   // the pair's force f on i (N) and n x f_t (N) into both sums: i gets +f, j gets -f, both
@@ -61,7 +68,7 @@ void Simulation::Impl::contacts(float dt) {
   };
 #pragma omp parallel num_threads(threads) if (n > 4096)
   {
-  if (simd_pairs) {
+  if (simd_pairs && !ledger && !hysteretic) {
   // pair pass, AVX2: the same walk; touching pairs are collected per thread into batches of
   // 8 and evaluated by the kernel (same results, contact_simd.hpp), then added to the sums in
   // pair order (the pass reads no sum, so the additions are those of the scalar pass). A
@@ -134,7 +141,7 @@ void Simulation::Impl::contacts(float dt) {
   } else {
   // pair pass: each entry computes its pair once
   for (int parity = 0; parity < 2; ++parity) {
-#pragma omp for schedule(dynamic, 1) reduction(+ : npairs)
+#pragma omp for schedule(dynamic, 1) reduction(+ : npairs, led_n, led_f, led_u)
   for (int c = parity; c < nchunks; c += 2) {
   for (int i = CS[c], i1 = CS[c + 1]; i < i1; ++i) {
     const int e0 = NS[i], e1 = NS[i + 1];
@@ -176,7 +183,10 @@ void Simulation::Impl::contacts(float dt) {
       Vec3 xi{xe[0], xe[1], xe[2]};  // zero for a new contact; carried over on rebuilds
       const ContactParams cp{kn, cn, kt, ctr * cn, mu, dt, first_law && TCH[e] == 0};  // new_contact: first substep
       TCH[e] = 1;
-      ContactForce cf = contact_force(cp, nrm, rs - dist, v, xi);
+      const float xi2_old = dot(xi, xi);
+      const float dm_old = DM[e];
+      ContactForce cf = contact_force_h(cp, kn2, nrm, rs - dist, v, xi, DM[e]);
+      if (led) ledger_terms(kn, kn2, kt, rs - dist, dm_old, DM[e], nrm, v, dt, xi2_old, cf.f, cf.ft, xi, led_n, led_f, led_u);
       xe[0] = xi.x;
       xe[1] = xi.y;
       xe[2] = xi.z;
@@ -187,6 +197,9 @@ void Simulation::Impl::contacts(float dt) {
   }
   }  // scalar pair pass
   }  // omp parallel
+  ledger_normal += led_n;
+  ledger_friction += led_f;
+  if (led) ledger_spring_pairs = led_u;
   stats.contacts = npairs;
   stats.neighbour_entries = nstart.empty() ? 0 : nstart[np];
 }

@@ -187,6 +187,7 @@ void Simulation::Impl::build_list(const std::vector<std::int32_t>& old_slot) {
         pairs.xi[3 * e + 1] = sgn * old.xi[3 * k + 1];
         pairs.xi[3 * e + 2] = sgn * old.xi[3 * k + 2];
         pairs.touch[e] = old.touch[k];
+        pairs.dmax[e] = old.dmax[k];  // (a largest overlap: the same from either side)
       }
     }
   }

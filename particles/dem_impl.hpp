@@ -208,6 +208,38 @@ struct Simulation::Impl {
   float pred_gain = 0.5f;              // velocity predictor gain of this substep (predictor_gain)
   bool first_law = false;              // this substep applies the first-substep dashpot (timing_on)
   StepStats stats;
+  // Energy ledger (Simulation::set_energy_ledger; diagnostic, not state): J dissipated since it
+  // was switched on by the normal spring-dashpot (dashpot and, hysteretic, the spring's
+  // loss) and by friction (slip and tangential damper), pairs and boundary planes; and the
+  // normal springs' recoverable energy at the last substep. While on, the pair pass takes the
+  // scalar law.
+  bool ledger = false;
+  double ledger_normal = 0, ledger_friction = 0;
+  double ledger_spring_pairs = 0, ledger_spring_walls = 0;  // J at the last substep
+  // The work one contact of contact_force_h dissipated this substep (J), v its contact velocity
+  // (v_n = v.n, the overlap changing by -v_n dt): normal: the work of the normal force on the
+  // pair, -f_n v_n dt, less the change of the normal spring's recoverable energy U(delta, dmax)
+  // (1/2 k_n delta^2, or hysteretic f_el^2 / (2 kn2)) from the overlap delta + v_n dt before
+  // (with dmax_old) to delta now (with dmax); friction: -f_t . v dt less the tangential
+  // spring's energy change (xi2_old = |xi|^2 before). f, ft the contact's total and tangential
+  // force (ContactForce). u += U now.
+  static double normal_spring_energy(float kn, float kn2, float delta, float dmax) {
+    if (!(delta > 0)) return 0;
+    if (!(kn2 > kn)) return 0.5 * double(kn) * delta * delta;
+    const double d0 = double(dmax) * (1.0 - double(kn) / kn2);
+    const double fel = std::max(0.0, std::min(double(kn) * delta, double(kn2) * (delta - d0)));
+    return fel * fel / (2.0 * kn2);
+  }
+  static void ledger_terms(float kn, float kn2, float kt, float delta, float dmax_old, float dmax, Vec3 nrm, Vec3 v,
+                           float dt, float xi2_old, Vec3 f, Vec3 ft, Vec3 xi_new, double& dn, double& dfr,
+                           double& u) {
+    const double vn = dot(v, nrm), fn = dot(f, nrm);
+    const double u_now = normal_spring_energy(kn, kn2, delta, dmax);
+    const double u_before = normal_spring_energy(kn, kn2, float(delta + vn * dt), dmax_old);
+    dn += -fn * vn * dt - (u_now - u_before);
+    u += u_now;
+    dfr += -double(dot(ft, v)) * dt - 0.5 * double(kt) * (double(dot(xi_new, xi_new)) - xi2_old);
+  }
 
   // ---- setup
   void size_grid();
@@ -304,6 +336,8 @@ struct Simulation::Impl {
     float* ACC;
     float* WX;
     std::uint32_t* WM;
+    float* WD;   // wall_dmax (6 per sphere)
+    float kn2;   // N/m, unloading stiffness of the hysteretic normal spring (= law.kn: linear)
     physics::Boundaries bounds;
     float floor_y;
     bool first_law;

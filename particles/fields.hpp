@@ -73,11 +73,13 @@
 
 #define SANDPATCH_SPHERE_CONTACT_FIELDS(X)                                                        \
   X(float,         wall_xi,   18, 1, CPU,  "m; tangential springs against the 6 boundary planes (physics_common.glsl slots: floor, walls x0, x1, z0, z1, terrain), xyz each; read only where wall_mask has the plane's bit") \
-  X(std::uint32_t, wall_mask,  1, 1, CPU,  "bit k: boundary plane k touched the sphere at the last substep")
+  X(std::uint32_t, wall_mask,  1, 1, CPU,  "bit k: boundary plane k touched the sphere at the last substep") \
+  X(float,         wall_dmax,  6, 0, CPU,  "m; largest overlap of each plane contact (hysteretic normal spring, contact_force_h; 0 with the linear spring; not hashed: it shows in the positions)")
 
 #define SANDPATCH_PAIR_CONTACT_FIELDS(X)                                                          \
   X(float,         xi,         3, 1, CPU,  "m; the pair's tangential spring (zero while the pair does not touch)") \
-  X(std::uint8_t,  touch,      1, 1, CPU,  "1: the pair touched at the last substep (else a touch is in its first substep)")
+  X(std::uint8_t,  touch,      1, 1, CPU,  "1: the pair touched at the last substep (else a touch is in its first substep)") \
+  X(float,         dmax,       1, 0, CPU,  "m; the pair's largest overlap while it touches (hysteretic normal spring, contact_force_h; 0 with the linear spring; not hashed: it shows in the positions)")
 // clang-format on
 
 namespace sandpatch {

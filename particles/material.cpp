@@ -77,6 +77,8 @@ Status validate(const Material& m, const std::string& p) {
         "must be > 0 (k_t / k_n)");
   check(m.tangential_damping_ratio >= 0, "tangential_damping_ratio", m.tangential_damping_ratio,
         "must be >= 0 (c_t / c_n)");
+  check(m.unloading_stiffness_ratio >= 1 && m.unloading_stiffness_ratio <= 100, "unloading_stiffness_ratio",
+        m.unloading_stiffness_ratio, "must be in [1, 100] (unloading / loading normal stiffness; 1 = linear spring)");
   if (!es.empty()) return es;
   return Ok{};
 }

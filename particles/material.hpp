@@ -37,6 +37,10 @@ struct Material {
   ShearLaw shear = ShearLaw::SpringHistory;
   float tangential_stiffness_ratio = 2.0f / 7.0f;  // k_t / k_n (SpringHistory)
   float tangential_damping_ratio = 0.5f;           // c_t / c_n (SpringHistory)
+  // kn2 / k_n >= 1: the hysteretic normal spring (Walton & Braun 1986; physics_common.glsl
+  // contact_force_h) unloads along kn2 = this x k_n, so a contact gives back 1/this of the
+  // energy its loading stored (on top of the dashpot). 1 = the linear spring. CPU backend only.
+  float unloading_stiffness_ratio = 1.0f;
 };
 
 // ---- The clamped law (what the simulation does), zeta in [0, inf) ----

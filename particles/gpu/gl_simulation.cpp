@@ -56,6 +56,11 @@ Status validate_common(const SimulationDef& d, const GlOptions& o) {
     bad("GlOptions.max_contacts_per_sphere", o.max_contacts_per_sphere, "must be in [1, 64]");
   if (o.workgroup_size < 1 || o.workgroup_size > 1024 || (o.workgroup_size & (o.workgroup_size - 1)))
     bad("GlOptions.workgroup_size", o.workgroup_size, "must be a power of two in [1, 1024]");
+  // The hysteretic normal spring keeps one more float per contact (dmax), which the GL contact
+  // slots (xi, partner id) have no room for yet: the CPU backend runs it.
+  if (d.material.unloading_stiffness_ratio != 1.0f)
+    bad("SimulationDef.material.unloading_stiffness_ratio", d.material.unloading_stiffness_ratio,
+        "must be 1 on the GL backend (the hysteretic normal spring runs on the CPU backend)");
   if (!es.empty()) return es;
   return Ok{};
 }

@@ -63,7 +63,8 @@ struct DemStatus {
 // For one sphere of a pair or a sphere against a plane. Notation: n = unit normal from the
 // partner to this sphere; delta = overlap (m); v = velocity of this sphere's contact point
 // relative to the partner's (m/s).
-//   normal      f_n = max(0, k_n delta - d),  d = c_n v.n; in the first substep of a contact
+//   normal      f_n = max(0, f_el - d), f_el = k_n delta (or hysteretic: contact_force_h),
+//               d = c_n v.n; in the first substep of a contact
 //               (new_contact) |d| = c_n (min(delta/dt, |v.n|) + |v.n|/2) instead, with the
 //               sign of v.n                                              (N, never attractive)
 //   tangential  v_t = v - (v.n) n; xi <- xi - (xi.n) n, rescaled to its old length;
@@ -106,7 +107,16 @@ struct ContactForce {
 // with delta < |vn| dt also strips the damping from lightly loaded resting contacts (overlap
 // ~ m g / k_n) and beds stopped settling (measured, ibid.). fd has the sign of vn, so the
 // dashpot still opposes the normal motion.
-SP_INLINE ContactForce contact_force(ContactParams p, vec3 n, float delta, vec3 v, SP_INOUT(vec3) xi) {
+//
+// Hysteretic normal spring (Walton & Braun 1986, J. Rheol. 30:949), used when kn2 > k_n:
+// loading (delta at its largest of the contact, dmax) along k_n, unloading and reloading along
+// the stiffer kn2 from delta0 = dmax (1 - k_n/kn2): f_el = min(k_n delta, kn2 (delta - delta0)),
+// at least 0. A load-unload cycle gives back k_n/kn2 of the energy the loading stored, however
+// slowly it runs (the dashpot takes only a part ~ zeta omega of a slow cycle: the collective
+// modes of a bed, far slower than one contact, were left nearly undamped). dmax (m) is the
+// contact's history beside xi (0 for a new contact); kn2 <= k_n: the linear spring, dmax untouched.
+SP_INLINE ContactForce contact_force_h(ContactParams p, float kn2, vec3 n, float delta, vec3 v, SP_INOUT(vec3) xi,
+                                       SP_INOUT(float) dmax) {
   ContactForce o;
   float vn = dot(v, n);
   float fd = p.cn * vn;
@@ -115,7 +125,17 @@ SP_INLINE ContactForce contact_force(ContactParams p, vec3 n, float delta, vec3 
     const float dd = delta < avn * p.dt ? delta / p.dt : avn;
     fd = (vn < 0.0f ? -1.0f : 1.0f) * (p.cn * (dd + 0.5f * avn));
   }
-  float fn = p.kn * delta - fd;
+  float fel = p.kn * delta;
+  float uel = 0.5f * p.kn * delta * delta;  // J, the normal spring's energy (recoverable)
+  if (kn2 > p.kn) {
+    dmax = delta > dmax ? delta : dmax;
+    const float d0 = dmax * (1.0f - p.kn / kn2);
+    const float fu = kn2 * (delta - d0);
+    fel = fu < fel ? fu : fel;
+    fel = fel > 0.0f ? fel : 0.0f;
+    uel = fel * fel / (2.0f * kn2);
+  }
+  float fn = fel - fd;
   fn = fn > 0.0f ? fn : 0.0f;
   vec3 vt = v - vn * n;
   float xi2 = dot(xi, xi);
@@ -147,10 +167,16 @@ SP_INLINE ContactForce contact_force(ContactParams p, vec3 n, float delta, vec3 
     beta = beta < 0.0f ? 0.0f : (beta > 1.0f ? 1.0f : beta);
     ft = a + beta * b;
   }
-  o.energy = 0.5f * p.kn * delta * delta + 0.5f * p.kt * dot(xi, xi);
+  o.energy = uel + 0.5f * p.kt * dot(xi, xi);
   o.f = fn * n + ft;
   o.ft = ft;
   return o;
+}
+
+// The linear spring (no hysteresis): contact_force_h with kn2 = k_n.
+SP_INLINE ContactForce contact_force(ContactParams p, vec3 n, float delta, vec3 v, SP_INOUT(vec3) xi) {
+  float dm = 0.0f;
+  return contact_force_h(p, p.kn, n, delta, v, xi, dm);
 }
 
 // Velocity (m/s) of sphere i's contact point relative to sphere j's, n the unit normal from j

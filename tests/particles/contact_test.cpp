@@ -60,6 +60,56 @@ TEST(ContactLaw, FirstSubstepDashpot) {
 }
 
 // Spring law: xi grows by v_t dt while it sticks, then is capped at mu f_n (slip).
+// Hysteretic normal spring (Walton & Braun 1986; contact_force_h): loading along k_n while the
+// overlap is at its largest (dmax), unloading and reloading along kn2 from
+// delta0 = dmax (1 - k_n / kn2), never attractive. Golden values with k_n = 1000, kn2 = 4000 N/m,
+// no dashpot: delta0 = 0.75 dmax.
+TEST(ContactLaw, HystereticSpringUnloadsAlongTheStifferBranch) {
+  ContactParams p{1000, 0, 300, 0, 0.5f, 1e-4f, false};
+  const float kn2 = 4000;
+  Vec3 xi{};
+  float dm = 0;
+  ContactForce f = contact_force_h(p, kn2, {0, 1, 0}, 1e-3f, {0, -0.1f, 0}, xi, dm);  // loading: k_n delta
+  EXPECT_NEAR(f.f.y, 1.0f, 1e-6f);
+  EXPECT_EQ(dm, 1e-3f);
+  f = contact_force_h(p, kn2, {0, 1, 0}, 0.8e-3f, {0, 0.1f, 0}, xi, dm);  // unloading: 4000 (0.8e-3 - 0.75e-3)
+  EXPECT_NEAR(f.f.y, 0.2f, 1e-5f);
+  EXPECT_NEAR(f.energy, 0.2f * 0.2f / (2 * 4000.0f), 1e-9f);  // recoverable: f^2 / (2 kn2)
+  EXPECT_EQ(dm, 1e-3f);
+  f = contact_force_h(p, kn2, {0, 1, 0}, 0.7e-3f, {0, 0.1f, 0}, xi, dm);  // below delta0: no force
+  EXPECT_EQ(f.f.y, 0.0f);
+  f = contact_force_h(p, kn2, {0, 1, 0}, 0.9e-3f, {0, -0.1f, 0}, xi, dm);  // reloading along kn2
+  EXPECT_NEAR(f.f.y, 0.6f, 1e-5f);
+  f = contact_force_h(p, kn2, {0, 1, 0}, 1.2e-3f, {0, -0.1f, 0}, xi, dm);  // past dmax: k_n again
+  EXPECT_NEAR(f.f.y, 1.2f, 1e-5f);
+  EXPECT_EQ(dm, 1.2e-3f);
+  // kn2 <= k_n: the linear spring, bit for bit contact_force's, dmax untouched
+  Vec3 xa{}, xb{};
+  float d0 = 0;
+  const ContactForce a = contact_force(p, {0, 1, 0}, 1e-3f, {0.05f, -0.1f, 0}, xa);
+  const ContactForce b = contact_force_h(p, 1000, {0, 1, 0}, 1e-3f, {0.05f, -0.1f, 0}, xb, d0);
+  EXPECT_EQ(a.f.x, b.f.x);
+  EXPECT_EQ(a.f.y, b.f.y);
+  EXPECT_EQ(a.energy, b.energy);
+  EXPECT_EQ(d0, 0.0f);
+}
+
+// A collision with the hysteretic spring and no dashpot (restitution 1) gives back 1/lambda of
+// the energy: e = 1/sqrt(lambda) (Walton & Braun 1986), measured through the Simulation at
+// dt = t_clamped / 50 over 4 phases of the touch, pairs and onto the floor, within 2 %.
+TEST(HeadOnHysteretic, RestitutionIsOneOverRootLambda) {
+  auto create = [](const SimulationDef& d) { return Simulation::create(d); };
+  for (float lambda : {4.0f, 11.111111f})
+    for (bool floor : {false, true}) {
+      const auto st = testutil::head_on<Simulation>(create, 1.0, 50, 4, floor, lambda);
+      const double e = 1.0 / std::sqrt(double(lambda));
+      std::printf("hysteretic lambda %.3f %s: e %.4f ... %.4f (1/sqrt(lambda) = %.4f)\n", lambda,
+                  floor ? "floor" : "pair", st.e_lo, st.e_hi, e);
+      EXPECT_NEAR(st.e_lo, e, 0.02 * e);
+      EXPECT_NEAR(st.e_hi, e, 0.02 * e);
+    }
+}
+
 TEST(ContactLaw, SpringStickThenSlip) {
   ContactParams p{1000, 0, 300, 0, 0.5f, 1e-3f, false};
   Vec3 xi{};

@@ -48,9 +48,11 @@ inline ShellDef head_on_sphere(Vec3 pos, Vec3 vel) {
   return s;
 }
 
-inline SimulationDef head_on_def(double e) {
+// unloading: Material::unloading_stiffness_ratio (1: the linear spring).
+inline SimulationDef head_on_def(double e, float unloading = 1.0f) {
   SimulationDef def;
   def.material.restitution = float(e);
+  def.material.unloading_stiffness_ratio = unloading;
   def.material.friction = 0;
   def.gravity_world = {0, 0, 0};
   def.floor_height = -1;
@@ -66,8 +68,8 @@ inline SimulationDef head_on_def(double e) {
 
 // create(def) returns a Result<Sim>. Fails the test (and returns what it has) on an error.
 template <class Sim, class Create>
-HeadOnStats head_on(Create&& create, double e, int N, int phases, bool floor) {
-  SimulationDef def = head_on_def(e);
+HeadOnStats head_on(Create&& create, double e, int N, int phases, bool floor, float unloading = 1.0f) {
+  SimulationDef def = head_on_def(e, unloading);
   if (floor) def.floor_height = -0.02f;
   const double m = head_on_sphere_mass(), meff = floor ? m : m / 2;
   HeadOnStats out;

@@ -1,0 +1,85 @@
+// HEAVY: the impact series of docs/validation.md through the World and its TerrainManager
+// (bench/impact.hpp): drop heights 0.05 ... 0.8 m and ball densities 800, 2500, 7800 kg/m^3, with
+// the hysteretic normal spring (e = 0.3 from the spring, no dashpot) and, for comparison, the
+// linear spring-dashpot (e = 0.3 from the dashpot). About 4 minutes on one core.
+//   ctest --test-dir build -R bench_impact_heavy --output-on-failure
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+
+#include "bench/impact.hpp"
+
+namespace sandpatch {
+
+namespace {
+
+ImpactSeriesDef series(float unloading, float restitution) {
+  ImpactSeriesDef sd;
+  DropDef& d = sd.base;
+  d.sphere_radius = 0.25;
+  d.sphere_density = 2500;
+  d.terrain_side = 2.0;
+  d.patch_depth = 0.5;
+  d.frame_dt = 1.0 / 240.0;
+  d.stiffness = 1.5e5f;
+  d.restitution = restitution;
+  d.unloading_ratio = unloading;
+  d.threads = 1;
+  d.max_substeps = 100000;
+  sd.knobs.lod = false;
+  sd.knobs.granules_per_slot = 60000;
+  sd.heights = {0.05, 0.1, 0.2, 0.4, 0.8};
+  sd.densities = {800, 2500, 7800};
+  sd.density_height = 0.2;
+  return sd;
+}
+
+void print(const char* name, const ImpactSeries& r, const ImpactSeriesDef& sd) {
+  const double mu = std::tan(35.9 * 3.14159265358979 / 180.0);
+  const double Db = 2 * (sd.base.sphere_radius + sd.base.granule_radius);
+  std::printf("%s: bulk density %.0f kg/m^3\n", name, r.bulk_density);
+  for (const auto* v : {&r.by_height, &r.by_density})
+    for (const ImpactPoint& p : *v)
+      std::printf("  h %.2f m rho_b %5.0f: d %.4f m (Uehara %.4f), H %.4f m, rebound %.3f, bottom after %.4f m\n",
+                  p.drop_height, p.density, p.depth, uehara_depth(mu, p.density, r.bulk_density, Db, p.drop_height),
+                  p.total_drop, p.drop.rebound_ratio, p.drop.rebound_bottom);
+  std::printf("  d ~ H^%.3f +- %.3f (prefactor %.4f), d ~ rho_b^%.3f +- %.3f, worst rebound %.3f\n",
+              r.depth_vs_total_drop.exponent, r.depth_vs_total_drop.exponent_se, r.depth_vs_total_drop.prefactor,
+              r.depth_vs_density.exponent, r.depth_vs_density.exponent_se, r.worst_rebound);
+}
+
+}  // namespace
+
+// Hysteretic spring: no rebound above 5 % of the impact speed (measured at most 3.3 %);
+// d ~ rho_b^c with c within 0.2 of the experiments' 1/2 (measured 0.63-0.66 over two seeds);
+// d ~ H^b with b within 0.35 of 1/3 (measured 0.54-0.64: the model's depth grows faster with
+// the drop than the experiments', docs/validation.md; this guards the present state, it is not
+// agreement); the depths within a factor 4 of Uehara et al.'s law with this bed's bulk density
+// and repose angle (measured 0.29-0.77 of it: a sanity bound).
+// Linear spring-dashpot at the same restitution: the bed throws the ball back (worst rebound
+// above 10 % of the impact speed), which is the defect the hysteresis removes.
+TEST(ImpactHeavy, SeriesAgainstUehara) {
+  const ImpactSeriesDef wb = series(1.0f / (0.3f * 0.3f), 1.0f);
+  auto r = run_impact_series(wb);
+  ASSERT_TRUE(r.ok()) << r.message();
+  print("hysteretic (lambda 11.1, no dashpot)", *r, wb);
+  EXPECT_LE(r->worst_rebound, 0.05);
+  EXPECT_NEAR(r->depth_vs_total_drop.exponent, 1.0 / 3.0, 0.35);
+  EXPECT_NEAR(r->depth_vs_density.exponent, 0.5, 0.2);
+  const double mu = std::tan(35.9 * 3.14159265358979 / 180.0);
+  const double Db = 2 * (wb.base.sphere_radius + wb.base.granule_radius);
+  for (const ImpactPoint& p : r->by_height) {
+    const double u = uehara_depth(mu, p.density, r->bulk_density, Db, p.drop_height);
+    EXPECT_GT(p.depth, u / 4) << p.drop_height;
+    EXPECT_LT(p.depth, 4 * u) << p.drop_height;
+  }
+
+  const ImpactSeriesDef lin = series(1.0f, 0.3f);
+  auto l = run_impact_series(lin);
+  ASSERT_TRUE(l.ok()) << l.message();
+  print("linear (dashpot e 0.3)", *l, lin);
+  EXPECT_GT(l->worst_rebound, 0.1);
+}
+
+}  // namespace sandpatch
