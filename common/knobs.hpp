@@ -43,6 +43,7 @@ inline constexpr Knob kFriction{"materials[].friction", "TerrainDef.material.fri
 inline constexpr Knob kRestitution{"materials[].restitution", "TerrainDef.material.restitution", 0.3, 0, 1, true, false, false, "", "coefficient of restitution e of a sphere pair (or damping_ratio in scene files)"};
 inline constexpr Knob kStiffness{"materials[].stiffness", "TerrainDef.material.stiffness", 2.0e4, 1, 1e12, false, false, false, "N/m", "normal contact stiffness k_n"};
 inline constexpr Knob kTangentialRatio{"materials[].tangential_stiffness_ratio", "TerrainDef.material.tangential_stiffness_ratio", 2.0 / 7.0, 0, 1, false, false, false, "", "k_t / k_n"};
+inline constexpr Knob kUnloadingRatio{"materials[].unloading_stiffness_ratio", "TerrainDef.material.unloading_stiffness_ratio", 1, 1, 100, false, false, false, "", "hysteretic normal spring (Walton & Braun): unloading / loading stiffness; 1 = linear (CPU backend only above 1; docs/validation.md)"};
 
 // ---- the patches ----
 inline constexpr Knob kSlots{"simulation.pool.slots", "TerrainDef.slots", 2, 1, 1024, false, false, true, "", "simulations in the pool (patches live at once)"};
@@ -66,8 +67,8 @@ inline constexpr Knob kBodyRestitution{"bodies[].restitution", "BodyDef.restitut
 inline constexpr Knob kBodyRollingFriction{"bodies[].rolling_friction", "BodyDef.rolling_friction", 0.05, 0, 10, false, false, false, "", "rolling resistance (torque arm / radius)"};
 
 // Every entry, in the order of the docs' tables.
-inline constexpr std::array<const Knob*, 23> kAll = {
-    &kGranuleRadius, &kDensity, &kFriction, &kRestitution, &kStiffness, &kTangentialRatio,
+inline constexpr std::array<const Knob*, 24> kAll = {
+    &kGranuleRadius, &kDensity, &kFriction, &kRestitution, &kStiffness, &kTangentialRatio, &kUnloadingRatio,
     &kSlots, &kGranulesPerSlot, &kParticleScale, &kStepsPerContact, &kMaxSubsteps, &kPatchDepth,
     &kSoilDepth, &kSleepSpeed, &kSleepTime, &kIdleTimeout, &kThreads, &kLodHorizon, &kLodMargin,
     &kLodApron, &kBodyFriction, &kBodyRestitution, &kBodyRollingFriction};

@@ -112,6 +112,7 @@ api::TerrainDef terrain_def(const SceneDef& scene, int threads, const std::strin
   t.material.restitution = mat->restitution_value();
   t.material.stiffness = mat->stiffness;
   t.material.tangential_stiffness_ratio = mat->tangential_stiffness_ratio;
+  t.material.unloading_stiffness_ratio = mat->unloading_stiffness_ratio;
   t.particle_scale = sim.particle_scale;
   t.steps_per_contact = sim.steps_per_contact;
   t.max_substeps = sim.max_substeps;

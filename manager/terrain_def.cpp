@@ -10,6 +10,7 @@ TerrainManagerDef manager_def(const api::TerrainDef& def) {
   m.material.restitution = float(def.material.restitution);
   m.material.stiffness = float(def.material.stiffness);
   m.material.tangential_stiffness_ratio = float(def.material.tangential_stiffness_ratio);
+  m.material.unloading_stiffness_ratio = float(def.material.unloading_stiffness_ratio);
   m.particle_scale = def.particle_scale;
   m.steps_per_contact = def.steps_per_contact;
   m.max_substeps = def.max_substeps;

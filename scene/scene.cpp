@@ -154,6 +154,7 @@ MaterialDef parse_material(Ctx& c, const json& j, const std::string& path) {
   }
   o.knob("stiffness", m.stiffness, knobs::kStiffness);
   o.knob("tangential_stiffness_ratio", m.tangential_stiffness_ratio, knobs::kTangentialRatio);
+  o.knob("unloading_stiffness_ratio", m.unloading_stiffness_ratio, knobs::kUnloadingRatio);
   o.knob("granule_radius", m.granule_radius, knobs::kGranuleRadius);
   o.number("packing_fraction", m.packing_fraction, {0.0, 0.74, true, false, ""});
   o.finish();
@@ -772,6 +773,12 @@ Result<SceneDef> parse_scene(const std::string& json_text, const std::string& so
   top.finish();
 
   // Cross references.
+  // The GL backend's contact slots hold no largest overlap: the hysteretic spring is the CPU's.
+  if (s.simulation.backend == Backend::Gl)
+    for (std::size_t k = 0; k < s.materials.size(); ++k)
+      if (s.materials[k].unloading_stiffness_ratio != 1.0)
+        c.error("materials[" + std::to_string(k) + "].unloading_stiffness_ratio", fmt_num(s.materials[k].unloading_stiffness_ratio),
+                "must be 1 with simulation.backend \"gl\" (the hysteretic normal spring runs on the CPU backend only)");
   check_unique_names(c, s.materials, "materials");
   check_unique_names(c, s.bodies, "bodies");
   check_unique_names(c, s.cameras, "cameras");

@@ -89,6 +89,7 @@ struct MaterialDef {
   std::optional<double> damping_ratio;         // ζ in [0, 1)  }
   double stiffness = knobs::kStiffness.def;    // k_n, N/m, normal contact stiffness
   double tangential_stiffness_ratio = knobs::kTangentialRatio.def;  // k_t / k_n
+  double unloading_stiffness_ratio = knobs::kUnloadingRatio.def;    // hysteretic normal spring; 1 = linear
   double granule_radius = knobs::kGranuleRadius.def;  // m, radius of each of the 4 spheres of a granule
   // φ, granule solid volume / bulk volume: validated, not used by the simulation (the
   // pre-settled tile measures its own φ; the report gives it as tile.packing_fraction).

@@ -59,6 +59,7 @@ nlohmann::json scene_to_json(const SceneDef& s) {
     else mj["restitution"] = m.restitution_value();
     mj["stiffness"] = m.stiffness;
     mj["tangential_stiffness_ratio"] = m.tangential_stiffness_ratio;
+    mj["unloading_stiffness_ratio"] = m.unloading_stiffness_ratio;
     mj["granule_radius"] = m.granule_radius;
     mj["packing_fraction"] = m.packing_fraction;
     j["materials"].push_back(mj);

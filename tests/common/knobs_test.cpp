@@ -89,6 +89,9 @@ std::vector<Case> cases() {
       {&knobs::kTangentialRatio, mat("tangential_stiffness_ratio"), [](S s) { return s.materials[0].tangential_stiffness_ratio; },
        [](T t, D, double v) { t.material.tangential_stiffness_ratio = v; }, td.material.tangential_stiffness_ratio,
        [](S s) { return manager_field(s, [](M m) { return double(m.material.tangential_stiffness_ratio); }); }},
+      {&knobs::kUnloadingRatio, mat("unloading_stiffness_ratio"), [](S s) { return s.materials[0].unloading_stiffness_ratio; },
+       [](T t, D, double v) { t.material.unloading_stiffness_ratio = v; }, td.material.unloading_stiffness_ratio,
+       [](S s) { return manager_field(s, [](M m) { return double(m.material.unloading_stiffness_ratio); }); }},
       {&knobs::kSlots, sim2("pool", "slots"), [](S s) { return double(s.simulation.pool.slots); },
        [](T t, D, double v) { t.slots = int(v); }, double(td.slots),
        [](S s) { return manager_field(s, [](M m) { return double(m.slots); }); }},
@@ -146,6 +149,7 @@ std::vector<Case> cases() {
 // A value inside the range other than the default (integers whole).
 double other_value(const knobs::Knob& k) {
   double v = k.def > 0 ? k.def * 0.5 : (k.lo + k.hi) * 0.5;
+  if (v < k.lo || (k.lo_open && v == k.lo)) v = k.def * 2;  // (a default at the range's low end)
   if (k.integer) v = std::floor(v);
   if (v == k.def) v = k.def + 1;
   return v;

@@ -882,3 +882,23 @@ TEST(Scene, FrameBudget) {
 
 }  // namespace
 }  // namespace sandpatch
+
+// The hysteretic normal spring (materials[].unloading_stiffness_ratio > 1) is read, and refused
+// with the GL backend naming the field (its contact slots hold no largest overlap).
+TEST(Scene, HystereticSpringIsReadAndRefusedOnGl) {
+  const std::string cpu = R"({"materials": [{"name": "sand", "restitution": 0.3, "unloading_stiffness_ratio": 11.1}],
+    "terrain": {"source": {"type": "procedural", "kind": "flat", "samples_x": 9, "samples_z": 9}, "spacing": 0.5}})";
+  auto ok = sandpatch::parse_scene(cpu, "hys.json", "");
+  ASSERT_TRUE(ok.ok()) << ok.message();
+  EXPECT_DOUBLE_EQ(ok->materials[0].unloading_stiffness_ratio, 11.1);
+  std::string gl = cpu;
+  gl.insert(gl.rfind('}'), R"(, "simulation": {"backend": "gl"})");
+  auto bad = sandpatch::parse_scene(gl, "hys.json", "");
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.message().find("materials[0].unloading_stiffness_ratio = 11.1"), std::string::npos) << bad.message();
+  auto low = sandpatch::parse_scene(R"({"materials": [{"name": "sand", "restitution": 0.3, "unloading_stiffness_ratio": 0.5}],
+    "terrain": {"source": {"type": "procedural", "kind": "flat", "samples_x": 9, "samples_z": 9}, "spacing": 0.5}})",
+                                    "hys.json", "");
+  ASSERT_FALSE(low.ok());
+  EXPECT_NE(low.message().find("[1, 100]"), std::string::npos) << low.message();
+}
