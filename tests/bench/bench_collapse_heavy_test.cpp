@@ -1,0 +1,66 @@
+// HEAVY: the full quasi-2D column-collapse sweep of `sandpatch bench collapse` (nine aspect
+// ratios 0.5 ... 8, L0 = 10 lattice columns, slot 3 wide, mu = 0.5, seed 1, one thread; about
+// 4 minutes on a busy two-core machine) and its fitted exponents against the published ones
+// (docs/validation.md "Granular column collapse" has the table and the references):
+//   runout (l_inf - L0)/L0 = k a^n, a <= 2.5: Lube et al. 2005 (planar) n = 1;
+//                                    a >= 2.5: Lube et al. 2005 n = 2/3, Balmforth & Kerswell
+//                                    2005 narrow slots n = 0.65 +- 0.05;
+//   final height h_inf/L0 = k a^n, a >= 2.5: Balmforth & Kerswell n = 0.5 (narrow) / 0.4
+//                                    (wide). The model does NOT agree here (measured 0.62):
+//                                    asserted is what it gives, documented as a disagreement.
+// Run: ctest --test-dir build -R bench_collapse_heavy --output-on-failure
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <vector>
+
+#include "bench/collapse.hpp"
+
+using namespace sandpatch;
+
+TEST(CollapseHeavy, SweepExponentsAgainstThePublishedScalings) {
+  const std::vector<double> targets = {0.5, 0.75, 1, 1.5, 2, 3, 4, 6, 8};
+  std::vector<double> a, runout, height;
+  for (double t : targets) {
+    CollapseDef c;
+    c.aspect = t;
+    c.threads = 1;
+    auto r = run_collapse(c);
+    ASSERT_TRUE(r.ok()) << r.message();
+    std::printf("a = %.3f: (l_inf - L0)/L0 = %.3f, h_inf/L0 = %.3f, %d granules, %.1f s wall\n", r->aspect,
+                r->runout, r->height, r->granules, r->wall_seconds);
+    std::fflush(stdout);
+    a.push_back(r->aspect);
+    runout.push_back(r->runout);
+    height.push_back(r->height);
+    // every deposit grows with a (the sweep is monotone in the runout)
+    if (a.size() >= 2) {
+      EXPECT_GT(runout.back(), 0.9 * runout[runout.size() - 2]);
+    }
+  }
+  const PowerFit lo = fit_power_law(a, runout, 0, 2.5), hi = fit_power_law(a, runout, 2.5),
+                 h = fit_power_law(a, height, 2.5);
+  std::printf("runout low a: n = %.3f +- %.3f, k = %.3f; high a: n = %.3f +- %.3f, k = %.3f; "
+              "height high a: n = %.3f +- %.3f, k = %.3f\n",
+              lo.exponent, lo.exponent_se, lo.prefactor, hi.exponent, hi.exponent_se, hi.prefactor, h.exponent,
+              h.exponent_se, h.prefactor);
+  ASSERT_EQ(lo.points, 5);
+  ASSERT_EQ(hi.points, 4);
+  // low a: linear (n = 1) within 2 standard errors (measured 1.17 +- 0.18), prefactor within
+  // 25 % of Lube's 1.2 (measured 0.99: the narrow slot's walls brake the flow)
+  EXPECT_NEAR(lo.exponent, 1.0, 2 * lo.exponent_se);
+  EXPECT_NEAR(lo.prefactor / 1.2, 1.0, 0.25);
+  // high a: within the combined uncertainty (2 sigma) of Balmforth & Kerswell's narrow slots,
+  // 0.65 +- 0.05 (measured 0.725 +- 0.039), and inside [0.55, 0.85] whatever the fit's SE
+  const double sigma = std::sqrt(hi.exponent_se * hi.exponent_se + 0.05 * 0.05);
+  EXPECT_NEAR(hi.exponent, 0.65, 2 * sigma);
+  EXPECT_GT(hi.exponent, 0.55);
+  EXPECT_LT(hi.exponent, 0.85);
+  // the runout law's change of regime: the high-a exponent is below the low-a one
+  EXPECT_LT(hi.exponent, lo.exponent);
+  // final height: the disagreement, asserted as measured (0.62 +- 0.04 against the published
+  // 0.4 - 0.5): the exponent stays in [0.5, 0.75]
+  EXPECT_GT(h.exponent, 0.5);
+  EXPECT_LT(h.exponent, 0.75);
+}
