@@ -287,8 +287,8 @@ int run_bench_collapse(const BenchCollapseArgs& a) {
       std::printf("bench collapse: mu = %.2f, L0 = %d lattice columns, slot %d wide, seed %llu, %d thread(s)\n", mu,
                   a.length_granules, a.width_granules, (unsigned long long)a.seed, a.threads);
     if (!a.json)
-      std::printf("%6s %6s %7s %6s %7s %8s %7s %7s %6s %9s %4s %4s %6s %7s\n", "a_tgt", "N", "H0[m]", "a", "l_inf",
-                  "dL/L0", "h/L0", "h/H0", "t_stop", "t/sqrtH/g", "ej", "rest", "settle", "wall[s]");
+      std::printf("%6s %6s %7s %6s %7s %8s %7s %7s %6s %9s %4s %4s %6s %7s %7s %6s\n", "a_tgt", "N", "H0[m]", "a", "l_inf",
+                  "dL/L0", "h/L0", "h/H0", "t_stop", "t/sqrtH/g", "ej", "rest", "settle", "wall[s]", "Lube05", "ratio");
     std::vector<double> as, runs, hs;
     nlohmann::json rows = nlohmann::json::array();
     for (double asp : a.aspects) {
@@ -307,13 +307,19 @@ int run_bench_collapse(const BenchCollapseArgs& a) {
       as.push_back(r->aspect);
       runs.push_back(r->runout);
       hs.push_back(r->height);
+      // the planar law of Lube et al. (2005) in the run's regime: 1.2 a (low), 1.9 a^(2/3) (high)
+      const double law = asp <= a.split ? 1.2 * r->aspect : 1.9 * std::pow(r->aspect, 2.0 / 3.0);
       nlohmann::json j = collapse_json(*r);
+      j["lube2005_runout"] = law;
       j["aspect_target"] = asp;
       rows.push_back(j);
+      if (!a.json && rows.size() == 1)
+        std::printf("  L0 = %.4f m, slot W = %.4f m, granule bounding diameter d = %.4f m (L0 = %.1f d, W = %.1f d)\n",
+                    r->L0, r->W, r->d, r->L0 / r->d, r->W / r->d);
       if (!a.json) {
-        std::printf("%6.2f %6d %7.3f %6.2f %7.3f %8.3f %7.3f %7.3f %6.2f %9.2f %4d %4s %6.2f %7.1f\n", asp, r->granules,
+        std::printf("%6.2f %6d %7.3f %6.2f %7.3f %8.3f %7.3f %7.3f %6.2f %9.2f %4d %4s %6.2f %7.1f %7.3f %6.2f\n", asp, r->granules,
                     r->H0, r->aspect, r->l_inf, r->runout, r->height, r->h_inf / r->H0, r->t_stop,
-                    r->t_stop / std::sqrt(r->H0 / kG), r->ejected, r->at_rest ? "yes" : "no", r->settle_time, r->wall_seconds);
+                    r->t_stop / std::sqrt(r->H0 / kG), r->ejected, r->at_rest ? "yes" : "no", r->settle_time, r->wall_seconds, law, r->runout / law);
         std::fflush(stdout);
       }
     }
@@ -321,21 +327,30 @@ int run_bench_collapse(const BenchCollapseArgs& a) {
       return nlohmann::json{{"exponent", f.exponent},   {"exponent_se", f.exponent_se}, {"prefactor", f.prefactor},
                             {"log_prefactor_se", f.log_prefactor_se}, {"points", f.points}};
     };
-    const PowerFit all = fit_power_law(as, runs), lo = fit_power_law(as, runs, 0, a.split),
-                   hi = fit_power_law(as, runs, a.split), h_hi = fit_power_law(as, hs, a.split);
+    // the regimes are split on the target aspect ratios (a measured a near the split would
+    // otherwise move a run from one fit to the other between frictions or seeds)
+    std::vector<double> a_lo, a_hi, r_lo, r_hi, h_hi_v;
+    for (std::size_t i = 0; i < as.size(); ++i) {
+      const bool low = a.aspects[i] <= a.split;
+      (low ? a_lo : a_hi).push_back(as[i]);
+      (low ? r_lo : r_hi).push_back(runs[i]);
+      if (!low) h_hi_v.push_back(hs[i]);
+    }
+    const PowerFit all = fit_power_law(as, runs), lo = fit_power_law(a_lo, r_lo), hi = fit_power_law(a_hi, r_hi),
+                   h_hi = fit_power_law(a_hi, h_hi_v);
     if (!a.json) {
       auto pr = [](const char* what, const PowerFit& f) {
         std::printf("  %-34s exponent %.3f +- %.3f, prefactor %.3f (ln k +- %.3f), %d points\n", what, f.exponent,
                     f.exponent_se, f.prefactor, f.log_prefactor_se, f.points);
       };
       pr("(l_inf - L0)/L0 = k a^n, all a:", all);
-      std::printf("  %-34s a <= %.2f and a >= %.2f:\n", "", a.split, a.split);
+      std::printf("  %-34s target a <= %.2f and > %.2f:\n", "", a.split, a.split);
       pr("  (l_inf - L0)/L0, low a:", lo);
       pr("  (l_inf - L0)/L0, high a:", hi);
       pr("h_inf/L0 = k a^n, high a:", h_hi);
-      std::printf("  published (Balmforth & Kerswell 2005): runout exponent 0.65 +- 0.05 (narrow slots), "
-                  "0.9 +- 0.1 (wide channels); H0/h_inf ~ a^0.5 (narrow), a^0.6 (wide), i.e. h_inf/L0 ~ a^0.5, "
-                  "a^0.4\n");
+      std::printf("  published: Lube et al. 2005 (planar): (l_inf - L0)/L0 = 1.2 a (small a), 1.9 a^(2/3) (large a); "
+                  "Balmforth & Kerswell 2005: runout exponent 0.65 +- 0.05 (narrow slots), 0.9 +- 0.1 (wide "
+                  "channels); H0/h_inf ~ a^0.5 (narrow), a^0.6 (wide), i.e. h_inf/L0 ~ a^0.5, a^0.4\n");
     }
     out["sweeps"].push_back({{"friction", mu},
                              {"length_granules", a.length_granules},

@@ -84,7 +84,7 @@ struct BenchCollapseArgs {
   std::vector<float> frictions = {0.5f};  // a sweep per friction
   int length_granules = 10;
   int width_granules = 3;
-  double split = 2.5;   // measured a: fits over a <= split, a >= split and all
+  double split = 2.5;   // target a: fits over the runs of target a <= split, > split, and all
   std::uint64_t seed = 1;
   int threads = 1;
   bool json = false;

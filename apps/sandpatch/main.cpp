@@ -333,7 +333,7 @@ void add_bench(CLI::App& app, BenchCli& a) {
       ->delimiter(',');
   bcolc->add_option("--length", bcol.length_granules, "Column length L0 in granules (default 10)");
   bcolc->add_option("--width", bcol.width_granules, "Slot width in granules (default 3)");
-  bcolc->add_option("--split", bcol.split, "Aspect ratio between the low-a and high-a fits (default 2.5)");
+  bcolc->add_option("--split", bcol.split, "Target aspect ratio between the low-a and high-a fits (default 2.5)");
   bcolc->add_option("--seed", bcol.seed, "Lattice seed (orientations, jitter) (default 1)");
   bcolc->add_option("--threads", bcol.threads, "Worker threads per run (default 1; 0 = all)");
   bcolc->add_flag("--json", bcol.json, "Print one JSON object on the last line");

@@ -2,10 +2,10 @@
 // ratios 0.5 ... 8, L0 = 10 lattice columns, slot 3 wide, mu = 0.5, seed 1, one thread; about
 // 4 minutes on a busy two-core machine) and its fitted exponents against the published ones
 // (docs/validation.md "Granular column collapse" has the table and the references):
-//   runout (l_inf - L0)/L0 = k a^n, a <= 2.5: Lube et al. 2005 (planar) n = 1;
-//                                    a >= 2.5: Lube et al. 2005 n = 2/3, Balmforth & Kerswell
+//   runout (l_inf - L0)/L0 = k a^n, target a <= 2 (measured 0.58-1.81): Lube et al. 2005 (planar) n = 1;
+//                                    target a >= 3 (2.71-6.53): Lube et al. 2005 n = 2/3, Balmforth & Kerswell
 //                                    2005 narrow slots n = 0.65 +- 0.05;
-//   final height h_inf/L0 = k a^n, a >= 2.5: Balmforth & Kerswell n = 0.5 (narrow) / 0.4
+//   final height h_inf/L0 = k a^n, target a >= 3: Balmforth & Kerswell n = 0.5 (narrow) / 0.4
 //                                    (wide). The model does NOT agree here (measured 0.62):
 //                                    asserted is what it gives, documented as a disagreement.
 // Run: ctest --test-dir build -R bench_collapse_heavy --output-on-failure
@@ -22,6 +22,7 @@ using namespace sandpatch;
 TEST(CollapseHeavy, SweepExponentsAgainstThePublishedScalings) {
   const std::vector<double> targets = {0.5, 0.75, 1, 1.5, 2, 3, 4, 6, 8};
   std::vector<double> a, runout, height;
+  std::vector<double> a_lo, r_lo, a_hi, r_hi, h_hi;  // split on the target a: <= 2 and >= 3
   for (double t : targets) {
     CollapseDef c;
     c.aspect = t;
@@ -34,13 +35,17 @@ TEST(CollapseHeavy, SweepExponentsAgainstThePublishedScalings) {
     a.push_back(r->aspect);
     runout.push_back(r->runout);
     height.push_back(r->height);
+    if (t <= 2.5) {
+      a_lo.push_back(r->aspect), r_lo.push_back(r->runout);
+    } else {
+      a_hi.push_back(r->aspect), r_hi.push_back(r->runout), h_hi.push_back(r->height);
+    }
     // every deposit grows with a (the sweep is monotone in the runout)
     if (a.size() >= 2) {
       EXPECT_GT(runout.back(), 0.9 * runout[runout.size() - 2]);
     }
   }
-  const PowerFit lo = fit_power_law(a, runout, 0, 2.5), hi = fit_power_law(a, runout, 2.5),
-                 h = fit_power_law(a, height, 2.5);
+  const PowerFit lo = fit_power_law(a_lo, r_lo), hi = fit_power_law(a_hi, r_hi), h = fit_power_law(a_hi, h_hi);
   std::printf("runout low a: n = %.3f +- %.3f, k = %.3f; high a: n = %.3f +- %.3f, k = %.3f; "
               "height high a: n = %.3f +- %.3f, k = %.3f\n",
               lo.exponent, lo.exponent_se, lo.prefactor, hi.exponent, hi.exponent_se, hi.prefactor, h.exponent,
