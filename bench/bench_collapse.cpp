@@ -186,6 +186,7 @@ Result<CollapseResult> run_collapse(const CollapseDef& c) {
   const int max_flow = int(std::ceil(c.max_flow / c.frame_dt));
   const int every = std::max(1, int(std::lround(0.01 / c.frame_dt)));  // front checked every 10 ms
   double front_moved = 0;  // l_inf when the front last moved by more than 1 % of L0
+  double height_moved = res.H0, t_height = 0;  // h_inf, time when it last moved by 1 % of L0
   for (f = 0; f < max_flow; ++f) {
     if (auto st = sim->step(c.frame_dt); !st) return st.errors();
     count_step();
@@ -196,9 +197,14 @@ Result<CollapseResult> run_collapse(const CollapseDef& c) {
       front_moved = dep.l_inf;
       res.t_stop = t;
     }
+    if (std::fabs(dep.h_inf - height_moved) > 0.01 * L0) {
+      height_moved = dep.h_inf;
+      t_height = t;
+    }
     res.at_rest = t > 0.1 && sim->max_granule_speed() < c.rest_speed;
-    // at rest, or the front has not moved for 0.3 s after 3 free-fall times: done
-    if (res.at_rest || (t > 3 * t_free && t - res.t_stop > 0.3)) {
+    // at rest, or neither the front nor the height has moved for 0.3 s after 3 free-fall
+    // times: done
+    if (res.at_rest || (t > 3 * t_free && t - std::max(res.t_stop, t_height) > 0.3)) {
       ++f;
       break;
     }

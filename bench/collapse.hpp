@@ -20,6 +20,8 @@
 //   h_inf   final height: highest sphere top of the deposit
 //   t_stop  time after release at which the front (l_inf) last moved by more than 1 % of
 //           L0 (the front's arrest time)
+// The run ends when every granule is slower than rest_speed, or when neither l_inf nor h_inf
+// has moved by 1 % of L0 for 0.3 s after 3 sqrt(H0 / g), or after max_flow.
 #pragma once
 
 #include <cstdint>
