@@ -9,7 +9,7 @@
 //   final height h_inf/L0 = k a^n, target a >= 3: Balmforth & Kerswell n = 0.5 (narrow) / 0.4
 //                                    (wide). The model does NOT agree here (measured 0.58):
 //                                    asserted is what it gives, documented as a disagreement.
-// Run: ctest --test-dir build -R bench_collapse_heavy --output-on-failure
+// Run: ctest --test-dir build -R CollapseHeavy --output-on-failure (or ./build/tests/bench/bench_collapse_heavy_test)
 #include <gtest/gtest.h>
 
 #include <cmath>
