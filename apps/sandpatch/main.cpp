@@ -9,6 +9,7 @@
 //   sandpatch bench dem [--granules N] [--steps S] [--repeat K] [--alternate-threads T2] [--backend cpu|gl] [--threads T] [--json]
 //   sandpatch bench render [--terrain N]... [--frames F] [--width W] [--height H] [--json]
 //   sandpatch bench lod [--sizes N,N,...] [--seconds S] [--threads T] [--json]
+//   sandpatch bench collapse [--aspects A,A,...] [--friction MU,...] [--length N] [--width N] [--seed S] [--threads T] [--json]
 //   sandpatch bench tradeoff [--quick | --full] [--threads T] [--out DIR] [--no-gl] [--no-plot] [--json]
 //   sandpatch stress SCENE [--sims N] [--frames F] [--interval S] [--threads T] [--out DIR] [--no-plot] [--json]
 // Exit codes: 0 ok, 1 runtime failure (with the stage that failed), 2 bad input.
@@ -37,6 +38,7 @@
 #include "apps/sandpatch/view.hpp"
 #include "bench/bench.hpp"
 #include "bench/bench_tradeoff.hpp"
+#include "bench/collapse.hpp"
 #include "common/knobs.hpp"
 #include "gl/context.hpp"
 #include "manager/run.hpp"
@@ -278,6 +280,7 @@ struct BenchCli {
   std::string lod_sizes;
   BenchTradeoffArgs tradeoff;
   bool trade_quick = false, trade_full = false, trade_no_gl = false, trade_no_plot = false;
+  BenchCollapseArgs collapse;
 };
 
 void add_bench(CLI::App& app, BenchCli& a) {
@@ -325,6 +328,20 @@ void add_bench(CLI::App& app, BenchCli& a) {
   btradec->add_flag("--no-gl", a.trade_no_gl, "Skip the gl backend settings");
   btradec->add_flag("--no-plot", a.trade_no_plot, "Write the data only (no python3/matplotlib plot)");
   btradec->add_flag("--json", btrade.json, "Print one JSON object on the last line");
+
+  BenchCollapseArgs& bcol = a.collapse;
+  auto* bcolc = bench->add_subcommand("collapse", "Quasi-2D granular column collapse: runout and final height against "
+                                                  "aspect ratio, fitted exponents (docs/validation.md)");
+  bcolc->add_option("--aspects", bcol.aspects, "Aspect ratios H0/L0, comma-separated (default 0.5,0.75,1,1.5,2,3,4,6,8)")
+      ->delimiter(',');
+  bcolc->add_option("--friction", bcol.frictions, "Friction coefficients, comma-separated: a sweep each (default 0.5)")
+      ->delimiter(',');
+  bcolc->add_option("--length", bcol.length_granules, "Column length L0 in granules (default 10)");
+  bcolc->add_option("--width", bcol.width_granules, "Slot width in granules (default 3)");
+  bcolc->add_option("--split", bcol.split, "Target aspect ratio between the low-a and high-a fits (default 2.5)");
+  bcolc->add_option("--seed", bcol.seed, "Lattice seed (orientations, jitter) (default 1)");
+  bcolc->add_option("--threads", bcol.threads, "Worker threads per run (default 1; 0 = all)");
+  bcolc->add_flag("--json", bcol.json, "Print one JSON object on the last line");
 }
 
 // "512,1024,..." into sizes; false (with the message on stderr) when an item is not an integer.
@@ -368,6 +385,7 @@ int cmd_bench(BenchCli& a) {
     if (!a.trade_no_plot) btrade.plot_script = std::string(SANDPATCH_SOURCE_DIR) + "/scripts/plot_tradeoff.py";
     return run_bench_tradeoff(btrade);
   }
+  if (bench->got_subcommand("collapse")) return run_bench_collapse(a.collapse);
   if (bench->got_subcommand("lod")) {
     if (!a.lod_sizes.empty() && !parse_lod_sizes(a.lod_sizes, a.lod.sizes)) return code(ExitCode::BadInput);
     return run_bench_lod(a.lod);
