@@ -422,17 +422,27 @@ int cmd_stress(StressCli& a) {
 }  // namespace
 
 // OpenMP's threads wait at the end of a parallel region. GCC's libgomp spins first (300,000
-// iterations) and sleeps after; on a machine whose cores other programs also use, a thread
-// spinning at one of a DEM substep's barriers holds the core its partner needs, and the step
-// runs several times slower than on one thread (docs/BENCHMARKS.md "OpenMP's wait policy").
-// libgomp reads its policy once, when it is loaded, so the program starts itself again with
-// OMP_WAIT_POLICY=passive unless the user chose a policy (OMP_WAIT_POLICY or GOMP_SPINCOUNT).
-// (Not under valgrind: its tools would lose the program at the exec.)
-void sleep_at_barriers(char** argv) {
+// iterations) and sleeps after. On a quiet machine spinning is the faster (bench dem, two
+// threads: 1.8 times the sphere-steps/s of sleeping); on cores other programs also use, a
+// thread spinning at one of a DEM substep's barriers holds the core its partner needs, and the
+// step runs several times slower than sleeping (9 times at a load average of 9 on two cores;
+// docs/BENCHMARKS.md "OpenMP's wait policy"). libgomp reads its policy once, when it is
+// loaded, so when the machine is busy at start-up (1-minute load average at least its
+// hardware threads) the program starts itself again with OMP_WAIT_POLICY=passive, unless the
+// user chose a policy (OMP_WAIT_POLICY or GOMP_SPINCOUNT). `bench` keeps libgomp's default (it
+// measures the peak). Not under valgrind: its tools would lose the program at the exec.
+void sleep_at_barriers_if_busy(int argc, char** argv) {
   if (std::getenv("OMP_WAIT_POLICY") || std::getenv("GOMP_SPINCOUNT")) return;
+  if (argc > 1 && std::string(argv[1]) == "bench") return;
 #if __has_include(<valgrind/valgrind.h>)
   if (RUNNING_ON_VALGRIND) return;
 #endif
+  double load1 = 0;
+  if (FILE* f = std::fopen("/proc/loadavg", "r")) {
+    if (std::fscanf(f, "%lf", &load1) != 1) load1 = 0;
+    std::fclose(f);
+  }
+  if (!(load1 >= double(omp_get_num_procs()))) return;
   char self[4096];
   const ssize_t n = ::readlink("/proc/self/exe", self, sizeof self - 1);
   if (n <= 0 || n >= ssize_t(sizeof self - 1)) return;
@@ -443,7 +453,7 @@ void sleep_at_barriers(char** argv) {
 }
 
 int main(int argc, char** argv) {
-  sleep_at_barriers(argv);
+  sleep_at_barriers_if_busy(argc, argv);
   CLI::App app{"Sandpatch: real-time granular terrain (hybrid heightfield / DEM level of detail)", "sandpatch"};
   app.require_subcommand(1);
   app.set_version_flag("--version", std::string("sandpatch ") + SANDPATCH_VERSION);
