@@ -9,27 +9,14 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <string>
+#include "tests/apps/process.hpp"
 
 namespace fs = std::filesystem;
 
 namespace {
 
-struct Outcome {
-  int code = -1;
-  std::string output;  // stdout and stderr together
-};
-
-Outcome sandpatch(const std::string& args) {
-  const std::string cmd = std::string(SANDPATCH_EXE) + " " + args + " 2>&1";
-  Outcome o;
-  FILE* p = popen(cmd.c_str(), "r");
-  if (!p) return o;
-  std::array<char, 4096> buf;
-  while (std::size_t n = std::fread(buf.data(), 1, buf.size(), p)) o.output.append(buf.data(), n);
-  const int status = pclose(p);
-  o.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return o;
-}
+using apps_test::Outcome;
+using apps_test::sandpatch;
 
 std::string scene(const std::string& rel) { return std::string(SANDPATCH_SOURCE_DIR) + "/scenes/" + rel; }
 

@@ -13,28 +13,15 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <string>
+#include "tests/apps/process.hpp"
 
 namespace fs = std::filesystem;
 
 namespace {
 
-struct Outcome {
-  int code = -1;
-  std::string output;
-};
-
-Outcome shell(const std::string& cmd) {
-  Outcome o;
-  FILE* p = popen((cmd + " 2>&1").c_str(), "r");
-  if (!p) return o;
-  std::array<char, 4096> buf;
-  while (std::size_t n = std::fread(buf.data(), 1, buf.size(), p)) o.output.append(buf.data(), n);
-  const int status = pclose(p);
-  o.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return o;
-}
-
-Outcome sandpatch(const std::string& args) { return shell(std::string(SANDPATCH_EXE) + " " + args); }
+using apps_test::Outcome;
+using apps_test::sandpatch;
+using apps_test::shell;
 std::string scene(const std::string& rel) { return std::string(SANDPATCH_SOURCE_DIR) + "/scenes/" + rel; }
 nlohmann::json read(const std::string& rel) {
   std::ifstream f(scene(rel));

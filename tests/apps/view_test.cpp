@@ -12,29 +12,16 @@
 #include <string>
 
 #include "render/image.hpp"
+#include "tests/apps/process.hpp"
 
 namespace fs = std::filesystem;
 using sandpatch::render::Image;
 
 namespace {
 
-struct Outcome {
-  int code = -1;
-  std::string output;  // stdout and stderr together
-};
-
-Outcome shell(const std::string& cmd) {
-  Outcome o;
-  FILE* p = popen((cmd + " 2>&1").c_str(), "r");
-  if (!p) return o;
-  std::array<char, 4096> buf;
-  while (std::size_t n = std::fread(buf.data(), 1, buf.size(), p)) o.output.append(buf.data(), n);
-  const int status = pclose(p);
-  o.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return o;
-}
-
-Outcome run_exe(const std::string& args) { return shell(std::string(SANDPATCH_EXE) + " " + args); }
+using apps_test::Outcome;
+using apps_test::shell;
+Outcome run_exe(const std::string& args) { return apps_test::sandpatch(args); }
 
 bool on_path(const std::string& exe) { return shell("command -v " + exe).code == 0; }
 
