@@ -16,6 +16,7 @@
 #include <nlohmann/json.hpp>
 
 #include "common/error.hpp"
+#include "common/checker.hpp"
 #include "common/hash.hpp"
 #include "common/knobs.hpp"
 #include "common/limits.hpp"
@@ -24,7 +25,7 @@
 #include "heightfield/procedural.hpp"
 #include "manager/bullet_world.hpp"
 #include "manager/profile.hpp"
-#include "manager/terrain_def.hpp"
+#include "manager/definitions.hpp"
 #include "manager/terrain_manager.hpp"
 #include "manager/world.hpp"
 #include "render/clipmap.hpp"
@@ -61,180 +62,7 @@ std::vector<Error> convert(const std::vector<core::Error>& es, const std::string
   return out;
 }
 
-// Range checks that name the field, its value and the allowed range.
-struct Checker {
-  std::string prefix;  // "TerrainDef." / "BodyDef."
-  std::string detail;  // appended to every error (e.g. the body's name)
-  std::vector<Error> errs;
-
-  void add(const std::string& field, const std::string& value, const std::string& allowed) {
-    errs.push_back({"", prefix + field, value, allowed, detail});
-  }
-  // lo_open / hi_open: the bound itself is excluded. NaN and infinities always fail.
-  void number(const std::string& field, double v, double lo, double hi, bool lo_open, bool hi_open, const char* unit) {
-    const bool ok = std::isfinite(v) && (lo_open ? v > lo : v >= lo) && (hi_open ? v < hi : v <= hi);
-    if (ok) return;
-    std::string allowed = std::string("must be in ") + (lo_open ? "(" : "[") + num(lo) + ", " + num(hi) + (hi_open ? ")" : "]");
-    if (*unit) allowed += std::string(" ") + unit;
-    add(field, num(v), allowed);
-  }
-  void closed(const std::string& f, double v, double lo, double hi, const char* unit = "") { number(f, v, lo, hi, false, false, unit); }
-  // A setting of the knob table (common/knobs.hpp): its range; the field is the table's name.
-  void knob(const knobs::Knob& k, double v) {
-    if (k.allows(v)) return;
-    errs.push_back({"", k.api, num(v), "must be in " + knobs::describe_range(k), detail});
-  }
-  void positive(const std::string& f, double v, double hi, const char* unit = "") { number(f, v, 0.0, hi, true, false, unit); }
-  void integer(const std::string& field, long long v, long long lo, long long hi) {
-    if (v < lo || v > hi) add(field, std::to_string(v), "must be in [" + std::to_string(lo) + ", " + std::to_string(hi) + "]");
-  }
-  template <class A>
-  void finite(const std::string& field, const A& v, const char* unit) {
-    for (auto x : v)
-      if (!std::isfinite(double(x))) {
-        std::string s = "[";
-        for (std::size_t k = 0; k < v.size(); ++k) s += (k ? ", " : "") + num(double(v[k]));
-        add(field, s + "]", std::string("must be finite (") + unit + ")");
-        return;
-      }
-  }
-};
-
-std::string lower_extension(const std::string& path) {
-  std::string e = std::filesystem::path(path).extension().string();
-  for (char& c : e) c = char(std::tolower(static_cast<unsigned char>(c)));
-  return e;
-}
-
-// Every TerrainDef field, before anything is built.
-std::vector<Error> validate(const TerrainDef& d) {
-  Checker c{"TerrainDef.", "", {}};
-  const int sources = int(!d.heights.empty()) + int(!d.file.empty()) + int(!d.procedural.empty());
-  if (sources != 1)
-    c.add("heights", sources == 0 ? "(none)" : std::to_string(sources) + " sources",
-          "give exactly one of heights (an array), file (a heightmap) or procedural (a generator)");
-  const std::string ext = lower_extension(d.file);
-  const bool need_grid = !d.heights.empty() || !d.procedural.empty() || (!d.file.empty() && ext == ".raw");
-  if (need_grid) {
-    c.integer("samples_x", d.samples_x, 2, 1048577);
-    c.integer("samples_z", d.samples_z, 2, 1048577);
-    if (auto e = core::limits::check_grid_size("", "TerrainDef.samples_x × samples_z", d.samples_x, d.samples_z))
-      c.errs.push_back({e->file, e->field, e->value, e->allowed, e->detail});
-  }
-  if (!d.heights.empty()) {
-    const long long n = (long long)(std::max(d.samples_x, 0)) * std::max(d.samples_z, 0);
-    if ((long long)d.heights.size() != n)
-      c.add("heights", std::to_string(d.heights.size()) + " values",
-            "must hold samples_x * samples_z = " + std::to_string(n) + " values (row-major, x fastest)");
-    for (std::size_t k = 0; k < d.heights.size(); ++k)
-      if (!std::isfinite(d.heights[k])) {
-        c.add("heights[" + std::to_string(k) + "]", num(d.heights[k]), "must be finite (m)");
-        break;
-      }
-  }
-  if (!d.file.empty() && ext != ".png" && ext != ".raw" && ext != ".asc")
-    c.add("file", d.file, "the extension must be .png (16-bit greyscale), .raw (float32) or .asc (ESRI ASCII grid)");
-  if (!d.procedural.empty()) {
-    if (d.procedural != "flat" && d.procedural != "plane" && d.procedural != "hills" && d.procedural != "noise")
-      c.add("procedural", "\"" + d.procedural + "\"", "must be one of flat, plane, hills, noise");
-    c.closed("base_height", d.base_height, -1e5, 1e5, "m");
-    c.closed("slope_x", d.slope_x, -1e3, 1e3);
-    c.closed("slope_z", d.slope_z, -1e3, 1e3);
-    c.closed("amplitude", d.amplitude, 0.0, 1e5, "m");
-    c.positive("wavelength", d.wavelength, 1e7, "m");
-    c.integer("octaves", d.octaves, 1, 16);
-  }
-  if (!d.file.empty()) {
-    c.closed("vertical_scale", d.vertical_scale, -1e6, 1e6, "m");
-    c.closed("vertical_offset", d.vertical_offset, -1e6, 1e6, "m");
-  }
-  c.positive("spacing", d.spacing, 1e4, "m");
-  c.finite("origin", d.origin, "m");
-  c.knob(knobs::kSoilDepth, d.soil_depth);
-  c.knob(knobs::kGranuleRadius, d.material.granule_radius);
-  c.knob(knobs::kDensity, d.material.density);
-  c.knob(knobs::kFriction, d.material.friction);
-  c.knob(knobs::kRestitution, d.material.restitution);
-  c.knob(knobs::kStiffness, d.material.stiffness);
-  c.knob(knobs::kTangentialRatio, d.material.tangential_stiffness_ratio);
-  c.knob(knobs::kUnloadingRatio, d.material.unloading_stiffness_ratio);
-  c.knob(knobs::kSlots, d.slots);
-  c.knob(knobs::kGranulesPerSlot, d.granules_per_slot);
-  if (d.granular_patches && double(d.slots) * double(d.granules_per_slot) > double(core::limits::kMaxPoolGranules))
-    c.add("slots", std::to_string(d.slots) + " × granules_per_slot " + std::to_string(d.granules_per_slot),
-          "slots × granules_per_slot must be at most " + std::to_string(core::limits::kMaxPoolGranules) +
-              " granules (every slot is allocated at full capacity); lower slots or granules_per_slot");
-  c.knob(knobs::kPatchDepth, d.patch_depth);
-  if (knobs::kPatchDepth.allows(d.patch_depth) && std::isfinite(d.soil_depth) && d.patch_depth > d.soil_depth)
-    c.add("patch_depth", num(d.patch_depth), "must be at most soil_depth (" + num(d.soil_depth) + " m)");
-  c.knob(knobs::kParticleScale, d.particle_scale);
-  c.knob(knobs::kStepsPerContact, d.steps_per_contact);
-  c.knob(knobs::kMaxSubsteps, d.max_substeps);
-  c.knob(knobs::kSleepSpeed, d.sleep_speed);
-  c.knob(knobs::kSleepTime, d.sleep_time);
-  c.knob(knobs::kIdleTimeout, d.idle_timeout);
-  if (d.backend != "cpu" && d.backend != "gl") c.add("backend", "\"" + d.backend + "\"", "must be cpu or gl");
-  if (d.backend == "gl" && d.material.unloading_stiffness_ratio != 1.0)
-    c.add("material.unloading_stiffness_ratio", format_number(d.material.unloading_stiffness_ratio),
-          "must be 1 with backend \"gl\" (the hysteretic normal spring runs on the CPU backend only)");
-  c.knob(knobs::kThreads, d.threads);
-  c.knob(knobs::kLodHorizon, d.lod_horizon);
-  c.knob(knobs::kLodMargin, d.lod_margin);
-  c.knob(knobs::kLodApron, d.lod_apron);
-  if (d.frame_budget_ms && !(*d.frame_budget_ms > 0))
-    c.add("frame_budget_ms", num(*d.frame_budget_ms), "must be > 0 ms, +infinity for no budget, or unset for half of each step's dt");
-  c.finite("gravity", d.gravity, "m/s^2");
-  return c.errs;
-}
-
-Result<core::Heightfield> build_heightfield(const TerrainDef& d) {
-  auto fail = [](const auto& r) { return convert(r.errors(), "TerrainDef.", {{"kind", "TerrainDef.procedural"},
-                                                                              {"height", "TerrainDef.base_height"},
-                                                                              {"seed", "TerrainDef.noise_seed"},
-                                                                              {"import.vertical_scale", "TerrainDef.vertical_scale"},
-                                                                              {"import.vertical_offset", "TerrainDef.vertical_offset"}}); };
-  core::HeightfieldDef g;
-  g.samples_x = d.samples_x;
-  g.samples_z = d.samples_z;
-  g.spacing = float(d.spacing);
-  g.origin_x = d.origin[0];
-  g.origin_y = d.origin[1];
-  g.origin_z = d.origin[2];
-  if (!d.heights.empty()) {
-    auto hf = core::Heightfield::create(g);
-    if (!hf) return fail(hf);
-    hf->write(hf->whole(), d.heights.data());
-    return std::move(*hf);
-  }
-  if (!d.procedural.empty()) {
-    core::ProceduralHeightsDef p;
-    p.kind = d.procedural;
-    p.height = d.base_height;
-    p.slope_x = d.slope_x;
-    p.slope_z = d.slope_z;
-    p.amplitude = d.amplitude;
-    p.wavelength = d.wavelength;
-    p.seed = d.noise_seed;
-    p.octaves = d.octaves;
-    auto hf = core::make_procedural(g, p);
-    if (!hf) return fail(hf);
-    return std::move(*hf);
-  }
-  core::HeightmapImport im;
-  im.origin_x = d.origin[0];
-  im.origin_y = d.origin[1];
-  im.origin_z = d.origin[2];
-  im.spacing = float(d.spacing);
-  im.vertical_scale = float(d.vertical_scale);
-  im.vertical_offset = float(d.vertical_offset);
-  im.override_spacing = d.spacing_overrides_file;
-  const std::string ext = lower_extension(d.file);
-  auto hf = ext == ".png"   ? core::load_png16(d.file, im)
-            : ext == ".raw" ? core::load_raw_f32(d.file, d.samples_x, d.samples_z, im)
-                            : core::load_esri_ascii(d.file, im);
-  if (!hf) return fail(hf);
-  return std::move(*hf);
-}
+using Checker = core::BasicChecker<Error>;
 
 EventKind kind_of(core::PatchEventKind k) {
   switch (k) {
@@ -303,11 +131,11 @@ Terrain& Terrain::operator=(Terrain&&) noexcept = default;
 Terrain::~Terrain() = default;
 
 Result<Terrain> Terrain::create(const TerrainDef& def) {
-  if (auto errs = validate(def); !errs.empty()) return errs;
+  if (auto errs = core::validate(def); !errs.empty()) return convert(errs, "");
   auto impl = std::make_unique<Impl>();
   impl->def = def;
-  auto hf = build_heightfield(def);
-  if (!hf) return hf.errors();
+  auto hf = core::build_heightfield(def);
+  if (!hf) return convert(hf.errors(), "");
   const Eigen::Vector3f gravity(float(def.gravity[0]), float(def.gravity[1]), float(def.gravity[2]));
   auto world = core::World::create(std::move(*hf), gravity);
   if (!world) return convert(world.errors(), "TerrainDef.");
@@ -341,112 +169,11 @@ Result<Terrain> Terrain::create(const TerrainDef& def) {
 
 Result<BodyHandle> Terrain::add_body(const BodyDef& d) {
   Impl& I = *impl_;
-  Checker c{"BodyDef.", d.name.empty() ? "" : "body '" + d.name + "'", {}};
-  const ShapeDef& s = d.shape;
-  core::RigidBodyDef r;
-  r.name = d.name;
-  switch (s.kind) {
-    case ShapeKind::Sphere:
-      c.positive("shape.radius", s.radius, 1e4, "m");
-      r.shape.kind = core::RigidShapeKind::Sphere;
-      break;
-    case ShapeKind::Box:
-      for (int k = 0; k < 3; ++k) c.positive("shape.half_extents[" + std::to_string(k) + "]", s.half_extents[k], 1e4, "m");
-      r.shape.kind = core::RigidShapeKind::Box;
-      break;
-    case ShapeKind::Cylinder:
-      c.positive("shape.radius", s.radius, 1e4, "m");
-      c.positive("shape.height", s.height, 1e4, "m");
-      r.shape.kind = core::RigidShapeKind::Cylinder;
-      break;
-    case ShapeKind::Capsule:
-      c.positive("shape.radius", s.radius, 1e4, "m");
-      c.closed("shape.height", s.height, 0.0, 1e4, "m");
-      r.shape.kind = core::RigidShapeKind::Capsule;
-      break;
-    default:
-      c.add("shape.kind", std::to_string(static_cast<int>(s.kind)), "must be a ShapeKind: Sphere, Box, Cylinder, Capsule or Mesh");
-      break;
-    case ShapeKind::Mesh: {
-      r.shape.kind = core::RigidShapeKind::Mesh;
-      if (s.mesh_file.empty() == s.vertices.empty()) {
-        c.add("shape.mesh_file", s.mesh_file.empty() ? "(none)" : s.mesh_file,
-              "a mesh needs exactly one of mesh_file (an OBJ) or vertices + triangles");
-        break;
-      }
-      core::TriangleMesh mesh;
-      if (!s.mesh_file.empty()) {
-        c.positive("shape.mesh_scale", s.mesh_scale, 1e4);
-        if (!c.errs.empty()) break;
-        auto m = core::load_obj_mesh(s.mesh_file, s.mesh_scale);
-        if (!m) {
-          for (auto& e : convert(m.errors(), "BodyDef.shape.")) c.errs.push_back(e);
-          break;
-        }
-        mesh = std::move(*m);
-      } else {
-        if (s.vertices.size() % 3 != 0 || s.vertices.size() < 12)
-          c.add("shape.vertices", std::to_string(s.vertices.size()) + " values", "must be x, y, z per vertex, at least 4 vertices");
-        if (s.triangles.size() % 3 != 0 || s.triangles.size() < 12)
-          c.add("shape.triangles", std::to_string(s.triangles.size()) + " values", "must be 3 indices per triangle, at least 4 triangles");
-        const int nv = int(s.vertices.size() / 3);
-        for (std::size_t k = 0; k < s.triangles.size(); ++k)
-          if (s.triangles[k] < 0 || s.triangles[k] >= nv) {
-            c.add("shape.triangles[" + std::to_string(k) + "]", std::to_string(s.triangles[k]),
-                  "must be a vertex index in [0, " + std::to_string(nv - 1) + "]");
-            break;
-          }
-        for (std::size_t k = 0; k < s.vertices.size(); ++k)
-          if (!std::isfinite(s.vertices[k])) {
-            c.add("shape.vertices[" + std::to_string(k) + "]", num(s.vertices[k]), "must be finite (m)");
-            break;
-          }
-        if (!c.errs.empty()) break;
-        for (std::size_t k = 0; k + 2 < s.vertices.size(); k += 3)
-          mesh.vertices.emplace_back(s.vertices[k], s.vertices[k + 1], s.vertices[k + 2]);
-        for (std::size_t k = 0; k + 2 < s.triangles.size(); k += 3)
-          mesh.triangles.push_back({s.triangles[k], s.triangles[k + 1], s.triangles[k + 2]});
-      }
-      for (auto& e : convert(core::check_solid_mesh(mesh, s.mesh_file, "BodyDef.shape"), "")) c.errs.push_back(e);
-      if (!c.errs.empty()) break;
-      const Eigen::Vector3f centre = mesh.centroid().cast<float>();  // bodies are centred on their centre of mass
-      for (const auto& v : mesh.vertices) r.shape.vertices.push_back(v - centre);
-      r.shape.triangles = mesh.triangles;
-      break;
-    }
-  }
-  if (d.motion != BodyMotion::Dynamic && d.motion != BodyMotion::Kinematic && d.motion != BodyMotion::Static)
-    c.add("motion", std::to_string(static_cast<int>(d.motion)), "must be a BodyMotion: Dynamic, Kinematic or Static");
-  if (d.motion == BodyMotion::Dynamic) c.closed("mass", d.mass, core::limits::kMinBodyMass, core::limits::kMaxBodyMass, "kg");
-  c.finite("position", d.position, "m");
-  c.finite("orientation", d.orientation, "");
-  if (c.errs.empty() && !(eq_norm_positive(d.orientation)))
-    c.add("orientation", "[0, 0, 0, 0]", "must be a non-zero quaternion [w, x, y, z]");
-  c.finite("linear_velocity", d.linear_velocity, "m/s");
-  c.finite("angular_velocity", d.angular_velocity, "rad/s");
-  speed_limit(c, "linear_velocity", d.linear_velocity, core::limits::kMaxBodySpeed, "m/s");
-  speed_limit(c, "angular_velocity", d.angular_velocity, core::limits::kMaxBodySpin, "rad/s");
-  c.knob(knobs::kBodyFriction, d.friction);
-  c.knob(knobs::kBodyRestitution, d.restitution);
-  c.knob(knobs::kBodyRollingFriction, d.rolling_friction);
-  if (!c.errs.empty()) return c.errs;
-
-  r.shape.radius = float(s.radius);
-  r.shape.height = float(s.height);
-  r.shape.half_extents = {float(s.half_extents[0]), float(s.half_extents[1]), float(s.half_extents[2])};
-  r.motion = d.motion == BodyMotion::Kinematic ? core::RigidMotion::Kinematic
-             : d.motion == BodyMotion::Static  ? core::RigidMotion::Static
-                                               : core::RigidMotion::Dynamic;
-  r.mass = d.motion == BodyMotion::Dynamic ? float(d.mass) : 0.0f;
-  r.position = {d.position[0], d.position[1], d.position[2]};
-  r.orientation = eq(d.orientation);
-  r.linear_velocity = ev(d.linear_velocity);
-  r.angular_velocity = ev(d.angular_velocity);
-  r.friction = float(d.friction);
-  r.restitution = float(d.restitution);
-  r.rolling_friction = float(d.rolling_friction);
+  auto def = core::rigid_body_def(d);
+  if (!def) return convert(def.errors(), "");
+  const core::RigidBodyDef& r = *def;
   auto id = I.world->add_body(r);
-  if (!id) return convert(id.errors(), "BodyDef.");
+  if (!id) return convert(id.errors(), "BodyDef.", {{"simulation.pool.shell_spheres_per_slot", "TerrainDef.shell_spheres_per_slot"}});
   // The body's lowest point must start at or above the bedrock (surface − soil_depth): the
   // patches' granules stop there.
   Eigen::Vector3d lo, hi;

@@ -48,6 +48,7 @@ inline constexpr Knob kUnloadingRatio{"materials[].unloading_stiffness_ratio", "
 // ---- the patches ----
 inline constexpr Knob kSlots{"simulation.pool.slots", "TerrainDef.slots", 2, 1, 1024, false, false, true, "", "simulations in the pool (patches live at once)"};
 inline constexpr Knob kGranulesPerSlot{"simulation.pool.granules_per_slot", "TerrainDef.granules_per_slot", 16384, 64, 16777216, false, false, true, "", "granule capacity of each slot"};
+inline constexpr Knob kShellSpheresPerSlot{"simulation.pool.shell_spheres_per_slot", "TerrainDef.shell_spheres_per_slot", 8192, 64, 1048576, false, false, true, "", "body-shell sphere capacity of each slot: a body's surface sampled every 1.5 granule radii (a body needing more is refused when it is added)"};
 inline constexpr Knob kParticleScale{"simulation.particle_scale", "TerrainDef.particle_scale", 1, 1e-3, 1e3, false, false, false, "", "world size / simulated size of granules (Leach & Marais §4.3)"};
 inline constexpr Knob kStepsPerContact{"simulation.steps_per_contact", "TerrainDef.steps_per_contact", 20, 2, 1000, false, false, true, "", "N: the DEM substeps at dt <= t_c / N (t_c the contact time)"};
 inline constexpr Knob kMaxSubsteps{"simulation.max_substeps", "TerrainDef.max_substeps", 0, 0, 100000, false, false, true, "", "most DEM substeps per frame before a frame is refused; 0 = max(64, 64 N / 20)"};
@@ -67,9 +68,9 @@ inline constexpr Knob kBodyRestitution{"bodies[].restitution", "BodyDef.restitut
 inline constexpr Knob kBodyRollingFriction{"bodies[].rolling_friction", "BodyDef.rolling_friction", 0.05, 0, 10, false, false, false, "", "rolling resistance (torque arm / radius)"};
 
 // Every entry, in the order of the docs' tables.
-inline constexpr std::array<const Knob*, 24> kAll = {
+inline constexpr std::array<const Knob*, 25> kAll = {
     &kGranuleRadius, &kDensity, &kFriction, &kRestitution, &kStiffness, &kTangentialRatio, &kUnloadingRatio,
-    &kSlots, &kGranulesPerSlot, &kParticleScale, &kStepsPerContact, &kMaxSubsteps, &kPatchDepth,
+    &kSlots, &kGranulesPerSlot, &kShellSpheresPerSlot, &kParticleScale, &kStepsPerContact, &kMaxSubsteps, &kPatchDepth,
     &kSoilDepth, &kSleepSpeed, &kSleepTime, &kIdleTimeout, &kThreads, &kLodHorizon, &kLodMargin,
     &kLodApron, &kBodyFriction, &kBodyRestitution, &kBodyRollingFriction};
 
@@ -81,7 +82,7 @@ struct Field {
   const char* note;
 };
 inline constexpr std::array<Field, 34> kOtherFields = {{
-    {"terrain.source", "TerrainDef.file, TerrainDef.procedural (+ samples_x/z, base_height, slope_x/z, amplitude, wavelength, noise_seed, octaves)", "a heightmap file or a generator"},
+    {"terrain.source", "TerrainDef.file + file_type, TerrainDef.procedural (+ samples_x/z, base_height, slope_x/z, amplitude, wavelength, noise_seed, octaves)", "a heightmap file or a generator; the scene's source.type is file_type (the library may leave it to the extension)"},
     {"", "TerrainDef.heights", "an array from the game; scene files name a heightmap file instead"},
     {"terrain.spacing", "TerrainDef.spacing", "with an esri_ascii source, a spacing given overrides the file's cellsize (TerrainDef.spacing_overrides_file)"},
     {"terrain.size", "", "the library gives spacing and the sample count"},
@@ -94,7 +95,7 @@ inline constexpr std::array<Field, 34> kOtherFields = {{
     {"materials[].damping_ratio", "", "the library takes the restitution e, from which ζ follows"},
     {"materials[].packing_fraction", "", "validated, not used: the pre-settled tile measures its own φ"},
     {"bodies[].name", "BodyDef.name", ""},
-    {"bodies[].shape", "BodyDef.shape", "mesh: an OBJ file in both; the library also takes vertices and triangles"},
+    {"bodies[].shape", "BodyDef.shape", "mesh: an OBJ file (file, scale, solid) in both; the library also takes vertices and triangles"},
     {"bodies[].motion", "BodyDef.motion", "not a number: dynamic, kinematic or static (BodyMotion in the library)"},
     {"bodies[].keyframes", "Terrain::set_keyframes, set_kinematic_target", "a kinematic body's poses over time; a game may also give one target pose per step"},
     {"bodies[].mass", "BodyDef.mass", "dynamic bodies only"},

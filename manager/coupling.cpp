@@ -370,7 +370,16 @@ void TerrainManager::Impl::couple_after(Slot& slot, double dt, bool stepped) {
 // sample_shell per mesh; plan() asks once for every new body, so the cost falls in the frame
 // the body appears, not in the frame it first touches a patch.
 Result<std::vector<Eigen::Vector3f>> TerrainManager::Impl::shell_points(RigidBodyId b, double scale) const {
-  RigidShape shape = world->definition(b).shape;
+  return shell_points(world->definition(b).shape, scale);
+}
+
+Result<std::vector<Eigen::Vector3f>> TerrainManager::Impl::shell_points(RigidShape shape, double scale) const {
+  return scaled_shell(def, std::move(shape), scale);
+}
+
+// The shell in sim units at particle scale `scale`: the shape shrunk by 1 / scale, sampled
+// every 1.5 granule radii (the granules' own spacing in the simulation).
+Result<std::vector<Eigen::Vector3f>> scaled_shell(const TerrainManagerDef& def, RigidShape shape, double scale) {
   const float inv = float(1.0 / scale);
   shape.radius *= inv;
   shape.height *= inv;
@@ -378,5 +387,15 @@ Result<std::vector<Eigen::Vector3f>> TerrainManager::Impl::shell_points(RigidBod
   for (auto& v : shape.vertices) v *= inv;
   return sample_shell(shape, 1.5f * def.material.radius, def.material.radius, def.shell_particles_per_slot);
 }
+
+Status check_shell(const TerrainManagerDef& def, const RigidShape& shape) {
+  double finest = def.particle_scale;
+  for (const auto& b : def.scale_bands) finest = std::min(finest, b.particle_scale);
+  auto pts = scaled_shell(def, shape, finest);
+  if (pts) return Ok{};
+  return pts.errors();
+}
+
+Status TerrainManager::check_shell(const RigidShape& shape) const { return sandpatch::check_shell(impl_->def, shape); }
 
 }  // namespace sandpatch

@@ -173,7 +173,7 @@ Result<std::vector<Eigen::Vector3f>> sample_mesh_shell(const MeshSdf& sdf, float
   if (!(inset >= 0) || !std::isfinite(inset))
     return Error{"", "shell inset", std::to_string(inset), "must be finite and >= 0 (m)"};
   auto too_many = [&](double n) {
-    return Error{"", "pool.shell_particles_per_slot", std::to_string(max_points),
+    return Error{"", "simulation.pool.shell_spheres_per_slot", std::to_string(max_points),
                  "too small for a body shell of " + std::to_string((long long)std::llround(n)) + " spheres at spacing " +
                      std::to_string(spacing) + " m; raise it or use a coarser granule size"};
   };

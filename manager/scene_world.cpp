@@ -1,7 +1,7 @@
 #include "manager/scene_world.hpp"
 
 #include "manager/terrain.hpp"
-#include "manager/terrain_def.hpp"
+#include "manager/definitions.hpp"
 #include "scene/mesh.hpp"
 
 namespace sandpatch {
@@ -62,43 +62,52 @@ std::vector<World::Load> to_loads(const BodyDef& body) {
   return out;
 }
 
-Result<RigidBodyDef> to_rigid_body(const SceneDef& scene, std::size_t index) {
+api::BodyDef body_def(const SceneDef& scene, std::size_t index) {
   const BodyDef& b = scene.bodies[index];
-  RigidBodyDef d;
+  api::BodyDef d;
   d.name = b.name;
-  d.motion = b.motion == MotionKind::Kinematic ? RigidMotion::Kinematic
-             : b.motion == MotionKind::Static  ? RigidMotion::Static
-                                               : RigidMotion::Dynamic;
-  d.mass = float(b.mass_value());
-  d.position = {b.pose.position[0], b.pose.position[1], b.pose.position[2]};
+  d.motion = b.motion == MotionKind::Kinematic ? api::BodyMotion::Kinematic
+             : b.motion == MotionKind::Static  ? api::BodyMotion::Static
+                                               : api::BodyMotion::Dynamic;
+  d.mass = b.mass_value();
+  d.position = b.pose.position;
   const auto& q = b.pose.orientation;
-  d.orientation = Eigen::Quaternionf(float(q[0]), float(q[1]), float(q[2]), float(q[3])).normalized();
-  d.linear_velocity = vec3f(b.linear_velocity);
-  d.angular_velocity = vec3f(b.angular_velocity);
-  d.friction = float(b.friction);
-  d.restitution = float(b.restitution);
-  d.rolling_friction = float(b.rolling_friction);
+  d.orientation = {float(q[0]), float(q[1]), float(q[2]), float(q[3])};
+  d.linear_velocity = {float(b.linear_velocity[0]), float(b.linear_velocity[1]), float(b.linear_velocity[2])};
+  d.angular_velocity = {float(b.angular_velocity[0]), float(b.angular_velocity[1]), float(b.angular_velocity[2])};
+  d.friction = b.friction;
+  d.restitution = b.restitution;
+  d.rolling_friction = b.rolling_friction;
   const ShapeDef& s = b.shape;
-  d.shape.radius = float(s.radius);
-  d.shape.height = float(s.height);
-  d.shape.half_extents = vec3f(s.half_extents);
+  d.shape.radius = s.radius;
+  d.shape.height = s.height;
+  d.shape.half_extents = s.half_extents;
   switch (s.kind) {
-    case ShapeKind::Sphere: d.shape.kind = RigidShapeKind::Sphere; break;
-    case ShapeKind::Box: d.shape.kind = RigidShapeKind::Box; break;
-    case ShapeKind::Cylinder: d.shape.kind = RigidShapeKind::Cylinder; break;
-    case ShapeKind::Capsule: d.shape.kind = RigidShapeKind::Capsule; break;
-    case ShapeKind::Mesh: {
-      d.shape.kind = RigidShapeKind::Mesh;
-      auto mesh = load_obj_mesh(s.file, s.scale);
-      if (!mesh) return mesh.errors();
-      // Bodies are centred on their centre of mass.
-      const Eigen::Vector3f c = mesh->centroid().cast<float>();
-      for (const auto& v : mesh->vertices) d.shape.vertices.push_back(v - c);
-      d.shape.triangles = mesh->triangles;
+    case ShapeKind::Sphere: d.shape.kind = api::ShapeKind::Sphere; break;
+    case ShapeKind::Box: d.shape.kind = api::ShapeKind::Box; break;
+    case ShapeKind::Cylinder: d.shape.kind = api::ShapeKind::Cylinder; break;
+    case ShapeKind::Capsule: d.shape.kind = api::ShapeKind::Capsule; break;
+    case ShapeKind::Mesh:
+      d.shape.kind = api::ShapeKind::Mesh;
+      d.shape.mesh_file = s.file;
+      d.shape.mesh_scale = s.scale;
+      d.shape.solid = s.solid;
       break;
-    }
   }
   return d;
+}
+
+Result<RigidBodyDef> to_rigid_body(const SceneDef& scene, std::size_t index) {
+  auto r = rigid_body_def(body_def(scene, index));
+  if (r) return r;
+  std::vector<Error> es = r.errors();
+  const std::string at = "bodies[" + std::to_string(index) + "].";
+  for (Error& e : es) {
+    if (e.field.starts_with("BodyDef.")) e.field = at + e.field.substr(8);
+    if (e.field == at + "shape.mesh_file") e.field = at + "shape.file";
+    if (e.file.empty()) e.file = scene.source_path;
+  }
+  return es;
 }
 
 api::TerrainDef terrain_def(const SceneDef& scene, int threads, const std::string& backend) {
@@ -106,6 +115,42 @@ api::TerrainDef terrain_def(const SceneDef& scene, int threads, const std::strin
   const MaterialDef* mat = scene.terrain.material.empty() ? &scene.materials.front()
                                                          : scene.find_material(scene.terrain.material);
   api::TerrainDef t;
+  // The heightfield's source: a file of the scene's type, or the generator on its grid.
+  const TerrainDef& ter = scene.terrain;
+  const TerrainSourceDef& src = ter.source;
+  t.origin = ter.origin;
+  t.spacing = ter.spacing;
+  t.vertical_scale = ter.vertical_scale;
+  t.vertical_offset = ter.vertical_offset;
+  switch (src.kind) {
+    case TerrainSourceKind::Png16: t.file = src.file; t.file_type = "png16"; break;
+    case TerrainSourceKind::RawF32:
+      t.file = src.file;
+      t.file_type = "raw_f32";
+      t.samples_x = src.samples_x;
+      t.samples_z = src.samples_z;
+      break;
+    case TerrainSourceKind::EsriAscii:
+      t.file = src.file;
+      t.file_type = "esri_ascii";
+      t.spacing_overrides_file = ter.spacing_given;  // else the file's cellsize
+      break;
+    case TerrainSourceKind::Procedural: {
+      const ProceduralDef& p = src.procedural;
+      t.procedural = to_string(p.kind);
+      t.samples_x = p.samples_x;
+      t.samples_z = p.samples_z;
+      t.spacing = ter.spacing_xz(p.samples_x, p.samples_z)[0];
+      t.base_height = float(p.height);
+      t.slope_x = float(p.slope_x);
+      t.slope_z = float(p.slope_z);
+      t.amplitude = float(p.amplitude);
+      t.wavelength = float(p.wavelength);
+      t.noise_seed = std::uint32_t(p.seed);
+      t.octaves = p.octaves;
+      break;
+    }
+  }
   t.material.granule_radius = mat->granule_radius;
   t.material.density = mat->density;
   t.material.friction = mat->friction;
@@ -119,6 +164,7 @@ api::TerrainDef terrain_def(const SceneDef& scene, int threads, const std::strin
   t.frame_budget_ms = sim.frame_budget_ms;
   t.slots = sim.pool.slots;
   t.granules_per_slot = sim.pool.granules_per_slot;
+  t.shell_spheres_per_slot = sim.pool.shell_spheres_per_slot;
   t.soil_depth = scene.terrain.soil_depth.value_or(knobs::kSoilDepth.def);
   t.patch_depth = std::min(scene.terrain.patch_depth, t.soil_depth);
   t.lod_horizon = sim.lod.horizon;
@@ -220,6 +266,16 @@ Result<std::unique_ptr<World>> make_world(const SceneDef& scene, int threads, co
     if (Status s = (*world)->enable_patches(md); !s) return s.errors();
   }
   for (std::size_t i = 0; i < body_defs.size(); ++i) {
+    // The shell must fit a slot: checked here whether or not the pool is built (`check`).
+    if (Status s = scene.simulation.granular_patches ? check_shell(md, body_defs[i].shape) : Status(Ok{}); !s) {
+      part = "bodies";
+      std::vector<Error> es = s.errors();
+      for (Error& e : es) {
+        e.file = scene.source_path;
+        e.detail += std::string(e.detail.empty() ? "" : "; ") + "for bodies[" + std::to_string(i) + "] ('" + scene.bodies[i].name + "')";
+      }
+      return es;
+    }
     const std::size_t entry = (*world)->schedule_body(body_defs[i], scene.bodies[i].spawn_time);
     if (!scene.bodies[i].loads.empty()) (*world)->set_loads(entry, to_loads(scene.bodies[i]));
     if (!scene.bodies[i].keyframes.empty()) {

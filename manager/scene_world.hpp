@@ -1,6 +1,11 @@
 // A scene file's world: its heightfield, bodies and terrain manager made into a World
-// (manager/world.hpp), for `sandpatch run`, `sandpatch bench lod` and the tests. The scene's
-// definitions (scene/scene.hpp) are turned into the manager's and Bullet's here, in one place.
+// (manager/world.hpp), for `sandpatch run`, `sandpatch bench lod` and the tests. A scene's
+// terrain, material, simulation settings and bodies (scene/scene.hpp) are mapped onto the
+// library's public definitions (TerrainDef, BodyDef) here, and from there go the one way the
+// library's do (manager/definitions.hpp): the same validation, the same heightfield builder,
+// the same manager and Bullet definitions. What only scene files have (named materials,
+// densities, loads, keyframes, spawn times, scale bands, a flat bedrock, a size instead of a
+// spacing) is added around that chain here.
 #pragma once
 
 #include <functional>
@@ -9,7 +14,7 @@
 
 #include "common/error.hpp"
 #include "manager/bullet_world.hpp"
-#include "manager/terrain_def.hpp"
+#include "manager/definitions.hpp"
 #include "manager/terrain_manager.hpp"
 #include "manager/world.hpp"
 #include "render/render.hpp"
@@ -17,17 +22,23 @@
 
 namespace sandpatch {
 
-// The library's TerrainDef for a scene's terrain material and simulation section
-// (docs/scene-format.md): the settings both doors share. `backend`: "cpu" or "gl".
+// The library's TerrainDef for a scene's terrain, material and simulation section
+// (docs/scene-format.md): its heightfield source and every setting both doors share.
+// `backend`: "cpu" or "gl".
 api::TerrainDef terrain_def(const SceneDef& scene, int threads, const std::string& backend);
 
 // The terrain manager's definition of a scene: manager_def(terrain_def(...))
-// (manager/terrain_def.hpp), then what only scene files have: the scale bands (camera at
+// (manager/definitions.hpp), then what only scene files have: the scale bands (camera at
 // t = 0) and the flat bedrock, which need the heightfield.
 TerrainManagerDef manager_def(const SceneDef& scene, const Heightfield& hf, int threads, const std::string& backend);
 
-// Scene body `index` as a Bullet body definition (meshes are read again from their validated
-// OBJ, centred on their centroid).
+// Scene body `index` as the library's BodyDef: its mass (given, or density × volume), pose,
+// velocities, shape (a mesh by its resolved OBJ path) and contact settings. Its motion's
+// keyframes, loads and spawn time stay with the scene (make_world schedules them).
+api::BodyDef body_def(const SceneDef& scene, std::size_t index);
+
+// rigid_body_def(body_def(scene, index)), errors named after the scene's field
+// ("bodies[2].shape.radius").
 Result<RigidBodyDef> to_rigid_body(const SceneDef& scene, std::size_t index);
 
 // A scene body's loads as the World applies them (World::set_loads).

@@ -123,7 +123,7 @@ Result<std::vector<Eigen::Vector3f>> sample_shell(const RigidShape& s, float spa
     }
   }
   if (int(out.size()) > max_points) {
-    return Error{"", "pool.shell_particles_per_slot", std::to_string(max_points),
+    return Error{"", "simulation.pool.shell_spheres_per_slot", std::to_string(max_points),
                  "too small for a body shell of " + std::to_string(out.size()) + " spheres at spacing " +
                      std::to_string(spacing) + " m; raise it or use a coarser granule size"};
   }

@@ -4,8 +4,8 @@
 #include <string>
 #include <vector>
 
-#include "heightfield/io.hpp"
-#include "heightfield/procedural.hpp"
+#include "manager/definitions.hpp"
+#include "manager/scene_world.hpp"
 
 namespace sandpatch {
 namespace {
@@ -37,55 +37,13 @@ Result<Heightfield> with_spacing(const Heightfield& hf, float spacing) {
 Result<Heightfield> load_scene_terrain(const SceneDef& scene) {
   const TerrainDef& t = scene.terrain;
   const TerrainSourceDef& s = t.source;
-  HeightmapImport imp;
-  imp.origin_x = t.origin[0];
-  imp.origin_y = t.origin[1];
-  imp.origin_z = t.origin[2];
-  imp.spacing = float(t.spacing);
-  imp.vertical_scale = float(t.vertical_scale);
-  imp.vertical_offset = float(t.vertical_offset);
-
-  Result<Heightfield> hf = Error{scene.source_path, "terrain.source", "", "unknown source kind"};
-  switch (s.kind) {
-    case TerrainSourceKind::Png16: hf = load_png16(s.file, imp); break;
-    case TerrainSourceKind::RawF32: hf = load_raw_f32(s.file, s.samples_x, s.samples_z, imp); break;
-    case TerrainSourceKind::EsriAscii:
-      imp.override_spacing = t.spacing_given;  // else the file's cellsize
-      hf = load_esri_ascii(s.file, imp);
-      break;
-    case TerrainSourceKind::Procedural: {
-      const ProceduralDef& p = s.procedural;
-      HeightfieldDef grid;
-      grid.samples_x = p.samples_x;
-      grid.samples_z = p.samples_z;
-      const auto sp = t.spacing_xz(p.samples_x, p.samples_z);
-      grid.spacing = float(sp[0]);
-      grid.origin_x = t.origin[0];
-      grid.origin_y = t.origin[1];
-      grid.origin_z = t.origin[2];
-      ProceduralHeightsDef g;
-      g.kind = to_string(p.kind);
-      g.height = float(p.height);
-      g.slope_x = float(p.slope_x);
-      g.slope_z = float(p.slope_z);
-      g.amplitude = float(p.amplitude);
-      g.wavelength = float(p.wavelength);
-      g.seed = std::uint32_t(p.seed);
-      g.octaves = p.octaves;
-      hf = make_procedural(grid, g);
-      if (hf && (t.vertical_scale != 1.0 || t.vertical_offset != 0.0)) {
-        Heightfield& h = *hf;
-        for (int j = 0; j < h.samples_z(); ++j)
-          for (int i = 0; i < h.samples_x(); ++i)
-            h.set_height(i, j, float(t.vertical_offset + t.vertical_scale * h.height(i, j)));
-      }
-      break;
-    }
-  }
+  // The library's heightfield builder, on the scene's terrain as a TerrainDef (one chain).
+  Result<Heightfield> hf = build_heightfield(terrain_def(scene, 0, "cpu"));
   if (!hf) {
     // Heightfield errors name the heightmap file; add the scene field they came from.
     std::vector<Error> errs = hf.errors();
     for (Error& e : errs) {
+      if (e.field.starts_with("TerrainDef.")) e.field = e.field.substr(11);
       if (e.field.empty()) e.field = "terrain.source";
       else if (e.field.rfind("terrain", 0) != 0) e.field = "terrain.source (" + e.field + ")";
       if (e.file.empty()) e.file = scene.source_path;

@@ -139,6 +139,14 @@ struct PatchEvent {
   int granules = 0;
 };
 
+// A body's particle shell at particle scale `scale` (sim units): its surface sampled every
+// 1.5 granule radii, at most def.shell_particles_per_slot spheres (else an error naming
+// simulation.pool.shell_spheres_per_slot and the count needed).
+Result<std::vector<Eigen::Vector3f>> scaled_shell(const TerrainManagerDef& def, RigidShape shape, double scale);
+// Whether a body of this shape fits a slot's shell capacity at the finest particle scale a
+// patch may have (particle_scale, or the finest scale band).
+Status check_shell(const TerrainManagerDef& def, const RigidShape& shape);
+
 class TerrainManager {
  public:
   // `hf` and `world` must outlive the manager. Builds the pre-settled granule tile and the
@@ -159,6 +167,11 @@ class TerrainManager {
   void set_camera(const Eigen::Vector3d& position);
   // ms the frame budget allows a frame of dt seconds (infinity: no budget).
   double budget_ms(double dt) const;
+  // Whether a body of this shape fits a slot's shell capacity at the finest particle scale
+  // a patch may have (particle_scale, or the finest scale band): an error naming
+  // simulation.pool.shell_spheres_per_slot and the spheres it needs, else Ok. Checked when a
+  // body is added, so a body too big for the pool is bad input, not a failure mid-run.
+  Status check_shell(const RigidShape& shape) const;
   // Demotes every patch now (end of a run that wants the final terrain).
   Status demote_all(double time, Profile& profile);
 

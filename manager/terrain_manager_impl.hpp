@@ -291,6 +291,7 @@ struct TerrainManager::Impl {
   // `stepped`: the DEM ran a substep this frame (else a kinematic shell's force stands).
   void couple_after(Slot& slot, double dt, bool stepped = true);
   Result<std::vector<Eigen::Vector3f>> shell_points(RigidBodyId b, double scale) const;
+  Result<std::vector<Eigen::Vector3f>> shell_points(RigidShape shape, double scale) const;
 
   // ---- demotion (demotion.cpp): Stage::Demotion ----
   // Demotes the patches asleep for idle_timeout, one part of one patch a frame.

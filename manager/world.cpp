@@ -48,7 +48,13 @@ Status World::enable_patches(const TerrainManagerDef& def) {
 
 // ---- bodies ----
 
+Status World::check_body(const RigidBodyDef& def) const {
+  if (!manager_) return Ok{};
+  return manager_->check_shell(def.shape);
+}
+
 Result<RigidBodyId> World::add_body(const RigidBodyDef& def) {
+  if (Status s = check_body(def); !s) return s.errors();
   auto id = bullet_->add_body(def);
   if (id) {
     entries_.push_back({def.name, time(), *id, false});

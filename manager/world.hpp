@@ -57,6 +57,9 @@ class World {
   // ---- bodies ----
   // Adds a body now.
   Result<RigidBodyId> add_body(const RigidBodyDef& def);
+  // What add_body checks beyond Bullet's own rules: with patches, that the body's particle
+  // shell fits a slot (TerrainManager::check_shell). schedule_body's caller checks it first.
+  Status check_body(const RigidBodyDef& def) const;
   // Adopts a game's btRigidBody now (BulletWorld::adopt_body).
   Result<RigidBodyId> adopt_body(btRigidBody* body, const std::string& name);
   // A body that enters the world in the spawn stage of the first step that starts at or after

@@ -428,6 +428,7 @@ SceneSimulationDef parse_simulation(Ctx& c, const json& j) {
     Obj p(c, *pj, o.at("pool"));
     p.knob("slots", s.pool.slots, knobs::kSlots);
     p.knob("granules_per_slot", s.pool.granules_per_slot, knobs::kGranulesPerSlot);
+    p.knob("shell_spheres_per_slot", s.pool.shell_spheres_per_slot, knobs::kShellSpheresPerSlot);
     if (double(s.pool.slots) * s.pool.granules_per_slot > double(limits::kMaxPoolGranules))
       c.error(p.at("slots"), std::to_string(s.pool.slots) + " × granules_per_slot " + std::to_string(s.pool.granules_per_slot),
               "slots × granules_per_slot must be at most " + std::to_string(limits::kMaxPoolGranules) +

@@ -183,6 +183,7 @@ enum class Backend { Cpu, Gl };
 struct PoolDef {
   int slots = int(knobs::kSlots.def);          // simulations kept ready (active patches at once)
   int granules_per_slot = int(knobs::kGranulesPerSlot.def);  // capacity of each slot
+  int shell_spheres_per_slot = int(knobs::kShellSpheresPerSlot.def);  // body-shell spheres each slot holds
 };
 
 struct SleepDef {

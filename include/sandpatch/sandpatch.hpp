@@ -136,9 +136,11 @@ struct TerrainDef {
   int samples_z = 0;                           // >= 2
   // -- or from a heightmap file: .png (16-bit greyscale), .raw (little-endian float32, needs
   //    samples_x / samples_z), .asc (ESRI ASCII grid; its cellsize is the spacing unless
-  //    spacing_overrides_file). height = vertical_offset + vertical_scale * value
-  //    (png: value = v / 65535).
+  //    spacing_overrides_file). height = vertical_offset + vertical_scale * value for every
+  //    source (png: value = v / 65535; a generator's or the array's heights are values too).
   std::string file;
+  std::string file_type;                       // "" = from the extension; or "png16" | "raw_f32" | "esri_ascii"
+                                               //   (scene files' terrain.source.type: any extension)
   double vertical_scale = 1.0;                 // m per unit (finite)
   double vertical_offset = 0.0;                // m (finite)
   bool spacing_overrides_file = false;         // .asc: use `spacing` instead of the file's cellsize
@@ -160,6 +162,8 @@ struct TerrainDef {
   MaterialDef material;
   int slots = 2;                               // simulations in the pool (patches at once), [1, 1024]
   int granules_per_slot = 16384;               // capacity of each slot, [64, 16777216]
+  int shell_spheres_per_slot = 8192;           // body-shell spheres each slot holds (a body's surface every
+                                               //   1.5 granule radii; add_body refuses a body needing more), [64, 1048576]
   double patch_depth = 0.4;                    // m of granules under a patch's lowest surface point, (0, soil_depth]
   double particle_scale = 1.0;                 // world size / simulated size, [1e-3, 1e3]
   int steps_per_contact = 20;                  // N: the DEM substeps at dt <= t_c / N (t_c the contact time), [2, 1000]
@@ -204,6 +208,9 @@ struct ShapeDef {
   // No degenerate (zero-area) triangles.
   std::string mesh_file;
   double mesh_scale = 1.0;                     // OBJ units → m, (0, 1e4]
+  // true: a closed solid (checked: every edge shared by two triangles, outward winding), with
+  // an inside for the particle shell; false: a thin surface (a shell of its own), taken as is.
+  bool solid = true;
   std::vector<float> vertices;
   std::vector<int> triangles;
 };

@@ -183,6 +183,28 @@ TEST(Api, BadBodiesHandlesAndStepsAreRefused) {
 
 // Heights from an array and from a raw float32 file land where the layout says: sample (i, j)
 // = heights[j * samples_x + i] at world (origin_x + i spacing, origin_z + j spacing).
+// A body whose particle shell does not fit a slot is refused by add_body, naming the
+// capacity (TerrainDef.shell_spheres_per_slot) and how many spheres it needs.
+TEST(Api, ABodyTooBigForTheShellCapacityIsRefused) {
+  sp::TerrainDef d = sand_def();
+  d.shell_spheres_per_slot = 64;
+  auto t = sp::Terrain::create(d);
+  ASSERT_TRUE(t.ok()) << t.message();
+  sp::BodyDef b;
+  b.name = "crate";
+  b.shape.kind = sp::ShapeKind::Box;
+  b.shape.half_extents = {0.5, 0.2, 0.5};  // 1.8 m² of surface: ~800 shell spheres at 7.5 cm
+  b.mass = 20;
+  b.position = {2.0, 1.5, 2.0};
+  sp::Error e = first_error(t->add_body(b));
+  EXPECT_EQ(e.field, "TerrainDef.shell_spheres_per_slot");
+  EXPECT_EQ(e.value, "64");
+  EXPECT_NE(e.allowed.find("too small for a body shell of"), std::string::npos) << e.message();
+  EXPECT_TRUE(t->bodies().empty());
+  b.shape.half_extents = {0.05, 0.05, 0.05};  // a small one fits
+  EXPECT_TRUE(t->add_body(b).ok());
+}
+
 TEST(Api, HeightsFromAnArrayAndAFile) {
   sp::TerrainDef d = flat_def();
   d.procedural.clear();

@@ -103,7 +103,7 @@ TEST(Shell, MeshCentresOnTheInsetSurface) {
   EXPECT_EQ(*again, *pts);
   auto small = sample_shell(s, 0.05f, 0.02f, 10);
   ASSERT_FALSE(small.ok());
-  EXPECT_EQ(small.error().field, "pool.shell_particles_per_slot");
+  EXPECT_EQ(small.error().field, "simulation.pool.shell_spheres_per_slot");
 }
 
 TEST(Shell, CapacityAndSpacingErrorsNameTheField) {
@@ -111,7 +111,7 @@ TEST(Shell, CapacityAndSpacingErrorsNameTheField) {
   s.radius = 1.0f;
   auto big = sample_shell(s, 0.01f, 0.005f, 1000);
   ASSERT_FALSE(big.ok());
-  EXPECT_NE(big.message().find("shell_particles_per_slot"), std::string::npos) << big.message();
+  EXPECT_NE(big.message().find("shell_spheres_per_slot"), std::string::npos) << big.message();
   EXPECT_FALSE(sample_shell(s, 0.0f, 0.005f, 1000).ok());
   EXPECT_FALSE(sample_shell(s, std::nanf(""), 0.005f, 1000).ok());
 }
