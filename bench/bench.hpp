@@ -25,6 +25,10 @@ struct BenchDemArgs {
   // > 0: every second block runs with this many threads instead (Simulation::set_threads), so
   // the two thread counts are timed on the same bed in the same minutes; each gets its median
   int alternate_threads = 0;
+  // > 1: the hysteretic normal spring with this unloading / loading stiffness ratio and
+  // restitution 1 (e = 1/sqrt(ratio) from the spring alone; docs/dem.md); 1: the linear
+  // spring-dashpot at e = 0.3
+  double unloading = 1.0;
   bool json = false;
 };
 
