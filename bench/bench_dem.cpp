@@ -81,7 +81,7 @@ int run_bench_dem(const BenchDemArgs& a) {
   def.particle_radius = r;
   def.material.density = 2500;
   def.material.normal_stiffness = 3292;
-  def.material.restitution = a.unloading > 1.0 ? 1.0f : 0.3f;
+  def.material.restitution = a.restitution >= 0 ? float(a.restitution) : (a.unloading > 1.0 ? 1.0f : 0.3f);
   def.material.unloading_stiffness_ratio = float(a.unloading);
   def.material.friction = 0.5f;
   def.threads = a.threads;
@@ -115,9 +115,9 @@ int run_bench_dem(const BenchDemArgs& a) {
   const char* kernel = simd::use_avx2_pair_kernel() ? "avx2" : "scalar";
   if (!a.json)
     std::printf("bench dem: %d granules (%d spheres), box %.3f m x %.3f m, %d layers, dt %g s, %d threads, %s pair kernel, "
-                "normal spring %s (unloading ratio %g)\n",
+                "normal spring %s (unloading ratio %g, restitution %g)\n",
                 a.granules, spheres, L, L, bed.layers, dt, threads, kernel, a.unloading > 1.0 ? "hysteretic" : "linear",
-                a.unloading);
+                a.unloading, double(def.material.restitution));
 
   // settle
   auto t0 = std::chrono::steady_clock::now();
@@ -236,6 +236,7 @@ int run_bench_dem(const BenchDemArgs& a) {
                       {"threads", threads},
                       {"pair_kernel", kernel},
                       {"unloading_stiffness_ratio", a.unloading},
+                      {"restitution", def.material.restitution},
                       {"wall_seconds", wall},
                       {"cpu_seconds", cpu},
                       {"cpu_ns_per_sphere_step", cpu_ns},
