@@ -25,6 +25,11 @@ struct BenchDemArgs {
   // > 0: every second block runs with this many threads instead (Simulation::set_threads), so
   // the two thread counts are timed on the same bed in the same minutes; each gets its median
   int alternate_threads = 0;
+  // > 1: the hysteretic normal spring with this unloading / loading stiffness ratio (docs/dem.md)
+  double unloading = 1.0;
+  // the dashpot's restitution; < 0: 0.3 with the linear spring, 1 with the hysteretic one (e =
+  // 1/sqrt(unloading) from the spring alone)
+  double restitution = -1.0;
   bool json = false;
 };
 

@@ -78,6 +78,8 @@ Status check_collapse(const CollapseDef& c) {
   if (!(c.particle_radius > 1e-4f && c.particle_radius <= 1.0f))
     es.push_back(def_error("particle_radius", c.particle_radius, "must be in (1e-4, 1] m"));
   if (!(c.friction >= 0 && c.friction <= 2)) es.push_back(def_error("friction", c.friction, "must be in [0, 2]"));
+  if (!(c.unloading >= 1 && c.unloading <= 100)) es.push_back(def_error("unloading", c.unloading, "must be in [1, 100]"));
+  if (!(c.restitution <= 1)) es.push_back(def_error("restitution", c.restitution, "must be in [0, 1], or < 0 for the law's default"));
   if (!(c.frame_dt > 0 && c.frame_dt <= 0.02)) es.push_back(def_error("frame_dt", c.frame_dt, "must be in (0, 0.02] s"));
   if (!(c.max_settle >= 0.1 && c.max_settle <= 10))
     es.push_back(def_error("max_settle", c.max_settle, "must be in [0.1, 10] s"));
@@ -103,6 +105,11 @@ Result<CollapseResult> run_collapse(const CollapseDef& c) {
   SimulationDef def;
   def.particle_radius = r;
   def.material.friction = c.friction;  // the other material fields: the defaults (docs/dem.md)
+  if (c.unloading > 1.0f) {  // the hysteretic spring, by default e = 1/sqrt(unloading) from it alone
+    def.material.unloading_stiffness_ratio = c.unloading;
+    def.material.restitution = 1.0f;
+  }
+  if (c.restitution >= 0) def.material.restitution = c.restitution;
   def.threads = c.threads;
   def.sleep_time = 1e9f;  // never asleep: the run ends on its own rest test
   const GranuleShape shape = make_granule_shape(r, def.granule_edge_factor, def.material.density);
@@ -290,8 +297,9 @@ int run_bench_collapse(const BenchCollapseArgs& a) {
   const double load0 = bench::load_average();
   for (float mu : a.frictions) {
     if (!a.json)
-      std::printf("bench collapse: mu = %.2f, L0 = %d lattice columns, slot %d wide, seed %llu, %d thread(s)\n", mu,
-                  a.length_granules, a.width_granules, (unsigned long long)a.seed, a.threads);
+      std::printf("bench collapse: mu = %.2f, L0 = %d lattice columns, slot %d wide, seed %llu, %d thread(s), unloading ratio %g, restitution %g\n",
+                  mu, a.length_granules, a.width_granules, (unsigned long long)a.seed, a.threads, double(a.unloading),
+                  a.restitution >= 0 ? double(a.restitution) : (a.unloading > 1.0f ? 1.0 : 0.3));
     if (!a.json)
       std::printf("%6s %6s %7s %6s %7s %8s %7s %7s %6s %9s %4s %4s %6s %7s %7s %6s\n", "a_tgt", "N", "H0[m]", "a", "l_inf",
                   "dL/L0", "h/L0", "h/H0", "t_stop", "t/sqrtH/g", "ej", "rest", "settle", "wall[s]", "Lube05", "ratio");
@@ -301,6 +309,8 @@ int run_bench_collapse(const BenchCollapseArgs& a) {
       CollapseDef c;
       c.aspect = asp;
       c.friction = mu;
+      c.unloading = a.unloading;
+      c.restitution = a.restitution;
       c.length_granules = a.length_granules;
       c.width_granules = a.width_granules;
       c.threads = a.threads;

@@ -81,7 +81,8 @@ int run_bench_dem(const BenchDemArgs& a) {
   def.particle_radius = r;
   def.material.density = 2500;
   def.material.normal_stiffness = 3292;
-  def.material.restitution = 0.3f;
+  def.material.restitution = a.restitution >= 0 ? float(a.restitution) : (a.unloading > 1.0 ? 1.0f : 0.3f);
+  def.material.unloading_stiffness_ratio = float(a.unloading);
   def.material.friction = 0.5f;
   def.threads = a.threads;
   def.sleep_time = 0;  // never sleep: we time the work
@@ -113,8 +114,10 @@ int run_bench_dem(const BenchDemArgs& a) {
   // the pair kernel Simulation::create chose (SANDPATCH_DEM_KERNEL=scalar forces the scalar one)
   const char* kernel = simd::use_avx2_pair_kernel() ? "avx2" : "scalar";
   if (!a.json)
-    std::printf("bench dem: %d granules (%d spheres), box %.3f m x %.3f m, %d layers, dt %g s, %d threads, %s pair kernel\n",
-                a.granules, spheres, L, L, bed.layers, dt, threads, kernel);
+    std::printf("bench dem: %d granules (%d spheres), box %.3f m x %.3f m, %d layers, dt %g s, %d threads, %s pair kernel, "
+                "normal spring %s (unloading ratio %g, restitution %g)\n",
+                a.granules, spheres, L, L, bed.layers, dt, threads, kernel, a.unloading > 1.0 ? "hysteretic" : "linear",
+                a.unloading, double(def.material.restitution));
 
   // settle
   auto t0 = std::chrono::steady_clock::now();
@@ -232,6 +235,8 @@ int run_bench_dem(const BenchDemArgs& a) {
                       {"dt", dt},
                       {"threads", threads},
                       {"pair_kernel", kernel},
+                      {"unloading_stiffness_ratio", a.unloading},
+                      {"restitution", def.material.restitution},
                       {"wall_seconds", wall},
                       {"cpu_seconds", cpu},
                       {"cpu_ns_per_sphere_step", cpu_ns},

@@ -40,6 +40,10 @@ struct CollapseDef {
   int width_granules = 3;     // slot width W in lattice columns along z
   float particle_radius = 0.005f;  // r, m
   float friction = 0.5f;      // mu: granule-granule, floor and walls
+  // normal law: 1 = the default material's linear spring-dashpot (e = 0.3); > 1 = the
+  // hysteretic spring with this unloading / loading stiffness ratio and restitution 1
+  float unloading = 1.0f;
+  float restitution = -1.0f;  // the dashpot's restitution; < 0: 0.3 (linear) or 1 (hysteretic)
   std::uint64_t seed = 1;     // lattice orientations and jitter
   double frame_dt = 2e-3;     // s, frames substepped by the stability guard
   double max_settle = 1.5;    // s simulated for the column to settle before release
@@ -87,6 +91,8 @@ struct BenchCollapseArgs {
   int length_granules = 10;
   int width_granules = 3;
   double split = 2.5;   // target a: fits over the runs of target a <= split, > split, and all
+  float unloading = 1.0f;     // CollapseDef::unloading
+  float restitution = -1.0f;  // CollapseDef::restitution
   std::uint64_t seed = 1;
   int threads = 1;
   bool json = false;

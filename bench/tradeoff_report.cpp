@@ -133,7 +133,7 @@ void add_setting(const Row& row, std::string& csv, ojson& settings) {
     j[crater || drop ? "error_depth" : "error_angle"] = jnum(row.error_a);
     if (crater || drop) j["error_rim"] = jnum(row.error_b);
     if (drop) j["error_crater_volume"] = jnum(row.error_v);
-    if (drop) j["error_vs_experiment"] = jnum(row.error_experiment);
+    if (crater || drop) j["error_vs_experiment"] = jnum(row.error_experiment);
     j["pareto"] = row.pareto;
     if (row.set.noise) j["seed_scatter"] = jnum(row.scatter);
   }

@@ -43,7 +43,7 @@ inline constexpr Knob kFriction{"materials[].friction", "TerrainDef.material.fri
 inline constexpr Knob kRestitution{"materials[].restitution", "TerrainDef.material.restitution", 0.3, 0, 1, true, false, false, "", "coefficient of restitution e of a sphere pair (or damping_ratio in scene files)"};
 inline constexpr Knob kStiffness{"materials[].stiffness", "TerrainDef.material.stiffness", 2.0e4, 1, 1e12, false, false, false, "N/m", "normal contact stiffness k_n"};
 inline constexpr Knob kTangentialRatio{"materials[].tangential_stiffness_ratio", "TerrainDef.material.tangential_stiffness_ratio", 2.0 / 7.0, 0, 1, false, false, false, "", "k_t / k_n"};
-inline constexpr Knob kUnloadingRatio{"materials[].unloading_stiffness_ratio", "TerrainDef.material.unloading_stiffness_ratio", 1, 1, 100, false, false, false, "", "hysteretic normal spring (Walton & Braun): unloading / loading stiffness; 1 = linear (CPU backend only above 1; docs/validation.md)"};
+inline constexpr Knob kUnloadingRatio{"materials[].unloading_stiffness_ratio", "TerrainDef.material.unloading_stiffness_ratio", 1, 1, 100, false, false, false, "", "hysteretic normal spring (Walton & Braun): unloading / loading stiffness; 1 = linear (docs/dem.md)"};
 
 // ---- the patches ----
 inline constexpr Knob kSlots{"simulation.pool.slots", "TerrainDef.slots", 2, 1, 1024, false, false, true, "", "simulations in the pool (patches live at once)"};

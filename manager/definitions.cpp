@@ -141,9 +141,6 @@ std::vector<Error> validate(const api::TerrainDef& d) {
   c.knob(knobs::kSleepTime, d.sleep_time);
   c.knob(knobs::kIdleTimeout, d.idle_timeout);
   if (d.backend != "cpu" && d.backend != "gl") c.add("backend", "\"" + d.backend + "\"", "must be cpu or gl");
-  if (d.backend == "gl" && d.material.unloading_stiffness_ratio != 1.0)
-    c.add("material.unloading_stiffness_ratio", format_number(d.material.unloading_stiffness_ratio),
-          "must be 1 with backend \"gl\" (the hysteretic normal spring runs on the CPU backend only)");
   c.knob(knobs::kThreads, d.threads);
   c.knob(knobs::kLodHorizon, d.lod_horizon);
   c.knob(knobs::kLodMargin, d.lod_margin);

@@ -3,6 +3,8 @@
 // heights, its ledger closed, its slot back to the pool. See terrain_manager_impl.hpp.
 #include <algorithm>
 #include <cmath>
+#include <limits>
+#include <vector>
 
 #include "heightfield/filter.hpp"
 #include "manager/terrain_manager_impl.hpp"
@@ -12,6 +14,48 @@ namespace sandpatch {
 using manager_detail::body_key;
 using manager_detail::Clock;
 using manager_detail::ms_since;
+
+namespace {
+
+constexpr float kNoUnderside = std::numeric_limits<float>::infinity();
+
+// Where a carried body lies over the samples [i0, i0 + ni) x [j0, j0 + nj): `lowest` (its lowest
+// point, m, heightfield-local) at the samples under it, kNoUnderside elsewhere. Under it = within
+// a sphere radius rw (horizontally) of one of its DEM shell's spheres, which are centred on its
+// surface. A flat floor at the lowest point, not the body's curved underside: the shell's
+// centres give the underside only to within the slope times their spacing, and a height above
+// the body makes Bullet push it out (measured: a 0.5 m ball on heights from the shell's centres
+// lowered by rw/2 was kicked up at 0.24 m/s, and 10 cm spheres resting side by side kept waking
+// their patches). `pos`: the slot's spheres by id (Simulation::particle_positions); rw: the
+// granule sphere radius in the world (m).
+std::vector<float> floor_under_body(const Slot& slot, const Carried& c, const std::vector<Vec3>& pos, const Heightfield& hf, double rw,
+                                  float lowest, int i0, int j0, int ni, int nj) {
+  std::vector<float> out(std::size_t(ni) * std::size_t(nj), kNoUnderside);
+  // the shell's spheres: particle ids follow the bodies' creation order
+  std::size_t first = 0;
+  for (int b = 0; b < c.shell.index; ++b) first += std::size_t(slot.sim->body_particle_count(BodyId{b}));
+  const std::size_t n = std::size_t(slot.sim->body_particle_count(c.shell));
+  if (n == 0 || first + n > pos.size()) return out;
+  const double sp = hf.spacing();
+  const double r2 = rw * rw;
+  for (std::size_t k = first; k < first + n; ++k) {
+    const auto w = slot.sim->def().scale.position_to_world(pos[k]);
+    const double x = w[0] - hf.origin_x(), z = w[2] - hf.origin_z();
+    const int ia = std::max(i0, int(std::ceil((x - rw) / sp))), ib = std::min(i0 + ni - 1, int(std::floor((x + rw) / sp)));
+    const int ja = std::max(j0, int(std::ceil((z - rw) / sp))), jb = std::min(j0 + nj - 1, int(std::floor((z + rw) / sp)));
+    for (int j = ja; j <= jb; ++j)
+      for (int i = ia; i <= ib; ++i) {
+        const double dx = i * sp - x, dz = j * sp - z;
+        if (dx * dx + dz * dz > r2) continue;
+        out[std::size_t(j - j0) * std::size_t(ni) + std::size_t(i - i0)] = 0.0f;  // under the body
+      }
+  }
+  for (float& u : out)
+    if (u != kNoUnderside) u = lowest;
+  return out;
+}
+
+}  // namespace
 
 // One part a frame, of one patch: a demotion is three renders' and writes' worth of work (the
 // fill's surface, the surface now, the heights written), and doing it all in one frame was
@@ -177,7 +221,11 @@ Result<HeightImage> TerrainManager::Impl::render_surface(const Slot& slot, const
 // A body the patch carried stays where it is on the new surface: under its footprint the
 // heights are kept below its lowest point (the Gaussian lifts a narrow crater's floor, and
 // Bullet would push the body out with a kick that asked for a new patch). A body resting on
-// the granules is set down: its velocities are zeroed, so it stays at rest there. Resting is
+// the granules is set down: its velocities are zeroed, so it stays at rest there, and under
+// it the heightfield is a floor at its lowest point (floor_under_body): the top-down render sees
+// the granules the body rests on about a granule sphere radius below the body (its DEM shell's
+// spheres, centred on its surface, keep them there), and a body set on that render fell by up
+// to r and rolled on after demotion. Resting is
 // `lying` (coupling.cpp), the manager's test for a body on the terrain: lowest point within a
 // granule diameter of the surface under its centre, slower than 10 sleep_speed (linear, and
 // angular at its half-diagonal; a body settling into a patch still creeps at a few cm/s when
@@ -189,24 +237,65 @@ Result<HeightImage> TerrainManager::Impl::render_surface(const Slot& slot, const
 void TerrainManager::Impl::set_bodies_down(const Slot& slot, double time) {
   const double sp = hf->spacing();
   const GridRegion& a = slot.apron;
+  // Each carried body: whether it rests (on the surface just written, before any change
+  // below), its bounds and samples (the samples of the triangles under it: one more sample
+  // around its bounds, within the written apron) and, resting, the heights under it.
+  struct Down {
+    const Carried* c;
+    Eigen::Vector3d lo, hi;
+    bool resting;
+    float floor_at;  // its lowest point, m, heightfield-local
+    int i0, i1, j0, j1;
+    std::vector<float> under;
+    float at(int i, int j) const {
+      return under.empty() ? kNoUnderside : under[std::size_t(j - j0) * std::size_t(i1 - i0 + 1) + std::size_t(i - i0)];
+    }
+  };
+  std::vector<Down> downs;
+  std::vector<Vec3> pos;  // the patch's spheres by id (read once, for the first resting body)
   for (const Carried& c : slot.carried) {
     if (!c.enabled || !world->alive(c.body)) continue;  // (a disabled shell: another patch carries it)
-    Eigen::Vector3d lo, hi;
-    world->bounds(c.body, &lo, &hi);
-    const bool resting = lying(c.body, lo, hi);  // on the surface just written, before the cut below
-    const float floor_at = float(lo.y() - hf->origin_y());
-    // (the samples of the triangles under it: one more sample around its bounds; within
-    // the written apron)
-    const int i0 = std::max(a.i0, int(std::floor((lo.x() - hf->origin_x()) / sp))), i1 = std::min(a.i0 + a.ni - 1, int(std::ceil((hi.x() - hf->origin_x()) / sp)));
-    const int j0 = std::max(a.j0, int(std::floor((lo.z() - hf->origin_z()) / sp))), j1 = std::min(a.j0 + a.nj - 1, int(std::ceil((hi.z() - hf->origin_z()) / sp)));
-    for (int j = j0; j <= j1; ++j)
-      for (int i = i0; i <= i1; ++i)
-        if (hf->height(i, j) > floor_at) hf->set_height(i, j, floor_at);
-    if (!resting) continue;
-    BodyState st = world->state(c.body);
+    Down d{&c, {}, {}, false, 0, 0, 0, 0, 0, {}};
+    world->bounds(c.body, &d.lo, &d.hi);
+    d.resting = lying(c.body, d.lo, d.hi);
+    d.floor_at = float(d.lo.y() - hf->origin_y());
+    d.i0 = std::max(a.i0, int(std::floor((d.lo.x() - hf->origin_x()) / sp))), d.i1 = std::min(a.i0 + a.ni - 1, int(std::ceil((d.hi.x() - hf->origin_x()) / sp)));
+    d.j0 = std::max(a.j0, int(std::floor((d.lo.z() - hf->origin_z()) / sp))), d.j1 = std::min(a.j0 + a.nj - 1, int(std::ceil((d.hi.z() - hf->origin_z()) / sp)));
+    if (d.resting && d.i1 >= d.i0 && d.j1 >= d.j0) {
+      if (pos.empty()) pos = slot.sim->particle_positions();
+      d.under = floor_under_body(slot, c, pos, *hf, radius_world(slot), d.floor_at, d.i0, d.j0, d.i1 - d.i0 + 1, d.j1 - d.j0 + 1);
+    }
+    downs.push_back(std::move(d));
+  }
+  // Under a resting body: its lowest point, but nowhere above the lowest point of another body
+  // over the sample (bounds and one sample around them: bodies touching each other, or one
+  // beside the patch), so the heights never rise into another body.
+  std::vector<RigidBodyId> others = world->bodies();
+  std::vector<Eigen::Vector3d> olo(others.size()), ohi(others.size());
+  for (std::size_t k = 0; k < others.size(); ++k) world->bounds(others[k], &olo[k], &ohi[k]);
+  for (const Down& d : downs)
+    for (int j = d.j0; j <= d.j1; ++j)
+      for (int i = d.i0; i <= d.i1; ++i) {
+        float u = d.at(i, j);
+        if (u == kNoUnderside) continue;
+        const double x = hf->origin_x() + i * sp, z = hf->origin_z() + j * sp;
+        for (std::size_t k = 0; k < others.size(); ++k)
+          if (body_key(others[k]) != body_key(d.c->body) && x > olo[k].x() - sp && x < ohi[k].x() + sp && z > olo[k].z() - sp &&
+              z < ohi[k].z() + sp)
+            u = std::min(u, float(olo[k].y() - hf->origin_y()));
+        hf->set_height(i, j, u);
+      }
+  // Under every carried body elsewhere: below its lowest point.
+  for (const Down& d : downs)
+    for (int j = d.j0; j <= d.j1; ++j)
+      for (int i = d.i0; i <= d.i1; ++i)
+        if (d.at(i, j) == kNoUnderside && hf->height(i, j) > d.floor_at) hf->set_height(i, j, d.floor_at);
+  for (const Down& d : downs) {
+    if (!d.resting) continue;
+    BodyState st = world->state(d.c->body);
     st.linear_velocity.setZero();
     st.angular_velocity.setZero();
-    world->set_state(c.body, st);
+    world->set_state(d.c->body, st);
   }
   world->terrain_changed();
   // Every body over the written heights (those it carried, and those resting on the

@@ -70,7 +70,19 @@ void spring_pairs_avx2(const PairLaw& law, PairBatch& b) {
       fd = sel(m, _mm256_or_ps(_mm256_andnot_ps(sign, mag), _mm256_and_ps(sign, vn)), fd);
     }
   }
-  V fn = sub(mul(kn, delta), fd);
+  V fel = mul(kn, delta);
+  if (law.kn2 > law.kn) {
+    // hysteretic normal spring: dmax = max(delta, dmax); d0 = dmax (1 - k_n/kn2);
+    // fel = max(0, min(k_n delta, kn2 (delta - d0)))
+    V dm = ld(b.dmax);
+    dm = sel(gt(delta, dm), delta, dm);
+    const V d0 = mul(dm, set1(1.0f - law.kn / law.kn2));
+    const V fu = mul(set1(law.kn2), sub(delta, d0));
+    fel = sel(lt(fu, fel), fu, fel);
+    fel = _mm256_and_ps(gt(fel, zero), fel);
+    st(b.dmax, dm);
+  }
+  V fn = sub(fel, fd);
   fn = _mm256_and_ps(gt(fn, zero), fn);  // fn > 0 ? fn : 0
   const V vtx = sub(vx, mul(nx, vn)), vty = sub(vy, mul(ny, vn)), vtz = sub(vz, mul(nz, vn));
 

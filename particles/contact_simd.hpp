@@ -35,6 +35,9 @@ struct alignas(32) PairBatch {
   float newc[kPairLanes];                                 // 1: first substep of the contact, else 0
   // in and out: the tangential spring of the pair, m
   float xix[kPairLanes], xiy[kPairLanes], xiz[kPairLanes];
+  // in and out: the pair's largest overlap while it touches (the hysteretic normal spring's
+  // history, physics_common.glsl contact_force_h), m; untouched when PairLaw::kn2 <= kn
+  float dmax[kPairLanes];
   // out: force on sphere i (N) and n x f_t (N)
   float fx[kPairLanes], fy[kPairLanes], fz[kPairLanes];
   float cx[kPairLanes], cy[kPairLanes], cz[kPairLanes];
@@ -50,6 +53,7 @@ struct PairLaw {
   float ctr;  // c_t = ctr c_n
   float mu;
   float dt;   // s
+  float kn2;  // unloading stiffness, N/m (Material::unloading_stiffness_ratio x k_n; <= kn: the linear spring)
 };
 
 // Evaluates all 8 lanes (lanes >= count must hold finite inputs; their outputs are ignored).

@@ -68,12 +68,12 @@ void Simulation::Impl::contacts(float dt) {
   };
 #pragma omp parallel num_threads(threads) if (n > 4096)
   {
-  if (simd_pairs && !ledger && !hysteretic) {
+  if (simd_pairs && !ledger) {
   // pair pass, AVX2: the same walk; touching pairs are collected per thread into batches of
   // 8 and evaluated by the kernel (same results, contact_simd.hpp), then added to the sums in
   // pair order (the pass reads no sum, so the additions are those of the scalar pass). A
   // slab is one task, its last batch evaluated before the slab ends.
-  const simd::PairLaw plaw{kn, cn0, kt, ctr, mu, dt};
+  const simd::PairLaw plaw{kn, cn0, kt, ctr, mu, dt, kn2};
   simd::PairBatch bt;
   int bi[simd::kPairLanes], bj[simd::kPairLanes];
   auto flush = [&]() {
@@ -83,7 +83,7 @@ void Simulation::Impl::contacts(float dt) {
       bt.dux[k] = bt.dux[0], bt.duy[k] = bt.duy[0], bt.duz[k] = bt.duz[0];
       bt.rwx[k] = bt.rwx[0], bt.rwy[k] = bt.rwy[0], bt.rwz[k] = bt.rwz[0];
       bt.invm[k] = bt.invm[0], bt.newc[k] = bt.newc[0];
-      bt.xix[k] = bt.xix[0], bt.xiy[k] = bt.xiy[0], bt.xiz[k] = bt.xiz[0];
+      bt.xix[k] = bt.xix[0], bt.xiy[k] = bt.xiy[0], bt.xiz[k] = bt.xiz[0], bt.dmax[k] = bt.dmax[0];
     }
 #ifdef SANDPATCH_AVX2_KERNEL
     simd::spring_pairs_avx2(plaw, bt);
@@ -91,6 +91,7 @@ void Simulation::Impl::contacts(float dt) {
     for (int k = 0; k < cnt; ++k) {
       float* xe = XI + 3 * std::size_t(bt.entry[k]);
       xe[0] = bt.xix[k], xe[1] = bt.xiy[k], xe[2] = bt.xiz[k];
+      if (hysteretic) DM[bt.entry[k]] = bt.dmax[k];
       add_pair(bi[k], bj[k], _mm_setr_ps(bt.fx[k], bt.fy[k], bt.fz[k], 0.0f),
                _mm_setr_ps(bt.cx[k], bt.cy[k], bt.cz[k], 0.0f));
     }
@@ -130,6 +131,7 @@ void Simulation::Impl::contacts(float dt) {
         bt.newc[k] = first_law && TCH[e] == 0 ? 1.0f : 0.0f;  // first substep (ContactParams::new_contact)
         TCH[e] = 1;
         bt.xix[k] = xe[0], bt.xiy[k] = xe[1], bt.xiz[k] = xe[2];
+        bt.dmax[k] = DM[e];
         bt.entry[k] = e;
         bi[k] = i, bj[k] = j;
         if (bt.count == simd::kPairLanes) flush();

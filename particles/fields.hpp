@@ -31,8 +31,9 @@
 //   SANDPATCH_PAIR_CONTACT_FIELDS    per neighbour-list entry (CPU: the CSR list of dem.hpp,
 //                                    one entry per pair within r_i + r_j + skin, owner side)
 // The GL backend keeps its contact history by particle id in buffers of its own layout
-// (shaders/dem/common.glsl: SpringsIn/SpringsOut, K slots of (xi, partner id) per sphere,
-// and Walls, a mask and 6 springs per sphere), hashed by GlSimulation::state_hash.
+// (shaders/dem/common.glsl: SpringsIn/SpringsOut, K slots of (xi, partner id) per sphere and
+// their dmax, and Walls, a mask and 6 springs per sphere with their dmax in w), hashed by
+// GlSimulation::state_hash (the pairs' dmax only with the hysteretic spring).
 #pragma once
 
 #include <cstdint>

@@ -774,12 +774,6 @@ Result<SceneDef> parse_scene(const std::string& json_text, const std::string& so
   top.finish();
 
   // Cross references.
-  // The GL backend's contact slots hold no largest overlap: the hysteretic spring is the CPU's.
-  if (s.simulation.backend == Backend::Gl)
-    for (std::size_t k = 0; k < s.materials.size(); ++k)
-      if (s.materials[k].unloading_stiffness_ratio != 1.0)
-        c.error("materials[" + std::to_string(k) + "].unloading_stiffness_ratio", fmt_num(s.materials[k].unloading_stiffness_ratio),
-                "must be 1 with simulation.backend \"gl\" (the hysteretic normal spring runs on the CPU backend only)");
   check_unique_names(c, s.materials, "materials");
   check_unique_names(c, s.bodies, "bodies");
   check_unique_names(c, s.cameras, "cameras");

@@ -6,10 +6,10 @@
 //                  [--threads T] [--frame-budget MS|off]
 //   sandpatch check SCENE
 //   sandpatch info
-//   sandpatch bench dem [--granules N] [--steps S] [--repeat K] [--alternate-threads T2] [--backend cpu|gl] [--threads T] [--json]
+//   sandpatch bench dem [--granules N] [--steps S] [--repeat K] [--alternate-threads T2] [--backend cpu|gl] [--threads T] [--unloading L] [--restitution E] [--json]
 //   sandpatch bench render [--terrain N]... [--frames F] [--width W] [--height H] [--json]
 //   sandpatch bench lod [--sizes N,N,...] [--seconds S] [--threads T] [--json]
-//   sandpatch bench collapse [--aspects A,A,...] [--friction MU,...] [--length N] [--width N] [--seed S] [--threads T] [--json]
+//   sandpatch bench collapse [--aspects A,A,...] [--friction MU,...] [--length N] [--width N] [--seed S] [--unloading L] [--restitution E] [--threads T] [--json]
 //   sandpatch bench tradeoff [--quick | --full] [--threads T] [--out DIR] [--no-gl] [--no-plot] [--json]
 //   sandpatch stress SCENE [--sims N] [--frames F] [--interval S] [--threads T] [--out DIR] [--no-plot] [--json]
 // Exit codes: 0 ok, 1 runtime failure (with the stage that failed), 2 bad input.
@@ -298,6 +298,12 @@ void add_bench(CLI::App& app, BenchCli& a) {
   bdem->add_option("--alternate-threads", dem.alternate_threads,
                    "Run every second block with this many threads (scaling on one bed); needs --repeat >= 2")
       ->check(CLI::Range(1, 1024));
+  bdem->add_option("--unloading", dem.unloading,
+                   "Hysteretic normal spring: unloading / loading stiffness ratio (default 1: linear)")
+      ->check(CLI::Range(1.0, 100.0));
+  bdem->add_option("--restitution", dem.restitution,
+                   "Dashpot restitution (default 0.3 with the linear spring, 1 with --unloading above 1)")
+      ->check(CLI::Range(0.0, 1.0));
   bdem->add_flag("--json", dem.json, "Print one JSON object on the last line");
   render::BenchRenderArgs& brend = a.render;
   auto* bren = bench->add_subcommand("render", "Clipmap vs full-grid triangles and frame time per terrain size");
@@ -340,6 +346,12 @@ void add_bench(CLI::App& app, BenchCli& a) {
   bcolc->add_option("--width", bcol.width_granules, "Slot width in granules (default 3)");
   bcolc->add_option("--split", bcol.split, "Target aspect ratio between the low-a and high-a fits (default 2.5)");
   bcolc->add_option("--seed", bcol.seed, "Lattice seed (orientations, jitter) (default 1)");
+  bcolc->add_option("--unloading", bcol.unloading,
+                    "Hysteretic normal spring: unloading / loading stiffness ratio (default 1: linear)")
+      ->check(CLI::Range(1.0, 100.0));
+  bcolc->add_option("--restitution", bcol.restitution,
+                    "Dashpot restitution (default 0.3 with the linear spring, 1 with --unloading above 1)")
+      ->check(CLI::Range(0.0, 1.0));
   bcolc->add_option("--threads", bcol.threads, "Worker threads per run (default 1; 0 = all)");
   bcolc->add_flag("--json", bcol.json, "Print one JSON object on the last line");
 }

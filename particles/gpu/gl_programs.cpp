@@ -3,6 +3,7 @@
 // + shaders/dem/physics_common.glsl (the contact law, terrain, boundary planes and status
 // block, the CPU backend's own source) + common.glsl + the kernel; the uniforms they share;
 // the check of the generated layout against the driver's. gl_impl.hpp.
+#include <algorithm>
 #include <string>
 #include <string_view>
 
@@ -62,6 +63,7 @@ void GlSimulation::Impl::set_static_uniforms() {
     glProgramUniform1f(id, loc("u_inv_h"), 1.0f / h);
     glProgramUniform1ui(id, loc("u_blocks"), GLuint((cells() + kScanBlock - 1) / kScanBlock));
     glProgramUniform1f(id, loc("u_kn"), m.normal_stiffness);
+    glProgramUniform1f(id, loc("u_kn2"), m.normal_stiffness * std::max(1.0f, m.unloading_stiffness_ratio));
     glProgramUniform1f(id, loc("u_cn0"), cn0);
     glProgramUniform1f(id, loc("u_kt"), m.normal_stiffness * m.tangential_stiffness_ratio);
     glProgramUniform1f(id, loc("u_ctr"), m.tangential_damping_ratio);

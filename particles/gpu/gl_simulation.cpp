@@ -56,11 +56,6 @@ Status validate_common(const SimulationDef& d, const GlOptions& o) {
     bad("GlOptions.max_contacts_per_sphere", o.max_contacts_per_sphere, "must be in [1, 64]");
   if (o.workgroup_size < 1 || o.workgroup_size > 1024 || (o.workgroup_size & (o.workgroup_size - 1)))
     bad("GlOptions.workgroup_size", o.workgroup_size, "must be a power of two in [1, 1024]");
-  // The hysteretic normal spring keeps one more float per contact (dmax), which the GL contact
-  // slots (xi, partner id) have no room for yet: the CPU backend runs it.
-  if (d.material.unloading_stiffness_ratio != 1.0f)
-    bad("SimulationDef.material.unloading_stiffness_ratio", d.material.unloading_stiffness_ratio,
-        "must be 1 on the GL backend (the hysteretic normal spring runs on the CPU backend)");
   if (!es.empty()) return es;
   return Ok{};
 }
@@ -156,7 +151,8 @@ Result<GlSimulation> GlSimulation::create(const SimulationDef& d, const GlOption
   s.buf_bytes[Impl::kP0] = s.buf_bytes[Impl::kP1] = std430_size(kParticleFields, P);
   s.buf_bytes[Impl::kB] = std430_size(kBodyFields, std::size_t(s.cap_b));
   s.buf_bytes[Impl::kG] = sizeof(physics::DemStatus) + 4 * (std::size_t(s.cap_cells) + 1 + std::size_t(s.cap_cells) + s.scan_blocks_cap);
-  s.buf_bytes[Impl::kS0] = s.buf_bytes[Impl::kS1] = round_up(4 * P, 16) + 16 * P * std::size_t(s.K);
+  // springs (common.glsl SpringsIn/Out): counts, K slots of (xi, partner id), K dmax
+  s.buf_bytes[Impl::kS0] = s.buf_bytes[Impl::kS1] = round_up(4 * P, 16) + 20 * P * std::size_t(s.K);
   s.buf_bytes[Impl::kW] = round_up(4 * P, 16) + 16 * P * kWallSlots;
   s.buf_bytes[Impl::kSort] = s.sort_terrain_offset() + 4 * std::max<std::size_t>(s.cap_terrain, 1);
   GLint64 max_block = 0;
@@ -478,7 +474,10 @@ std::uint64_t GlSimulation::state_hash() const {
 #undef SP_HASH_P
   // The contact history (fields.hpp: the GL keeps it by particle id in buffers of its own
   // layout, common.glsl): each sphere's plane mask and 6 plane springs, then its pair springs
-  // (count, and the slots in use: xi bits and partner id) as the next substep reads them.
+  // (count, and the slots in use: xi bits and partner id) as the next substep reads them. With
+  // the hysteretic normal spring the planes' dmax (the w of their springs) and the pairs' dmax
+  // are hashed too (they decide the next force); with the linear spring they stay 0 and the
+  // pairs' are left out, so the linear law's hashes are those it had before dmax existed.
   {
     const std::size_t n = std::size_t(s.np), head = round_up(4 * std::size_t(s.cap_p), 16);
     std::vector<std::uint32_t> mask(n), wxi(n * 4 * kWallSlots), count(n), slots(n * 4 * std::size_t(s.K));
@@ -492,6 +491,11 @@ std::uint64_t GlSimulation::state_hash() const {
     for (std::size_t id = 0; id < n; ++id) {
       h.pod(count[id]);
       h.bytes(&slots[id * 4 * std::size_t(s.K)], 16 * std::size_t(count[id]));
+    }
+    if (s.def.material.unloading_stiffness_ratio > 1.0f) {
+      std::vector<float> dm(n * std::size_t(s.K));
+      s.read(springs, head + 16 * std::size_t(s.cap_p) * std::size_t(s.K), dm.size() * 4, dm.data());
+      for (std::size_t id = 0; id < n; ++id) h.bytes(&dm[id * std::size_t(s.K)], 4 * std::size_t(count[id]));
     }
   }
   return h.value();

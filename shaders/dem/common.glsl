@@ -8,9 +8,13 @@
 //   1 Pn   particles, scratch copy                       (the grid's gather writes it)
 //   2 B    bodies, creation order                        generated from fields.hpp
 //   3 G    status counters, cells, prefix-sum block sums
-//   4 SIn  tangential springs read this substep (by particle id, K slots each)
-//   5 SOut tangential springs written this substep
-//   6 W    boundary-plane springs (by particle id, 6 planes each)
+//   4 SIn  contact springs read this substep (by particle id, K slots each): per slot the
+//          tangential spring xi and the partner id (slot), and the largest overlap of the
+//          contact (dmax, m: the hysteretic normal spring, physics_common.glsl contact_force_h;
+//          0 with the linear spring)
+//   5 SOut contact springs written this substep
+//   6 W    boundary-plane springs (by particle id, 6 planes each): xi in xyz, the plane
+//          contact's largest overlap (m, as dmax) in w
 //   7 S    sort bookkeeping: slot_of (id -> sorted index), cell_of, order; terrain heights
 // Math follows particles/math.hpp operation by operation; the contact law, terrain and
 // boundary planes are physics_common.glsl's, the CPU backend's own source.
@@ -22,8 +26,16 @@ layout(std430, binding = 3) buffer Grid {
   uint block_sum[SP_SCAN_BLOCKS];
 } G;
 
-layout(std430, binding = 4) buffer SpringsIn { uint count[SP_PARTICLES]; uvec4 slot[SP_PARTICLES * SP_K]; } SIn;
-layout(std430, binding = 5) buffer SpringsOut { uint count[SP_PARTICLES]; uvec4 slot[SP_PARTICLES * SP_K]; } SOut;
+layout(std430, binding = 4) buffer SpringsIn {
+  uint count[SP_PARTICLES];
+  uvec4 slot[SP_PARTICLES * SP_K];
+  float dmax[SP_PARTICLES * SP_K];
+} SIn;
+layout(std430, binding = 5) buffer SpringsOut {
+  uint count[SP_PARTICLES];
+  uvec4 slot[SP_PARTICLES * SP_K];
+  float dmax[SP_PARTICLES * SP_K];
+} SOut;
 layout(std430, binding = 6) buffer Walls { uint mask[SP_PARTICLES]; vec4 xi[SP_PARTICLES * 6]; } W;
 // (terrain: the optional TerrainGrid heights, heights[iz * nx + ix], m)
 layout(std430, binding = 7) buffer Sort {

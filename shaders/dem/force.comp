@@ -11,8 +11,10 @@
 //   c_n = 2 zeta sqrt(k_n m_eff) = cn0 / sqrt(1/m_i + 1/m_j). The sphere velocities are the
 //   bodies' predicted to this substep's time, v + u_pred dt a_prev, translation only
 //   (bodies.comp), as on the CPU.
-// Springs live in SP_K slots per sphere (by particle id), keyed by the partner's id; a
-// contact that ends forgets its spring. A touching partner without a slot from the last
+// Springs live in SP_K slots per sphere (by particle id), keyed by the partner's id, with the
+// contact's largest overlap beside them (dmax, the hysteretic normal spring's history; both
+// spheres of a pair see the same overlap, so they keep the same dmax); a contact that ends
+// forgets its spring. A touching partner without a slot from the last
 // substep is a new contact (first substep).
 // Boundary planes (floor; side walls; terrain) use the same law with their own springs (W,
 // slot per plane; a plane not in the last substep's mask is new) and c_n from the sphere's
@@ -20,6 +22,7 @@
 layout(local_size_x = SP_WG) in;
 
 uniform float u_kn, u_cn0, u_kt, u_ctr, u_mu, u_dt;
+uniform float u_kn2;       // unloading stiffness (N/m): k_n x Material::unloading_stiffness_ratio (k_n: linear)
 uniform bool u_first_law;  // the first-substep dashpot is on (Simulation::contact_timing_on)
 uniform float u_floor_y;
 uniform bool u_walls;
@@ -74,18 +77,23 @@ void main() {
           const float cn = u_cn0 / sqrt(invm_i + invm_j);
           // this pair's spring from the last substep (zero for a new contact, and no slot)
           vec3 xi = vec3(0.0);
+          float dm = 0.0;
           bool first = true;
           for (uint k = 0u; k < old_count; ++k) {
             const uvec4 sl = SIn.slot[sbase + k];
             if (int(sl.w) == jid) {
               xi = uintBitsToFloat(sl.xyz);
+              dm = SIn.dmax[sbase + k];
               first = false;
               break;
             }
           }
-          const ContactForce cf =
-              contact_force(ContactParams(u_kn, cn, u_kt, u_ctr * cn, u_mu, u_dt, first && u_first_law), nrm, rs - dist, v, xi);
-          if (found < uint(SP_K)) SOut.slot[sbase + found] = uvec4(floatBitsToUint(xi), uint(jid));
+          const ContactForce cf = contact_force_h(ContactParams(u_kn, cn, u_kt, u_ctr * cn, u_mu, u_dt, first && u_first_law),
+                                                  u_kn2, nrm, rs - dist, v, xi, dm);
+          if (found < uint(SP_K)) {
+            SOut.slot[sbase + found] = uvec4(floatBitsToUint(xi), uint(jid));
+            SOut.dmax[sbase + found] = dm;
+          }
           ++found;
           if (id < jid || (B.flags[P.body[j]] & SP_BODY_STATIC) != 0u) ++owned;
           F += cf.f;
@@ -109,10 +117,12 @@ void main() {
         const uint wslot = uint(id) * uint(SP_PLANE_SLOTS) + uint(slot);
         const vec3 v = plane_contact_velocity(ui, wi, nrm, ri);
         const bool first = (old_mask & (1u << uint(slot))) == 0u;
-        vec3 xi = first ? vec3(0.0) : W.xi[wslot].xyz;
-        const ContactForce cf =
-            contact_force(ContactParams(u_kn, cnw, u_kt, u_ctr * cnw, u_mu, u_dt, first && u_first_law), nrm, ri - dist, v, xi);
-        W.xi[wslot] = vec4(xi, 0.0);
+        const vec4 wx = first ? vec4(0.0) : W.xi[wslot];
+        vec3 xi = wx.xyz;
+        float dm = wx.w;
+        const ContactForce cf = contact_force_h(ContactParams(u_kn, cnw, u_kt, u_ctr * cnw, u_mu, u_dt, first && u_first_law),
+                                                u_kn2, nrm, ri - dist, v, xi, dm);
+        W.xi[wslot] = vec4(xi, dm);
         F += cf.f;
         T += cross(nrm * (-ri), cf.ft);
         E += cf.energy;

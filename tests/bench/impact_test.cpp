@@ -66,7 +66,9 @@ TEST(Uehara, DepthSolvesTheScalingLaw) {
 // grows as rho_b^b with b within 0.2 of the experiments' 1/2 (0.66 here; seeds and settings
 // scatter it by about 0.1, docs/validation.md). After demote_all the heightfield holds the
 // crater the ball rests in (at the axis within half a granule diameter of the ball's lowest
-// point) and the ball stays there on the heightfield alone (moves less than r in 0.25 s).
+// point) and the ball stays there on the heightfield alone (moves less than r/2 in 0.25 s: the
+// heights under it are a floor at its lowest point, manager/demotion.cpp floor_under_body;
+// measured 0.1 and 0.0 mm).
 TEST(Impact, StopsInTheSandAndDepthFollowsDensity) {
   ImpactSeriesDef sd;
   sd.base = impact_base();
@@ -88,11 +90,9 @@ TEST(Impact, StopsInTheSandAndDepthFollowsDensity) {
     std::printf("  heightfield at the axis %.4f m below the surface (ball's bottom %.4f m); moved %.4f m after demotion\n",
                 p.drop.axis_depth_after, p.drop.sphere_sink, p.drop.shift_after_demotion);
     EXPECT_NEAR(p.drop.axis_depth_after, p.drop.sphere_sink, half_diameter) << p.density;
-    // The target is less than r. The 800 kg/m^3 ball meets it (0.8-1.2 cm); the 7800 kg/m^3
-    // one moved 1.3-5.1 cm (the tile and the DEM's summation order move it): asserted at 2.5 r,
-    // the target not met (docs/validation.md).
-    const double bound = p.density < 2000 ? 1.0 : 2.5;
-    EXPECT_LT(p.drop.shift_after_demotion, bound * double(sd.base.granule_radius)) << p.density;
+    // (before the heights under a resting body were set to its lowest point: 0.8-1.2 cm and
+    // 1.3-5.1 cm, the ball falling onto the granules' render about r below it)
+    EXPECT_LT(p.drop.shift_after_demotion, 0.5 * double(sd.base.granule_radius)) << p.density;
   }
   std::printf("depth ~ rho_b^%.3f\n", r->depth_vs_density.exponent);
   EXPECT_NEAR(r->depth_vs_density.exponent, 0.5, 0.2);

@@ -22,6 +22,7 @@ namespace {
 
 struct Lane {
   Vec3 f, c, xi;
+  float dmax = 0;
 };
 
 // The scalar pair pass for one lane of the batch (as particles/dem_contacts.cpp).
@@ -34,21 +35,19 @@ Lane scalar_lane(const simd::PairLaw& law, const simd::PairBatch& b, int k) {
   const float cn = law.cn0 / std::sqrt(b.invm[k]);
   Vec3 xi{b.xix[k], b.xiy[k], b.xiz[k]};
   const ContactParams cp{law.kn, cn, law.kt, law.ctr * cn, law.mu, law.dt, b.newc[k] != 0.0f};
-  const ContactForce cf = contact_force(cp, nrm, b.rs[k] - dist, v, xi);
-  return {cf.f, cross(nrm, cf.ft), xi};
+  float dm = b.dmax[k];
+  const ContactForce cf = contact_force_h(cp, law.kn2, nrm, b.rs[k] - dist, v, xi, dm);
+  return {cf.f, cross(nrm, cf.ft), xi, dm};
 }
 
 double norm(Vec3 a) { return std::sqrt(double(a.x) * a.x + double(a.y) * a.y + double(a.z) * a.z); }
 bool same_bits(Vec3 a, Vec3 b) { return a.x == b.x && a.y == b.y && a.z == b.z; }
 
-}  // namespace
-
-TEST(ContactAvx2, MatchesSharedScalarLawOnRandomPairs) {
-  if (!simd::avx2_available()) GTEST_SKIP() << "this CPU has no AVX2";
-  // the default material (k_n = 3292 N/m, e = 0.3: zeta = 0.4972, k_t = 2/7 k_n, c_t = c_n/2,
-  // mu = 0.5), r = 5 mm spheres of 2500 kg/m^3, substep 1e-5 s
-  const float kn = 3292.0f, zeta = 0.497239f;
-  const simd::PairLaw law{kn, float(2.0 * zeta * std::sqrt(double(kn))), kn * 2.0f / 7.0f, 0.5f, 0.5f, 1e-5f};
+// Random touching pairs through the kernel and the scalar law; lambda = kn2 / k_n (1: linear).
+// With lambda > 1 each lane also carries a largest overlap from before: none (a new contact),
+// below the overlap now (loading) or above it (unloading, or the spring already open).
+void random_pairs_match(const simd::PairLaw& law) {
+  const bool hyst = law.kn2 > law.kn;
   const float m = 2500.0f * 4.0f / 3.0f * 3.14159265f * 0.005f * 0.005f * 0.005f;
   std::mt19937 rng(12345);
   std::uniform_real_distribution<float> u(-1.0f, 1.0f), u01(0.0f, 1.0f);
@@ -74,13 +73,16 @@ TEST(ContactAvx2, MatchesSharedScalarLawOnRandomPairs) {
       // springs from nothing to beyond the slip limit (mu k_n delta / k_t ~ 1e-4 m here)
       const float xs = u01(rng) < 0.2f ? 0.0f : 3e-4f * u01(rng);
       b.xix[k] = xs * u(rng), b.xiy[k] = xs * u(rng), b.xiz[k] = xs * u(rng);
+      const float overlap = b.rs[k] - dist, pick = u01(rng);
+      b.dmax[k] = !hyst || pick < 0.2f ? 0.0f : overlap * (pick < 0.5f ? u01(rng) : 1.0f + 0.3f * u01(rng));
     }
     b.count = simd::kPairLanes;
     Lane ref[simd::kPairLanes];
     for (int k = 0; k < simd::kPairLanes; ++k) ref[k] = scalar_lane(law, b, k);
     simd::spring_pairs_avx2(law, b);
     for (int k = 0; k < simd::kPairLanes; ++k) {
-      const Lane got{{b.fx[k], b.fy[k], b.fz[k]}, {b.cx[k], b.cy[k], b.cz[k]}, {b.xix[k], b.xiy[k], b.xiz[k]}};
+      const Lane got{{b.fx[k], b.fy[k], b.fz[k]}, {b.cx[k], b.cy[k], b.cz[k]}, {b.xix[k], b.xiy[k], b.xiz[k]}, b.dmax[k]};
+      EXPECT_EQ(got.dmax, ref[k].dmax) << "batch " << batch << " lane " << k;
       const Vec3 g[3] = {got.f, got.c, got.xi}, r[3] = {ref[k].f, ref[k].c, ref[k].xi};
       bool all_exact = true;
       for (int q = 0; q < 3; ++q) {
@@ -93,8 +95,28 @@ TEST(ContactAvx2, MatchesSharedScalarLawOnRandomPairs) {
       exact += all_exact;
     }
   }
-  std::printf("%d lanes: %d bit-identical to the shared scalar law, worst relative difference %.3g\n", lanes, exact,
-              worst);
+  std::printf("lambda %.3f: %d lanes: %d bit-identical to the shared scalar law, worst relative difference %.3g\n",
+              double(law.kn2 / law.kn), lanes, exact, worst);
+  EXPECT_EQ(exact, lanes) << "the kernel is written to give the scalar law's bits";
 }
 
+// the default material (k_n = 3292 N/m, e = 0.3: zeta = 0.4972, k_t = 2/7 k_n, c_t = c_n/2,
+// mu = 0.5), r = 5 mm spheres of 2500 kg/m^3, substep 1e-5 s
+constexpr float kKn = 3292.0f, kZeta = 0.497239f;
+
+TEST(ContactAvx2, MatchesSharedScalarLawOnRandomPairs) {
+  if (!simd::avx2_available()) GTEST_SKIP() << "this CPU has no AVX2";
+  random_pairs_match({kKn, float(2.0 * kZeta * std::sqrt(double(kKn))), kKn * 2.0f / 7.0f, 0.5f, 0.5f, 1e-5f, kKn});
+}
+
+// The hysteretic normal spring (Walton & Braun): lambda = 11.1 with no dashpot (e = 1: the
+// e = 0.3 material of docs/dem.md "Hysteretic normal spring"), and lambda = 4 with the e = 0.3
+// dashpot as well.
+TEST(ContactAvx2, HystereticLaneMatchesSharedScalarLaw) {
+  if (!simd::avx2_available()) GTEST_SKIP() << "this CPU has no AVX2";
+  random_pairs_match({kKn, 0.0f, kKn * 2.0f / 7.0f, 0.5f, 0.5f, 1e-5f, kKn * 11.111111f});
+  random_pairs_match({kKn, float(2.0 * kZeta * std::sqrt(double(kKn))), kKn * 2.0f / 7.0f, 0.5f, 0.5f, 1e-5f, kKn * 4.0f});
+}
+
+}  // namespace
 }  // namespace sandpatch

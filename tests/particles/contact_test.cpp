@@ -110,6 +110,24 @@ TEST(HeadOnHysteretic, RestitutionIsOneOverRootLambda) {
     }
 }
 
+// The hysteretic spring with a weak dashpot as well (docs/calibration.md: restitution e_d
+// beside lambda, so that resting contacts are damped): the binary collision rebounds at about
+// e_d / sqrt(lambda). lambda = 11.1 with e_d = 0.9 and lambda = 9 with e_d = 0.9 (e = 0.3 the
+// calibration's way): within 5 % of e_d / sqrt(lambda), pairs and floor, 4 phases.
+TEST(HeadOnHysteretic, WeakDashpotGivesAboutRestitutionOverRootLambda) {
+  auto create = [](const SimulationDef& d) { return Simulation::create(d); };
+  for (float lambda : {9.0f, 11.111111f})
+    for (bool floor : {false, true}) {
+      const double ed = 0.9;
+      const auto st = testutil::head_on<Simulation>(create, ed, 50, 4, floor, lambda);
+      const double e = ed / std::sqrt(double(lambda));
+      std::printf("hysteretic lambda %.3f + dashpot e_d %.2f %s: e %.4f ... %.4f (e_d/sqrt(lambda) = %.4f)\n", lambda, ed,
+                  floor ? "floor" : "pair", st.e_lo, st.e_hi, e);
+      EXPECT_NEAR(st.e_lo, e, 0.05 * e);
+      EXPECT_NEAR(st.e_hi, e, 0.05 * e);
+    }
+}
+
 TEST(ContactLaw, SpringStickThenSlip) {
   ContactParams p{1000, 0, 300, 0, 0.5f, 1e-3f, false};
   Vec3 xi{};

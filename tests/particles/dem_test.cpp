@@ -129,9 +129,12 @@ TEST(Simulation, ContactTimingFollowsTheAccuracyAsked) {
 
 namespace {
 // A loose lattice of granules falling into a box (a few hundred contacts per step).
-std::uint64_t run_pile(int threads, int steps, int steps_per_contact = 20) {
+// unloading: Material::unloading_stiffness_ratio (1: the linear spring; with it restitution 1).
+std::uint64_t run_pile(int threads, int steps, int steps_per_contact = 20, float unloading = 1.0f) {
   SimulationDef d = small_box();
   d.accuracy_steps_per_contact = steps_per_contact;
+  d.material.unloading_stiffness_ratio = unloading;
+  if (unloading > 1.0f) d.material.restitution = 1.0f;
   d.threads = threads;
   d.max_bodies = 200;
   d.max_particles = 800;
@@ -203,17 +206,22 @@ TEST(Simulation, SetThreadsMidRunKeepsTheState) {
 
 // The AVX2 pair kernel (particles/contact_avx2.cpp, used when the CPU has AVX2) gives the
 // scalar contact law's results bit for bit: the same state hash with SANDPATCH_DEM_KERNEL=scalar,
-// with the timing correction off and on. (On a CPU without AVX2 both runs are scalar.)
+// with the timing correction off and on, and with the hysteretic normal spring (lambda = 11.1,
+// restitution 1: the kernel's dmax lane). (On a CPU without AVX2 both runs are scalar.)
 TEST(Simulation, Avx2PairKernelMatchesScalarBitForBit) {
   const char* saved = std::getenv("SANDPATCH_DEM_KERNEL");
   const std::string keep = saved ? saved : "";
-  for (int N : {20, 50}) {
-    ::unsetenv("SANDPATCH_DEM_KERNEL");
-    const std::uint64_t fast = run_pile(2, 3000, N);
-    ::setenv("SANDPATCH_DEM_KERNEL", "scalar", 1);
-    const std::uint64_t scalar = run_pile(2, 3000, N);
-    EXPECT_EQ(fast, scalar) << "N = " << N;
-  }
+  for (float lambda : {1.0f, 11.111111f})
+    for (int N : {20, 50}) {
+      ::unsetenv("SANDPATCH_DEM_KERNEL");
+      const std::uint64_t fast = run_pile(2, 3000, N, lambda);
+      ::setenv("SANDPATCH_DEM_KERNEL", "scalar", 1);
+      const std::uint64_t scalar = run_pile(2, 3000, N, lambda);
+      EXPECT_EQ(fast, scalar) << "N = " << N << ", lambda " << lambda;
+      if (lambda > 1.0f && N == 20) {
+        EXPECT_NE(fast, run_pile(2, 3000, N)) << "the hysteretic law must change the bed";
+      }
+    }
   if (saved) ::setenv("SANDPATCH_DEM_KERNEL", keep.c_str(), 1); else ::unsetenv("SANDPATCH_DEM_KERNEL");
   std::printf("AVX2 pair kernel available: %s\n", simd::avx2_available() ? "yes" : "no");
 }

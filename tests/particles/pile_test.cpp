@@ -91,6 +91,38 @@ TEST(Pile, ReposeAngleAtMu05) {
   EXPECT_LE(r->angle_deg, 40.0);
 }
 
+// The same pile with the hysteretic normal spring and a weak dashpot (lambda = 11.1,
+// restitution 0.9: the law docs/calibration.md recommends for impacts, e about 0.9/sqrt(lambda)):
+// at rest, in the same 25-40 degree band, and within 2 seed standard deviations (2 x 2.4
+// degrees) of the linear spring-dashpot's pile of the same seed. Measured, seeds 1-4: 32.7,
+// 32.7, 32.3, 33.3 degrees against the linear law's 34.5, 34.4, 35.2, 36.5 (the hysteretic
+// spring alone, restitution 1: 29.5, 29.5, 30.8, 28.7, its beds never quite at rest;
+// docs/dem.md "Which normal law is the default").
+TEST(Pile, HystereticSpringKeepsTheAngleAtMu05) {
+  double angle[2] = {0, 0};
+  for (int law = 0; law < 2; ++law) {
+    PileDef d;
+    d.material.friction = 0.5f;
+    if (law == 1) {
+      d.material.restitution = 0.9f;
+      d.material.unloading_stiffness_ratio = 11.111111f;
+    }
+    d.seed = 1;
+    d.threads = 1;
+    auto r = measure_repose(d);
+    ASSERT_TRUE(r.ok()) << r.message();
+    std::printf("pile, %s: angle %.2f deg (cone fit residual %.2g m; flank fit %.2f deg), height %.3f m, %.2f s "
+                "simulated in %.1f s wall, at rest %d\n",
+                law ? "hysteretic lambda 11.1, restitution 0.9" : "linear e 0.3", r->angle_deg, r->residual,
+                r->flank_angle_deg, r->peak, r->sim_seconds, r->wall_seconds, int(r->at_rest));
+    EXPECT_TRUE(r->at_rest) << r->final_speed;
+    EXPECT_GE(r->angle_deg, 25.0);
+    EXPECT_LE(r->angle_deg, 40.0);
+    angle[law] = r->angle_deg;
+  }
+  EXPECT_NEAR(angle[1], angle[0], 2 * 2.4);
+}
+
 // Bad definitions are refused naming the field.
 TEST(Pile, BadDefinitionNamesField) {
   PileDef d;
