@@ -329,7 +329,7 @@ struct TerrainManager::Impl {
                                      bool* on_gl) const;
   int render_resolution(const Slot& slot, const RenderBox& box) const;
   void set_bodies_down(const Slot& slot, double time);
-  void close_ledger(const Slot& slot, PatchRecord& rec, bool on_gl);
+  void close_ledger(const Slot& slot, PatchRecord& rec, bool on_gl, const std::vector<float>& granule_xyzr);
 
   // ---- report (terrain_manager.cpp) ----
   nlohmann::ordered_json dem_report() const;  // the report's "dem" section

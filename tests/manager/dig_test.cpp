@@ -143,6 +143,13 @@ TEST(Dig, BucketDigsCarriesAndDepositsInOnePatch) {
   EXPECT_LT(std::abs(ledger_pct), 2.5);
   EXPECT_LT(std::abs(closed_pct), 1.0);
   EXPECT_GT(dilation, 0.0);
+  // The report's ledger makes the same split (demotion.cpp close_ledger).
+  const auto& l = report["ledger"]["patches"][0];
+  std::printf("report: risen %.4f m3, solid fraction %.3f, dilation %.4f m3, ledger less dilation %.3f %%\n",
+              l["risen_m3"].get<double>(), l["risen_solid_fraction"].get<double>(), l["dilation_m3"].get<double>(),
+              l["error_less_dilation_pct"].get<double>());
+  EXPECT_NEAR(l["dilation_m3"].get<double>(), dilation, 0.2 * dilation);
+  EXPECT_LT(std::abs(l["error_less_dilation_pct"].get<double>()), 1.0);
 }
 
 }  // namespace
