@@ -5,6 +5,7 @@
 // planned path", docs/BENCHMARKS.md "Dig, carry, deposit"). 12-30 s on two cores: heavy.
 #include <gtest/gtest.h>
 
+#include <cctype>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -91,8 +92,10 @@ TEST(DigScene, ExcavatorDigsCarriesAndPours) {
   ASSERT_TRUE(in.good());
   std::string key;
   double ncols = 0, nrows = 0, x0 = 0, z0 = 0, cs = 0, v = 0;
-  for (int k = 0; k < 6; ++k) {
+  // The header: keyword-value lines until the first number.
+  while (in >> std::ws && std::isalpha(in.peek())) {
     in >> key >> v;
+    for (char& c : key) c = char(std::tolower(c));
     if (key == "ncols") ncols = v;
     if (key == "nrows") nrows = v;
     if (key == "xllcenter" || key == "xllcorner") x0 = v;
