@@ -39,6 +39,16 @@ World::Keyframe key(double t, double x, double y, double curl_deg) {
   return k;
 }
 
+// The cycle: down cutting-edge first at x = 1.0 m, a 0.5 m drag 22 cm deep, a quarter-turn
+// curl, a lift, 0.9 m carried at 1.05 m (0.2-0.3 m above the surface), mouth down at x = 3.1 m,
+// then lifted away.
+std::vector<World::Keyframe> cycle() {
+  return {key(0.0, 1.0, 0.85, -20), key(0.6, 1.2, 0.62, -20), key(1.3, 1.5, 0.52, 0),
+          key(2.3, 2.0, 0.52, 0),   key(3.1, 2.2, 0.75, 90),  key(3.5, 2.2, 1.05, 90),
+          key(4.3, 3.1, 1.05, 90),  key(4.7, 3.1, 1.05, 0),   key(5.1, 3.1, 1.05, -90),
+          key(5.9, 3.1, 1.05, -90), key(6.3, 3.1, 1.90, -90)};
+}
+
 // Soil volume (m³) between the heightfield now and `before` over the samples with x in
 // [x0, x1] (m, world; the terrain's origin is 0): the part above (`above` true) or below it.
 double volume_change(const Heightfield& hf, const std::vector<float>& before, double x0, double x1, bool above) {
@@ -67,10 +77,7 @@ TEST(Dig, BucketDigsCarriesAndDepositsInOnePatch) {
   ASSERT_TRUE(rig.ok()) << rig.error;
   auto bucket = rig.core->add_body(bucket_body());
   ASSERT_TRUE(bucket.ok()) << bucket.message();
-  std::vector<World::Keyframe> keys = {key(0.0, 1.0, 0.85, -20), key(0.6, 1.2, 0.62, -20), key(1.3, 1.5, 0.52, 0),
-                                       key(2.3, 2.0, 0.52, 0),   key(3.1, 2.2, 0.75, 90),  key(3.5, 2.2, 1.05, 90),
-                                       key(4.3, 3.1, 1.05, 90),  key(4.7, 3.1, 1.05, 0),   key(5.1, 3.1, 1.05, -90),
-                                       key(5.9, 3.1, 1.05, -90), key(6.3, 3.1, 1.90, -90)};
+  std::vector<World::Keyframe> keys = cycle();
   ASSERT_TRUE(rig.core->set_keyframes(0, keys).ok());
   TerrainManagerDef def = test::small_manager_def();
   def.material.radius = 0.04f;
@@ -150,6 +157,35 @@ TEST(Dig, BucketDigsCarriesAndDepositsInOnePatch) {
               l["error_less_dilation_pct"].get<double>());
   EXPECT_NEAR(l["dilation_m3"].get<double>(), dilation, 0.2 * dilation);
   EXPECT_LT(std::abs(l["error_less_dilation_pct"].get<double>()), 1.0);
+}
+
+// A stretch of path more than a slot holds is not asked for: the bucket is followed by the
+// ballistic prediction instead (patches around it, asked for ahead of it), and the report says
+// so (planned_paths[].too_big_frames, which `sandpatch run` turns into a warning), rather than
+// the run failing or the carried soil being dropped without a word.
+TEST(Dig, AStretchTooBigForASlotIsReportedAndFollowedByPatchesAhead) {
+  test::Rig rig(test::flat_terrain(46, 0.1f, 0.5f));
+  ASSERT_TRUE(rig.ok()) << rig.error;
+  auto bucket = rig.core->add_body(bucket_body());
+  ASSERT_TRUE(bucket.ok()) << bucket.message();
+  ASSERT_TRUE(rig.core->set_keyframes(0, cycle()).ok());
+  TerrainManagerDef def = test::small_manager_def();
+  def.material.radius = 0.04f;
+  def.granules_per_slot = 1000;  // the stretch needs about 1,800; one ballistic request fits
+  def.patch_depth = 0.4;
+  def.soil_depth = 0.8;
+  def.lod.apron = 0.3;
+  def.threads = 1;
+  ASSERT_TRUE(rig.start(def).ok()) << rig.error;
+  ASSERT_TRUE(rig.frames(int(std::lround(1.0 / rig.dt))).ok()) << rig.error;
+  const auto report = rig.manager->report();
+  ASSERT_TRUE(report.contains("planned_paths")) << report.dump(2);
+  const auto& p = report["planned_paths"][0];
+  EXPECT_EQ(p["body"].get<std::string>(), "bucket");
+  EXPECT_GT(p["too_big_frames"].get<long long>(), 0);
+  EXPECT_EQ(p["asked_frames"].get<long long>(), 0);
+  EXPECT_GT(p["granules_predicted"].get<int>(), 1000);
+  EXPECT_EQ(test::count_events(*rig.manager, PatchEventKind::Promoted), 1);  // the ballistic one
 }
 
 }  // namespace
