@@ -99,11 +99,12 @@ Status TerrainManager::Impl::plan(double time) {
 // them until they are poured out (docs/manager.md "Tools on a planned path"). Without a
 // contact ahead (the tool carrying, or past its path) nothing is asked for: the patch it is in
 // covers the stretch. A stretch more than a slot holds is not asked for: the body is then
-// predicted ballistically like any other (patches ahead of it), and the report's
-// planned_paths says so.
+// predicted ballistically like any other (patches ahead of it) for the rest of its path, and
+// the report's planned_paths says so.
 bool TerrainManager::Impl::plan_path(RigidBodyId b, double time, std::vector<PatchRequest>& out) {
   const auto it = paths.find(body_key(b));
   if (it == paths.end() || it->second.empty()) return false;
+  if (const auto l = path_log.find(body_key(b)); l != path_log.end() && l->second.too_big_frames > 0) return false;
   const std::vector<TerrainManager::PathPose>& path = it->second;
   // the sample the body is at (the last at or before now), then the later ones
   std::size_t first = std::size_t(std::upper_bound(path.begin(), path.end(), time + 1e-9,
@@ -142,7 +143,19 @@ bool TerrainManager::Impl::plan_path(RigidBodyId b, double time, std::vector<Pat
   log.name = world->definition(b).name;
   log.last = r;
   log.from = path[s].t, log.to = path[e].t;
-  log.granules = predict_granules(r, scale_for(r));
+  // (its region as if no patch were live: predict_granules would move it clear of the live
+  // ones, or find no room and predict none)
+  {
+    const double sc = scale_for(r);
+    log.granules = 0;
+    if (auto reg = patch_region(*hf, r, set_for(sc).cells)) {
+      float lo_h = 0, hi_h = 0;
+      const double fl = floor_of(*reg, sc, &lo_h, &hi_h);
+      const TileSet& set = set_for(sc);
+      const double pf = set.tiles.empty() ? 0.6 : set.tiles.front().packing_fraction;
+      log.granules = int(std::clamp(soil_volume(*hf, *reg, fl) * pf / granule_volume(sc), 0.0, 1e9));
+    }
+  }
   if (log.granules > def.granules_per_slot) {
     ++log.too_big_frames;
     return false;
