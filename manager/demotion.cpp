@@ -5,6 +5,7 @@
 #include <cmath>
 #include <limits>
 #include <vector>
+#include <numbers>
 
 #include "heightfield/filter.hpp"
 #include "manager/terrain_manager_impl.hpp"
@@ -157,7 +158,7 @@ Status TerrainManager::Impl::demote(Slot& slot, double time, bool gl_ok, bool st
   d.ni = std::min(hf->samples_x(), a.i0 + a.ni + 1) - d.i0;
   d.nj = std::min(hf->samples_z(), a.j0 + a.nj + 1) - d.j0;
   dirty.push_back(d);
-  close_ledger(slot, rec, w.on_gl);
+  close_ledger(slot, rec, w.on_gl, xyzr);
   for (const Carried& c : slot.carried)
     if (c.enabled && world->alive(c.body)) world->set_terrain_collision(c.body, true);
   events.push_back({PatchEventKind::Demoted, slot.patch, time, w.ms + ms_since(t2), rec.granules});
@@ -311,10 +312,40 @@ void TerrainManager::Impl::set_bodies_down(const Slot& slot, double time) {
 }
 
 // Ledger: the region above the floor plus what spilled onto the apron, against the volume
-// before promotion; appended to the closed ledgers (the report's ledger.patches).
-void TerrainManager::Impl::close_ledger(const Slot& slot, PatchRecord& rec, bool on_gl) {
+// before promotion; appended to the closed ledgers (the report's ledger.patches). With it, what
+// the patch raised above its old surface (a rim, a pile a tool poured out): the heightfield's
+// rise over the apron (`risen_m3`) against the spheres of the granules whose centres lie above
+// the old surface, at the fill's packing. Granules dug from the dense pre-settled bed and
+// dropped in a pile rest looser (and a loose granular surface renders higher), so the ledger
+// gains `dilation_m3` = risen − spheres / packing; `error_less_dilation_pct` is the ledger
+// without it (docs/manager.md "Tools on a planned path"). `granule_xyzr`: the granules'
+// spheres (x, y, z heightfield-local, m; radii not read).
+void TerrainManager::Impl::close_ledger(const Slot& slot, PatchRecord& rec, bool on_gl, const std::vector<float>& granule_xyzr) {
   rec.ledger.after = soil_volume_after(*hf, slot.region, slot.apron, slot.floor_local, rec.before_heights);
   const double err = rec.ledger.before > 0 ? 100.0 * (rec.ledger.after - rec.ledger.before) / rec.ledger.before : 0;
+  const GridRegion& a = slot.apron;
+  const double sp = hf->spacing();
+  double risen = 0;  // m³
+  for (int j = 0; j < a.nj; ++j)
+    for (int i = 0; i < a.ni; ++i)
+      risen += std::max(0.0, double(hf->height(a.i0 + i, a.j0 + j)) - rec.before_heights[std::size_t(j) * a.ni + i]) * sp * sp;
+  // The old surface at heightfield-local (x, z), bilinear over the apron's heights at promotion.
+  auto old_height = [&](double x, double z) {
+    const double u = std::clamp(x / sp - a.i0, 0.0, double(a.ni - 1)), v = std::clamp(z / sp - a.j0, 0.0, double(a.nj - 1));
+    const int i = std::min(int(u), a.ni - 2 < 0 ? 0 : a.ni - 2), j = std::min(int(v), a.nj - 2 < 0 ? 0 : a.nj - 2);
+    const int i1 = std::min(i + 1, a.ni - 1), j1 = std::min(j + 1, a.nj - 1);
+    const double fu = u - i, fv = v - j;
+    auto h = [&](int ii, int jj) { return double(rec.before_heights[std::size_t(jj) * a.ni + ii]); };
+    return (1 - fv) * ((1 - fu) * h(i, j) + fu * h(i1, j)) + fv * ((1 - fu) * h(i, j1) + fu * h(i1, j1));
+  };
+  long long above = 0;
+  for (std::size_t k = 0; k + 3 < granule_xyzr.size(); k += 4)
+    above += granule_xyzr[k + 1] > old_height(granule_xyzr[k], granule_xyzr[k + 2]);
+  const double rw = radius_world(slot);
+  const double spheres = double(above) * 4.0 / 3.0 * std::numbers::pi * rw * rw * rw;  // m³
+  const double pf = rec.ledger.packing_fraction;
+  const double dilation = pf > 0 ? risen - spheres / pf : 0.0;
+  const double less = rec.ledger.before > 0 ? 100.0 * (rec.ledger.after - rec.ledger.before - dilation) / rec.ledger.before : 0;
   ledgers.push_back({{"patch", slot.patch},
                      {"particle_scale", slot.scale},
                      {"region", {slot.region.i0, slot.region.j0, slot.region.ni, slot.region.nj}},
@@ -323,6 +354,11 @@ void TerrainManager::Impl::close_ledger(const Slot& slot, PatchRecord& rec, bool
                      {"volume_active_m3", rec.ledger.active},
                      {"volume_after_m3", rec.ledger.after},
                      {"error_pct", err},
+                     {"risen_m3", risen},
+                     {"risen_solid_fraction", risen > 0 ? spheres / risen : 0.0},
+                     {"packing_fraction", pf},
+                     {"dilation_m3", dilation},
+                     {"error_less_dilation_pct", less},
                      {"depth_render", on_gl ? "gl" : "cpu"}});
 }
 

@@ -341,6 +341,7 @@ Status TerrainManager::Impl::promote(Slot& slot, const PatchRequest& req, double
   rec.ledger = Ledger{};
   rec.ledger.before = soil_volume(*hf, region, floor_local);
   rec.ledger.active = double(slot.pending.size()) * granule_volume(s) / tile.packing_fraction;
+  rec.ledger.packing_fraction = tile.packing_fraction;
   rec.fill_ms = ms_since(t0);
   events.push_back({PatchEventKind::Promoted, slot.patch, time, rec.fill_ms, int(slot.pending.size())});
   return Ok{};

@@ -45,6 +45,7 @@ struct Carried {
 // it lives, the heightfield's after demotion.
 struct Ledger {
   double before = 0, active = 0, after = 0;
+  double packing_fraction = 0;  // of the tile the fill was cut from (sphere volume / bulk volume)
   bool closed = false;
 };
 

@@ -14,6 +14,7 @@ using manager_detail::body_key;
 
 Status TerrainManager::Impl::plan(double time) {
   std::vector<BodyMotion> motions;
+  std::vector<PatchRequest> planned;  // from planned paths
   for (RigidBodyId b : world->bodies()) {
     if (shells_sampled.insert(body_key(b)).second) {
       for (const TileSet& set : tile_sets) {
@@ -21,6 +22,10 @@ Status TerrainManager::Impl::plan(double time) {
         if (!pts) return pts.errors();
       }
     }
+    // A tool on a planned path asks for its patch from the path, not from a ballistic guess
+    // (which, for a bucket carrying soil in the air, predicted contacts ahead and grew a
+    // patch there: the soil fell where the bucket left the first patch).
+    if (plan_path(b, time, planned)) continue;
     BodyMotion m;
     world->bounds(b, &m.lo, &m.hi);
     const BodyState st = world->state(b);
@@ -49,6 +54,7 @@ Status TerrainManager::Impl::plan(double time) {
   // what one slot holds (before: unbounded, and bodies landing side by side merged into one
   // patch no slot could hold, an error mid-run).
   auto predicted = predict_contacts(*hf, motions, def.gravity, def.lod);
+  predicted.insert(predicted.end(), planned.begin(), planned.end());
   for (auto& r : predicted) clip_to_terrain(*hf, r);
   auto reqs = merge_requests(std::move(predicted), max_merged_side());
   // A queued request lapses when no body predicts a contact there any more (its body came
@@ -81,6 +87,82 @@ Status TerrainManager::Impl::plan(double time) {
     return p.speed > q.speed;
   });
   return Ok{};
+}
+
+// A tool on a planned path (its keyframes, known ahead): the stretch of the path that works
+// the ground is the run of path samples within reach of it (lowest point below the highest
+// surface sample under the footprint + engage_height / 2, where a patch's shell engages the
+// body: coupling.cpp engages) around its first contact from now on (lowest point within
+// lod.margin of that surface). One request covers the stretch's footprint plus lod.apron,
+// asked for when that contact is within lod.horizon: the dig, the carry in the air and the
+// dump are one patch, so the granules the tool scoops stay in the simulation that carries
+// them until they are poured out (docs/manager.md "Tools on a planned path"). Without a
+// contact ahead (the tool carrying, or past its path) nothing is asked for: the patch it is in
+// covers the stretch. A stretch more than a slot holds is not asked for: the body is then
+// predicted ballistically like any other (patches ahead of it) for the rest of its path, and
+// the report's planned_paths says so.
+bool TerrainManager::Impl::plan_path(RigidBodyId b, double time, std::vector<PatchRequest>& out) {
+  const auto it = paths.find(body_key(b));
+  if (it == paths.end() || it->second.empty()) return false;
+  if (const auto l = path_log.find(body_key(b)); l != path_log.end() && l->second.too_big_frames > 0) return false;
+  const std::vector<TerrainManager::PathPose>& path = it->second;
+  // the sample the body is at (the last at or before now), then the later ones
+  std::size_t first = std::size_t(std::upper_bound(path.begin(), path.end(), time + 1e-9,
+                                                   [](double t, const TerrainManager::PathPose& p) { return t < p.t; }) -
+                                  path.begin());
+  if (first > 0) --first;
+  auto ground = [&](const TerrainManager::PathPose& p) { return max_height_under(*hf, p.lo.x(), p.lo.z(), p.hi.x(), p.hi.z()); };
+  auto in_reach = [&](const TerrainManager::PathPose& p) {
+    const double g = ground(p);
+    return std::isfinite(g) && p.lo.y() < g + 0.5 * engage_height;
+  };
+  std::size_t k0 = path.size();
+  for (std::size_t k = first; k < path.size() && path[k].t <= time + def.lod.horizon; ++k) {
+    const double g = ground(path[k]);
+    if (std::isfinite(g) && path[k].lo.y() <= g + def.lod.margin) {
+      k0 = k;
+      break;
+    }
+  }
+  if (k0 == path.size()) return true;
+  std::size_t s = k0, e = k0;
+  while (s > first && in_reach(path[s - 1])) --s;
+  while (e + 1 < path.size() && in_reach(path[e + 1])) ++e;
+  Eigen::Vector3d lo = path[s].lo, hi = path[s].hi;
+  for (std::size_t k = s; k <= e; ++k) lo = lo.cwiseMin(path[k].lo), hi = hi.cwiseMax(path[k].hi);
+  PatchRequest r;
+  r.x0 = lo.x() - def.lod.apron, r.x1 = hi.x() + def.lod.apron;
+  r.z0 = lo.z() - def.lod.apron, r.z1 = hi.z() + def.lod.apron;
+  r.apron = def.lod.apron;
+  r.time_to_contact = std::max(0.0, path[k0].t - time);
+  r.speed = double(world->state(b).linear_velocity.norm());
+  r.bodies = {-1};  // (not a BodyMotion index: it lapses when the path asks for it no more)
+  clip_to_terrain(*hf, r);
+  if (r.x1 - r.x0 < 1e-6 || r.z1 - r.z0 < 1e-6 || covered(r)) return true;
+  PathLog& log = path_log[body_key(b)];
+  log.name = world->definition(b).name;
+  log.last = r;
+  log.from = path[s].t, log.to = path[e].t;
+  // (its region as if no patch were live: predict_granules would move it clear of the live
+  // ones, or find no room and predict none)
+  {
+    const double sc = scale_for(r);
+    log.granules = 0;
+    if (auto reg = patch_region(*hf, r, set_for(sc).cells)) {
+      float lo_h = 0, hi_h = 0;
+      const double fl = floor_of(*reg, sc, &lo_h, &hi_h);
+      const TileSet& set = set_for(sc);
+      const double pf = set.tiles.empty() ? 0.6 : set.tiles.front().packing_fraction;
+      log.granules = int(std::clamp(soil_volume(*hf, *reg, fl) * pf / granule_volume(sc), 0.0, 1e9));
+    }
+  }
+  if (log.granules > def.granules_per_slot) {
+    ++log.too_big_frames;
+    return false;
+  }
+  ++log.asked_frames;
+  out.push_back(std::move(r));
+  return true;
 }
 
 // The scale a request is promoted at (Leach & Marais §4.3, §6.3 scenario 2): its own (a

@@ -248,6 +248,14 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
     written.push_back(RunCsv::patches_path(csv.bodies_file()).string());
   }
   if (manager)
+    if (const ojson mr = manager->report(); mr.contains("planned_paths"))
+      for (const auto& p : mr["planned_paths"])
+        if (p["too_big_frames"].get<long long>() > 0)
+          warnings.push_back("bodies." + p["body"].get<std::string>() + ": the stretch of its keyframed path that works the ground needs about " +
+                             std::to_string(p["granules_predicted"].get<int>()) + " granules, more than a slot holds (simulation.pool.granules_per_slot = " +
+                             std::to_string(p["granules_per_slot"].get<int>()) +
+                             "): it was followed by patches asked for ahead of it instead, and what it carried fell where it left a patch");
+  if (manager)
     if (const ojson mr = manager->report(); mr.contains("tools_too_fast"))
       for (const auto& f : mr["tools_too_fast"])
         warnings.push_back("bodies." + f["body"].get<std::string>() + ": moved into a patch at up to " +

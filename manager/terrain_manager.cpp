@@ -202,6 +202,12 @@ bool TerrainManager::soil_force(RigidBodyId body, Eigen::Vector3f* force, Eigen:
 
 double TerrainManager::budget_ms(double dt) const { return impl_->budget_ms(dt); }
 
+void TerrainManager::set_planned_path(RigidBodyId body, std::vector<PathPose> path) {
+  const std::int64_t key = manager_detail::body_key(body);
+  if (path.empty()) impl_->paths.erase(key);
+  else impl_->paths[key] = std::move(path);
+}
+
 void TerrainManager::set_camera(const Eigen::Vector3d& position) { impl_->camera = position; }
 
 void TerrainManager::request_patch(double x0, double z0, double x1, double z1, double time) {
@@ -472,6 +478,19 @@ nlohmann::ordered_json TerrainManager::report() const {
     r["budget"] = b;
   }
   r["dem"] = I.dem_report();
+  // Tools on planned paths (planning.cpp plan_path): what was asked for over their paths.
+  if (!I.path_log.empty()) {
+    ojson pp = ojson::array();
+    for (const auto& [key, l] : I.path_log)
+      pp.push_back({{"body", l.name},
+                    {"asked_frames", l.asked_frames},
+                    {"too_big_frames", l.too_big_frames},
+                    {"last_request_m", {l.last.x0, l.last.z0, l.last.x1, l.last.z1}},
+                    {"last_request_s", {l.from, l.to}},
+                    {"granules_predicted", l.granules},
+                    {"granules_per_slot", I.def.granules_per_slot}});
+    r["planned_paths"] = pp;
+  }
   // Kinematic and static bodies that moved faster into a patch than its granules can stop
   // (coupling.cpp couple_before): their shells may have pushed granules through themselves.
   if (!I.fast_tools.empty()) {

@@ -162,6 +162,16 @@ class TerrainManager {
   // Requests a patch over the world rectangle [x0, x1] × [z0, z1] now, whether or not a body
   // is coming (e.g. a digging tool about to act); it is queued like a predicted contact.
   void request_patch(double x0, double z0, double x1, double z1, double time);
+  // A kinematic body's planned path, known ahead (World hands over its keyframes' when it
+  // enters): its world bounds (m) at times t (s, increasing). The lod stage asks for one patch
+  // over the stretch of the path that works the ground, instead of predicting the body's
+  // contacts ballistically, so the granules it carries never cross a patch's edge
+  // (docs/manager.md "Tools on a planned path"). An empty path forgets the body's.
+  struct PathPose {
+    double t = 0;
+    Eigen::Vector3d lo = Eigen::Vector3d::Zero(), hi = Eigen::Vector3d::Zero();
+  };
+  void set_planned_path(RigidBodyId body, std::vector<PathPose> path);
   // Moves the camera the scale bands are measured from (m, world); patches already live keep
   // their scale.
   void set_camera(const Eigen::Vector3d& position);

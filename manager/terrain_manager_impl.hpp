@@ -243,6 +243,23 @@ struct TerrainManager::Impl {
   // Predicts contacts, merges them into requests, drops lapsed queued requests, queues new
   // ones (or grows a patch under a body heading past its edge) and orders the queue.
   Status plan(double time);
+  // A body with a planned path (TerrainManager::set_planned_path): appends the request over the
+  // stretch of its path that works the ground, when its first contact from now on is within
+  // lod.horizon (planning.cpp). False when the path does not handle the body (no path, or a
+  // stretch more than a slot holds: the body is predicted ballistically, and the report says so).
+  bool plan_path(RigidBodyId b, double time, std::vector<PatchRequest>& out);
+  // Planned paths (body_key -> bounds over time) and what planning made of them (the report's
+  // planned_paths).
+  std::unordered_map<std::int64_t, std::vector<TerrainManager::PathPose>> paths;
+  struct PathLog {
+    std::string name;
+    long long asked_frames = 0;   // frames its stretch was not covered by a live patch (asked for)
+    long long too_big_frames = 0;  // frames its stretch needed more granules than a slot holds
+    PatchRequest last;            // the last stretch asked for (m, world, apron included)
+    int granules = 0;             // predicted for it
+    double from = 0, to = 0;      // s: the stretch's times
+  };
+  std::map<std::int64_t, PathLog> path_log;
   double scale_for(const PatchRequest& r) const;
   // m: the granules under a patch's lowest surface point at particle scale s: patch_depth; at
   // the coarser scales a frame budget may choose, at least two granules (4 bounding radii,
@@ -313,7 +330,7 @@ struct TerrainManager::Impl {
                                      bool* on_gl) const;
   int render_resolution(const Slot& slot, const RenderBox& box) const;
   void set_bodies_down(const Slot& slot, double time);
-  void close_ledger(const Slot& slot, PatchRecord& rec, bool on_gl);
+  void close_ledger(const Slot& slot, PatchRecord& rec, bool on_gl, const std::vector<float>& granule_xyzr);
 
   // ---- report (terrain_manager.cpp) ----
   nlohmann::ordered_json dem_report() const;  // the report's "dem" section

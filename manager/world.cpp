@@ -368,6 +368,7 @@ void World::drive_kinematic(double t, double dt) {
         st.angular_velocity.setZero();
         bullet_->set_state(e.id, st);
         kin.placed = true;
+        if (manager_) manager_->set_planned_path(e.id, planned_path(bullet_->definition(e.id).shape, kin.keys, t));
       }
       const Keyframe end = keyframe_at(kin.keys, t + dt);
       p = end.position;
@@ -387,6 +388,39 @@ void World::drive_kinematic(double t, double dt) {
   }
 }
 
+// A keyframed body's bounds along its keyframes from t to the last one (the path the manager
+// plans its patch over, docs/manager.md "Tools on a planned path"): every keyframe and samples
+// at most 1/30 s apart between them (at most 20,000 samples: a path longer than 667 s is
+// sampled more coarsely), each the world bounds of the shape at its pose (its support
+// function along ±x, ±y, ±z).
+std::vector<TerrainManager::PathPose> World::planned_path(const RigidShape& shape, const std::vector<Keyframe>& keys, double t) {
+  std::vector<TerrainManager::PathPose> path;
+  const double end = std::max(t, keys.back().t);
+  const double h = std::max(1.0 / 30.0, (end - t) / 20000.0);  // s
+  std::vector<double> times;
+  for (double u = t; u < end; u += h) times.push_back(u);
+  for (const Keyframe& k : keys)
+    if (k.t > t) times.push_back(k.t);
+  times.push_back(end);
+  std::sort(times.begin(), times.end());
+  times.erase(std::unique(times.begin(), times.end()), times.end());
+  path.reserve(times.size());
+  for (double u : times) {
+    const Keyframe k = keyframe_at(keys, u);
+    const Eigen::Quaternionf q = k.orientation.cast<float>();
+    TerrainManager::PathPose p;
+    p.t = u;
+    for (int a = 0; a < 3; ++a) {
+      Eigen::Vector3d e = Eigen::Vector3d::Zero();
+      e[a] = 1;
+      p.hi[a] = k.position[a] + extent_along(shape, q, e);
+      p.lo[a] = k.position[a] - extent_along(shape, q, -e);
+    }
+    path.push_back(p);
+  }
+  return path;
+}
+
 // ---- reading the soil ----
 
 double World::lowest_point(RigidBodyId id) const {
@@ -395,26 +429,29 @@ double World::lowest_point(RigidBodyId id) const {
 }
 
 double World::extent_below(const RigidShape& s, const Eigen::Quaternionf& q) {
+  return extent_along(s, q, Eigen::Vector3d(0, -1, 0));
+}
+
+double World::extent_along(const RigidShape& s, const Eigen::Quaternionf& q, const Eigen::Vector3d& dir) {
   const Eigen::Matrix3d R = q.cast<double>().normalized().toRotationMatrix();
-  const Eigen::Vector3d up = R.row(1).transpose();  // body-frame coordinates of world y: y_world = up · p_body
-  double below = 0;  // m, from the centre of mass down to the lowest point
+  const Eigen::Vector3d d = R.transpose() * dir;  // body-frame coordinates of dir: dir · (R p) = d · p
+  double reach = 0;  // m, from the centre of mass along dir to the farthest point
   switch (s.kind) {
-    case RigidShapeKind::Sphere: below = s.radius; break;
+    case RigidShapeKind::Sphere: reach = s.radius * d.norm(); break;
     case RigidShapeKind::Box:
-      below = std::abs(up.x()) * s.half_extents.x() + std::abs(up.y()) * s.half_extents.y() +
-              std::abs(up.z()) * s.half_extents.z();
+      reach = std::abs(d.x()) * s.half_extents.x() + std::abs(d.y()) * s.half_extents.y() + std::abs(d.z()) * s.half_extents.z();
       break;
-    case RigidShapeKind::Cylinder: {  // axis on body y: the rim's lowest point
-      const double ay = std::abs(up.y()), across = std::sqrt(std::max(0.0, 1.0 - ay * ay));
-      below = ay * 0.5 * s.height + across * s.radius;
+    case RigidShapeKind::Cylinder: {  // axis on body y: a rim point
+      const double across = std::sqrt(std::max(0.0, d.squaredNorm() - d.y() * d.y()));
+      reach = std::abs(d.y()) * 0.5 * s.height + across * s.radius;
       break;
     }
-    case RigidShapeKind::Capsule: below = std::abs(up.y()) * 0.5 * s.height + s.radius; break;
+    case RigidShapeKind::Capsule: reach = std::abs(d.y()) * 0.5 * s.height + s.radius * d.norm(); break;
     case RigidShapeKind::Mesh:
-      for (const auto& v : s.vertices) below = std::max(below, -up.dot(v.cast<double>()));
+      for (const auto& v : s.vertices) reach = std::max(reach, d.dot(v.cast<double>()));
       break;
   }
-  return below;
+  return reach;
 }
 
 double World::original_height(double x, double z) const {

@@ -176,6 +176,9 @@ class World {
   double lowest_point(RigidBodyId id) const;
   // How far (m, >= 0) a shape at orientation q reaches below its centre of mass.
   static double extent_below(const RigidShape& shape, const Eigen::Quaternionf& q);
+  // How far (m, >= 0) a shape at orientation q reaches from its centre of mass along the
+  // unit world direction `dir` (its support function; extent_below is dir = -y).
+  static double extent_along(const RigidShape& shape, const Eigen::Quaternionf& q, const Eigen::Vector3d& dir);
 
   // ---- the frame ----
   // Moves the camera the manager's scale bands are measured from (m, world).
@@ -238,6 +241,7 @@ class World {
   Status check_kinematic(RigidBodyId id, const char* field) const;
   void drive_kinematic(double t, double dt);
   void enter_kinematic(std::size_t entry, const RigidBodyDef& def);
+  static std::vector<TerrainManager::PathPose> planned_path(const RigidShape& shape, const std::vector<Keyframe>& keys, double t);
   void keep_original_heights();
 
 
