@@ -64,6 +64,7 @@ int run_bench_terra(const BenchTerraArgs& a) {
     std::fprintf(stderr, "bench terra: %s\n", e.c_str());
     return 2;
   }
+  std::setvbuf(stdout, nullptr, _IOLBF, 0);  // each table line as it comes (the runs take minutes)
   RigSetup setup;
   setup.scene = a.scene;
   setup.threads = a.threads;
@@ -127,7 +128,7 @@ int run_bench_terra(const BenchTerraArgs& a) {
     std::printf("  %19.2f  %14.2f  %13.3f  %8d  %6.1f\n", sg / 1000, r->curve.sigma / 1000, r->blade_sinkage, r->granules, r->wall_s);
     char name[64];
     std::snprintf(name, sizeof name, "shear_%05d.csv", int(std::lround(sg)));
-    if (!save(a, name, csv_series({"t", "j", "tau"}, {&r->t, &r->curve.j, &r->curve.tau}))) return 1;
+    if (!save(a, name, csv_series({"t", "j", "tau", "blade_sinkage"}, {&r->t, &r->curve.j, &r->curve.tau, &r->sink}))) return 1;
     js["shear"].push_back({{"sigma_nominal", sg}, {"sigma", r->curve.sigma}, {"blade_sinkage", r->blade_sinkage},
                            {"granules", r->granules}, {"simulated_s", r->simulated_s}, {"wall_s", r->wall_s}});
     shears.push_back(r->curve);
@@ -140,8 +141,11 @@ int run_bench_terra(const BenchTerraArgs& a) {
     js["shear"][i]["tau_max"] = shears[i].tau_max;
     js["shear"][i]["tau_max_sd"] = shears[i].tau_max_sd;
     js["shear"][i]["K"] = shears[i].K;
-    std::printf("  sigma %.2f kPa: tau_max %.2f +- %.2f kPa (plateau j >= %.2f m), K alone %.3f m\n", shears[i].sigma / 1000,
-                shears[i].tau_max / 1000, shears[i].tau_max_sd / 1000, plateau_from, shears[i].K);
+    js["shear"][i]["tau_peak"] = shears[i].tau_peak;
+    js["shear"][i]["j_peak"] = shears[i].j_peak;
+    std::printf("  sigma %.2f kPa: tau_max %.2f +- %.2f kPa (plateau j >= %.2f m), K alone %.3f m; peak %.2f kPa at j = %.3f m\n",
+                shears[i].sigma / 1000, shears[i].tau_max / 1000, shears[i].tau_max_sd / 1000, plateau_from, shears[i].K,
+                shears[i].tau_peak / 1000, shears[i].j_peak);
   }
   std::printf("Janosi-Hanamoto fit: c = %.2f +- %.2f kPa   phi = %.1f +- %.1f deg   K = %.3f +- %.3f m\n", sh.c / 1000,
               sf->c_se / 1000, sh.phi * 180 / M_PI, sf->phi_se * 180 / M_PI, sh.K, sf->K_se);
@@ -184,6 +188,15 @@ int run_bench_terra(const BenchTerraArgs& a) {
     if (!save(a, name, csv_series({"t", "x", "dp", "sinkage"}, {&r->t, &r->x, &r->dp, &r->sink}))) return 1;
   }
   js["wheel_geometry"] = {{"radius", geo.radius}, {"width", geo.width}};
+  // the model over slip 0 .. 0.9 at the rig's load (for the plot)
+  if (!js["wheel"].empty()) {
+    const double load = js["wheel"][0]["load"].get<double>();
+    for (int i = 0; i <= 18; ++i) {
+      const double s = 0.05 * i;
+      const WheelModel m = wheel_under_load(bk, sh, geo, s, load);
+      if (m.ok) js["model_curve"].push_back({{"slip", s}, {"drawbar_pull", m.drawbar_pull}, {"sinkage", m.sinkage}, {"torque", m.torque}});
+    }
+  }
   js["wall_s"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
   js["cpu_s"] = bench::process_cpu_seconds() - cpu0;
   js["load_after"] = bench::load_average();

@@ -7,8 +7,6 @@
 #include <array>
 #include <chrono>
 #include <cmath>
-#include <cstdio>
-#include <cstdlib>
 #include <memory>
 #include <string>
 #include <vector>
@@ -156,6 +154,26 @@ void hold(World& w, RigidBodyId id, double z, const Eigen::Quaternionf& q, doubl
   w.bullet().set_state(id, st);
 }
 
+// Holds a dynamic body at `pos` until its patch carries it: a body lying still on the
+// heightfield is not taken up by a new patch (manager/coupling.cpp), so it is given a downward
+// velocity faster than that rule's 10 sleep speeds and put back every frame.
+void hold_for_patch(World& w, RigidBodyId id, const Eigen::Vector3d& pos, const Eigen::Quaternionf& q) {
+  BodyState st = w.bullet().state(id);
+  st.position = pos;
+  st.orientation = q;
+  st.linear_velocity = Eigen::Vector3f(0, -0.15f, 0);
+  st.angular_velocity.setZero();
+  w.bullet().set_state(id, st);
+}
+
+// Zeroes a body's velocities (the first frame after hold_for_patch).
+void stop(World& w, RigidBodyId id) {
+  BodyState st = w.bullet().state(id);
+  st.linear_velocity.setZero();
+  st.angular_velocity.setZero();
+  w.bullet().set_state(id, st);
+}
+
 }  // namespace
 
 Result<PlateRun> run_plate(const RigSetup& s, const PlateDef& d) {
@@ -249,17 +267,11 @@ Result<ShearRun> run_shear(const RigSetup& s, const ShearDef& d) {
   for (long long f = 0; f < kMaxFrames; ++f) {
     const double t = w.time();
     if (t_release < 0) {
-      // held in place until its patch carries it
-      BodyState st = w.bullet().state(id.value());
-      st.position = Eigen::Vector3d(x_start, y0, 0);
-      st.orientation = q;
-      st.linear_velocity = Eigen::Vector3f(0, -0.02f, 0);  // moving, so the LOD keeps wanting the patch
-      st.angular_velocity.setZero();
-      w.bullet().set_state(id.value(), st);
-      if (patch_ready(rig) && w.contact(id.value()).granular.carried) t_release = t + kFillWait;
-      if (std::getenv("TERRA_DEBUG") && f % 20 == 0)
-        std::fprintf(stderr, "shear t %.3f ready %d carried %d y %.4f\n", t, int(patch_ready(rig)),
-                     int(w.contact(id.value()).granular.carried), w.bullet().state(id.value()).position.y());
+      hold_for_patch(w, id.value(), Eigen::Vector3d(x_start, y0, 0), q);
+      if (patch_ready(rig) && w.contact(id.value()).granular.carried) {
+        t_release = t;
+        stop(w, id.value());
+      }
     } else if (t < t_release + d.settle) {
       hold(w, id.value(), 0, q, 0, 0);
     } else {
@@ -277,6 +289,7 @@ Result<ShearRun> run_shear(const RigSetup& s, const ShearDef& d) {
       out.t.push_back(w.time());
       out.curve.j.push_back(x - x0);
       out.curve.tau.push_back(-double(c.granular.force.x()) / area);
+      out.sink.push_back(c.sinkage);
       fy += c.granular.force.y();
       ++nfy;
       if (x - x0 >= d.travel) break;
@@ -333,8 +346,11 @@ Result<WheelRun> run_wheel(const RigSetup& s, const WheelDef& d) {
     const double t = w.time();
     double wz = 0;
     if (t_release < 0) {
-      if (patch_ready(rig) && w.contact(id.value()).granular.carried) t_release = t;
-      hold(w, id.value(), p0.z(), q0, 0, 0);
+      hold_for_patch(w, id.value(), p0, q0);
+      if (patch_ready(rig) && w.contact(id.value()).granular.carried) {
+        t_release = t;
+        stop(w, id.value());
+      }
     } else if (t < t_release + d.settle) {
       hold(w, id.value(), p0.z(), q0, 0, 0);
     } else {
@@ -354,6 +370,8 @@ Result<WheelRun> run_wheel(const RigSetup& s, const WheelDef& d) {
     out.x.push_back(st.position.x());
     out.dp.push_back(c.granular.force.x());
     out.sink.push_back(c.sinkage + rs);
+    out.fy.push_back(c.granular.force.y());
+    out.hf_fy.push_back(c.heightfield_force.y());
     if (td > d.window_from) {
       const double dp = c.granular.force.x(), sk = c.sinkage + rs;
       sdp += dp;

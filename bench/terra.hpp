@@ -66,15 +66,18 @@ struct PlateCurve {
 };
 Result<BekkerFit> fit_bekker(const std::vector<PlateCurve>& plates, double z_lo, double z_hi);
 
-// Shear: tau_max(sigma) = c + sigma tan phi by least squares over the plateaus (c may come out
-// negative: reported as fitted), and one K for every curve: least squares of
-// tau / tau_max = 1 - exp(-j / K) (golden section on ln K). K_se: the spread of K fitted to
-// each curve alone (standard deviation / sqrt(curves)).
+// Shear: c, tan(phi) and K by least squares of tau = (c + sigma tan phi)(1 - exp(-j / K)) over
+// every point of every curve (golden section on ln K, the other two linear for each K). The
+// uncertainties: one standard error from the residuals (c, phi), and the half width of the K
+// range where the sum of squares rises by one residual variance (K); the points of a drag are
+// correlated frame to frame, so these are lower bounds. Per curve also: the plateau (points
+// with j >= plateau_from: mean and sd), K fitted to tau / plateau alone, and the peak.
 struct ShearCurve {
   double sigma = 0;                      // Pa, the normal stress over the shear window
   std::vector<double> j, tau;            // shear displacement (m) and shear stress (Pa)
   double tau_max = 0, tau_max_sd = 0;    // Pa: plateau mean and standard deviation
   double K = 0;                          // m, this curve's own fit
+  double tau_peak = 0, j_peak = 0;       // Pa, m: the largest shear stress (mean over 9 frames) and where
 };
 struct ShearFit {
   ShearLaw soil;
@@ -112,7 +115,6 @@ WheelModel wheel_under_load(const Bekker& bekker, const ShearLaw& shear, const W
 struct RigSetup {
   std::string scene = "scenes/wheel_on_sand.json";  // the bed (terrain, material, simulation) and the wheel
   int threads = 1;
-  double speed_scale = 1.0;   // the fast tests shorten the runs (durations x this); 1 for the validation
 };
 
 struct PlateDef {
@@ -142,6 +144,7 @@ struct ShearDef {
 struct ShearRun {
   ShearCurve curve;           // every drag frame
   std::vector<double> t;      // s
+  std::vector<double> sink;   // m, the blades' tips below the original surface, per drag frame
   double blade_sinkage = 0;   // m, the blades' tips below the surface at the drag's start
   int granules = 0;
   double simulated_s = 0, wall_s = 0;
@@ -152,8 +155,9 @@ struct WheelDef {
   double slip = 0.3;          // s = 1 - v / (w r) commanded
   double speed = 0.25;        // v, m/s
   double settle = 0.4;        // s let down before the drive
-  double drive = 1.6;         // s driven
-  double window_from = 0.6;   // s after the drive starts: the steady window's start
+  double drive = 2.2;         // s driven
+  double window_from = 1.0;   // s after the drive starts: the steady window's start (0.25 m: past the
+                              // transient of leaving the settling place)
 };
 struct WheelRun {
   double slip_cmd = 0, slip = 0;   // commanded; measured (mean over the window: 1 - dx/dt / (w r), w the frame's mean spin)
@@ -164,6 +168,7 @@ struct WheelRun {
   double torque = 0;               // N m, the soil's moment resisting the spin (mean over the window)
   double vertical = 0;             // N, mean granular force up over the window
   std::vector<double> t, x, dp, sink;  // per frame, from the drive's start
+  std::vector<double> fy, hf_fy;       // N per frame: granular and heightfield (Bullet) vertical force
   int granules = 0;
   double simulated_s = 0, wall_s = 0;
 };

@@ -185,11 +185,41 @@ Result<BekkerFit> fit_bekker(const std::vector<PlateCurve>& plates, double z_lo,
   return f;
 }
 
+namespace {
+
+// For a given K, tau = c g + tan(phi) sigma g with g = 1 - exp(-j / K) is linear in (c,
+// tan phi): least squares over every point of every curve. Returns the sum of squares; x the
+// two coefficients, inv the inverse of the normal matrix, n the points.
+double shear_linear(const std::vector<ShearCurve>& cs, double K, double x[2], double inv[2][2], int* n) {
+  double a00 = 0, a01 = 0, a11 = 0, b0 = 0, b1 = 0, yy = 0;
+  *n = 0;
+  for (const ShearCurve& c : cs)
+    for (std::size_t i = 0; i < c.j.size() && i < c.tau.size(); ++i) {
+      if (!(c.j[i] >= 0) || !std::isfinite(c.tau[i])) continue;
+      const double g = 1.0 - std::exp(-c.j[i] / K);
+      const double u = g, v = c.sigma * g, y = c.tau[i];
+      a00 += u * u, a01 += u * v, a11 += v * v, b0 += u * y, b1 += v * y, yy += y * y;
+      ++*n;
+    }
+  const double det = a00 * a11 - a01 * a01;
+  if (!(std::abs(det) > 0)) {
+    x[0] = x[1] = 0;
+    return 1e300;
+  }
+  inv[0][0] = a11 / det, inv[1][1] = a00 / det, inv[0][1] = inv[1][0] = -a01 / det;
+  x[0] = inv[0][0] * b0 + inv[0][1] * b1;
+  x[1] = inv[1][0] * b0 + inv[1][1] * b1;
+  return std::max(0.0, yy - x[0] * b0 - x[1] * b1);
+}
+
+}  // namespace
+
 Result<ShearFit> fit_shear(std::vector<ShearCurve>& curves, double plateau_from) {
   if (curves.size() < 2) return fit_error("curves", std::to_string(curves.size()), "at least 2 normal stresses (c and phi)");
-  std::vector<double> sg, tm;
+  double smin = 1e300, smax = -1e300;
   for (std::size_t i = 0; i < curves.size(); ++i) {
     ShearCurve& c = curves[i];
+    smin = std::min(smin, c.sigma), smax = std::max(smax, c.sigma);
     double s = 0, s2 = 0;
     int n = 0;
     for (std::size_t k = 0; k < c.j.size() && k < c.tau.size(); ++k)
@@ -205,38 +235,45 @@ Result<ShearFit> fit_shear(std::vector<ShearCurve>& curves, double plateau_from)
     c.tau_max_sd = std::sqrt(std::max(0.0, s2 / n - c.tau_max * c.tau_max));
     if (!(c.tau_max > 0)) return fit_error("curves[" + std::to_string(i) + "].tau_max", std::to_string(c.tau_max), "> 0 Pa");
     c.K = fit_K({c});
-    sg.push_back(c.sigma);
-    tm.push_back(c.tau_max);
+    c.tau_peak = 0;
+    for (std::size_t k = 4; k + 4 < c.tau.size() && k < c.j.size(); ++k) {
+      double m = 0;
+      for (std::size_t q = k - 4; q <= k + 4; ++q) m += c.tau[q];
+      m /= 9.0;
+      if (m > c.tau_peak) c.tau_peak = m, c.j_peak = c.j[k];
+    }
   }
-  // tau_max = c + sigma tan(phi): ordinary least squares.
-  const double n = double(sg.size());
-  const double mx = std::accumulate(sg.begin(), sg.end(), 0.0) / n, my = std::accumulate(tm.begin(), tm.end(), 0.0) / n;
-  double sxx = 0, sxy = 0;
-  for (std::size_t i = 0; i < sg.size(); ++i) {
-    sxx += (sg[i] - mx) * (sg[i] - mx);
-    sxy += (sg[i] - mx) * (tm[i] - my);
+  if (!(smax > 1.05 * smin)) return fit_error("curves.sigma", "all equal", "at least two normal stresses 5 % apart");
+  // the whole curves: golden section on ln K of the linear fit's sum of squares
+  double x[2], inv[2][2];
+  int n = 0;
+  auto sse = [&](double lk) { return shear_linear(curves, std::exp(lk), x, inv, &n); };
+  double a = std::log(1e-4), b = std::log(1.0);
+  const double g = 0.5 * (std::sqrt(5.0) - 1.0);
+  double x1 = b - g * (b - a), x2 = a + g * (b - a), f1 = sse(x1), f2 = sse(x2);
+  for (int it = 0; it < 100; ++it) {
+    if (f1 < f2) {
+      b = x2, x2 = x1, f2 = f1, x1 = b - g * (b - a), f1 = sse(x1);
+    } else {
+      a = x1, x1 = x2, f1 = f2, x2 = a + g * (b - a), f2 = sse(x2);
+    }
   }
-  if (!(sxx > 0)) return fit_error("curves.sigma", "all equal", "at least two different normal stresses");
-  const double slope = sxy / sxx, icpt = my - slope * mx;
-  double ss = 0;
-  for (std::size_t i = 0; i < sg.size(); ++i) ss += std::pow(tm[i] - (icpt + slope * sg[i]), 2);
+  const double lk = 0.5 * (a + b);
+  const double best = sse(lk);
+  if (n < 6) return fit_error("curves", std::to_string(n) + " points", "at least 6 points (j >= 0)");
+  const double s2 = best / double(n - 3);
   ShearFit f;
-  f.soil.c = icpt;
-  f.soil.phi = std::atan(slope);
-  if (sg.size() > 2) {
-    const double s2 = ss / (n - 2);
-    const double slope_se = std::sqrt(s2 / sxx);
-    f.phi_se = slope_se / (1.0 + slope * slope);
-    f.c_se = std::sqrt(s2 * (1.0 / n + mx * mx / sxx));
-  }
-  f.soil.K = fit_K(curves);
-  if (curves.size() > 1) {
-    double m = 0, v = 0;
-    for (const ShearCurve& c : curves) m += c.K;
-    m /= double(curves.size());
-    for (const ShearCurve& c : curves) v += (c.K - m) * (c.K - m);
-    f.K_se = std::sqrt(v / double(curves.size() - 1)) / std::sqrt(double(curves.size()));
-  }
+  f.soil.K = std::exp(lk);
+  f.soil.c = x[0];
+  f.soil.phi = std::atan(x[1]);
+  f.c_se = std::sqrt(s2 * inv[0][0]);
+  f.phi_se = std::sqrt(s2 * inv[1][1]) / (1.0 + x[1] * x[1]);
+  // K: where the sum of squares has risen by s2 on either side (one standard error)
+  double lo = lk, hi = lk;
+  for (int it = 0; it < 400 && sse(lo) - best < s2; ++it) lo -= 0.005;
+  for (int it = 0; it < 400 && sse(hi) - best < s2; ++it) hi += 0.005;
+  f.K_se = 0.5 * (std::exp(hi) - std::exp(lo));
+  sse(lk);  // leave x at the best fit
   return f;
 }
 

@@ -165,5 +165,27 @@ TEST(TerraRig, PlatePressureGrowsWithSinkage) {
   RecordProperty("n", std::to_string(n));
 }
 
+// The DEM wheel: at 30 % slip the soil pushes the wheel forward harder than at 0 % (the
+// drawbar pull rises with slip: the shear displacement along the contact grows with it).
+// Short drives (0.2 m): the heavy test runs the five slips to a steady state.
+TEST(TerraRig, DrawbarPullRisesWithSlip) {
+  RigSetup s;
+  s.scene = scene();
+  std::vector<double> dp;
+  for (double slip : {0.0, 0.3}) {
+    WheelDef d;
+    d.slip = slip;
+    d.drive = 0.8;
+    d.window_from = 0.3;
+    auto r = run_wheel(s, d);
+    ASSERT_TRUE(r) << r.message();
+    EXPECT_NEAR(r->vertical, r->load, 0.15 * r->load);  // it carries its load
+    EXPECT_NEAR(r->slip, slip, 0.1);                    // measured slip near the commanded one
+    EXPECT_GT(r->sinkage, 0.0);
+    dp.push_back(r->drawbar_pull);
+  }
+  EXPECT_GT(dp[1], dp[0] + 0.05 * 2943.0) << "DP at 0 %: " << dp[0] << " N, at 30 %: " << dp[1] << " N";
+}
+
 }  // namespace
 }  // namespace sandpatch::terra
