@@ -1,5 +1,6 @@
 // bench terra: the plate-sinkage, shear and wheel tests of bench/terra.hpp in one run, the
 // fits and the rigid-wheel model against the wheel rig (docs/validation.md "Terramechanics").
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -56,6 +57,7 @@ std::string check_bench_terra_args(const BenchTerraArgs& a) {
     if (!(s >= 0 && s <= 0.9)) return "--slips: " + std::to_string(s) + ": each in [0, 0.9]";
   if (!(a.z_lo > 0 && a.z_hi > a.z_lo && a.z_hi <= 0.4)) return "--z-range: 0 < lo < hi <= 0.4 m";
   if (a.threads < 0) return "--threads: >= 0";
+  if (!(a.bed_depth == 0 || (a.bed_depth >= 0.1 && a.bed_depth <= 2.0))) return "--bed-depth: 0 (the scene's) or in [0.1, 2] m";
   return "";
 }
 
@@ -68,8 +70,10 @@ int run_bench_terra(const BenchTerraArgs& a) {
   RigSetup setup;
   setup.scene = a.scene;
   setup.threads = a.threads;
+  setup.bed_depth = a.bed_depth;
   nlohmann::ordered_json js;
   js["scene"] = a.scene;
+  js["bed_depth"] = a.bed_depth;
   js["load_before"] = bench::load_average();
   const double cpu0 = bench::process_cpu_seconds();
   const auto wall0 = std::chrono::steady_clock::now();
@@ -115,6 +119,17 @@ int run_bench_terra(const BenchTerraArgs& a) {
                   {"k_c_se_kN", bf->k_c_se / 1000}, {"k_phi_kN", bk.k_phi / 1000}, {"k_phi_se_kN", bf->k_phi_se / 1000},
                   {"k_per_width_kN", bf->k},        {"rms_log", bf->rms_log},    {"points", bf->points}};
   for (auto& v : js["bekker"]["k_per_width_kN"]) v = v.get<double>() / 1000;
+  js["bekker"]["n_alone"] = bf->n_alone;
+  js["bekker"]["n_alone_se"] = bf->n_alone_se;
+  for (std::size_t i = 0; i < bf->widths.size(); ++i)
+    std::printf("  b = %.3f m alone: n = %.3f +- %.3f; with the shared n: k = %.1f +- %.1f kN/m^(n+2)\n", bf->widths[i],
+                bf->n_alone[i], bf->n_alone_se[i], bf->k[i] / 1000, bf->k_se[i] / 1000);
+
+  if (a.plates_only) {
+    if (!save(a, "terra.json", js.dump(1) + "\n")) return 1;
+    if (a.json) std::printf("%s\n", js.dump().c_str());
+    return 0;
+  }
 
   // 2. shear
   std::vector<ShearCurve> shears;
@@ -155,7 +170,8 @@ int run_bench_terra(const BenchTerraArgs& a) {
 
   // 3. wheel
   WheelGeometry geo;
-  std::printf("wheel rig\n  slip cmd  slip  DP (N)  sd (N)  sinkage (m)  torque (N m)  | model: DP (N)  sinkage (m)  torque (N m)  wall s\n");
+  std::printf("wheel rig\n  slip cmd  slip  DP (N)  sd (N)  sinkage (m)  torque (N m)  | model: DP (N)  sinkage (m)  torque (N m)"
+              "  | model at the rig's sinkage: load (N)  DP (N)  | wall s\n");
   std::vector<double> sl, dpv, skv, mdp, msk;
   for (double s : a.slips) {
     WheelDef d;
@@ -164,9 +180,12 @@ int run_bench_terra(const BenchTerraArgs& a) {
     if (!r) return fail(r.errors());
     geo = r->soil_seen;
     const WheelModel m = wheel_under_load(bk, sh, geo, r->slip, r->load);
-    std::printf("  %8.2f  %4.2f  %6.0f  %6.0f  %11.3f  %12.0f  | %13.0f  %11.3f  %12.0f  %6.1f\n", s, r->slip, r->drawbar_pull,
-                r->drawbar_pull_sd, r->sinkage, r->torque, m.ok ? m.drawbar_pull : NAN, m.ok ? m.sinkage : NAN,
-                m.ok ? m.torque : NAN, r->wall_s);
+    // the model at the rig's own sinkage (the entry angle from it, not from the load)
+    const double th = std::acos(std::clamp(1.0 - r->sinkage / geo.radius, 0.0, 1.0));
+    const WheelModel ms = wheel_at_entry(bk, sh, geo, r->slip, th);
+    std::printf("  %8.2f  %4.2f  %6.0f  %6.0f  %11.3f  %12.0f  | %13.0f  %11.3f  %12.0f  | %27.0f  %6.0f  | %6.1f\n", s, r->slip,
+                r->drawbar_pull, r->drawbar_pull_sd, r->sinkage, r->torque, m.ok ? m.drawbar_pull : NAN, m.ok ? m.sinkage : NAN,
+                m.ok ? m.torque : NAN, ms.load, ms.drawbar_pull, r->wall_s);
     js["wheel"].push_back({{"slip_cmd", s},
                            {"slip", r->slip},
                            {"load", r->load},
@@ -180,6 +199,9 @@ int run_bench_terra(const BenchTerraArgs& a) {
                            {"model_drawbar_pull", m.drawbar_pull},
                            {"model_sinkage", m.sinkage},
                            {"model_torque", m.torque},
+                           {"model_at_sinkage_load", ms.load},
+                           {"model_at_sinkage_drawbar_pull", ms.drawbar_pull},
+                           {"model_at_sinkage_torque", ms.torque},
                            {"granules", r->granules},
                            {"simulated_s", r->simulated_s},
                            {"wall_s", r->wall_s}});

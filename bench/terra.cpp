@@ -41,6 +41,8 @@ struct Rig {
 };
 
 Result<SceneDef> load_base(const RigSetup& s) {
+  if (!(s.bed_depth == 0 || (s.bed_depth >= 0.1 && s.bed_depth <= 2.0)))
+    return setup_error("RigSetup.bed_depth", s.bed_depth, "0 (the scene's) or in [0.1, 2] m");
   auto sc = load_scene_file(s.scene);
   if (!sc) return sc.errors();
   return sc;
@@ -52,6 +54,10 @@ Result<Rig> make_rig(SceneDef scene, const RigSetup& s, double x0, double z0, do
   scene.bodies.clear();
   scene.simulation.lod.apron = kRigApron;
   scene.simulation.threads = s.threads;
+  if (s.bed_depth > 0) {
+    scene.terrain.patch_depth = s.bed_depth;
+    scene.terrain.soil_depth = std::max(scene.terrain.soil_depth.value_or(2.0), s.bed_depth + 0.5);
+  }
   const MaterialDef* mat = scene.find_material(scene.terrain.material);
   if (!mat && !scene.materials.empty()) mat = &scene.materials.front();
   if (!mat) return Error{s.scene, "materials", "none", "the bed's material", ""};

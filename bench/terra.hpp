@@ -57,6 +57,7 @@ struct BekkerFit {
   Bekker soil;
   double n_se = 0, k_c_se = 0, k_phi_se = 0;
   std::vector<double> widths, k, k_se;  // per plate: b_i (m), k_i (Pa/m^n) and its se
+  std::vector<double> n_alone, n_alone_se;  // per plate: its own exponent (ln p on ln z alone) and se
   double rms_log = 0;                   // rms residual of ln p
   int points = 0;
 };
@@ -115,6 +116,7 @@ WheelModel wheel_under_load(const Bekker& bekker, const ShearLaw& shear, const W
 struct RigSetup {
   std::string scene = "scenes/wheel_on_sand.json";  // the bed (terrain, material, simulation) and the wheel
   int threads = 1;
+  double bed_depth = 0;       // m: the patch depth (terrain.patch_depth) instead of the scene's; 0 keeps it
 };
 
 struct PlateDef {
@@ -180,7 +182,9 @@ struct BenchTerraArgs {
   std::vector<double> plates = {0.3, 0.5};        // m
   std::vector<double> sigmas = {2000, 4000, 8000};  // Pa
   std::vector<double> slips = {0, 0.15, 0.3, 0.45, 0.6};
-  double z_lo = 0.02, z_hi = 0.12;                 // m, the Bekker fit's window
+  double z_lo = 0.03, z_hi = 0.12;                 // m, the Bekker fit's window
+  double bed_depth = 0;                            // m, RigSetup::bed_depth
+  bool plates_only = false;                        // stop after the Bekker fit
   std::string out;                                 // directory for the series (CSV), "" none
   int threads = 1;
   bool json = false;

@@ -161,6 +161,21 @@ Result<BekkerFit> fit_bekker(const std::vector<PlateCurve>& plates, double z_lo,
     f.k.push_back(k[i]);
     f.k_se.push_back(k[i] * std::sqrt(s2 * inv[1 + i][1 + i]));
   }
+  for (std::size_t i = 0; i < m; ++i) {
+    double sx = 0, sy = 0, sxx = 0, sxy = 0, syy = 0;
+    int q = 0;
+    for (std::size_t k2 = 0; k2 < plates[i].z.size() && k2 < plates[i].p.size(); ++k2) {
+      const double z = plates[i].z[k2], p = plates[i].p[k2];
+      if (!(z >= z_lo && z <= z_hi && p > 0 && std::isfinite(p))) continue;
+      const double lz = std::log(z), lp = std::log(p);
+      sx += lz, sy += lp, sxx += lz * lz, sxy += lz * lp, syy += lp * lp, ++q;
+    }
+    const double vxx = sxx - sx * sx / q, vxy = sxy - sx * sy / q, vyy = syy - sy * sy / q;
+    const double slope = vxy / vxx;
+    const double res = std::max(0.0, vyy - slope * vxy);
+    f.n_alone.push_back(slope);
+    f.n_alone_se.push_back(q > 2 ? std::sqrt(res / (q - 2) / vxx) : 0.0);
+  }
   // k_i = k_c (1/b_i) + k_phi: generalised least squares with the k covariance (exact for m = 2).
   std::vector<std::vector<double>> ck(m, std::vector<double>(m)), ckinv;
   for (std::size_t i = 0; i < m; ++i)

@@ -10,7 +10,7 @@
 //   sandpatch bench render [--terrain N]... [--frames F] [--width W] [--height H] [--json]
 //   sandpatch bench lod [--sizes N,N,...] [--seconds S] [--threads T] [--json]
 //   sandpatch bench collapse [--aspects A,A,...] [--friction MU,...] [--length N] [--width N] [--seed S] [--threads T] [--json]
-//   sandpatch bench terra [--scene FILE] [--plates B,B] [--sigmas PA,...] [--slips S,...] [--out DIR] [--threads T] [--json]
+//   sandpatch bench terra [--scene FILE] [--plates B,B] [--sigmas PA,...] [--slips S,...] [--bed-depth M] [--plates-only] [--out DIR] [--threads T] [--json]
 //   sandpatch bench tradeoff [--quick | --full] [--threads T] [--out DIR] [--no-gl] [--no-plot] [--json]
 //   sandpatch stress SCENE [--sims N] [--frames F] [--interval S] [--threads T] [--out DIR] [--no-plot] [--json]
 // Exit codes: 0 ok, 1 runtime failure (with the stage that failed), 2 bad input.
@@ -356,6 +356,8 @@ void add_bench(CLI::App& app, BenchCli& a) {
   bterc->add_option("--sigmas", bter.sigmas, "Shear plate normal stresses, Pa, comma-separated (default 2000,4000,8000)")
       ->delimiter(',');
   bterc->add_option("--slips", bter.slips, "Wheel slips, comma-separated (default 0,0.15,0.3,0.45,0.6)")->delimiter(',');
+  bterc->add_option("--bed-depth", bter.bed_depth, "Bed (patch) depth, m, instead of the scene's (default: the scene's)");
+  bterc->add_flag("--plates-only", bter.plates_only, "Stop after the plates and the Bekker fit");
   bterc->add_option("--out", bter.out, "Directory for the series (CSV) and terra.json (default: none)");
   bterc->add_option("--threads", bter.threads, "Worker threads (default 1; 0 = all)");
   bterc->add_flag("--json", bter.json, "Print one JSON object on the last line");
