@@ -81,8 +81,10 @@ def main():
                 fmt="o", capsize=3, label="DEM wheel (sd over the window)")
     p3.errorbar([x["slip"] for x in w], [100 * x["sinkage"] for x in w], yerr=[100 * x["sinkage_sd"] for x in w],
                 fmt="o", capsize=3, label="DEM wheel")
+    p2.plot([x["slip"] for x in w], [x["model_at_sinkage_drawbar_pull"] for x in w], "kx",
+            label="model at the DEM wheel's sinkage")
     if mc:
-        p2.plot([m["slip"] for m in mc], [m["drawbar_pull"] for m in mc], "k-", lw=1, label="Bekker-Wong model")
+        p2.plot([m["slip"] for m in mc], [m["drawbar_pull"] for m in mc], "k-", lw=1, label="Bekker-Wong model (carries the load)")
         p3.plot([m["slip"] for m in mc], [100 * m["sinkage"] for m in mc], "k-", lw=1, label="Bekker-Wong model")
     p2.axhline(0, color="0.6", lw=0.5)
     p2.set_xlabel("slip")
