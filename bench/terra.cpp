@@ -52,6 +52,7 @@ Result<Rig> make_rig(SceneDef scene, const RigSetup& s, double x0, double z0, do
   Rig rig;
   rig.wall0 = std::chrono::steady_clock::now();
   scene.bodies.clear();
+  scene.joints.clear();  // the tests add their own bodies and joints
   scene.simulation.lod.apron = kRigApron;
   scene.simulation.threads = s.threads;
   if (s.bed_depth > 0) {
@@ -326,6 +327,22 @@ Result<WheelRun> run_wheel(const RigSetup& s, const WheelDef& d) {
     return Error{s.scene, "bodies[" + std::to_string(wi) + "]", sc.bodies[wi].name, "a dynamic cylinder", ""};
   auto bd = to_rigid_body(sc, wi);
   if (!bd) return bd.errors();
+  // The jointed rig (scenes/wheel_on_sand.json): a kinematic "carriage", a vertical "slider"
+  // joint to a dynamic "hub", a hinge "axle" from the hub to the wheel with a velocity motor.
+  // Without them the wheel alone, its velocities set before every frame.
+  auto body_index = [&](const std::string& name) {
+    for (std::size_t i = 0; i < sc.bodies.size(); ++i)
+      if (sc.bodies[i].name == name) return i;
+    return sc.bodies.size();
+  };
+  auto joint_index = [&](const std::string& name) {
+    for (std::size_t i = 0; i < sc.joints.size(); ++i)
+      if (sc.joints[i].name == name) return i;
+    return sc.joints.size();
+  };
+  const std::size_t ci = body_index("carriage"), hi = body_index("hub");
+  const std::size_t si = joint_index("slider"), ai = joint_index("axle");
+  const bool jointed = ci < sc.bodies.size() && hi < sc.bodies.size() && si < sc.joints.size() && ai < sc.joints.size();
   const Eigen::Vector3d p0 = bd.value().position;
   const double travel = d.speed * d.drive;
   const double R = sc.bodies[wi].shape.radius, half_w = 0.5 * sc.bodies[wi].shape.height;
@@ -345,6 +362,58 @@ Result<WheelRun> run_wheel(const RigSetup& s, const WheelDef& d) {
   out.load = double(bd.value().mass) * kG;
   out.soil_seen.radius = r_eff;
   out.soil_seen.width = 2 * half_w + 2 * rs;
+  out.jointed = jointed;
+  RigidBodyId carriage, hub;
+  JointId axle;
+  Eigen::Vector3d c0 = Eigen::Vector3d::Zero(), h0 = Eigen::Vector3d::Zero();
+  Eigen::Quaternionf hq = Eigen::Quaternionf::Identity();
+  float spin_sign = -1.0f;  // the motor's target for rolling towards +x
+  if (jointed) {
+    auto cd = to_rigid_body(sc, ci);
+    if (!cd) return cd.errors();
+    if (cd.value().motion != RigidMotion::Kinematic)
+      return Error{s.scene, "bodies[" + std::to_string(ci) + "].motion", "not kinematic", "the carriage is kinematic", ""};
+    if (!sc.bodies[ci].keyframes.empty()) {
+      const auto& k = sc.bodies[ci].keyframes.front().position;
+      cd.value().position = Eigen::Vector3d(k[0], k[1], k[2]);
+    }
+    c0 = cd.value().position;
+    auto hd = to_rigid_body(sc, hi);
+    if (!hd) return hd.errors();
+    h0 = hd.value().position;
+    hq = hd.value().orientation.normalized();
+    auto cid = w.add_body(cd.value());
+    if (!cid) return cid.errors();
+    auto hid = w.add_body(hd.value());
+    if (!hid) return hid.errors();
+    carriage = cid.value();
+    hub = hid.value();
+    out.load += double(hd.value().mass) * kG;  // the slider carries no weight
+    for (std::size_t j : {si, ai}) {
+      RigidJointDef jd = to_rigid_joint(sc.joints[j]);
+      jd.turn.motor = JointMotor{};
+      jd.slide.motor = JointMotor{};
+      auto idof = [&](const std::string& n) {
+        return n == sc.bodies[ci].name ? carriage : n == sc.bodies[hi].name ? hub : n == sc.bodies[wi].name ? id.value() : RigidBodyId{};
+      };
+      jd.a = idof(sc.joints[j].body_a);
+      jd.b = idof(sc.joints[j].body_b);
+      if (!jd.a.valid() || (!sc.joints[j].body_b.empty() && !jd.b.valid()))
+        return Error{s.scene, "joints[" + std::to_string(j) + "]", sc.joints[j].name, "joins carriage, hub and wheel", ""};
+      auto jid = w.add_joint(jd);
+      if (!jid) return jid.errors();
+      if (j == ai) axle = jid.value();
+    }
+    // the hinge's axis along -z turns the wheel forward with a positive target
+    spin_sign = sc.joints[ai].axis[2] < 0 ? 1.0f : -1.0f;
+  }
+  auto set_motor = [&](double target) -> Status {
+    JointMotor m;
+    m.mode = MotorMode::Velocity;
+    m.target = float(target);
+    m.max_force = 1e6f;  // N m: the motor holds its rate whatever the soil does
+    return w.set_joint_motor(axle, true, m);
+  };
   double t_release = -1, t_drive = -1, angle = 0;
   double sdp = 0, sdp2 = 0, ssk = 0, ssk2 = 0, stq = 0, sfy = 0, sx = 0, sw = 0;
   int n = 0;
@@ -353,20 +422,36 @@ Result<WheelRun> run_wheel(const RigSetup& s, const WheelDef& d) {
     double wz = 0;
     if (t_release < 0) {
       hold_for_patch(w, id.value(), p0, q0);
+      if (jointed) {
+        hold_for_patch(w, hub, h0, hq);
+        if (Status st = set_motor(0); !st) return st.errors();
+      }
       if (patch_ready(rig) && w.contact(id.value()).granular.carried) {
         t_release = t;
         stop(w, id.value());
+        if (jointed) stop(w, hub);
       }
     } else if (t < t_release + d.settle) {
-      hold(w, id.value(), p0.z(), q0, 0, 0);
+      if (!jointed) hold(w, id.value(), p0.z(), q0, 0, 0);
     } else {
-      if (t_drive < 0) t_drive = t;
+      if (t_drive < 0) {
+        t_drive = t;
+        if (jointed)
+          if (Status st = set_motor(spin_sign * omega); !st) return st.errors();
+      }
       wz = -omega;  // rolling towards +x about +z
       angle += wz * dt;
-      hold(w, id.value(), p0.z(), Eigen::Quaternionf(Eigen::AngleAxisf(float(angle - wz * dt), Eigen::Vector3f::UnitZ())) * q0,
-           d.speed, wz);
+      if (!jointed)
+        hold(w, id.value(), p0.z(), Eigen::Quaternionf(Eigen::AngleAxisf(float(angle - wz * dt), Eigen::Vector3f::UnitZ())) * q0,
+             d.speed, wz);
     }
-    const double x_before = w.bullet().state(id.value()).position.x();
+    if (jointed) {
+      const double xc = c0.x() + (t_drive >= 0 ? d.speed * (t + dt - t_drive) : 0.0);
+      if (Status st = w.set_kinematic_target(carriage, Eigen::Vector3d(xc, c0.y(), c0.z()), Eigen::Quaternionf::Identity()); !st)
+        return st.errors();
+    }
+    const BodyState before = w.bullet().state(id.value());
+    const double x_before = before.position.x(), w_before = std::abs(double(before.angular_velocity.z()));
     if (Status st = w.step(dt); !st) return st.errors();
     if (t_drive < 0) continue;
     const BodyState st = w.bullet().state(id.value());
@@ -384,10 +469,10 @@ Result<WheelRun> run_wheel(const RigSetup& s, const WheelDef& d) {
       sdp2 += dp * dp;
       ssk += sk;
       ssk2 += sk * sk;
-      stq += c.granular.torque.z();  // about +z: negative resists a spin of -omega ... sign below
+      stq += c.granular.torque.z();  // about +z: the wheel spins about -z, so a resisting torque is > 0
       sfy += c.granular.force.y();
       sx += st.position.x() - x_before;
-      sw += 0.5 * (omega + std::abs(double(st.angular_velocity.z())));
+      sw += 0.5 * (w_before + std::abs(double(st.angular_velocity.z())));
       ++n;
     }
     if (td >= d.drive - 1e-9) break;

@@ -13,10 +13,11 @@
 //   shear  a dynamic grousered plate (a comb: a bar with blades under it, extruded across)
 //          whose weight is the normal load; its blades start in the soil; after it settles its
 //          x velocity is set before every frame (y free, z, tilt and spin held);
-//   wheel  the scene's wheel (dynamic cylinder, axle along z, its mass the load); after it
-//          settles its x velocity v and spin w are set before every frame (y free, z and tilt
-//          held): slip s = 1 - v / (w r). Joints are not used: the carriage is this per-frame
-//          velocity control.
+//   wheel  the scene's rig: a kinematic "carriage" moved along x at v, a vertical "slider"
+//          joint (free) to a dynamic "hub", a hinge "axle" from the hub to the "wheel" (dynamic
+//          cylinder, axle along z) whose velocity motor turns it at w: slip s = 1 - v / (w r);
+//          the hub's and the wheel's weight is the load. A scene with only a wheel: its x
+//          velocity and spin are set before every frame instead (y free, z and tilt held).
 // Sign conventions: y up, the rig moves along +x. Drawbar pull DP = the x component of the
 // granular force on the wheel (the soil's net push forward: thrust minus the resistances;
 // the carriage holds the wheel back with -DP).
@@ -162,9 +163,10 @@ struct WheelDef {
                               // transient of leaving the settling place)
 };
 struct WheelRun {
-  double slip_cmd = 0, slip = 0;   // commanded; measured (mean over the window: 1 - dx/dt / (w r), w the frame's mean spin)
-  double load = 0;                 // N, the wheel's weight
+  double slip_cmd = 0, slip = 0;   // commanded; measured (over the window: 1 - dx/dt / (w r), w the mean of the spin before and after each frame)
+  double load = 0;                 // N, the wheel's weight (and the hub's, jointed)
   WheelGeometry soil_seen;         // m: the cylinder grown by one shell sphere radius (rim and both faces)
+  bool jointed = false;            // driven through the scene's carriage, slider and motorised axle
   double drawbar_pull = 0, drawbar_pull_sd = 0;  // N, mean and sd over the window
   double sinkage = 0, sinkage_sd = 0;            // m, below the original surface
   double torque = 0;               // N m, the soil's moment resisting the spin (mean over the window)

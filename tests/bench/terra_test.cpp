@@ -182,7 +182,8 @@ TEST(TerraRig, DrawbarPullRisesWithSlip) {
     auto r = run_wheel(s, d);
     ASSERT_TRUE(r) << r.message();
     EXPECT_NEAR(r->vertical, r->load, 0.15 * r->load);  // it carries its load
-    EXPECT_NEAR(r->slip, slip, 0.1);                    // measured slip near the commanded one
+    EXPECT_TRUE(r->jointed);                            // carriage, slider, hub, motorised axle
+    EXPECT_NEAR(r->slip, slip, 0.03);                   // the motor holds the commanded rate
     EXPECT_GT(r->sinkage, 0.0);
     dp.push_back(r->drawbar_pull);
   }
