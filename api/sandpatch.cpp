@@ -27,6 +27,7 @@
 #include "manager/profile.hpp"
 #include "manager/definitions.hpp"
 #include "manager/terrain_manager.hpp"
+#include "manager/scene_world.hpp"
 #include "manager/world.hpp"
 #include "render/clipmap.hpp"
 #include "scene/mesh.hpp"
@@ -240,6 +241,118 @@ Result<BodyHandle> Terrain::adopt_bullet_body(void* bt_rigid_body, const std::st
 }
 
 bool Terrain::alive(BodyHandle h) const { return impl_->check(h).ok(); }
+
+// ---- joints ----
+
+namespace {
+
+using core::core_motor;
+
+// A joint's numbers checked in double first (a float conversion would turn 1e300 into inf and
+// lose the value written).
+void check_joint_numbers(Checker& c, const JointDef& d) {
+  c.finite("anchor", d.anchor, "m");
+  c.finite("axis", d.axis, "");
+  if (d.limits) c.finite("limits", *d.limits, d.kind == JointKind::Hinge ? "rad" : "m");
+  if (d.motor.mode != MotorMode::Off && d.motor.mode != MotorMode::Velocity && d.motor.mode != MotorMode::Position)
+    c.add("motor.mode", std::to_string(int(d.motor.mode)), "must be a MotorMode: Off, Velocity or Position");
+  if (d.motor.mode != MotorMode::Off) {
+    c.number("motor.target", d.motor.target, -1e4, 1e4, false, false, d.kind == JointKind::Hinge ? "(rad/s or rad)" : "(m/s or m)");
+    c.number("motor.max_force", d.motor.max_force, 0, 1e9, false, false, d.kind == JointKind::Hinge ? "N m" : "N");
+  }
+  if (d.motor.mode == MotorMode::Position) c.number("motor.servo_speed", d.motor.servo_speed, 0, 1e4, true, false, "");
+  c.closed("spring.stiffness", d.spring.stiffness, 0, 1e12);
+  c.closed("spring.damping", d.spring.damping, 0, 1e12);
+}
+
+}  // namespace
+
+Result<JointHandle> Terrain::add_joint(const JointDef& d) {
+  Impl& I = *impl_;
+  Checker c{"JointDef.", d.name.empty() ? "" : "joint '" + d.name + "'", {}};
+  if (d.kind != JointKind::Fixed && d.kind != JointKind::Hinge && d.kind != JointKind::Slider)
+    c.add("kind", std::to_string(int(d.kind)), "must be a JointKind: Fixed, Hinge or Slider");
+  if (!I.world->alive(I.id(d.body_a)))
+    c.add("body_a", "{" + std::to_string(d.body_a.index) + ", " + std::to_string(d.body_a.generation) + "}",
+          "must be a live body of this terrain (removed, or never added)");
+  if (d.body_b.valid() && !I.world->alive(I.id(d.body_b)))
+    c.add("body_b", "{" + std::to_string(d.body_b.index) + ", " + std::to_string(d.body_b.generation) + "}",
+          "must be a live body of this terrain, or an invalid handle (the world)");
+  check_joint_numbers(c, d);
+  if (!c.errs.empty()) return c.errs;
+  core::RigidJointDef r;
+  r.name = d.name;
+  r.kind = d.kind == JointKind::Fixed ? core::JointKind::Fixed : d.kind == JointKind::Slider ? core::JointKind::Slider : core::JointKind::Hinge;
+  r.a = I.id(d.body_a);
+  if (d.body_b.valid()) r.b = I.id(d.body_b);
+  r.anchor = {d.anchor[0], d.anchor[1], d.anchor[2]};
+  r.axis = {float(d.axis[0]), float(d.axis[1]), float(d.axis[2])};
+  core::JointDof& f = r.kind == core::JointKind::Slider ? r.slide : r.turn;
+  if (d.limits) {
+    f.limited = true;
+    f.lower = float((*d.limits)[0]);
+    f.upper = float((*d.limits)[1]);
+  }
+  f.motor = core_motor(d.motor);
+  f.stiffness = float(d.spring.stiffness);
+  f.damping = float(d.spring.damping);
+  auto id = I.world->add_joint(r);
+  if (!id) {
+    std::vector<Error> es = convert(id.errors(), "JointDef.", {{"type", "JointDef.kind"}});
+    for (Error& e : es)
+      if (!d.name.empty()) e.detail += (e.detail.empty() ? "" : "; ") + std::string("joint '") + d.name + "'";
+    return es;
+  }
+  return JointHandle{id->index, id->generation};
+}
+
+namespace {
+Status check_joint_handle(const core::World& w, JointHandle h) {
+  if (w.joint_alive(core::JointId{h.index, h.generation})) return Ok{};
+  return Error{"", "JointHandle", "{" + std::to_string(h.index) + ", " + std::to_string(h.generation) + "}",
+               "must be a live joint of this terrain (removed, one of its bodies removed, or never added)"};
+}
+}  // namespace
+
+Status Terrain::remove_joint(JointHandle h) {
+  if (Status s = check_joint_handle(*impl_->world, h); !s) return s;
+  impl_->world->remove_joint({h.index, h.generation});
+  return Ok{};
+}
+
+bool Terrain::alive(JointHandle h) const { return check_joint_handle(*impl_->world, h).ok(); }
+
+Status Terrain::set_joint_motor(JointHandle h, const JointMotor& m) {
+  if (Status s = check_joint_handle(*impl_->world, h); !s) return s;
+  const core::JointId id{h.index, h.generation};
+  const bool turn = impl_->bullet().joint_definition(id).kind != core::JointKind::Slider;
+  Checker c{"set_joint_motor.", "", {}};
+  JointDef probe;
+  probe.kind = turn ? JointKind::Hinge : JointKind::Slider;
+  probe.motor = m;
+  check_joint_numbers(c, probe);
+  if (!c.errs.empty()) return c.errs;
+  if (core::Status s = impl_->world->set_joint_motor(id, turn, core_motor(m)); !s)
+    return convert(s.errors(), "set_joint_motor.", {{"joint", "set_joint_motor.joint"}});
+  return Ok{};
+}
+
+Result<JointState> Terrain::joint_state(JointHandle h) const {
+  if (Status s = check_joint_handle(*impl_->world, h); !s) return s.errors();
+  const core::JointId id{h.index, h.generation};
+  const core::JointState st = impl_->bullet().joint_state(id);
+  JointState out;
+  if (impl_->bullet().joint_definition(id).kind == core::JointKind::Slider) {
+    out.position = st.position;
+    out.rate = st.rate;
+    out.force = st.force;
+  } else {
+    out.position = st.angle;
+    out.rate = st.angular_rate;
+    out.force = st.torque;
+  }
+  return out;
+}
 
 Result<BodyState> Terrain::body_state(BodyHandle h) const {
   if (Status s = impl_->check(h); !s) return s.errors();

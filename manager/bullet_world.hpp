@@ -73,6 +73,64 @@ struct RigidBodyId {
   bool valid() const { return index >= 0; }
 };
 
+// ---- joints (Bullet constraints between two bodies, or a body and the world) ----
+//
+// Every joint is one btGeneric6DofSpring2Constraint whose frame is built at creation from a
+// world anchor point and a world axis at the bodies' poses then: the frame's x is the axis,
+// and it is fixed in each body from then on. A joint's position (angle about the axis, rad,
+// or travel along it, m) is 0 at creation and is that of body b relative to body a (with no
+// body b, of body a relative to the world), right-handed about the axis.
+enum class JointKind {
+  Fixed,        // no relative motion
+  Hinge,        // turns about the axis (rad)
+  Slider,       // slides along the axis (m), no turning
+  Cylindrical,  // turns about and slides along the axis (a vehicle's steering knuckle with its suspension)
+};
+const char* to_string(JointKind k);  // "fixed", "hinge", "slider", "cylindrical"
+
+enum class MotorMode {
+  Off,       // no motor
+  Velocity,  // drive the rate (rad/s, m/s) towards `target`
+  Position,  // a servo: move towards the position `target` (rad, m) at up to servo_speed, and hold it
+};
+struct JointMotor {
+  MotorMode mode = MotorMode::Off;
+  float target = 0;          // rad/s or m/s (velocity); rad or m (position)
+  float max_force = 0;       // N m (turning) or N (sliding): the most the motor applies, >= 0
+  float servo_speed = 1.0f;  // rad/s or m/s (position), > 0
+};
+// One free degree of freedom of a joint: turning about the axis or sliding along it.
+struct JointDof {
+  bool limited = false;
+  float lower = 0, upper = 0;  // rad or m, lower <= upper (hinges: within [-pi, pi])
+  JointMotor motor;
+  float stiffness = 0;         // N m/rad or N/m: a spring towards position 0 (0 = none)
+  float damping = 0;           // N m s/rad or N s/m
+};
+struct RigidJointDef {
+  std::string name;
+  JointKind kind = JointKind::Hinge;
+  RigidBodyId a, b;            // b invalid: a is jointed to the world
+  Eigen::Vector3d anchor = Eigen::Vector3d::Zero();  // m, world, at creation
+  Eigen::Vector3f axis = Eigen::Vector3f::UnitZ();   // world, at creation (normalised here)
+  JointDof turn;               // hinge, cylindrical
+  JointDof slide;              // slider, cylindrical
+};
+struct JointId {
+  int index = -1;
+  int generation = 0;
+  bool valid() const { return index >= 0; }
+};
+// A joint after the last step (positions now; rates now; forces mean over the last step).
+struct JointState {
+  float angle = 0;             // rad, in [-pi, pi] (hinge, cylindrical)
+  float angular_rate = 0;      // rad/s, of b relative to a about the axis
+  float torque = 0;            // N m: motor + spring + limit on b about the axis, mean over the last step
+  float position = 0;          // m (slider, cylindrical)
+  float rate = 0;              // m/s along the axis
+  float force = 0;             // N: motor + spring + limit on b along the axis, mean over the last step
+};
+
 class BulletWorld {
  public:
   // `terrain` must outlive the world: its tile arrays are read in place by Bullet.
@@ -165,6 +223,24 @@ class BulletWorld {
   // heightfield (and always for kinematic and static bodies, which Bullet does not collide
   // with the static terrain).
   Eigen::Vector3f terrain_force(RigidBodyId id) const;
+
+  // ---- joints ----
+  // Checks a joint's definition against this world's bodies: errors name the field relative to
+  // the joint ("body_b", "axis", "limits", "motor.max_force", "spring.stiffness", ...); the
+  // callers put the joint's own path in front.
+  std::vector<Error> check_joint(const RigidJointDef& def) const;
+  // Adds a joint (check_joint first). Bullet stops colliding the two bodies with each other.
+  Result<JointId> add_joint(const RigidJointDef& def);
+  void remove_joint(JointId id);
+  bool joint_alive(JointId id) const;
+  // A new motor for the joint's turning (turn = true) or sliding degree of freedom, from the
+  // next step on; wakes both bodies. Checked by the caller (check_motor).
+  void set_joint_motor(JointId id, bool turn, const JointMotor& motor);
+  static std::vector<Error> check_motor(const JointMotor& m, bool turn, const std::string& field);
+  JointState joint_state(JointId id) const;
+  const RigidJointDef& joint_definition(JointId id) const;
+  // Live joints in slot order.
+  std::vector<JointId> joints() const;
 
  private:
   BulletWorld() = default;

@@ -62,6 +62,50 @@ std::vector<World::Load> to_loads(const BodyDef& body) {
   return out;
 }
 
+RigidJointDef to_rigid_joint(const JointDef& j) {
+  RigidJointDef d;
+  d.name = j.name;
+  d.kind = j.type == JointType::Fixed ? JointKind::Fixed : j.type == JointType::Slider ? JointKind::Slider : JointKind::Hinge;
+  d.anchor = {j.anchor[0], j.anchor[1], j.anchor[2]};
+  d.axis = vec3f(j.axis);
+  JointDof& f = d.kind == JointKind::Slider ? d.slide : d.turn;
+  if (j.limits) {
+    f.limited = true;
+    f.lower = float((*j.limits)[0]);
+    f.upper = float((*j.limits)[1]);
+  }
+  f.stiffness = float(j.spring_stiffness);
+  f.damping = float(j.spring_damping);
+  return d;  // the motor outside every phase: none
+}
+
+std::vector<World::MotorPhase> to_motor_phases(const JointDef& j) {
+  std::vector<World::MotorPhase> out;
+  for (const MotorPhaseDef& m : j.motor) {
+    World::MotorPhase p;
+    p.from = m.from;
+    if (m.until) p.until = *m.until;
+    p.turn = j.type != JointType::Slider;
+    p.motor.mode = m.target_position ? MotorMode::Position : MotorMode::Velocity;
+    p.motor.target = float(m.target_position ? *m.target_position : m.target_velocity.value_or(0.0));
+    p.motor.max_force = float(m.max_force);
+    p.motor.servo_speed = float(m.servo_speed);
+    out.push_back(p);
+  }
+  return out;
+}
+
+JointMotor core_motor(const api::JointMotor& m) {
+  JointMotor c;
+  c.mode = m.mode == api::MotorMode::Velocity   ? MotorMode::Velocity
+           : m.mode == api::MotorMode::Position ? MotorMode::Position
+                                                : MotorMode::Off;
+  c.target = float(m.target);
+  c.max_force = float(m.max_force);
+  c.servo_speed = float(m.servo_speed);
+  return c;
+}
+
 api::BodyDef body_def(const SceneDef& scene, std::size_t index) {
   const BodyDef& b = scene.bodies[index];
   api::BodyDef d;
@@ -238,19 +282,59 @@ Result<std::unique_ptr<World>> make_world(const SceneDef& scene, int threads, co
     if (!def) return def.errors();
     body_defs.push_back(std::move(*def));
   }
+  struct SceneJoint {
+    RigidJointDef def;
+    std::size_t a, b;                    // indices into body_defs (b = World::kWorld: the world)
+    std::vector<World::MotorPhase> phases;
+    std::string field;                   // for errors: "joints[2]"
+  };
+  std::vector<SceneJoint> joint_defs;
+  std::vector<std::string> body_fields;  // for errors, by body_defs index
+  for (std::size_t i = 0; i < scene.bodies.size(); ++i) body_fields.push_back("bodies[" + std::to_string(i) + "]");
+  // Bodies by name (the parser checked that every joint's names exist).
+  auto body_index = [&](const std::string& name) {
+    std::size_t k = 0;
+    while (k < body_defs.size() && body_defs[k].name != name) ++k;
+    return k;
+  };
+  for (std::size_t i = 0; i < scene.joints.size(); ++i) {
+    const JointDef& j = scene.joints[i];
+    joint_defs.push_back({to_rigid_joint(j), body_index(j.body_a), j.body_b.empty() ? World::kWorld : body_index(j.body_b),
+                          to_motor_phases(j), "joints[" + std::to_string(i) + "]"});
+  }
   // Bodies are added at their spawn time: Bullet's own checks run now, on a scratch world, so
   // that a body it would refuse is bad input before frame 0 and not a failure mid-run.
   {
     part = "bodies";
     auto scratch = BulletWorld::create(hf, vec3f(scene.simulation.gravity));
     if (!scratch) return scratch.errors();
+    std::vector<RigidBodyId> ids;
     for (std::size_t i = 0; i < body_defs.size(); ++i) {
       auto id = (*scratch)->add_body(body_defs[i]);
       if (!id) {
         std::vector<Error> es = id.errors();
         for (Error& e : es) {
           e.file = scene.source_path;
-          e.field = "bodies[" + std::to_string(i) + "]" + (e.field.empty() ? "" : " (" + e.field + ")");
+          e.field = body_fields[i] + (e.field.empty() ? "" : " (" + e.field + ")");
+        }
+        return es;
+      }
+      ids.push_back(*id);
+    }
+    // The joints too, between the bodies at their starting poses: what Bullet would refuse
+    // when the run makes them is refused now, naming joints[i].field.
+    part = "joints";
+    for (const SceneJoint& sj : joint_defs) {
+      RigidJointDef d = sj.def;
+      d.a = ids[sj.a];
+      if (sj.b != World::kWorld) d.b = ids[sj.b];
+      std::vector<Error> es = (*scratch)->check_joint(d);
+      for (const auto& p : sj.phases)
+        for (Error& e : BulletWorld::check_motor(p.motor, p.turn, "motor")) es.push_back(std::move(e));
+      if (!es.empty()) {
+        for (Error& e : es) {
+          e.file = scene.source_path;
+          e.field = sj.field + "." + e.field;
         }
         return es;
       }
@@ -296,6 +380,10 @@ Result<std::unique_ptr<World>> make_world(const SceneDef& scene, int threads, co
         return es;
       }
     }
+  }
+  for (const SceneJoint& sj : joint_defs) {
+    const std::size_t e = (*world)->schedule_joint(sj.def, sj.a, sj.b);
+    if (!sj.phases.empty()) (*world)->set_motor_phases(e, sj.phases);
   }
   return world;
 }

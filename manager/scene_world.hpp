@@ -44,6 +44,14 @@ Result<RigidBodyDef> to_rigid_body(const SceneDef& scene, std::size_t index);
 // A scene body's loads as the World applies them (World::set_loads).
 std::vector<World::Load> to_loads(const BodyDef& body);
 
+// A scene joint as Bullet's definition, its bodies left unset (the World fills them when both
+// have spawned), and its motor phases as the World applies them (World::set_motor_phases).
+RigidJointDef to_rigid_joint(const JointDef& joint);
+std::vector<World::MotorPhase> to_motor_phases(const JointDef& joint);
+
+// The library's joint motor as Bullet's.
+JointMotor core_motor(const api::JointMotor& motor);
+
 // Camera pose at simulated time t: fixed, or linear between path keyframes (held outside).
 render::CameraView camera_at(const CameraDef& camera, double t);
 

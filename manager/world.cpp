@@ -85,6 +85,15 @@ std::size_t World::schedule_body(const RigidBodyDef& def, double spawn_time) {
 
 void World::remove_body(RigidBodyId id) {
   if (!alive(id)) return;
+  // Its joints go at once (the body itself may stay in Bullet until the next step, far above).
+  for (JointEntry& j : joints_) {
+    if (j.removed || !j.id.valid() || !bullet_->joint_alive(j.id)) continue;
+    const RigidJointDef& d = bullet_->joint_definition(j.id);
+    if (same(d.a, id) || (d.b.valid() && same(d.b, id))) {
+      bullet_->remove_joint(j.id);
+      j.removed = true;
+    }
+  }
   for (Entry& e : entries_)
     if (same(e.id, id)) e.removed = true;
   if (!manager_ || bullet_->adopted(id)) {
@@ -258,6 +267,103 @@ void World::apply_scene_loads(double t) {
       Eigen::Vector3f tq = l.body_frame ? Eigen::Vector3f(R * l.torque) : l.torque;
       if (!l.at_centre) tq += (R * l.at).cross(f);  // N m: `at` is a point of the body, wherever it has turned
       accumulate(id, f, tq);
+    }
+  }
+}
+
+// ---- joints ----
+
+Result<JointId> World::add_joint(const RigidJointDef& def) {
+  for (RigidBodyId id : {def.a, def.b})
+    if (id.valid() && bullet_->alive(id) && !alive(id))
+      return Error{"", same(id, def.a) ? "body_a" : "body_b", "'" + bullet_->definition(id).name + "'",
+                   "must be a live body (it was removed)"};
+  auto id = bullet_->add_joint(def);
+  if (!id) return id;
+  JointEntry e;
+  e.name = def.name;
+  e.id = *id;
+  e.def = def;
+  joints_.push_back(std::move(e));
+  return id;
+}
+
+std::size_t World::schedule_joint(const RigidJointDef& def, std::size_t a_entry, std::size_t b_entry) {
+  JointEntry e;
+  e.name = def.name;
+  e.a = a_entry;
+  e.b = b_entry;
+  e.def = def;
+  joints_.push_back(std::move(e));
+  return joints_.size() - 1;
+}
+
+void World::set_motor_phases(std::size_t joint_entry, std::vector<MotorPhase> phases) {
+  if (joint_entry >= joints_.size()) return;
+  joints_[joint_entry].phases = std::move(phases);
+  joints_[joint_entry].applied[0] = joints_[joint_entry].applied[1] = -2;
+}
+
+bool World::joint_alive(JointId id) const {
+  if (!bullet_->joint_alive(id)) return false;
+  const RigidJointDef& d = bullet_->joint_definition(id);
+  return alive(d.a) && (!d.b.valid() || alive(d.b));
+}
+
+void World::remove_joint(JointId id) {
+  if (!bullet_->joint_alive(id)) return;
+  for (JointEntry& j : joints_)
+    if (!j.removed && j.id.index == id.index && j.id.generation == id.generation) j.removed = true;
+  bullet_->remove_joint(id);
+}
+
+Status World::set_joint_motor(JointId id, bool turn, const JointMotor& motor) {
+  if (!joint_alive(id))
+    return Error{"", "joint", "{" + std::to_string(id.index) + ", " + std::to_string(id.generation) + "}",
+                 "must be a live joint of this world (removed, or one of its bodies removed)"};
+  const JointKind k = bullet_->joint_definition(id).kind;
+  const bool has = turn ? (k == JointKind::Hinge || k == JointKind::Cylindrical)
+                        : (k == JointKind::Slider || k == JointKind::Cylindrical);
+  if (!has)
+    return Error{"", "joint", std::string("a ") + to_string(k) + " joint",
+                 k == JointKind::Fixed ? "a fixed joint has no motor" : std::string("has no ") + (turn ? "turning" : "sliding") + " motor"};
+  if (auto es = BulletWorld::check_motor(motor, turn, "motor"); !es.empty()) return es;
+  bullet_->set_joint_motor(id, turn, motor);
+  return Ok{};
+}
+
+// Scheduled joints whose bodies have both spawned are made now (in entry order).
+void World::make_due_joints() {
+  for (JointEntry& j : joints_) {
+    if (j.id.valid() || j.removed) continue;
+    const Entry& a = entries_[j.a];
+    if (!a.spawned() || (j.b != kWorld && !entries_[j.b].spawned())) continue;
+    RigidJointDef d = j.def;
+    d.a = a.id;
+    d.b = j.b == kWorld ? RigidBodyId{} : entries_[j.b].id;
+    auto id = bullet_->add_joint(d);
+    if (!id) {  // checked before the run (make_world); a body removed since: the joint goes too
+      j.removed = true;
+      continue;
+    }
+    j.id = *id;
+    j.def = d;
+  }
+}
+
+// The motor phases due in the frame starting at t (with the spawn stage's 1 ns tolerance).
+void World::drive_motors(double t) {
+  for (JointEntry& j : joints_) {
+    if (j.phases.empty() || !j.id.valid() || j.removed || !joint_alive(j.id)) continue;
+    for (int dof = 0; dof < 2; ++dof) {
+      const bool turn = dof == 0;
+      int now = -1;
+      for (std::size_t k = 0; k < j.phases.size() && now < 0; ++k)
+        if (j.phases[k].turn == turn && t + 1e-9 >= j.phases[k].from && t + 1e-9 < j.phases[k].until) now = int(k);
+      const bool any = std::any_of(j.phases.begin(), j.phases.end(), [&](const MotorPhase& p) { return p.turn == turn; });
+      if (!any || now == j.applied[dof]) continue;
+      j.applied[dof] = now;
+      bullet_->set_joint_motor(j.id, turn, now >= 0 ? j.phases[std::size_t(now)].motor : (turn ? j.def.turn : j.def.slide).motor);
     }
   }
 }
@@ -578,6 +684,8 @@ Status World::step(double dt, int substeps) {
       it = pending_.erase(it);
     }
   }
+  make_due_joints();
+  drive_motors(t);
   drive_kinematic(t, dt);  // before the lod stage: contact prediction sees the prescribed velocities
   apply_scene_loads(t);  // the body frame's loads turn with the body as it starts the frame
   if (manager_) {
@@ -760,6 +868,28 @@ nlohmann::ordered_json World::report() const {
                   {"max_height_m", hf.origin_y() + hf.max_height()},
                   {"hash", Hasher::to_hex(hf.hash())}};
   r["bodies"] = bodies;
+  if (!joints_.empty()) {
+    ojson js = ojson::array();
+    for (const JointEntry& j : joints_) {
+      ojson o = {{"name", j.name}, {"type", to_string(j.def.kind)}, {"made", j.id.valid() && !j.removed}};
+      if (j.id.valid() && !j.removed && joint_alive(j.id)) {
+        const JointState st = bullet_->joint_state(j.id);
+        const JointKind k = j.def.kind;
+        if (k == JointKind::Hinge || k == JointKind::Cylindrical) {
+          o["angle_rad"] = st.angle;
+          o["angular_rate_rad_s"] = st.angular_rate;
+          o["torque_N_m"] = st.torque;
+        }
+        if (k == JointKind::Slider || k == JointKind::Cylindrical) {
+          o["position_m"] = st.position;
+          o["rate_m_s"] = st.rate;
+          o["force_N"] = st.force;
+        }
+      }
+      js.push_back(o);
+    }
+    r["joints"] = js;
+  }
   {
     std::vector<std::string> w;
     for (const auto& [name, v] : too_fast_)

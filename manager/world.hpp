@@ -146,6 +146,43 @@ class World {
   // m/s and rad/s (world), |v| <= 1000, |w| <= 1e4, held for every following step.
   Status set_kinematic_velocity(RigidBodyId id, const Eigen::Vector3f& linear, const Eigen::Vector3f& angular);
 
+  // ---- joints (docs/api.md "Joints") ----
+  // A joint between live bodies now (BulletWorld::add_joint: its errors name fields relative
+  // to the joint).
+  Result<JointId> add_joint(const RigidJointDef& def);
+  // A joint between the bodies at entries a_entry and b_entry (b_entry = kWorld: a and the
+  // world), made in the spawn stage of the first step at which both have spawned (its anchor
+  // and axis are world ones at that moment). Returns its joint entry index. For scene files,
+  // whose bodies spawn in that stage; the definition's a and b are filled then.
+  static constexpr std::size_t kWorld = std::size_t(-1);
+  std::size_t schedule_joint(const RigidJointDef& def, std::size_t a_entry, std::size_t b_entry);
+  // Motor phases of the joint at entry `joint_entry`: in a frame starting at t with
+  // from <= t < until the phase's motor drives the degree of freedom (turn or slide) it
+  // names; outside every phase the definition's motor does. Applied by step() to Bullet only
+  // when they change.
+  struct MotorPhase {
+    double from = 0;                                        // s
+    double until = std::numeric_limits<double>::infinity();  // s
+    bool turn = true;                                       // the turning (hinge) or sliding degree of freedom
+    JointMotor motor;
+  };
+  void set_motor_phases(std::size_t joint_entry, std::vector<MotorPhase> phases);
+  struct JointEntry {
+    std::string name;
+    JointId id;                 // invalid until made
+    std::size_t a = 0, b = 0;   // body entries (scheduled joints; b = kWorld: the world)
+    RigidJointDef def;          // as given (motors: the ones outside every phase)
+    std::vector<MotorPhase> phases;
+    int applied[2] = {-2, -2};  // phase applied to (turn, slide): -1 the definition's, -2 none yet
+    bool removed = false;
+  };
+  const std::vector<JointEntry>& joint_entries() const { return joints_; }
+  void remove_joint(JointId id);
+  bool joint_alive(JointId id) const;
+  // A new motor from the next step on (BulletWorld::set_joint_motor), checked: errors name
+  // `field`.motor_field.
+  Status set_joint_motor(JointId id, bool turn, const JointMotor& motor);
+
   // ---- the soil's force ----
   struct SoilForce {
     Eigen::Vector3f force = Eigen::Vector3f::Zero();   // N, world: mean contact force of the granules over the last step
@@ -243,6 +280,8 @@ class World {
   void enter_kinematic(std::size_t entry, const RigidBodyDef& def);
   static std::vector<TerrainManager::PathPose> planned_path(const RigidShape& shape, const std::vector<Keyframe>& keys, double t);
   void keep_original_heights();
+  void make_due_joints();
+  void drive_motors(double t);
 
 
   // Declaration order is destruction order reversed: the manager refers to the Bullet world
@@ -261,6 +300,7 @@ class World {
   };
   std::vector<Held> held_;    // in the order bodies were first loaded
   std::vector<std::vector<Load>> loads_;  // by entry index (scene loads)
+  std::vector<JointEntry> joints_;        // added or scheduled, in that order
   struct Kinematic {                      // what drives a kinematic body, by entry index
     std::vector<Keyframe> keys;
     bool placed = false;                  // put at its keyframes' pose when it entered

@@ -28,6 +28,7 @@
 #include "common/hash.hpp"
 #include "common/limits.hpp"
 #include "scene/json_reader.hpp"
+#include "scene/scene_joints.hpp"
 #include "scene/mesh.hpp"
 
 namespace sandpatch {
@@ -764,6 +765,7 @@ Result<SceneDef> parse_scene(const std::string& json_text, const std::string& so
       meshes.push_back(std::move(mesh));
     });
   }
+  if (const json* jj = top.get("joints")) s.joints = parse_joints(c, *jj);
   if (const json* sj = top.get("simulation")) s.simulation = parse_simulation(c, *sj);
   if (const json* cj = top.get("cameras")) {
     for_each_element(c, *cj, "cameras", [&](const json& e, const std::string& p) {
@@ -777,6 +779,7 @@ Result<SceneDef> parse_scene(const std::string& json_text, const std::string& so
   check_unique_names(c, s.materials, "materials");
   check_unique_names(c, s.bodies, "bodies");
   check_unique_names(c, s.cameras, "cameras");
+  check_joints(c, s);
   if (s.terrain.material.empty()) {
     if (!s.materials.empty()) s.terrain.material = s.materials.front().name;
   } else if (!s.find_material(s.terrain.material) && !s.materials.empty()) {

@@ -176,6 +176,35 @@ struct BodyDef {
   double mass_value() const;
 };
 
+// ---- joints (docs/scene-format.md "joints") ----
+
+// A joint between two bodies (or a body and the world), made when both have spawned, with its
+// frame from a world anchor and axis at that moment (BulletWorld's RigidJointDef).
+enum class JointType { Fixed, Hinge, Slider };
+inline constexpr int kMaxJoints = 4096;
+inline constexpr int kMaxMotorPhases = 256;
+// The motor while the time t of a step's start is in [from, until) (outside every phase: none).
+struct MotorPhaseDef {
+  double from = 0.0;                           // s
+  std::optional<double> until;                 // s, > from; none: to the end of the run
+  std::optional<double> target_velocity;       // rad/s or m/s    } exactly one
+  std::optional<double> target_position;       // rad or m (servo) }
+  double max_force = 0.0;                      // N m ("max_torque", hinge) or N ("max_force", slider)
+  double servo_speed = 1.0;                    // rad/s or m/s (target_position)
+};
+struct JointDef {
+  std::string name;                            // unique among joints
+  JointType type = JointType::Hinge;
+  std::string body_a;                          // a body's name
+  std::string body_b;                          // "" = the world
+  Vec3d anchor = {0.0, 0.0, 0.0};              // m, world, when the joint is made
+  Vec3d axis = {0.0, 0.0, 1.0};                // world, when the joint is made (hinge, slider)
+  std::optional<std::array<double, 2>> limits; // rad (hinge, within [-pi, pi]) or m
+  double spring_stiffness = 0.0;               // N m/rad or N/m (0: no spring)
+  double spring_damping = 0.0;                 // N m s/rad or N s/m
+  std::vector<MotorPhaseDef> motor;            // at most kMaxMotorPhases
+};
+
 // ---- simulation ----
 
 enum class Backend { Cpu, Gl };
@@ -312,6 +341,7 @@ struct SceneDef {
   TerrainDef terrain;
   std::vector<MaterialDef> materials;
   std::vector<BodyDef> bodies;
+  std::vector<JointDef> joints;
   SceneSimulationDef simulation;
   std::vector<CameraDef> cameras;
   OutputsDef outputs;
@@ -361,5 +391,6 @@ const char* to_string(Backend b);
 const char* to_string(HeightfieldFormat f);
 const char* to_string(LoadFrame f);
 const char* to_string(MotionKind m);
+const char* to_string(JointType t);
 
 }  // namespace sandpatch

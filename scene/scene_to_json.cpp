@@ -116,6 +116,35 @@ nlohmann::json scene_to_json(const SceneDef& s) {
     j["bodies"].push_back(bj);
   }
 
+  // Only when there are joints, so scenes without them keep their canonical JSON and hash.
+  if (!s.joints.empty()) {
+    j["joints"] = json::array();
+    for (const JointDef& d : s.joints) {
+      json jj = {{"name", d.name}, {"type", to_string(d.type)}, {"body_a", d.body_a}};
+      if (!d.body_b.empty()) jj["body_b"] = d.body_b;
+      jj["anchor"] = d.anchor;
+      if (d.type != JointType::Fixed) {
+        jj["axis"] = d.axis;
+        if (d.limits) jj["limits"] = *d.limits;
+        jj["spring"] = {{"stiffness", d.spring_stiffness}, {"damping", d.spring_damping}};
+        json phases = json::array();
+        for (const MotorPhaseDef& m : d.motor) {
+          json pj = {{"from", m.from}};
+          if (m.until) pj["until"] = *m.until;
+          if (m.target_velocity) pj["target_velocity"] = *m.target_velocity;
+          if (m.target_position) {
+            pj["target_position"] = *m.target_position;
+            pj["servo_speed"] = m.servo_speed;
+          }
+          pj[d.type == JointType::Hinge ? "max_torque" : "max_force"] = m.max_force;
+          phases.push_back(pj);
+        }
+        if (!phases.empty()) jj["motor"] = phases;
+      }
+      j["joints"].push_back(jj);
+    }
+  }
+
   const auto& sim = s.simulation;
   j["simulation"] = {
       {"dt", sim.dt},

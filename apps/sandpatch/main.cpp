@@ -10,6 +10,7 @@
 //   sandpatch bench render [--terrain N]... [--frames F] [--width W] [--height H] [--json]
 //   sandpatch bench lod [--sizes N,N,...] [--seconds S] [--threads T] [--json]
 //   sandpatch bench collapse [--aspects A,A,...] [--friction MU,...] [--length N] [--width N] [--seed S] [--unloading L] [--restitution E] [--threads T] [--json]
+//   sandpatch bench terra [--scene FILE] [--plates B,B] [--sigmas PA,...] [--slips S,...] [--bed-depth M] [--plates-only] [--out DIR] [--threads T] [--json]
 //   sandpatch bench tradeoff [--quick | --full] [--threads T] [--out DIR] [--no-gl] [--no-plot] [--json]
 //   sandpatch stress SCENE [--sims N] [--frames F] [--interval S] [--threads T] [--out DIR] [--no-plot] [--json]
 // Exit codes: 0 ok, 1 runtime failure (with the stage that failed), 2 bad input.
@@ -39,6 +40,7 @@
 #include "bench/bench.hpp"
 #include "bench/bench_tradeoff.hpp"
 #include "bench/collapse.hpp"
+#include "bench/terra.hpp"
 #include "common/knobs.hpp"
 #include "gl/context.hpp"
 #include "manager/run.hpp"
@@ -281,6 +283,7 @@ struct BenchCli {
   BenchTradeoffArgs tradeoff;
   bool trade_quick = false, trade_full = false, trade_no_gl = false, trade_no_plot = false;
   BenchCollapseArgs collapse;
+  terra::BenchTerraArgs terra;
 };
 
 void add_bench(CLI::App& app, BenchCli& a) {
@@ -354,6 +357,22 @@ void add_bench(CLI::App& app, BenchCli& a) {
       ->check(CLI::Range(0.0, 1.0));
   bcolc->add_option("--threads", bcol.threads, "Worker threads per run (default 1; 0 = all)");
   bcolc->add_flag("--json", bcol.json, "Print one JSON object on the last line");
+
+  terra::BenchTerraArgs& bter = a.terra;
+  bter.scene = std::string(SANDPATCH_SOURCE_DIR) + "/scenes/wheel_on_sand.json";
+  auto* bterc = bench->add_subcommand("terra", "Terramechanics on the wheel rig's bed: plate sinkage (Bekker), grousered "
+                                               "shear plate (Janosi-Hanamoto), a wheel at set slips against the rigid-wheel "
+                                               "model (docs/validation.md)");
+  bterc->add_option("--scene", bter.scene, "The bed and wheel (default scenes/wheel_on_sand.json)");
+  bterc->add_option("--plates", bter.plates, "Square plate widths, m, comma-separated (default 0.3,0.5)")->delimiter(',');
+  bterc->add_option("--sigmas", bter.sigmas, "Shear plate normal stresses, Pa, comma-separated (default 2000,4000,8000)")
+      ->delimiter(',');
+  bterc->add_option("--slips", bter.slips, "Wheel slips, comma-separated (default 0,0.15,0.3,0.45,0.6)")->delimiter(',');
+  bterc->add_option("--bed-depth", bter.bed_depth, "Bed (patch) depth, m, instead of the scene's (default: the scene's)");
+  bterc->add_flag("--plates-only", bter.plates_only, "Stop after the plates and the Bekker fit");
+  bterc->add_option("--out", bter.out, "Directory for the series (CSV) and terra.json (default: none)");
+  bterc->add_option("--threads", bter.threads, "Worker threads (default 1; 0 = all)");
+  bterc->add_flag("--json", bter.json, "Print one JSON object on the last line");
 }
 
 // "512,1024,..." into sizes; false (with the message on stderr) when an item is not an integer.
@@ -398,6 +417,7 @@ int cmd_bench(BenchCli& a) {
     return run_bench_tradeoff(btrade);
   }
   if (bench->got_subcommand("collapse")) return run_bench_collapse(a.collapse);
+  if (bench->got_subcommand("terra")) return terra::run_bench_terra(a.terra);
   if (bench->got_subcommand("lod")) {
     if (!a.lod_sizes.empty() && !parse_lod_sizes(a.lod_sizes, a.lod.sizes)) return code(ExitCode::BadInput);
     return run_bench_lod(a.lod);

@@ -281,6 +281,68 @@ struct Keyframe {
 };
 
 // ---------------------------------------------------------------------------------------
+// Joints (docs/api.md "Joints")
+//
+// A joint connects two bodies, or a body and the world. Its frame is given once, at creation,
+// as a world anchor point and a world axis at the bodies' poses then; from then on it is fixed
+// in each body. Its position (the angle about the axis, rad, or the travel along it, m) is 0 at
+// creation and is that of body_b relative to body_a (with no body_b, of body_a relative to the
+// world), right-handed about the axis.
+
+enum class JointKind {
+  Fixed,   // no relative motion
+  Hinge,   // turns about the axis
+  Slider,  // slides along the axis, no turning
+};
+
+enum class MotorMode {
+  Off,       // no motor
+  Velocity,  // drives the joint's rate towards `target` (rad/s, m/s)
+  Position,  // a servo: moves to the position `target` (rad, m) at up to servo_speed, and holds it
+};
+
+struct JointMotor {
+  MotorMode mode = MotorMode::Off;
+  double target = 0;           // rad/s or m/s (Velocity), |target| <= 1e4; rad or m (Position; a hinge's in [-pi, pi])
+  double max_force = 0;        // the most the motor applies: N m for a hinge, N for a slider, [0, 1e9]
+  double servo_speed = 1;      // rad/s or m/s (Position), (0, 1e4]
+};
+
+// A spring towards position 0 (the pose at creation) with a damper: a suspension.
+struct JointSpring {
+  double stiffness = 0;        // N/m (slider) or N m/rad (hinge), [0, 1e12]; 0 = none
+  double damping = 0;          // N s/m or N m s/rad, [0, 1e12]
+};
+
+struct JointDef {
+  std::string name;            // for messages and the report
+  JointKind kind = JointKind::Hinge;
+  BodyHandle body_a;           // a live body
+  BodyHandle body_b;           // another live body, or invalid (the default): body_a to the world
+                               //   at least one of the two must be dynamic
+  Vec3 anchor{};               // m, world, at creation
+  Vec3 axis = {0.0, 0.0, 1.0}; // world, at creation (hinge, slider), non-zero; normalised
+  std::optional<std::array<double, 2>> limits;  // [lower, upper], rad (hinge, within [-pi, pi]) or m; lower <= upper
+  JointMotor motor;            // hinge, slider
+  JointSpring spring;          // hinge, slider
+};
+
+struct JointHandle {
+  int index = -1;
+  int generation = 0;
+  bool valid() const { return index >= 0; }
+  friend bool operator==(const JointHandle&, const JointHandle&) = default;
+};
+
+// A joint after the last step.
+struct JointState {
+  double position = 0;         // rad (hinge, in [-pi, pi]) or m (slider), 0 at creation
+  double rate = 0;             // rad/s or m/s: of body_b relative to body_a
+  double force = 0;            // N m (hinge) or N (slider): what the motor, the spring and the limits
+                               //   applied to body_b about / along the axis, mean over the last step
+};
+
+// ---------------------------------------------------------------------------------------
 // Events, particles, heightfield data for renderers
 
 enum class EventKind {
@@ -418,6 +480,20 @@ class SANDPATCH_API Terrain {
   // Everything the ground did to the body in the last step: the granules' force and torque,
   // the heightfield's contact force, and the sinkage below the original surface (BodyContact).
   Result<BodyContact> body_contact(BodyHandle h) const;
+
+  // ---- joints (docs/api.md "Joints") ----
+  // Refused, naming the field ("JointDef.axis") and its value: a stale body handle, body_b the
+  // same as body_a, no dynamic body on either side, a non-finite anchor, a zero or non-finite
+  // axis, limits with lower > upper (a hinge's outside [-pi, pi]), non-finite targets, a
+  // negative max_force, a negative spring. Bullet stops colliding the two bodies with each other.
+  Result<JointHandle> add_joint(const JointDef& def);
+  // A joint also goes when one of its bodies is removed.
+  Status remove_joint(JointHandle h);
+  bool alive(JointHandle h) const;
+  // The joint's motor from the next step on (call it every step to drive a machine); refused
+  // for a fixed joint and for the values add_joint refuses ("set_joint_motor.motor.target").
+  Status set_joint_motor(JointHandle h, const JointMotor& motor);
+  Result<JointState> joint_state(JointHandle h) const;
 
   // Low-level entry of sandpatch::api::bullet::adopt (include/sandpatch/bullet.hpp): use that.
   // `bt_rigid_body` is a btRigidBody*; `abi` describes the Bullet the caller was compiled
