@@ -14,6 +14,7 @@
 #include "manager/world.hpp"
 #include "render/render.hpp"
 #include "scene/scene.hpp"
+#include "scene/vehicle.hpp"
 
 namespace sandpatch {
 
@@ -40,6 +41,10 @@ std::vector<World::MotorPhase> to_motor_phases(const JointDef& joint);
 
 // The library's joint motor as Bullet's.
 JointMotor core_motor(const api::JointMotor& motor);
+// A vehicle's wheel (a primitive api::BodyDef from expand_vehicle) as Bullet's definition, and
+// its wheel joint with the bodies left unset (scene/vehicle.hpp).
+RigidBodyDef vehicle_body_def(const api::BodyDef& part);
+RigidJointDef vehicle_joint_def(const VehicleJoint& joint);
 
 // Camera pose at simulated time t: fixed, or linear between path keyframes (held outside).
 render::CameraView camera_at(const CameraDef& camera, double t);
