@@ -337,6 +337,77 @@ Status Terrain::set_joint_motor(JointHandle h, const JointMotor& m) {
   return Ok{};
 }
 
+// ---- vehicles ----
+
+Result<VehicleHandles> Terrain::add_vehicle(const VehicleDef& def) {
+  Impl& I = *impl_;
+  if (auto es = core::check_vehicle(def, "VehicleDef."); !es.empty()) return convert(es, "");
+  const core::VehicleParts parts = core::expand_vehicle(def);
+  VehicleHandles out;
+  out.def = def;
+  std::vector<BodyHandle> bodies;
+  auto undo = [&] {
+    for (BodyHandle h : bodies) I.world->discard_body(I.id(h));  // no step has seen them
+  };
+  for (const BodyDef& b : parts.bodies) {
+    auto h = add_body(b);  // the same checks as any body's: the bedrock, the surface
+    if (!h) {
+      undo();
+      std::vector<Error> es = h.errors();
+      for (Error& e : es)
+        if (e.field.starts_with("BodyDef.")) {
+          e.detail += (e.detail.empty() ? "" : "; ") + std::string("part '") + b.name + "' at " + vec_str(b.position);
+          e.field = e.field == "BodyDef.position" ? "VehicleDef.position" : "VehicleDef";
+          e.value = vec_str(def.position);
+        }
+      return es;
+    }
+    bodies.push_back(*h);
+  }
+  std::vector<core::JointId> joints;
+  for (const core::VehicleJoint& j : parts.joints) {
+    core::RigidJointDef d = core::vehicle_joint_def(j);
+    d.a = I.id(bodies[std::size_t(j.a)]);
+    d.b = I.id(bodies[std::size_t(j.b)]);
+    auto id = I.world->add_joint(d);
+    if (!id) {  // checked with the vehicle: not expected
+      for (core::JointId x : joints) I.world->remove_joint(x);
+      undo();
+      return convert(id.errors(), "VehicleDef.");
+    }
+    if (j.max_steer > 0) I.world->bullet().set_joint_steering(*id, float(def.steering_angle), float(def.steering_speed));
+    joints.push_back(*id);
+  }
+  out.chassis = bodies[0];
+  for (std::size_t k = 0; k < 4; ++k) {
+    out.wheels[k] = bodies[1 + k];
+    out.axles[k] = {joints[k].index, joints[k].generation};
+  }
+  return out;
+}
+
+Status Terrain::drive_vehicle(const VehicleHandles& v, double wheel_speed, double max_torque, double steering_angle) {
+  Impl& I = *impl_;
+  Checker c{"drive_vehicle.", "", {}};
+  c.closed("wheel_speed", wheel_speed, -1e4, 1e4, "rad/s");
+  c.closed("max_torque", max_torque, 0, 1e9, "N m");
+  const double lim = v.def.max_steering_angle;
+  c.closed("steering_angle", steering_angle, -lim, lim, "rad (±VehicleDef.max_steering_angle)");
+  for (const JointHandle& a : v.axles)
+    if (!I.world->joint_alive({a.index, a.generation})) {
+      c.add("vehicle", "'" + v.def.name + "'", "must be a live vehicle of this terrain (a part or joint was removed)");
+      break;
+    }
+  if (!c.errs.empty()) return c.errs;
+  const core::VehicleParts parts = core::expand_vehicle(v.def);  // which wheels are driven and steered
+  for (std::size_t k = 0; k < 4; ++k) {
+    const core::JointId id{v.axles[k].index, v.axles[k].generation};
+    if (parts.driven[k]) I.world->bullet().set_joint_motor(id, true, core::core_motor(core::drive_motor(wheel_speed, max_torque)));
+    if (parts.steered[k]) I.world->bullet().set_joint_steering(id, float(steering_angle), float(v.def.steering_speed));
+  }
+  return Ok{};
+}
+
 Result<JointState> Terrain::joint_state(JointHandle h) const {
   if (Status s = check_joint_handle(*impl_->world, h); !s) return s.errors();
   const core::JointId id{h.index, h.generation};

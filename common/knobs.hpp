@@ -81,7 +81,7 @@ struct Field {
   const char* api;    // "" = scene files only
   const char* note;
 };
-inline constexpr std::array<Field, 35> kOtherFields = {{
+inline constexpr std::array<Field, 36> kOtherFields = {{
     {"terrain.source", "TerrainDef.file + file_type, TerrainDef.procedural (+ samples_x/z, base_height, slope_x/z, amplitude, wavelength, noise_seed, octaves)", "a heightmap file or a generator; the scene's source.type is file_type (the library may leave it to the extension)"},
     {"", "TerrainDef.heights", "an array from the game; scene files name a heightmap file instead"},
     {"terrain.spacing", "TerrainDef.spacing", "with an esri_ascii source, a spacing given overrides the file's cellsize (TerrainDef.spacing_overrides_file)"},
@@ -105,6 +105,7 @@ inline constexpr std::array<Field, 35> kOtherFields = {{
     {"bodies[].angular_velocity", "BodyDef.angular_velocity", ""},
     {"bodies[].spawn_time", "", "a game adds a body when it is due (Terrain::add_body)"},
     {"bodies[].loads", "Terrain::apply_force, apply_torque, apply_impulse", "a game calls these before each step; a scene lists forces and torques with the times they act"},
+    {"vehicles", "VehicleDef, Terrain::add_vehicle, drive_vehicle", "the same fields, one expansion (scene/vehicle.hpp); a scene gives throttle and steering phases over time, a game calls drive_vehicle before each step"},
     {"joints", "JointDef, Terrain::add_joint, set_joint_motor", "bodies by name in a scene, by handle in the library; a scene's motor is a list of phases over time (joints[].motor), a game calls set_joint_motor before each step"},
     {"simulation.dt", "Terrain::step(dt, substeps)", "the step's arguments"},
     {"simulation.substeps", "Terrain::step(dt, substeps)", "the step's arguments"},

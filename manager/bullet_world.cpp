@@ -93,6 +93,9 @@ struct BulletWorld::Impl {
     std::unique_ptr<btJointFeedback> fb;
     double turn_impulse = 0, slide_impulse = 0;  // N m s, N s: on body b about / along the axis, this frame so far
     float torque = 0, force = 0;                 // N m, N: the last frame's means
+    // Wheel joints: the frame in body a at zero steering, the steering now, its target and speed.
+    btTransform frame_a0;
+    float steer = 0, steer_target = 0, steer_speed = 0;  // rad, rad, rad/s
   };
   std::vector<Joint> joints;
   std::vector<int> free_joints;
@@ -109,11 +112,27 @@ struct BulletWorld::Impl {
     for (Joint& j : joints) {
       if (!j.c) continue;
       j.c->calculateTransforms();
-      const btVector3 axis = j.c->getCalculatedTransformA().getBasis().getColumn(0);
+      const btMatrix3x3& basis = j.c->getCalculatedTransformA().getBasis();
+      const btVector3 axis = basis.getColumn(0);
+      const btVector3 slide = j.def.kind == JointKind::Wheel ? basis.getColumn(1) : axis;
       const btVector3 r = j.c->getCalculatedTransformB().getOrigin() - moving(j)->getCenterOfMassPosition();
       const btVector3 t = j.fb->m_appliedTorqueBodyB - r.cross(j.fb->m_appliedForceBodyB);
       j.turn_impulse += double(t.dot(axis)) * sub;
-      j.slide_impulse += double(j.fb->m_appliedForceBodyB.dot(axis)) * sub;
+      j.slide_impulse += double(j.fb->m_appliedForceBodyB.dot(slide)) * sub;
+    }
+  }
+
+  // Before a Bullet substep of `sub` seconds: each steered wheel's axle a step towards its target.
+  void steer_wheels(float sub) {
+    for (Joint& j : joints) {
+      if (!j.c || j.def.kind != JointKind::Wheel || j.steer == j.steer_target) continue;
+      const float most = j.steer_speed * sub;
+      j.steer += std::clamp(j.steer_target - j.steer, -most, most);
+      btTransform fa = j.frame_a0;
+      fa.setBasis(fa.getBasis() * btMatrix3x3(btQuaternion(btVector3(0, 1, 0), j.steer)));  // about the frame's y: `up`
+      j.c->setFrames(fa, j.c->getFrameOffsetB());
+      j.c->getRigidBodyA().activate(true);
+      j.c->getRigidBodyB().activate(true);
     }
   }
 
@@ -594,6 +613,7 @@ void BulletWorld::step_frame(float dt, int substeps) {
       b.rb->getMotionState()->setWorldTransform(tr);
     }
     m.ensure_edges(sub);
+    m.steer_wheels(sub);
     m.world->stepSimulation(sub, 0, sub);
     m.gather_terrain_impulses();
     m.gather_joint_impulses(sub);
@@ -786,6 +806,7 @@ const char* to_string(JointKind k) {
     case JointKind::Hinge: return "hinge";
     case JointKind::Slider: return "slider";
     case JointKind::Cylindrical: return "cylindrical";
+    case JointKind::Wheel: return "wheel";
   }
   return "?";
 }
@@ -799,8 +820,8 @@ constexpr double kMaxJointSpeed = 1e4;   // rad/s or m/s: targets of velocity mo
 
 std::string num(double v) { return format_number(v); }
 
-bool turns(JointKind k) { return k == JointKind::Hinge || k == JointKind::Cylindrical; }
-bool slides(JointKind k) { return k == JointKind::Slider || k == JointKind::Cylindrical; }
+bool turns(JointKind k) { return k == JointKind::Hinge || k == JointKind::Cylindrical || k == JointKind::Wheel; }
+bool slides(JointKind k) { return k == JointKind::Slider || k == JointKind::Cylindrical || k == JointKind::Wheel; }
 
 // A frame whose x is `axis` (unit), y and z any perpendicular pair.
 btMatrix3x3 basis_along(const btVector3& axis) {
@@ -858,9 +879,18 @@ std::vector<Error> BulletWorld::check_joint(const RigidJointDef& d) const {
   const std::string axis = "[" + num(d.axis.x()) + ", " + num(d.axis.y()) + ", " + num(d.axis.z()) + "]";
   if (!d.axis.allFinite() || !(d.axis.cast<double>().norm() > 1e-6))
     es.push_back({"", "axis", axis, "must be a finite, non-zero direction (world)"});
-  if (d.kind != JointKind::Fixed && d.kind != JointKind::Hinge && d.kind != JointKind::Slider && d.kind != JointKind::Cylindrical)
+  if (d.kind != JointKind::Fixed && d.kind != JointKind::Hinge && d.kind != JointKind::Slider &&
+      d.kind != JointKind::Cylindrical && d.kind != JointKind::Wheel)
     es.push_back({"", "type", std::to_string(int(d.kind)), "must be fixed, hinge or slider"});
-  const bool two = d.kind == JointKind::Cylindrical;
+  if (d.kind == JointKind::Wheel) {
+    const Eigen::Vector3d u = d.up.cast<double>(), x = d.axis.cast<double>();
+    if (!d.up.allFinite() || !(u.norm() > 1e-6) || (x.norm() > 1e-6 && std::abs(u.normalized().dot(x.normalized())) > 0.99))
+      es.push_back({"", "up", "[" + num(d.up.x()) + ", " + num(d.up.y()) + ", " + num(d.up.z()) + "]",
+                    "must be a finite direction across the axis (world)"});
+    if (!std::isfinite(d.max_steer) || d.max_steer < 0 || d.max_steer > 1.2f)
+      es.push_back({"", "max_steer", num(d.max_steer), "must be in [0, 1.2] rad"});
+  }
+  const bool two = d.kind == JointKind::Cylindrical || d.kind == JointKind::Wheel;
   auto dof = [&](const JointDof& f, bool turn) {
     const std::string pre = two ? (turn ? "turn." : "slide.") : "";
     const char* unit = turn ? "rad" : "m";
@@ -933,6 +963,14 @@ Result<JointId> BulletWorld::add_joint(const RigidJointDef& def) {
   // The joint's frame in the world (Bullet-local), then in each body.
   const Eigen::Vector3d local = def.anchor - m.origin;
   btTransform frame(basis_along(bt(j.def.axis)), btVector3(float(local.x()), float(local.y()), float(local.z())));
+  if (def.kind == JointKind::Wheel) {
+    // x the axle, y the suspension's (and the steering's) axis `up` made square to it.
+    const btVector3 x = bt(j.def.axis);
+    btVector3 y = bt(def.up) - x * x.dot(bt(def.up));
+    y.normalize();
+    const btVector3 z = x.cross(y);
+    frame.setBasis(btMatrix3x3(x.x(), y.x(), z.x(), x.y(), y.y(), z.y(), x.z(), y.z(), z.z()));
+  }
   btRigidBody& a = *m.bodies[def.a.index].rb;
   if (def.b.valid()) {
     btRigidBody& b = *m.bodies[def.b.index].rb;
@@ -948,13 +986,14 @@ Result<JointId> BulletWorld::add_joint(const RigidJointDef& def) {
   c.setLinearUpperLimit(btVector3(0, 0, 0));
   c.setAngularLowerLimit(btVector3(0, 0, 0));
   c.setAngularUpperLimit(btVector3(0, 0, 0));
+  j.frame_a0 = c.getFrameOffsetA();
   auto open = [&](int index, const JointDof& f) {
     if (!f.limited) c.setLimit(index, 1.0f, -1.0f);
     else if (index >= 3) c.setLimit(index, kTurnSign * f.upper, kTurnSign * f.lower);  // kTurnSign = -1
     else c.setLimit(index, f.lower, f.upper);
     apply_dof(c, index, f);
   };
-  if (slides(def.kind)) open(0, j.def.slide);
+  if (slides(def.kind)) open(def.kind == JointKind::Wheel ? 1 : 0, j.def.slide);  // a wheel slides along y: `up`
   if (turns(def.kind)) open(3, j.def.turn);
   // More solver iterations for joints than Bullet's 10 for contacts: a chain of bodies of very
   // different masses and inertias (a 1 kg bob 1 m from its pivot, a 1500 kg chassis on 30 kg
@@ -1000,9 +1039,22 @@ void BulletWorld::set_joint_motor(JointId id, bool turn, const JointMotor& motor
   assert(joint_alive(id));
   auto& j = impl_->joints[std::size_t(id.index)];
   (turn ? j.def.turn : j.def.slide).motor = motor;
-  apply_motor(*j.c, turn ? 3 : 0, motor);
+  apply_motor(*j.c, turn ? 3 : (j.def.kind == JointKind::Wheel ? 1 : 0), motor);
   j.c->getRigidBodyA().activate(true);
   j.c->getRigidBodyB().activate(true);
+}
+
+void BulletWorld::set_joint_steering(JointId id, float angle, float speed) {
+  assert(joint_alive(id));
+  auto& j = impl_->joints[std::size_t(id.index)];
+  if (j.def.kind != JointKind::Wheel) return;
+  j.steer_target = std::clamp(angle, -j.def.max_steer, j.def.max_steer);
+  j.steer_speed = speed;
+}
+
+float BulletWorld::joint_steering(JointId id) const {
+  assert(joint_alive(id));
+  return impl_->joints[std::size_t(id.index)].steer;
 }
 
 const RigidJointDef& BulletWorld::joint_definition(JointId id) const {
@@ -1025,8 +1077,9 @@ JointState BulletWorld::joint_state(JointId id) const {
   JointState s;
   s.angle = kTurnSign * c.getAngle(0);
   s.angular_rate = (b.getAngularVelocity() - a.getAngularVelocity()).dot(axis);
-  s.position = c.getRelativePivotPosition(0);
-  s.rate = (vb - va).dot(axis);
+  const bool wheel = j.def.kind == JointKind::Wheel;
+  s.position = c.getRelativePivotPosition(wheel ? 1 : 0);
+  s.rate = (vb - va).dot(wheel ? c.getCalculatedTransformA().getBasis().getColumn(1) : axis);
   s.torque = j.torque;
   s.force = j.force;
   if (!turns(j.def.kind)) s.angle = s.angular_rate = s.torque = 0;

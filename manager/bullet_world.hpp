@@ -84,9 +84,11 @@ enum class JointKind {
   Fixed,        // no relative motion
   Hinge,        // turns about the axis (rad)
   Slider,       // slides along the axis (m), no turning
-  Cylindrical,  // turns about and slides along the axis (a vehicle's steering knuckle with its suspension)
+  Cylindrical,  // turns about and slides along the axis
+  Wheel,        // a vehicle's wheel on its chassis: turns about the axis (the axle), slides along
+                // `up` (the suspension), and the axle is steered about `up` (set_joint_steering)
 };
-const char* to_string(JointKind k);  // "fixed", "hinge", "slider", "cylindrical"
+const char* to_string(JointKind k);  // "fixed", "hinge", "slider", "cylindrical", "wheel"
 
 enum class MotorMode {
   Off,       // no motor
@@ -113,8 +115,10 @@ struct RigidJointDef {
   RigidBodyId a, b;            // b invalid: a is jointed to the world
   Eigen::Vector3d anchor = Eigen::Vector3d::Zero();  // m, world, at creation
   Eigen::Vector3f axis = Eigen::Vector3f::UnitZ();   // world, at creation (normalised here)
-  JointDof turn;               // hinge, cylindrical
-  JointDof slide;              // slider, cylindrical
+  JointDof turn;               // hinge, cylindrical, wheel
+  JointDof slide;              // slider, cylindrical; wheel: along `up`
+  Eigen::Vector3f up = Eigen::Vector3f::UnitY();  // wheel: the suspension's and the steering's axis (world, across `axis`)
+  float max_steer = 0;         // wheel: rad, the steering's limit (0: not steered), [0, 1.2]
 };
 struct JointId {
   int index = -1;
@@ -237,6 +241,11 @@ class BulletWorld {
   // next step on; wakes both bodies. Checked by the caller (check_motor).
   void set_joint_motor(JointId id, bool turn, const JointMotor& motor);
   static std::vector<Error> check_motor(const JointMotor& m, bool turn, const std::string& field);
+  // A wheel joint's steering: its axle turns about `up` towards `angle` (rad, within
+  // ±max_steer) at up to `speed` (rad/s), a step of the joint's frame in body a at every
+  // Bullet substep (kinematic: no torque limit).
+  void set_joint_steering(JointId id, float angle, float speed);
+  float joint_steering(JointId id) const;  // rad, now
   JointState joint_state(JointId id) const;
   const RigidJointDef& joint_definition(JointId id) const;
   // Live joints in slot order.

@@ -106,6 +106,23 @@ JointMotor core_motor(const api::JointMotor& m) {
   return c;
 }
 
+RigidJointDef vehicle_joint_def(const VehicleJoint& j) {
+  RigidJointDef d;
+  d.name = j.name;
+  d.kind = JointKind::Wheel;
+  d.anchor = {j.anchor[0], j.anchor[1], j.anchor[2]};
+  d.axis = {float(j.axis[0]), float(j.axis[1]), float(j.axis[2])};
+  d.up = {float(j.up[0]), float(j.up[1]), float(j.up[2])};
+  d.max_steer = float(j.max_steer);
+  d.turn.motor = core_motor(j.drive);
+  d.slide.limited = j.slide_limited;
+  d.slide.lower = float(j.slide_lower);
+  d.slide.upper = float(j.slide_upper);
+  d.slide.stiffness = float(j.stiffness);
+  d.slide.damping = float(j.damping);
+  return d;
+}
+
 api::BodyDef body_def(const SceneDef& scene, std::size_t index) {
   const BodyDef& b = scene.bodies[index];
   api::BodyDef d;
@@ -282,16 +299,76 @@ Result<std::unique_ptr<World>> make_world(const SceneDef& scene, int threads, co
     if (!def) return def.errors();
     body_defs.push_back(std::move(*def));
   }
+  // The vehicles' parts follow the bodies (scene/vehicle.hpp: one expansion for both doors);
+  // their joints precede the scene's joints. Each part's centre must start above the terrain.
   struct SceneJoint {
     RigidJointDef def;
     std::size_t a, b;                    // indices into body_defs (b = World::kWorld: the world)
     std::vector<World::MotorPhase> phases;
-    std::string field;                   // for errors: "joints[2]"
+    std::string field;                   // for errors: "vehicles[0]" or "joints[2]"
+    JointMotor steer_default;            // a steered wheel: its steering outside every phase
   };
   std::vector<SceneJoint> joint_defs;
   std::vector<std::string> body_fields;  // for errors, by body_defs index
   for (std::size_t i = 0; i < scene.bodies.size(); ++i) body_fields.push_back("bodies[" + std::to_string(i) + "]");
-  // Bodies by name (the parser checked that every joint's names exist).
+  for (std::size_t i = 0; i < scene.vehicles.size(); ++i) {
+    const VehicleSceneDef& vs = scene.vehicles[i];
+    const std::string field = "vehicles[" + std::to_string(i) + "]";
+    const VehicleParts parts = expand_vehicle(vs.def);
+    const std::size_t base = body_defs.size();
+    for (const api::BodyDef& b : parts.bodies) {
+      const double x = b.position[0] - hf.origin_x(), z = b.position[2] - hf.origin_z();
+      if (x >= 0 && z >= 0 && x <= w && z <= d) {
+        const double surface = hf.origin_y() + hf.sample(float(x), float(z));
+        if (b.position[1] < surface)
+          return Error{scene.source_path, field + ".position",
+                       "[" + format_number(vs.def.position[0]) + ", " + format_number(vs.def.position[1]) + ", " +
+                           format_number(vs.def.position[2]) + "]",
+                       "the vehicle's part '" + b.name + "' starts inside the terrain: its centre is below the surface (world y = " +
+                           format_number(surface) + " m there); raise the vehicle"};
+      }
+      // The parts go the way every body does (manager/definitions.hpp).
+      auto part_def = rigid_body_def(b);
+      if (!part_def) {
+        std::vector<Error> es = part_def.errors();
+        for (Error& e : es) {
+          if (e.field.starts_with("BodyDef.")) e.field = field + " (" + b.name + ")." + e.field.substr(8);
+          if (e.file.empty()) e.file = scene.source_path;
+        }
+        return es;
+      }
+      body_defs.push_back(std::move(*part_def));
+      body_fields.push_back(field);
+    }
+    for (std::size_t k = 0; k < parts.joints.size(); ++k) {
+      const VehicleJoint& j = parts.joints[k];
+      SceneJoint sj{vehicle_joint_def(j), base + std::size_t(j.a), base + std::size_t(j.b), {}, field, {}};
+      if (parts.steered[k]) {
+        sj.steer_default.target = float(vs.def.steering_angle);
+        sj.steer_default.servo_speed = float(vs.def.steering_speed);
+        for (const SteeringPhaseDef& p : vs.steering) {
+          World::MotorPhase m;
+          m.from = p.from;
+          if (p.until) m.until = *p.until;
+          m.steer = true;
+          m.motor.target = float(p.angle);
+          m.motor.servo_speed = float(vs.def.steering_speed);
+          sj.phases.push_back(m);
+        }
+      }
+      if (parts.driven[k])
+        for (const ThrottlePhaseDef& p : vs.throttle) {
+          World::MotorPhase m;
+          m.from = p.from;
+          if (p.until) m.until = *p.until;
+          m.turn = true;
+          m.motor = core_motor(drive_motor(p.wheel_speed, p.max_torque));
+          sj.phases.push_back(m);
+        }
+      joint_defs.push_back(std::move(sj));
+    }
+  }
+  // Bodies by name, the vehicles' parts too (the parser checked that every joint's names exist).
   auto body_index = [&](const std::string& name) {
     std::size_t k = 0;
     while (k < body_defs.size() && body_defs[k].name != name) ++k;
@@ -300,7 +377,7 @@ Result<std::unique_ptr<World>> make_world(const SceneDef& scene, int threads, co
   for (std::size_t i = 0; i < scene.joints.size(); ++i) {
     const JointDef& j = scene.joints[i];
     joint_defs.push_back({to_rigid_joint(j), body_index(j.body_a), j.body_b.empty() ? World::kWorld : body_index(j.body_b),
-                          to_motor_phases(j), "joints[" + std::to_string(i) + "]"});
+                          to_motor_phases(j), "joints[" + std::to_string(i) + "]", {}});
   }
   // Bodies are added at their spawn time: Bullet's own checks run now, on a scratch world, so
   // that a body it would refuse is bad input before frame 0 and not a failure mid-run.
@@ -322,7 +399,8 @@ Result<std::unique_ptr<World>> make_world(const SceneDef& scene, int threads, co
       ids.push_back(*id);
     }
     // The joints too, between the bodies at their starting poses: what Bullet would refuse
-    // when the run makes them is refused now, naming joints[i].field.
+    // when the run makes them is refused now, naming joints[i].field (vehicles[i]: the
+    // joint's name says which).
     part = "joints";
     for (const SceneJoint& sj : joint_defs) {
       RigidJointDef d = sj.def;
@@ -334,6 +412,7 @@ Result<std::unique_ptr<World>> make_world(const SceneDef& scene, int threads, co
       if (!es.empty()) {
         for (Error& e : es) {
           e.file = scene.source_path;
+          if (sj.field.starts_with("vehicles")) e.detail += (e.detail.empty() ? "" : "; ") + std::string("joint '") + d.name + "'";
           e.field = sj.field + "." + e.field;
         }
         return es;
@@ -381,9 +460,11 @@ Result<std::unique_ptr<World>> make_world(const SceneDef& scene, int threads, co
       }
     }
   }
+  // The vehicles' parts enter at the start, after the scene's bodies (entry = body_defs index).
+  for (std::size_t i = scene.bodies.size(); i < body_defs.size(); ++i) (*world)->schedule_body(body_defs[i], 0.0);
   for (const SceneJoint& sj : joint_defs) {
     const std::size_t e = (*world)->schedule_joint(sj.def, sj.a, sj.b);
-    if (!sj.phases.empty()) (*world)->set_motor_phases(e, sj.phases);
+    if (!sj.phases.empty() || sj.steer_default.servo_speed > 0) (*world)->set_motor_phases(e, sj.phases, sj.steer_default);
   }
   return world;
 }

@@ -19,6 +19,7 @@
 #include "manager/world.hpp"
 #include "render/render.hpp"
 #include "scene/scene.hpp"
+#include "scene/vehicle.hpp"
 
 namespace sandpatch {
 
@@ -51,6 +52,9 @@ std::vector<World::MotorPhase> to_motor_phases(const JointDef& joint);
 
 // The library's joint motor as Bullet's.
 JointMotor core_motor(const api::JointMotor& motor);
+// A vehicle's wheel joint with the bodies left unset (scene/vehicle.hpp); its bodies (the
+// api::BodyDefs expand_vehicle makes) go through rigid_body_def like every body.
+RigidJointDef vehicle_joint_def(const VehicleJoint& joint);
 
 // Camera pose at simulated time t: fixed, or linear between path keyframes (held outside).
 render::CameraView camera_at(const CameraDef& camera, double t);

@@ -298,10 +298,11 @@ std::size_t World::schedule_joint(const RigidJointDef& def, std::size_t a_entry,
   return joints_.size() - 1;
 }
 
-void World::set_motor_phases(std::size_t joint_entry, std::vector<MotorPhase> phases) {
+void World::set_motor_phases(std::size_t joint_entry, std::vector<MotorPhase> phases, const JointMotor& steer_default) {
   if (joint_entry >= joints_.size()) return;
   joints_[joint_entry].phases = std::move(phases);
-  joints_[joint_entry].applied[0] = joints_[joint_entry].applied[1] = -2;
+  joints_[joint_entry].steer_default = steer_default;
+  joints_[joint_entry].applied[0] = joints_[joint_entry].applied[1] = joints_[joint_entry].applied[2] = -2;
 }
 
 bool World::joint_alive(JointId id) const {
@@ -348,6 +349,8 @@ void World::make_due_joints() {
     }
     j.id = *id;
     j.def = d;
+    if (d.kind == JointKind::Wheel && j.steer_default.servo_speed > 0)
+      bullet_->set_joint_steering(j.id, j.steer_default.target, j.steer_default.servo_speed);
   }
 }
 
@@ -355,15 +358,21 @@ void World::make_due_joints() {
 void World::drive_motors(double t) {
   for (JointEntry& j : joints_) {
     if (j.phases.empty() || !j.id.valid() || j.removed || !joint_alive(j.id)) continue;
-    for (int dof = 0; dof < 2; ++dof) {
-      const bool turn = dof == 0;
+    for (int dof = 0; dof < 3; ++dof) {
+      const bool turn = dof == 0, steer = dof == 2;
+      auto mine = [&](const MotorPhase& p) { return p.steer == steer && (steer || p.turn == turn); };
       int now = -1;
       for (std::size_t k = 0; k < j.phases.size() && now < 0; ++k)
-        if (j.phases[k].turn == turn && t + 1e-9 >= j.phases[k].from && t + 1e-9 < j.phases[k].until) now = int(k);
-      const bool any = std::any_of(j.phases.begin(), j.phases.end(), [&](const MotorPhase& p) { return p.turn == turn; });
+        if (mine(j.phases[k]) && t + 1e-9 >= j.phases[k].from && t + 1e-9 < j.phases[k].until) now = int(k);
+      const bool any = std::any_of(j.phases.begin(), j.phases.end(), mine);
       if (!any || now == j.applied[dof]) continue;
       j.applied[dof] = now;
-      bullet_->set_joint_motor(j.id, turn, now >= 0 ? j.phases[std::size_t(now)].motor : (turn ? j.def.turn : j.def.slide).motor);
+      if (steer) {  // outside every phase: straight ahead
+        const JointMotor m = now >= 0 ? j.phases[std::size_t(now)].motor : j.steer_default;
+        bullet_->set_joint_steering(j.id, m.target, m.servo_speed);
+      } else {
+        bullet_->set_joint_motor(j.id, turn, now >= 0 ? j.phases[std::size_t(now)].motor : (turn ? j.def.turn : j.def.slide).motor);
+      }
     }
   }
 }
@@ -875,12 +884,13 @@ nlohmann::ordered_json World::report() const {
       if (j.id.valid() && !j.removed && joint_alive(j.id)) {
         const JointState st = bullet_->joint_state(j.id);
         const JointKind k = j.def.kind;
-        if (k == JointKind::Hinge || k == JointKind::Cylindrical) {
+        if (k == JointKind::Wheel) o["steering_rad"] = bullet_->joint_steering(j.id);
+        if (k == JointKind::Hinge || k == JointKind::Cylindrical || k == JointKind::Wheel) {
           o["angle_rad"] = st.angle;
           o["angular_rate_rad_s"] = st.angular_rate;
           o["torque_N_m"] = st.torque;
         }
-        if (k == JointKind::Slider || k == JointKind::Cylindrical) {
+        if (k == JointKind::Slider || k == JointKind::Cylindrical || k == JointKind::Wheel) {
           o["position_m"] = st.position;
           o["rate_m_s"] = st.rate;
           o["force_N"] = st.force;

@@ -164,16 +164,21 @@ class World {
     double from = 0;                                        // s
     double until = std::numeric_limits<double>::infinity();  // s
     bool turn = true;                                       // the turning (hinge) or sliding degree of freedom
+    bool steer = false;                                     // a wheel joint's steering instead: motor.target (rad)
+                                                            //   at motor.servo_speed (rad/s)
     JointMotor motor;
   };
-  void set_motor_phases(std::size_t joint_entry, std::vector<MotorPhase> phases);
+  // `steer_default`: a wheel joint's steering outside every steering phase (target rad,
+  // servo_speed rad/s), also set when the joint is made.
+  void set_motor_phases(std::size_t joint_entry, std::vector<MotorPhase> phases, const JointMotor& steer_default = {});
   struct JointEntry {
     std::string name;
     JointId id;                 // invalid until made
     std::size_t a = 0, b = 0;   // body entries (scheduled joints; b = kWorld: the world)
     RigidJointDef def;          // as given (motors: the ones outside every phase)
     std::vector<MotorPhase> phases;
-    int applied[2] = {-2, -2};  // phase applied to (turn, slide): -1 the definition's, -2 none yet
+    JointMotor steer_default;   // a wheel joint's steering outside every phase (target rad, servo_speed rad/s)
+    int applied[3] = {-2, -2, -2};  // phase applied to (turn, slide, steer): -1 the definition's, -2 none yet
     bool removed = false;
   };
   const std::vector<JointEntry>& joint_entries() const { return joints_; }

@@ -765,6 +765,7 @@ Result<SceneDef> parse_scene(const std::string& json_text, const std::string& so
       meshes.push_back(std::move(mesh));
     });
   }
+  if (const json* vj = top.get("vehicles")) s.vehicles = parse_vehicles(c, *vj);
   if (const json* jj = top.get("joints")) s.joints = parse_joints(c, *jj);
   if (const json* sj = top.get("simulation")) s.simulation = parse_simulation(c, *sj);
   if (const json* cj = top.get("cameras")) {

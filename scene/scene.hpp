@@ -21,6 +21,7 @@
 
 #include "common/error.hpp"
 #include "common/knobs.hpp"
+#include "sandpatch/sandpatch.hpp"
 
 namespace sandpatch {
 
@@ -195,7 +196,7 @@ struct MotorPhaseDef {
 struct JointDef {
   std::string name;                            // unique among joints
   JointType type = JointType::Hinge;
-  std::string body_a;                          // a body's name
+  std::string body_a;                          // a body's name (a vehicle's parts: "<vehicle>.chassis", ...)
   std::string body_b;                          // "" = the world
   Vec3d anchor = {0.0, 0.0, 0.0};              // m, world, when the joint is made
   Vec3d axis = {0.0, 0.0, 1.0};                // world, when the joint is made (hinge, slider)
@@ -203,6 +204,27 @@ struct JointDef {
   double spring_stiffness = 0.0;               // N m/rad or N/m (0: no spring)
   double spring_damping = 0.0;                 // N m s/rad or N s/m
   std::vector<MotorPhaseDef> motor;            // at most kMaxMotorPhases
+};
+
+// ---- vehicles (docs/scene-format.md "vehicles") ----
+
+// A four-wheeled vehicle: the library's VehicleDef (scene/vehicle.hpp expands it into bodies
+// and joints for both doors) and, over time, its throttle and steering.
+struct ThrottlePhaseDef {
+  double from = 0.0;                           // s
+  std::optional<double> until;                 // s, > from
+  double wheel_speed = 0.0;                    // rad/s, > 0 forward
+  double max_torque = 0.0;                     // N m per driven wheel (0: no drive)
+};
+struct SteeringPhaseDef {
+  double from = 0.0;                           // s
+  std::optional<double> until;                 // s, > from
+  double angle = 0.0;                          // rad, > 0 left, within ±max_steering_angle
+};
+struct VehicleSceneDef {
+  api::VehicleDef def;                         // outside every phase: its wheel_speed, max_torque, steering_angle
+  std::vector<ThrottlePhaseDef> throttle;
+  std::vector<SteeringPhaseDef> steering;
 };
 
 // ---- simulation ----
@@ -342,6 +364,7 @@ struct SceneDef {
   std::vector<MaterialDef> materials;
   std::vector<BodyDef> bodies;
   std::vector<JointDef> joints;
+  std::vector<VehicleSceneDef> vehicles;
   SceneSimulationDef simulation;
   std::vector<CameraDef> cameras;
   OutputsDef outputs;
@@ -392,5 +415,6 @@ const char* to_string(HeightfieldFormat f);
 const char* to_string(LoadFrame f);
 const char* to_string(MotionKind m);
 const char* to_string(JointType t);
+const char* to_string(api::DriveWheels d);
 
 }  // namespace sandpatch

@@ -1,19 +1,23 @@
 // Scene files' joints: parsing and checks (see scene_joints.hpp, docs/scene-format.md "joints").
 #include "scene/scene_joints.hpp"
 
+#include <Eigen/Geometry>
 #include <cmath>
 #include <map>
 #include <optional>
 #include <set>
 
+#include "scene/vehicle.hpp"
 
 namespace sandpatch {
 
 namespace {
 const std::vector<std::string> kJointTypes = {"fixed", "hinge", "slider"};
+const std::vector<std::string> kDriveWheels = {"rear", "front", "all"};
 }  // namespace
 
 const char* to_string(JointType t) { return kJointTypes[static_cast<int>(t)].c_str(); }
+const char* to_string(api::DriveWheels d) { return kDriveWheels[static_cast<int>(d)].c_str(); }
 
 namespace scene_json {
 namespace {
@@ -111,13 +115,136 @@ std::vector<JointDef> parse_joints(Ctx& c, const json& j) {
   return out;
 }
 
+namespace {
+
+// The orientation of `o`: "orientation" (a unit quaternion [w, x, y, z]) or "euler_deg"
+// [α, β, γ] (R = Rz(γ)·Ry(β)·Rx(α)), as a body's pose.
+api::Quat read_orientation(Ctx& c, Obj& o) {
+  api::Quat q = {1, 0, 0, 0};
+  if (o.both("orientation", "euler_deg")) return q;
+  if (const json* j = o.get("orientation")) {
+    if (auto v = read_numbers<4>(c, *j, o.at("orientation"), closed(-1.0 - 1e-3, 1.0 + 1e-3, ""))) {
+      const double n = std::sqrt((*v)[0] * (*v)[0] + (*v)[1] * (*v)[1] + (*v)[2] * (*v)[2] + (*v)[3] * (*v)[3]);
+      if (std::abs(n - 1.0) > 1e-3)
+        c.error(o.at("orientation"), show(*j), "must be a unit quaternion [w, x, y, z] (|q| = 1 ± 0.001)", "|q| = " + fmt_num(n));
+      else
+        q = {float((*v)[0] / n), float((*v)[1] / n), float((*v)[2] / n), float((*v)[3] / n)};
+    }
+  }
+  if (const json* j = o.get("euler_deg")) {
+    if (auto e = read_numbers<3>(c, *j, o.at("euler_deg"), closed(-720.0, 720.0, "deg"))) {
+      const double r = kPi / 180.0;
+      const Eigen::Quaterniond e_q = Eigen::AngleAxisd((*e)[2] * r, Eigen::Vector3d::UnitZ()) *
+                                     Eigen::AngleAxisd((*e)[1] * r, Eigen::Vector3d::UnitY()) *
+                                     Eigen::AngleAxisd((*e)[0] * r, Eigen::Vector3d::UnitX());
+      q = {float(e_q.w()), float(e_q.x()), float(e_q.y()), float(e_q.z())};
+    }
+  }
+  return q;
+}
+
+// from / until of a phase (as a load's).
+void read_span(Ctx& c, Obj& o, double& from, std::optional<double>& until) {
+  o.number("from", from, closed(0.0, 1e6, "s"));
+  until = o.number_opt("until", positive(1e6, "s"));
+  if (until && !(*until > from))
+    c.error(o.at("until"), show(*o.get("until")), "must be greater than 'from' (" + fmt_num(from) + " s)",
+            "a phase holds for from <= t < until");
+}
+
+VehicleSceneDef parse_vehicle(Ctx& c, const json& j, const std::string& path) {
+  VehicleSceneDef s;
+  api::VehicleDef& v = s.def;
+  Obj o(c, j, path);
+  o.string_req("name", v.name, "a unique name");
+  Vec3d p = {v.position[0], v.position[1], v.position[2]};
+  if (o.vec3_req("position", p, closed(-1e7, 1e7, "m"))) v.position = {p[0], p[1], p[2]};
+  v.orientation = read_orientation(c, o);
+  // Numbers are read as any finite value here; check_vehicle (the library's check) names the
+  // ranges.
+  const Range any = closed(-1e300, 1e300, "");
+  Vec3d h = v.chassis_half_extents;
+  o.vec3("chassis_half_extents", h, any);
+  v.chassis_half_extents = h;
+  for (auto [key, field] : {std::pair{"chassis_mass", &v.chassis_mass}, {"wheel_radius", &v.wheel_radius},
+                            {"wheel_width", &v.wheel_width}, {"wheel_mass", &v.wheel_mass},
+                            {"wheel_friction", &v.wheel_friction}, {"wheel_rolling_friction", &v.wheel_rolling_friction},
+                            {"wheelbase", &v.wheelbase}, {"track", &v.track}, {"axle_height", &v.axle_height},
+                            {"wheel_speed", &v.wheel_speed}, {"max_torque", &v.max_torque},
+                            {"steering_angle", &v.steering_angle}, {"max_steering_angle", &v.max_steering_angle},
+                            {"steering_speed", &v.steering_speed},
+                            {"suspension_stiffness", &v.suspension_stiffness}, {"suspension_damping", &v.suspension_damping},
+                            {"suspension_travel", &v.suspension_travel}})
+    o.number(key, *field, any);
+  o.enumeration("drive", v.drive, kDriveWheels);
+  if (const json* tj = o.get("throttle")) {
+    if (tj->is_array() && tj->size() > std::size_t(kMaxMotorPhases))
+      c.error(o.at("throttle"), std::to_string(tj->size()) + " phases", "at most " + std::to_string(kMaxMotorPhases) + " phases");
+    else
+      for_each_element(c, *tj, o.at("throttle"), [&](const json& e, const std::string& pp) {
+        ThrottlePhaseDef t;
+        Obj po(c, e, pp);
+        read_span(c, po, t.from, t.until);
+        po.number_req("wheel_speed", t.wheel_speed, closed(-1e4, 1e4, "rad/s"));
+        po.number_req("max_torque", t.max_torque, closed(0.0, 1e9, "N m"));
+        po.finish();
+        s.throttle.push_back(t);
+      });
+  }
+  if (const json* sj = o.get("steering")) {
+    if (sj->is_array() && sj->size() > std::size_t(kMaxMotorPhases))
+      c.error(o.at("steering"), std::to_string(sj->size()) + " phases", "at most " + std::to_string(kMaxMotorPhases) + " phases");
+    else
+      for_each_element(c, *sj, o.at("steering"), [&](const json& e, const std::string& pp) {
+        SteeringPhaseDef t;
+        Obj po(c, e, pp);
+        read_span(c, po, t.from, t.until);
+        po.number_req("angle", t.angle, closed(-1.2, 1.2, "rad"));
+        po.finish();
+        s.steering.push_back(t);
+      });
+  }
+  o.finish();
+  if (o.valid()) {
+    for (Error& e : check_vehicle(v, path + ".")) c.error(e.field, e.value, e.allowed, e.detail);
+    for (std::size_t k = 0; k < s.steering.size(); ++k)
+      if (std::isfinite(v.max_steering_angle) && std::abs(s.steering[k].angle) > v.max_steering_angle)
+        c.error(path + ".steering[" + std::to_string(k) + "].angle", fmt_num(s.steering[k].angle),
+                "must be within ±max_steering_angle (" + fmt_num(v.max_steering_angle) + " rad)");
+  }
+  return s;
+}
+
+}  // namespace
+
+std::vector<VehicleSceneDef> parse_vehicles(Ctx& c, const json& j) {
+  std::vector<VehicleSceneDef> out;
+  if (j.is_array() && j.size() > 256) {
+    c.error("vehicles", std::to_string(j.size()) + " vehicles", "at most 256 vehicles");
+    return out;
+  }
+  for_each_element(c, j, "vehicles", [&](const json& e, const std::string& p) { out.push_back(parse_vehicle(c, e, p)); });
+  return out;
+}
+
 void check_joints(Ctx& c, const SceneDef& s) {
-  // Every body by name.
+  // Every body by name: the scene's, then the vehicles' parts (dynamic), each name once.
   std::vector<std::string> names;
   std::map<std::string, MotionKind> motion;
   for (const BodyDef& b : s.bodies) {
     names.push_back(b.name);
     motion.emplace(b.name, b.motion);
+  }
+  std::set<std::string> vehicle_names;
+  for (std::size_t i = 0; i < s.vehicles.size(); ++i) {
+    const std::string at = "vehicles[" + std::to_string(i) + "].name";
+    if (!vehicle_names.insert(s.vehicles[i].def.name).second)
+      c.error(at, json_quote(s.vehicles[i].def.name), "must be unique among vehicles");
+    for (const std::string& n : vehicle_body_names(s.vehicles[i].def.name)) {
+      if (motion.count(n)) c.error(at, json_quote(s.vehicles[i].def.name), "its part '" + n + "' has the name of a body: rename one");
+      names.push_back(n);
+      motion.emplace(n, MotionKind::Dynamic);
+    }
   }
   struct Found {
     MotionKind motion;

@@ -13,8 +13,11 @@ namespace sandpatch::scene_json {
 
 // The top-level "joints" array.
 std::vector<JointDef> parse_joints(Ctx& c, const json& j);
+// The top-level "vehicles" array: each checked with check_vehicle (scene/vehicle.hpp).
+std::vector<VehicleSceneDef> parse_vehicles(Ctx& c, const json& j);
 // Cross references once bodies are known: body names exist, not the same on both sides, not
-// two non-dynamic sides; unique joint names.
+// two non-dynamic sides; unique joint names; vehicles' names unique and their parts' names
+// unlike every body's.
 void check_joints(Ctx& c, const SceneDef& s);
 
 }  // namespace sandpatch::scene_json

@@ -116,6 +116,49 @@ nlohmann::json scene_to_json(const SceneDef& s) {
     j["bodies"].push_back(bj);
   }
 
+  // Only when there are vehicles, so scenes without them keep their canonical JSON and hash.
+  if (!s.vehicles.empty()) {
+    j["vehicles"] = json::array();
+    for (const VehicleSceneDef& vs : s.vehicles) {
+      const api::VehicleDef& v = vs.def;
+      json vj = {{"name", v.name},
+                 {"position", v.position},
+                 {"orientation", {double(v.orientation[0]), double(v.orientation[1]), double(v.orientation[2]), double(v.orientation[3])}},
+                 {"chassis_half_extents", v.chassis_half_extents},
+                 {"chassis_mass", v.chassis_mass},
+                 {"wheel_radius", v.wheel_radius},
+                 {"wheel_width", v.wheel_width},
+                 {"wheel_mass", v.wheel_mass},
+                 {"wheel_friction", v.wheel_friction},
+                 {"wheel_rolling_friction", v.wheel_rolling_friction},
+                 {"wheelbase", v.wheelbase},
+                 {"track", v.track},
+                 {"axle_height", v.axle_height},
+                 {"drive", to_string(v.drive)},
+                 {"wheel_speed", v.wheel_speed},
+                 {"max_torque", v.max_torque},
+                 {"steering_angle", v.steering_angle},
+                 {"max_steering_angle", v.max_steering_angle},
+                 {"steering_speed", v.steering_speed},
+                 {"suspension_stiffness", v.suspension_stiffness},
+                 {"suspension_damping", v.suspension_damping},
+                 {"suspension_travel", v.suspension_travel}};
+      json th = json::array(), st = json::array();
+      for (const ThrottlePhaseDef& t : vs.throttle) {
+        json pj = {{"from", t.from}, {"wheel_speed", t.wheel_speed}, {"max_torque", t.max_torque}};
+        if (t.until) pj["until"] = *t.until;
+        th.push_back(pj);
+      }
+      for (const SteeringPhaseDef& t : vs.steering) {
+        json pj = {{"from", t.from}, {"angle", t.angle}};
+        if (t.until) pj["until"] = *t.until;
+        st.push_back(pj);
+      }
+      if (!th.empty()) vj["throttle"] = th;
+      if (!st.empty()) vj["steering"] = st;
+      j["vehicles"].push_back(vj);
+    }
+  }
   // Only when there are joints, so scenes without them keep their canonical JSON and hash.
   if (!s.joints.empty()) {
     j["joints"] = json::array();

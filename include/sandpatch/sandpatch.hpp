@@ -343,6 +343,50 @@ struct JointState {
 };
 
 // ---------------------------------------------------------------------------------------
+// Vehicles (docs/api.md "Vehicles")
+//
+// A four-wheeled vehicle made of bodies and joints: a box chassis and four cylinder wheels,
+// each on one wheel joint to the chassis: it turns about the axle (motorised on the driven
+// wheels), slides along the vehicle's up axis on the suspension's spring (rigid without one),
+// and the front wheels' axles are steered about the up axis. Vehicle frame: x forward, y up,
+// z to the right.
+
+enum class DriveWheels { Rear, Front, All };
+
+struct VehicleDef {
+  std::string name;                            // its parts are "<name>.chassis", "<name>.wheel_fl", ...
+  Vec3 position{};                             // m, world: the chassis' centre
+  Quat orientation{1.0f, 0.0f, 0.0f, 0.0f};    // [w, x, y, z]: the vehicle frame in the world (norm > 0)
+  Vec3 chassis_half_extents = {2.0, 0.3, 0.6}; // m (x, y, z), each (0, 1e4]
+  double chassis_mass = 1500.0;                // kg, [1e-6, 1e9]
+  double wheel_radius = 0.4;                   // m, (0, 1e4]
+  double wheel_width = 0.3;                    // m, (0, 1e4]
+  double wheel_mass = 30.0;                    // kg, [1e-6, 1e9]
+  double wheel_friction = 0.9;                 // μ against the heightfield and bodies, [0, 10]
+  double wheel_rolling_friction = 0.05;        // [0, 10]
+  double wheelbase = 2.7;                      // m between the front and rear axles, (0, 1e4]
+  double track = 1.9;                          // m between the left and right wheels' centres, (0, 1e4]
+  double axle_height = -0.3;                   // m: the wheels' centres above the chassis' centre, [-1e4, 1e4]
+  DriveWheels drive = DriveWheels::Rear;       // which wheels the motors turn
+  double wheel_speed = 0.0;                    // rad/s: the driven wheels' target (> 0: forward), [-1e4, 1e4]
+  double max_torque = 0.0;                     // N m per driven wheel, [0, 1e9]; 0: no drive (the wheels roll free)
+  double steering_angle = 0.0;                 // rad of the front wheels (> 0: left), within ±max_steering_angle
+  double max_steering_angle = 0.5;             // rad, [0, 1.2]
+  double steering_speed = 1.0;                 // rad/s the steering turns at, (0, 1e4]
+  double suspension_stiffness = 0.0;           // N/m per wheel, [0, 1e12]; 0: no suspension (rigid struts)
+  double suspension_damping = 0.0;             // N s/m per wheel, [0, 1e12]
+  double suspension_travel = 0.1;              // m each way from the unloaded pose, [0, 10]
+};
+
+struct VehicleHandles {
+  BodyHandle chassis;
+  std::array<BodyHandle, 4> wheels{};          // front left, front right, rear left, rear right
+  std::array<JointHandle, 4> axles{};          // the wheels' joints: set_joint_motor drives one wheel, joint_state
+                                               //   reads its spin (rad/s) and drive torque (N m)
+  VehicleDef def;                              // as added
+};
+
+// ---------------------------------------------------------------------------------------
 // Events, particles, heightfield data for renderers
 
 enum class EventKind {
@@ -494,6 +538,19 @@ class SANDPATCH_API Terrain {
   // for a fixed joint and for the values add_joint refuses ("set_joint_motor.motor.target").
   Status set_joint_motor(JointHandle h, const JointMotor& motor);
   Result<JointState> joint_state(JointHandle h) const;
+
+  // ---- vehicles (docs/api.md "Vehicles") ----
+  // Adds the vehicle's five bodies and four joints (the same expansion as a scene file's
+  // `vehicles`), driving at def.wheel_speed / max_torque and steered to def.steering_angle.
+  // Refused, naming the field ("VehicleDef.wheel_radius") and its value: the ranges above,
+  // wheels that would touch the chassis ("VehicleDef.track") or each other
+  // ("VehicleDef.wheelbase"), a part below the bedrock or inside the terrain
+  // ("VehicleDef.position"); nothing is added then.
+  Result<VehicleHandles> add_vehicle(const VehicleDef& def);
+  // From the next step on: the driven wheels' target speed (rad/s, > 0 forward) with at most
+  // max_torque (N m each; 0: no drive), the front wheels' steering angle (rad, > 0 left, within
+  // ±max_steering_angle). Refused naming "drive_vehicle.<argument>".
+  Status drive_vehicle(const VehicleHandles& v, double wheel_speed, double max_torque, double steering_angle);
 
   // Low-level entry of sandpatch::api::bullet::adopt (include/sandpatch/bullet.hpp): use that.
   // `bt_rigid_body` is a btRigidBody*; `abi` describes the Bullet the caller was compiled
