@@ -428,17 +428,19 @@ Result<std::unique_ptr<World>> make_world(const SceneDef& scene, int threads, co
     part = "activation";
     if (Status s = (*world)->enable_patches(md); !s) return s.errors();
   }
-  for (std::size_t i = 0; i < body_defs.size(); ++i) {
-    // The shell must fit a slot: checked here whether or not the pool is built (`check`).
-    if (Status s = scene.simulation.granular_patches ? check_shell(md, body_defs[i].shape) : Status(Ok{}); !s) {
+  // Every body's shell (the vehicles' parts too) must fit a slot: checked here whether or not
+  // the pool is built (`sandpatch check`).
+  for (std::size_t i = 0; i < body_defs.size() && scene.simulation.granular_patches; ++i)
+    if (Status s = check_shell(md, body_defs[i].shape); !s) {
       part = "bodies";
       std::vector<Error> es = s.errors();
       for (Error& e : es) {
         e.file = scene.source_path;
-        e.detail += std::string(e.detail.empty() ? "" : "; ") + "for bodies[" + std::to_string(i) + "] ('" + scene.bodies[i].name + "')";
+        e.detail += std::string(e.detail.empty() ? "" : "; ") + "for " + body_fields[i] + " ('" + body_defs[i].name + "')";
       }
       return es;
     }
+  for (std::size_t i = 0; i < scene.bodies.size(); ++i) {
     const std::size_t entry = (*world)->schedule_body(body_defs[i], scene.bodies[i].spawn_time);
     if (!scene.bodies[i].loads.empty()) (*world)->set_loads(entry, to_loads(scene.bodies[i]));
     if (!scene.bodies[i].keyframes.empty()) {
