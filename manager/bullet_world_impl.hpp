@@ -1,0 +1,279 @@
+// BulletWorld's state, shared by its source files (bullet_world.cpp: bodies, terrain, the step;
+// bullet_joints.cpp: joints). Private to manager/.
+#pragma once
+
+#include <BulletCollision/CollisionDispatch/btInternalEdgeUtility.h>
+#include <BulletCollision/CollisionShapes/btHeightfieldTerrainShape.h>
+#include <BulletCollision/CollisionShapes/btTriangleInfoMap.h>
+#include <LinearMath/btConvexHullComputer.h>
+#include <LinearMath/btTransformUtil.h>
+#include <btBulletDynamicsCommon.h>
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+
+#include "heightfield/heightfield.hpp"
+#include "manager/bullet_world.hpp"
+#include "scene/mesh.hpp"
+
+namespace sandpatch {
+
+inline btVector3 bt(const Eigen::Vector3f& v) { return {v.x(), v.y(), v.z()}; }
+inline Eigen::Vector3f eig(const btVector3& v) { return {v.x(), v.y(), v.z()}; }
+
+struct BulletWorld::Impl {
+  const Heightfield* terrain = nullptr;
+  Eigen::Vector3d origin;  // m, world position of Bullet's (0,0,0): the terrain origin
+
+  std::unique_ptr<btDefaultCollisionConfiguration> config;
+  std::unique_ptr<btCollisionDispatcher> dispatcher;
+  std::unique_ptr<btDbvtBroadphase> broadphase;
+  std::unique_ptr<btSequentialImpulseConstraintSolver> solver;
+  std::unique_ptr<btDiscreteDynamicsWorld> world;
+
+  struct Tile {
+    int tx, tz;
+    float min_h, max_h;  // m, local: the vertical range the shape was built with
+    std::unique_ptr<btHeightfieldTerrainShape> shape;
+    // Internal-edge info (see adjust_internal_edges), built on demand (ensure_edges): null
+    // until a body first comes near the tile. Building it for every tile up front cost
+    // ~4 µs and ~60 bytes per sample: 849 s and most of 4.6 GB for an 8192² terrain.
+    std::unique_ptr<btTriangleInfoMap> edges;
+    std::unique_ptr<btCollisionObject> object;
+  };
+  std::vector<Tile> tiles;
+  int edge_maps_built = 0;  // tiles whose internal-edge info was built, over the world's life
+
+  // Collision groups: terrain tiles vs bodies, so a body can stop colliding with the terrain.
+  static constexpr int kGroupBody = 1, kGroupTerrain = 2;
+
+  struct Body {
+    int generation = 0;
+    RigidBodyDef def;
+    bool terrain = true;  // collides with the heightfield
+    // Kinematic: the pose at the start of the next frame and its end (Bullet-local), set by
+    // set_kinematic_target and used up by step_frame.
+    bool has_target = false;
+    btTransform from, to;
+    btVector3 terrain_impulse{0, 0, 0};  // N s, world: the heightfield's contacts in the frame so far
+    std::unique_ptr<btCollisionShape> shape;
+    std::unique_ptr<btTriangleMesh> mesh;  // mesh bodies keep their triangles alive
+    std::unique_ptr<btDefaultMotionState> motion;
+    std::unique_ptr<btRigidBody> body;     // null for an adopted body
+    btRigidBody* rb = nullptr;             // the body Bullet steps: body.get(), or the game's
+    // Adopted bodies (adopt_body): what release() gives back to the game.
+    bool adopted = false;
+    btVector3 game_gravity{0, 0, 0};       // m/s², the body's own gravity before it joined
+  };
+  std::vector<Body> bodies;
+  std::vector<int> free_slots;
+  float last_frame_dt = 0;  // s, the last step_frame's dt
+
+  struct Joint {
+    int generation = 0;
+    RigidJointDef def;
+    std::unique_ptr<btGeneric6DofSpring2Constraint> c;  // null: a free slot
+    std::unique_ptr<btJointFeedback> fb;
+    double turn_impulse = 0, slide_impulse = 0;  // N m s, N s: on body b about / along the axis, this frame so far
+    float torque = 0, force = 0;                 // N m, N: the last frame's means
+    // Wheel joints: the frame in body a at zero steering, the steering now, its target and speed.
+    btTransform frame_a0;
+    float steer = 0, steer_target = 0, steer_speed = 0;  // rad, rad, rad/s
+  };
+  std::vector<Joint> joints;
+  std::vector<int> free_joints;
+
+  // The moving body of a joint (Bullet's body B): b, or a when a is jointed to the world.
+  btRigidBody* moving(const Joint& j) { return &j.c->getRigidBodyB(); }
+
+  // After a Bullet step of `sub` seconds: each joint's push on its moving body about and along
+  // its axis. btJointFeedback holds the constraint's whole force and torque on B over the
+  // step (every row); the linear rows' force acts at the anchor, so their torque about B's
+  // centre of mass, r × F, is taken out, and what is left about the axis is the motor's, the
+  // spring's and the limit's (the locked rows are perpendicular to the axis).
+  void gather_joint_impulses(float sub) {
+    for (Joint& j : joints) {
+      if (!j.c) continue;
+      j.c->calculateTransforms();
+      const btMatrix3x3& basis = j.c->getCalculatedTransformA().getBasis();
+      const btVector3 axis = basis.getColumn(0);
+      const btVector3 slide = j.def.kind == JointKind::Wheel ? basis.getColumn(1) : axis;
+      const btVector3 r = j.c->getCalculatedTransformB().getOrigin() - moving(j)->getCenterOfMassPosition();
+      const btVector3 t = j.fb->m_appliedTorqueBodyB - r.cross(j.fb->m_appliedForceBodyB);
+      j.turn_impulse += double(t.dot(axis)) * sub;
+      j.slide_impulse += double(j.fb->m_appliedForceBodyB.dot(slide)) * sub;
+    }
+  }
+
+  // Before a Bullet substep of `sub` seconds: each steered wheel's axle a step towards its target.
+  void steer_wheels(float sub) {
+    for (Joint& j : joints) {
+      if (!j.c || j.def.kind != JointKind::Wheel || j.steer == j.steer_target) continue;
+      const float most = j.steer_speed * sub;
+      j.steer += std::clamp(j.steer_target - j.steer, -most, most);
+      btTransform fa = j.frame_a0;
+      fa.setBasis(fa.getBasis() * btMatrix3x3(btQuaternion(btVector3(0, 1, 0), j.steer)));  // about the frame's y: `up`
+      j.c->setFrames(fa, j.c->getFrameOffsetB());
+      j.c->getRigidBodyA().activate(true);
+      j.c->getRigidBodyB().activate(true);
+    }
+  }
+
+  void drop_joint(int index) {
+    Joint& j = joints[std::size_t(index)];
+    world->removeConstraint(j.c.get());
+    // A dynamic body with no joint left may sleep again (add_joint kept it awake).
+    for (btRigidBody* rb : {&j.c->getRigidBodyA(), &j.c->getRigidBodyB()}) {
+      if (rb->isStaticOrKinematicObject()) continue;
+      bool jointed = false;
+      for (const Joint& o : joints)
+        jointed = jointed || (o.c && &o != &j && (&o.c->getRigidBodyA() == rb || &o.c->getRigidBodyB() == rb));
+      if (!jointed) rb->forceActivationState(ACTIVE_TAG);
+      rb->activate(true);
+    }
+    j.c.reset();
+    j.fb.reset();
+    free_joints.push_back(index);
+  }
+
+  // A body into a free slot (generation bumped) or a new one.
+  RigidBodyId insert(Body&& b) {
+    int index;
+    if (!free_slots.empty()) {
+      index = free_slots.back();
+      free_slots.pop_back();
+      b.generation = bodies[index].generation + 1;
+      bodies[index] = std::move(b);
+    } else {
+      index = int(bodies.size());
+      bodies.push_back(std::move(b));
+    }
+    return RigidBodyId{index, bodies[index].generation};
+  }
+
+  // Moves a body's transforms by `d` (m): world transform, interpolation and motion state.
+  static void shift(btRigidBody& rb, const btVector3& d) {
+    btTransform tr = rb.getWorldTransform();
+    tr.setOrigin(tr.getOrigin() + d);
+    rb.setWorldTransform(tr);
+    btTransform it = rb.getInterpolationWorldTransform();
+    it.setOrigin(it.getOrigin() + d);
+    rb.setInterpolationWorldTransform(it);
+    if (rb.getMotionState()) rb.getMotionState()->setWorldTransform(tr);
+  }
+
+  // An adopted body, already out of the world, back in the game's frame with its own gravity.
+  void give_back(Body& b) {
+    shift(*b.rb, btVector3(float(origin.x()), float(origin.y()), float(origin.z())));
+    b.rb->setGravity(b.game_gravity);
+  }
+
+  void build_tile(Tile& t) {
+    const Heightfield& hf = *terrain;
+    const int w = hf.tile_samples_x(t.tx), l = hf.tile_samples_z(t.tz);
+    t.min_h = hf.tile_min_height(t.tx, t.tz);
+    t.max_h = hf.tile_max_height(t.tx, t.tz);
+    // Bullet needs a non-degenerate vertical range.
+    if (t.max_h - t.min_h < 1e-3f) t.max_h = t.min_h + 1e-3f;
+    t.shape = std::make_unique<btHeightfieldTerrainShape>(w, l, hf.tile_data(t.tx, t.tz), 1.0f, t.min_h, t.max_h, 1,
+                                                          PHY_FLOAT, false);
+    const float sp = hf.spacing();
+    t.shape->setLocalScaling(btVector3(sp, 1.0f, sp));
+    t.edges.reset();  // rebuilt on demand for the new shape (ensure_edges)
+    // Bullet centres the shape on its bounding box; place it so sample (i,j) sits at local
+    // (i*spacing, h, j*spacing) relative to the terrain origin.
+    const GridRegion r = hf.tile_region(t.tx, t.tz);
+    const btVector3 centre((r.i0 + 0.5f * (w - 1)) * sp, 0.5f * (t.min_h + t.max_h), (r.j0 + 0.5f * (l - 1)) * sp);
+    if (!t.object) {
+      t.object = std::make_unique<btCollisionObject>();
+      t.object->setFriction(0.8f);
+      t.object->setRestitution(0.1f);
+      t.object->setRollingFriction(1.0f);  // combined = product with the body's coefficient
+      t.object->setSpinningFriction(1.0f);
+      t.object->setCollisionFlags(t.object->getCollisionFlags() | btCollisionObject::CF_STATIC_OBJECT |
+                                  btCollisionObject::CF_CUSTOM_MATERIAL_CALLBACK);
+    }
+    // Static and never active (what Bullet does to a static btRigidBody): with
+    // setForceUpdateAllAabbs(false) Bullet then never recomputes the tile's bounds, and the
+    // broadphase moves it to its fixed set, so a step costs nothing per idle tile.
+    t.object->forceActivationState(ISLAND_SLEEPING);
+    t.object->setCollisionShape(t.shape.get());
+    btTransform tr;
+    tr.setIdentity();
+    tr.setOrigin(centre);
+    t.object->setWorldTransform(tr);
+  }
+
+  // Adds the impulses (N s) the last Bullet step's contacts between a body and a terrain
+  // tile applied to the body: Bullet's normal m_normalWorldOnB points from B to A, A gets
+  // +n·j and B −n·j; the friction impulses along their own directions the same way.
+  void gather_terrain_impulses() {
+    const int nm = dispatcher->getNumManifolds();
+    for (int k = 0; k < nm; ++k) {
+      const btPersistentManifold* pm = dispatcher->getManifoldByIndexInternal(k);
+      const btCollisionObject* a = pm->getBody0();
+      const btCollisionObject* b = pm->getBody1();
+      const bool a_terrain = a->getCollisionShape()->getShapeType() == TERRAIN_SHAPE_PROXYTYPE;
+      const bool b_terrain = b->getCollisionShape()->getShapeType() == TERRAIN_SHAPE_PROXYTYPE;
+      if (a_terrain == b_terrain) continue;
+      const btCollisionObject* body = a_terrain ? b : a;
+      const float sign = a_terrain ? -1.0f : 1.0f;  // the body is B: it gets −n·j
+      Body* owner = nullptr;
+      for (Body& x : bodies)
+        if (x.rb == body) owner = &x;
+      if (!owner) continue;
+      btVector3 j(0, 0, 0);
+      for (int c = 0; c < pm->getNumContacts(); ++c) {
+        const btManifoldPoint& pt = pm->getContactPoint(c);
+        j += pt.m_normalWorldOnB * pt.m_appliedImpulse + pt.m_lateralFrictionDir1 * pt.m_appliedImpulseLateral1 +
+             pt.m_lateralFrictionDir2 * pt.m_appliedImpulseLateral2;
+      }
+      owner->terrain_impulse += sign * j;
+    }
+  }
+
+  static constexpr std::size_t kEagerEdgeTiles = 64;  // at most about 1 s at start-up
+  void build_edges(Tile& t) {
+    t.edges = std::make_unique<btTriangleInfoMap>();
+    btGenerateInternalEdgeInfo(t.shape.get(), t.edges.get());  // also hands the map to the shape
+    ++edge_maps_built;
+  }
+
+  // Before a step: every tile a body may touch during it has its internal-edge info. The
+  // body's bounds (m, local) grown by twice its travel in one step and kEdgeReach, mapped to
+  // tile indices; O(bodies), whatever the terrain's size.
+  void ensure_edges(float dt) {
+    static constexpr float kEdgeReach = 1.0f;  // m, beyond Bullet's contact thresholds (cm)
+    const Heightfield& hf = *terrain;
+    const float sp = hf.spacing();
+    const int cells = hf.tile_cells();
+    for (const Body& b : bodies) {
+      if (!b.rb || !b.terrain) continue;
+      btVector3 lo, hi;
+      b.rb->getCollisionShape()->getAabb(b.rb->getWorldTransform(), lo, hi);
+      const float grow = kEdgeReach + 2.0f * dt * b.rb->getLinearVelocity().length();
+      if (!std::isfinite(grow)) continue;  // a broken body: run.cpp reports it after the step
+      // Tile t holds samples [t·cells, (t+1)·cells] (neighbours share the edge sample; the
+      // last tile takes the rest): the samples under [a − grow, c + grow] (m, local).
+      auto tile_range = [&](float a, float c, int samples, int count, int* t0, int* t1) {
+        const float i0 = std::floor((a - grow) / sp), i1 = std::ceil((c + grow) / sp);
+        if (i1 < 0 || i0 > float(samples - 1)) return false;  // off the terrain
+        *t0 = std::min(std::max(0, int(i0)) / cells, count - 1);
+        *t1 = std::min(std::min(samples - 1, int(i1)) / cells, count - 1);
+        return true;
+      };
+      int tx0, tx1, tz0, tz1;
+      if (!tile_range(lo.x(), hi.x(), hf.samples_x(), hf.tiles_x(), &tx0, &tx1) ||
+          !tile_range(lo.z(), hi.z(), hf.samples_z(), hf.tiles_z(), &tz0, &tz1))
+        continue;
+      for (int tz = tz0; tz <= tz1; ++tz)
+        for (int tx = tx0; tx <= tx1; ++tx) {
+          Tile& t = tiles[std::size_t(tz) * hf.tiles_x() + tx];
+          if (!t.edges) build_edges(t);
+        }
+    }
+  }
+};
+
+}  // namespace sandpatch
