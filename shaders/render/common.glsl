@@ -49,15 +49,19 @@ vec3 sp_blend_materials(vec4 w, vec2 p) {
 }
 
 // One directional light (sun) plus ambient; n and sun_dir unit vectors (toward the sun).
+// Ambient 0.3 and sun 1.2: with the default sun 25 deg above the horizon flat ground gets
+// 0.3 + 1.2 sin 25 deg = 0.81, and a wall tilted 14 deg toward / away from the sun 1.06 / 0.53,
+// so a crater one granule diameter deep reads (docs/rendering.md "Shading").
+const float kAmbient = 0.3, kSun = 1.2;
 uniform vec3 u_sun_dir;
 vec3 sp_shade(vec3 albedo, vec3 n) {
   float diffuse = max(dot(n, u_sun_dir), 0.0);
-  return albedo * (0.35 + 0.75 * diffuse);
+  return albedo * (kAmbient + kSun * diffuse);
 }
 // The same with the sun's share scaled by its visibility in [0, 1] (1 = lit, 0 = in shadow).
 vec3 sp_shade_visible(vec3 albedo, vec3 n, float visibility) {
   float diffuse = max(dot(n, u_sun_dir), 0.0);
-  return albedo * (0.35 + 0.75 * diffuse * visibility);
+  return albedo * (kAmbient + kSun * diffuse * visibility);
 }
 
 // Bodies' shadows (render.cpp: an orthographic depth map of the bodies seen from the sun).

@@ -257,8 +257,9 @@ TEST(SceneRenderer, BadCameraIsRefused) {
 // A crater in the heightfield one granule diameter deep (8 cm, radius 0.5 m, a cosine bowl; a
 // demoted patch's crater at 0.125 m spacing), reported through heightfield_changed and seen
 // 10 m away at 320 x 240. Metric: the mean over the crater's pixels (the ground disc of 0.6 m
-// around its centre) of |luma(after) - luma(before)|, Rec. 709 luma in 0..255: above 5 (its
-// walls lit as slopes by the full-resolution normals, its floor occluded).
+// around its centre) of |luma(after) - luma(before)|, Rec. 709 luma in 0..255: above 9 (its
+// walls lit as slopes by the full-resolution normals under a sun 25 degrees high, its floor
+// occluded; measured 11.5, and 6.4 with the sun at 37.5 degrees and the weaker sun term).
 TEST(SceneRenderer, HeightfieldCraterChangesItsPixels) {
   auto ctx = make_context();
   if (!ctx) GTEST_SKIP() << "no GL context";
@@ -302,5 +303,5 @@ TEST(SceneRenderer, HeightfieldCraterChangesItsPixels) {
     for (int x = 0; x < cam.width; ++x)
       if (mask[std::size_t(y) * cam.width + x]) sum += std::fabs(luma(before->pixel(x, y)) - luma(after->pixel(x, y)));
   std::printf("crater pixels %d: mean |luma change| %.1f\n", n_px, sum / n_px);
-  EXPECT_GT(sum / n_px, 5.0);
+  EXPECT_GT(sum / n_px, 9.0);
 }
