@@ -227,6 +227,7 @@ ShadowMap SceneRenderer::shadow_pass(const Eigen::Vector3d& origin) {
   sm.texture = shadow_tex_;
   sm.matrix = to_unit * light_vp;
   sm.bias = 0.01f / (far_m - near_m);  // 1 cm along the sun
+  sm.texel_m = 2.0f * Rf / float(n);
   return sm;
 }
 
@@ -303,7 +304,7 @@ Result<Image> SceneRenderer::render(const CameraView& cam, const FrameFlags& fla
   }
   // Bodies last: depth-tested against the terrain and the granules in front of them.
   if (flags.bodies && !bodies_.empty()) {
-    st.body_triangles = std::int64_t(body_renderer_->draw(bodies_, view_proj, m.eye, terrain_->sun_direction(), origin, flags.body_ids));
+    st.body_triangles = std::int64_t(body_renderer_->draw(bodies_, view_proj, m.eye, terrain_->sun_direction(), origin, flags.body_ids, &shadow));
     st.bodies = int(bodies_.size());
   }
 

@@ -70,6 +70,7 @@ uniform bool u_shadow_on;
 uniform mat4 u_shadow_matrix;
 uniform sampler2DShadow u_shadow_map;  // depth compare, linear: 2 x 2 taps per lookup
 uniform float u_shadow_bias;           // depth units of the map
+uniform float u_shadow_texel;          // m, one texel's width (bodies' normal offset)
 float sp_sun_visibility(vec3 p) {
   if (!u_shadow_on) return 1.0;
   vec4 q = u_shadow_matrix * vec4(p, 1.0);
