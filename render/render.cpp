@@ -231,6 +231,23 @@ ShadowMap SceneRenderer::shadow_pass(const Eigen::Vector3d& origin) {
   return sm;
 }
 
+Status SceneRenderer::set_effects(float ao_strength, int shadow_map_size) {
+  std::vector<Error> es;
+  if (!(ao_strength >= 0 && ao_strength <= 4))
+    es.push_back(Error{"", "ao_strength", std::to_string(ao_strength), "must be in [0, 4] (0 = off)"});
+  if (shadow_map_size != 0 && (shadow_map_size < 256 || shadow_map_size > 8192))
+    es.push_back(Error{"", "shadow_map_size", std::to_string(shadow_map_size), "must be 0 (none) or in [256, 8192] texels"});
+  if (!es.empty()) return es;
+  def_.ao_strength = ao_strength;
+  if (shadow_map_size != def_.shadow_map_size) {  // the map is made again at its new size when next needed
+    if (shadow_fbo_) glDeleteFramebuffers(1, &shadow_fbo_);
+    if (shadow_tex_) glDeleteTextures(1, &shadow_tex_);
+    shadow_fbo_ = shadow_tex_ = 0;
+    def_.shadow_map_size = shadow_map_size;
+  }
+  return Ok{};
+}
+
 std::optional<SceneRenderer::Projected> SceneRenderer::project(const CameraView& cam, const Eigen::Vector3d& p) const {
   if (!validate(cam).ok() || !p.allFinite()) return std::nullopt;
   const Matrices m = matrices(cam);

@@ -151,6 +151,10 @@ class SceneRenderer {
   // and field (bodies[k].radius); nothing changes on error.
   Status set_bodies(std::vector<BodyInstance> bodies);
   void clear_bodies() { bodies_.clear(); }
+  // Lighter or fuller frames without a new renderer (the viewer's --quality): the ambient
+  // occlusion's strength (in [0, 4], 0 = off) and the bodies' shadow map size (0 = none, else
+  // in [256, 8192] texels a side). Errors name the field; nothing changes then.
+  Status set_effects(float ao_strength, int shadow_map_size);
 
   RenderStats stats() const { return stats_; }
   const RendererDef& def() const { return def_; }
