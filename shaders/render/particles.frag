@@ -75,5 +75,5 @@ void main() {
   // ball; u_gain brings the bed's mean brightness back to the terrain's.
   float occ = u_gain * mix(0.9, mix(0.8, 1.0, clamp(0.5 + 0.5 * dot(n_sphere, n_bed), 0.0, 1.0)), detail);
   float tint = mix(1.0, v_tint, 0.5 + 0.5 * detail);
-  o_color = vec4(occ * sp_shade_visible(tint * sp_blend_materials(v_weights, p.xz), n, sp_sun_visibility(p)), u_fade);
+  o_color = vec4(sp_shade_gain(tint * sp_blend_materials(v_weights, p.xz), n, sp_sun_visibility(p), occ), u_fade);
 }

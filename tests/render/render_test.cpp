@@ -298,7 +298,7 @@ TEST(SceneRenderer, BadCameraIsRefused) {
 // 10 m away at 320 x 240. Metric: the mean over the crater's pixels (the ground disc of 0.6 m
 // around its centre) of |luma(after) - luma(before)|, Rec. 709 luma in 0..255: above 9 (its
 // walls lit as slopes by the full-resolution normals under a sun 25 degrees high, its floor
-// occluded; measured 11.5, and 6.4 with the sun at 37.5 degrees and the weaker sun term).
+// occluded; measured 11.3, and 6.4 with the sun at 37.5 degrees and the weaker sun term).
 TEST(SceneRenderer, HeightfieldCraterChangesItsPixels) {
   auto ctx = make_context();
   if (!ctx) GTEST_SKIP() << "no GL context";
