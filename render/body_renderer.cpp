@@ -4,6 +4,7 @@
 #include <GL/glcorearb.h>
 
 #include "render/shaders.hpp"
+#include "render/terrain_renderer.hpp"
 
 namespace sandpatch::render {
 
@@ -37,7 +38,7 @@ BodyRenderer::~BodyRenderer() {
 
 std::size_t BodyRenderer::draw(const std::vector<BodyInstance>& bodies, const Eigen::Matrix4f& view_proj,
                                const Eigen::Vector3f& eye, const Eigen::Vector3f& sun_direction,
-                               const Eigen::Vector3d& world_origin, bool flat_ids) {
+                               const Eigen::Vector3d& world_origin, bool flat_ids, const ShadowMap* shadow) {
   data_.clear();
   std::size_t triangles = 0;
   for (std::size_t k = 0; k < bodies.size(); ++k) {
@@ -65,6 +66,7 @@ std::size_t BodyRenderer::draw(const std::vector<BodyInstance>& bodies, const Ei
   const Eigen::Vector3f sun = sun_direction.normalized();
   glUniform3f(glGetUniformLocation(p, "u_sun_dir"), sun.x(), sun.y(), sun.z());
   glUniform1i(glGetUniformLocation(p, "u_flat"), flat_ids ? 1 : 0);
+  bind_shadow(p, shadow && !flat_ids ? *shadow : ShadowMap{});
   glBindBuffer(GL_ARRAY_BUFFER, vbo_);
   glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(data_.size() * sizeof(float)), data_.data(), GL_STREAM_DRAW);
   glBindVertexArray(vao_);

@@ -227,7 +227,25 @@ ShadowMap SceneRenderer::shadow_pass(const Eigen::Vector3d& origin) {
   sm.texture = shadow_tex_;
   sm.matrix = to_unit * light_vp;
   sm.bias = 0.01f / (far_m - near_m);  // 1 cm along the sun
+  sm.texel_m = 2.0f * Rf / float(n);
   return sm;
+}
+
+Status SceneRenderer::set_effects(float ao_strength, int shadow_map_size) {
+  std::vector<Error> es;
+  if (!(ao_strength >= 0 && ao_strength <= 4))
+    es.push_back(Error{"", "ao_strength", std::to_string(ao_strength), "must be in [0, 4] (0 = off)"});
+  if (shadow_map_size != 0 && (shadow_map_size < 256 || shadow_map_size > 8192))
+    es.push_back(Error{"", "shadow_map_size", std::to_string(shadow_map_size), "must be 0 (none) or in [256, 8192] texels"});
+  if (!es.empty()) return es;
+  def_.ao_strength = ao_strength;
+  if (shadow_map_size != def_.shadow_map_size) {  // the map is made again at its new size when next needed
+    if (shadow_fbo_) glDeleteFramebuffers(1, &shadow_fbo_);
+    if (shadow_tex_) glDeleteTextures(1, &shadow_tex_);
+    shadow_fbo_ = shadow_tex_ = 0;
+    def_.shadow_map_size = shadow_map_size;
+  }
+  return Ok{};
 }
 
 std::optional<SceneRenderer::Projected> SceneRenderer::project(const CameraView& cam, const Eigen::Vector3d& p) const {
@@ -303,7 +321,7 @@ Result<Image> SceneRenderer::render(const CameraView& cam, const FrameFlags& fla
   }
   // Bodies last: depth-tested against the terrain and the granules in front of them.
   if (flags.bodies && !bodies_.empty()) {
-    st.body_triangles = std::int64_t(body_renderer_->draw(bodies_, view_proj, m.eye, terrain_->sun_direction(), origin, flags.body_ids));
+    st.body_triangles = std::int64_t(body_renderer_->draw(bodies_, view_proj, m.eye, terrain_->sun_direction(), origin, flags.body_ids, &shadow));
     st.bodies = int(bodies_.size());
   }
 

@@ -48,7 +48,9 @@ struct RendererDef {
     return d;
   }();
   std::array<std::uint8_t, 3> background{140, 180, 230};  // sRGB bytes of the sky; no terrain colour equals it
-  Eigen::Vector3f sun_direction{-0.6f, 0.6f, 0.55f};        // toward the sun (normalised on use)
+  // Toward the sun (normalised on use): 25° above the horizon, from −x, +z. A low sun is what
+  // makes shallow relief read (docs/rendering.md "Shading").
+  Eigen::Vector3f sun_direction{-0.6f, 0.38f, 0.55f};
   // Particle lighting normal = normalize(mix(sphere normal, bed normal, bend)), in [0, 1]: 0 is
   // pure sphere shading; 0.7 keeps each splat's roundness while a bed's slopes (a crater's
   // walls, a heap's flanks) light like slopes. The bed normal is estimated from a depth
@@ -63,7 +65,7 @@ struct RendererDef {
   // neighbours below the equator, are darker on average than the smooth heightfield they were
   // cut from; the gain brings a bed's mean brightness back to the terrain's (measured in
   // tests/render/particle_renderer_test.cpp, FadedInPatchLooksLikeTheHeightfield).
-  float particle_gain = 1.0f;
+  float particle_gain = 1.12f;
   // Screen-space ambient occlusion (shaders/render/ao.frag): radius (m, world) of the
   // neighbourhood a pixel looks at, > 0; strength in [0, 4] (0 = off); samples per pixel in [1, 64].
   float ao_radius = 1.0f;
@@ -149,6 +151,10 @@ class SceneRenderer {
   // and field (bodies[k].radius); nothing changes on error.
   Status set_bodies(std::vector<BodyInstance> bodies);
   void clear_bodies() { bodies_.clear(); }
+  // Lighter or fuller frames without a new renderer (the viewer's --quality): the ambient
+  // occlusion's strength (in [0, 4], 0 = off) and the bodies' shadow map size (0 = none, else
+  // in [256, 8192] texels a side). Errors name the field; nothing changes then.
+  Status set_effects(float ao_strength, int shadow_map_size);
 
   RenderStats stats() const { return stats_; }
   const RendererDef& def() const { return def_; }

@@ -24,6 +24,7 @@ void bind_shadow(unsigned p, const ShadowMap& s) {
   glUniform1i(loc(p, "u_shadow_on"), s.on ? 1 : 0);
   glUniformMatrix4fv(loc(p, "u_shadow_matrix"), 1, GL_FALSE, s.matrix.data());
   glUniform1f(loc(p, "u_shadow_bias"), s.bias);
+  glUniform1f(loc(p, "u_shadow_texel"), s.texel_m);
 }
 
 Result<std::unique_ptr<TerrainRenderer>> TerrainRenderer::create(const Heightfield& hf, const ClipmapDef& def_in) {

@@ -37,6 +37,7 @@ struct ShadowMap {
   unsigned texture = 0;
   Eigen::Matrix4f matrix = Eigen::Matrix4f::Identity();
   float bias = 0;
+  float texel_m = 0;  // one texel's width (m): bodies look themselves up this far off their surface
 };
 // Binds `s` to the current program (texture unit kShadowUnit).
 inline constexpr int kShadowUnit = 5;

@@ -3,7 +3,7 @@
 //                 [--video FILE [--video-fps F]] [--csv FILE]
 //   sandpatch render [SCENE] --at T [--camera NAME] [--image FILE] [--out DIR] [--frame-budget MS|off]
 //   sandpatch view [SCENE] [--frames N [--screenshot FILE]] [--size WxH] [--camera NAME] [--backend cpu|gl]
-//                  [--threads T] [--frame-budget MS|off]
+//                  [--threads T] [--frame-budget MS|off] [--keys K,...] [--quality high|low]
 //   sandpatch check SCENE
 //   sandpatch info
 //   sandpatch bench dem [--granules N] [--steps S] [--repeat K] [--alternate-threads T2] [--backend cpu|gl] [--threads T] [--unloading L] [--restitution E] [--json]
@@ -147,6 +147,9 @@ void add_view(CLI::App& app, ViewArgs& a) {
   view->add_option("--threads", a.threads, "Worker threads (0 = all)")->check(CLI::NonNegativeNumber);
   view->add_option("--frame-budget", a.frame_budget,
                    "Wall-clock ms a frame's patches may take, or off (overrides simulation.frame_budget_ms)");
+  view->add_option("--keys", a.keys,
+                   "Scripted input, one token a frame, then exit: keys (space . n + - r q), rotate:DX:DY, pan:DX:DY, zoom:N");
+  view->add_option("--quality", a.quality, "high (default) or low: half resolution, no ambient occlusion, small shadow map");
 }
 
 // Loads the scene (the embedded default when scene_path is empty), runs it with the options

@@ -102,6 +102,11 @@ struct Controls {
   bool left = false, right = false;
   double mouse_x = 0, mouse_y = 0;
 
+  // What a drag with the left / right button and the wheel do (the callbacks and --keys).
+  void drag_rotate(double dx, double dy) { orbit.rotate(dx, dy), dirty = true; }
+  void drag_pan(double dx, double dy) { orbit.pan(dx, dy, fov_deg, fb_height), dirty = true; }
+  void scroll(double notches) { orbit.zoom(notches), dirty = true; }
+
   void key(unsigned c) {
     switch (c) {
       case ' ': paused = !paused; break;
@@ -115,6 +120,64 @@ struct Controls {
     dirty = true;
   }
 };
+
+// One --keys token: a key, or a drag / wheel motion.
+struct ScriptToken {
+  enum Kind { Key, Rotate, Pan, Zoom } kind = Key;
+  unsigned key = 0;
+  double a = 0, b = 0;
+  std::string text;
+  void apply(Controls& c) const {
+    switch (kind) {
+      case Key: c.key(key); break;
+      case Rotate: c.drag_rotate(a, b); break;
+      case Pan: c.drag_pan(a, b); break;
+      case Zoom: c.scroll(a); break;
+    }
+  }
+};
+
+// Parses --keys; on error, the message names the token and what is allowed.
+bool parse_keys(const std::string& s, std::vector<ScriptToken>& out, std::string& why) {
+  const std::string known = " .nN+=-_rRqQ";
+  std::size_t start = 0;
+  while (start <= s.size()) {
+    std::size_t end = s.find(',', start);
+    if (end == std::string::npos) end = s.size();
+    const std::string t = s.substr(start, end - start);
+    start = end + 1;
+    ScriptToken k;
+    k.text = t;
+    auto number = [&](const std::string& x, double& v) {
+      char* e = nullptr;
+      v = std::strtod(x.c_str(), &e);
+      return !x.empty() && e && *e == '\0' && std::isfinite(v) && std::fabs(v) <= 1e6;
+    };
+    const std::size_t c1 = t.find(':');
+    if (t == "space") {
+      k.key = ' ';
+    } else if (t.size() == 1 && known.find(t[0]) != std::string::npos) {
+      k.key = static_cast<unsigned char>(t[0]);
+    } else if (c1 != std::string::npos) {
+      const std::string name = t.substr(0, c1), rest = t.substr(c1 + 1);
+      const std::size_t c2 = rest.find(':');
+      if ((name == "rotate" || name == "pan") && c2 != std::string::npos && number(rest.substr(0, c2), k.a) &&
+          number(rest.substr(c2 + 1), k.b)) {
+        k.kind = name == "rotate" ? ScriptToken::Rotate : ScriptToken::Pan;
+      } else if (name == "zoom" && number(rest, k.a)) {
+        k.kind = ScriptToken::Zoom;
+      } else {
+        why = "'" + t + "'";
+        return false;
+      }
+    } else {
+      why = "'" + t + "'";
+      return false;
+    }
+    out.push_back(k);
+  }
+  return true;
+}
 
 Controls& controls(GLFWwindow* w) { return *static_cast<Controls*>(glfwGetWindowUserPointer(w)); }
 
@@ -134,12 +197,11 @@ void install_callbacks(GLFWwindow* win) {
     Controls& c = controls(w);
     const double dx = x - c.mouse_x, dy = y - c.mouse_y;
     c.mouse_x = x, c.mouse_y = y;
-    if (c.left) c.orbit.rotate(dx, dy), c.dirty = true;
-    else if (c.right) c.orbit.pan(dx, dy, c.fov_deg, c.fb_height), c.dirty = true;
+    if (c.left) c.drag_rotate(dx, dy);
+    else if (c.right) c.drag_pan(dx, dy);
   });
   glfwSetScrollCallback(win, [](GLFWwindow* w, double, double dy) {
-    controls(w).orbit.zoom(dy);
-    controls(w).dirty = true;
+    controls(w).scroll(dy);
   });
   glfwSetFramebufferSizeCallback(win, [](GLFWwindow* w, int, int) { controls(w).dirty = true; });
 }
@@ -171,8 +233,10 @@ struct Presenter {
     glClearColor(0, 0, 0, 1);
     glClear(GL_COLOR_BUFFER_BIT);
     // Texture row 0 is the image's top row; the window's row 0 is its bottom: flip in the blit.
-    glBlitFramebuffer(0, 0, img.width, img.height, 0, fb_h, img.width, fb_h - img.height, GL_COLOR_BUFFER_BIT,
-                      GL_NEAREST);
+    // An image smaller than the window (--quality low) is scaled up to fill it.
+    const bool scaled = img.width != fb_w || img.height != fb_h;
+    glBlitFramebuffer(0, 0, img.width, img.height, 0, fb_h, scaled ? fb_w : img.width, scaled ? 0 : fb_h - img.height,
+                      GL_COLOR_BUFFER_BIT, scaled ? GL_LINEAR : GL_NEAREST);
     if (shot) {
       glBindFramebuffer(GL_READ_FRAMEBUFFER, 0);
       glReadBuffer(GL_BACK);
@@ -313,6 +377,17 @@ int run_view(const ViewArgs& a) {
     return bad("--size " + a.size + ": must be WxH, two integers in [16, 8192] pixels (e.g. 1280x720)");
   if (!a.screenshot.empty() && a.frames <= 0)
     return bad("--screenshot " + a.screenshot + ": needs --frames N (the screenshot is taken after frame N)");
+  std::vector<ScriptToken> script;
+  if (!a.keys.empty()) {
+    std::string why;
+    if (a.keys.size() > 100000 || !parse_keys(a.keys, script, why))
+      return bad("--keys " + a.keys.substr(0, 200) + ": token " + (why.empty() ? "list too long" : why) +
+                 " unknown: allowed are the keys space . n + = - _ r q, rotate:DX:DY, pan:DX:DY (pixels), zoom:N "
+                 "(notches), comma separated, at most 100000 characters");
+  }
+  if (!a.quality.empty() && a.quality != "high" && a.quality != "low")
+    return bad("--quality " + a.quality + ": allowed values are high, low");
+  const bool low = a.quality == "low";
   if (a.frames > 0 && !(double(a.frames) <= kMaxRunFrames))
     return bad("--frames " + std::to_string(a.frames) + ": at most " + format_number(kMaxRunFrames));
   auto loaded = a.scene.empty() ? load_default_scene() : load_scene_file(a.scene);
@@ -407,7 +482,15 @@ int run_view(const ViewArgs& a) {
     double next_due = 0;  // wall s (since t0) at which the next step is due
     std::fprintf(stderr, "view: start-up %.2f s; window %dx%d on DISPLAY=%s\n", seconds_since(t_setup), width, height, display);
 
+    std::size_t next_token = 0;  // --keys: the next token to apply
+    bool token_applied = false;  // a token was applied for the frame being drawn
+    bool effects_set = !low;
     while (!glfwWindowShouldClose(win) && !ctl.quit) {
+      if (next_token < script.size() && shown > 0 && !token_applied) {
+        script[next_token].apply(ctl);
+        token_applied = true;
+        if (ctl.quit) break;
+      }
       const bool done = a.frames > 0 && world.steps() >= a.frames;
       const bool stepping = !done && (!ctl.paused || ctl.step_once);
       if (!stepping && !ctl.dirty) {
@@ -438,7 +521,8 @@ int run_view(const ViewArgs& a) {
         render::CameraView view = start;
         view.position = ctl.orbit.eye();
         view.target = ctl.orbit.target;
-        view.width = fb_w, view.height = fb_h;
+        // --quality low: half the window's pixels each way, scaled up when presented.
+        view.width = low ? std::max(fb_w / 2, 16) : fb_w, view.height = low ? std::max(fb_h / 2, 16) : fb_h;
         ctl.fb_height = fb_h;
         const auto t_r = Clock::now();
         if (Status s = images.heightfield_changed(world.take_dirty_regions()); !s) {
@@ -446,6 +530,14 @@ int run_view(const ViewArgs& a) {
           break;
         }
         auto img = images.render(view);
+        if (img && !effects_set && images.renderer()) {  // the renderer exists from the first image on
+          if (Status s = images.renderer()->set_effects(0.0f, 512); !s) {
+            code = failed(s.message());
+            break;
+          }
+          effects_set = true;
+          img = images.render(view);
+        }
         if (!img) {
           code = failed("render: " + img.message());
           break;
@@ -478,6 +570,14 @@ int run_view(const ViewArgs& a) {
                       shot.height, panel[0], panel[1], panel[2], panel[3]);
         }
         ++shown;
+        if (token_applied) {
+          const Eigen::Vector3d eye = ctl.orbit.eye();
+          std::printf("keys: %s -> %s, steps %lld, t = %.6f s, speed %g, eye %.9f %.9f %.9f\n",
+                      script[next_token].text.c_str(), ctl.paused ? "paused" : "running", world.steps(), world.time(),
+                      ctl.speed, eye.x(), eye.y(), eye.z());
+          token_applied = false;
+          if (++next_token == script.size()) ctl.quit = true;  // the script's last frame is drawn
+        }
         sum_step += stepping ? st.step_ms : 0;
         sum_render += st.render_ms;
         sum_overlay += overlay_ms;

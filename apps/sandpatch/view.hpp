@@ -21,6 +21,12 @@ struct ViewArgs {
   std::string backend;       // "" = the scene's; "cpu" | "gl"
   int threads = -1;          // >= 0 overrides simulation.threads (0 = all)
   std::string frame_budget;  // ms or "off" (overrides simulation.frame_budget_ms); "" = the scene's
+  // Scripted input, fed to the same handlers as the keyboard and mouse, one token per drawn
+  // frame from the second on; the viewer exits after the last token's frame. Tokens, comma
+  // separated: a key the viewer knows (" " may be written space), rotate:DX:DY and pan:DX:DY
+  // (a drag of that many pixels), zoom:N (wheel notches). "" = none.
+  std::string keys;
+  std::string quality;       // "high" (default) | "low": half resolution, no ambient occlusion, 512² shadow map
 };
 
 // Exit code: 0 ok, 1 runtime failure (a step failed, no window could be made), 2 bad input

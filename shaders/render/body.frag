@@ -1,6 +1,6 @@
 #version 430 core
-// Rigid bodies lit like the terrain (common.glsl sp_shade: the same sun, diffuse + ambient),
-// two-sided (a mesh's winding is not trusted); or, for tests, one flat ID colour per body.
+// Rigid bodies lit like the terrain (common.glsl sp_shade: the same sun, diffuse + ambient,
+// the bodies' shadows), two-sided (a mesh's winding is not trusted); or, for tests, one flat ID colour per body.
 
 in vec3 v_position;
 in vec3 v_normal;
@@ -18,5 +18,9 @@ void main() {
   }
   vec3 n = normalize(v_normal);
   if (dot(n, u_eye - v_position) < 0.0) n = -n;
-  o_color = vec4(sp_shade(v_color, n), 1.0);
+  // The bodies' shadows, this body's own included: looked up 3 shadow-map texels off the
+  // surface along its normal (the 3 x 3 taps reach one texel each way), so a lit face does not
+  // shadow itself; faces turned from the sun get no sun either way.
+  float vis = sp_sun_visibility(v_position + 3.0 * u_shadow_texel * n);
+  o_color = vec4(sp_shade_visible(v_color, n, vis), 1.0);
 }

@@ -49,16 +49,24 @@ vec3 sp_blend_materials(vec4 w, vec2 p) {
 }
 
 // One directional light (sun) plus ambient; n and sun_dir unit vectors (toward the sun).
+// Ambient 0.3 and sun 1.2: with the default sun 25 deg above the horizon flat ground gets
+// 0.3 + 1.2 sin 25 deg = 0.81, and a wall tilted 14 deg toward / away from the sun 1.06 / 0.53,
+// so a crater one granule diameter deep reads (docs/rendering.md "Shading").
+const float kAmbient = 0.3, kSun = 1.2;
 uniform vec3 u_sun_dir;
-vec3 sp_shade(vec3 albedo, vec3 n) {
+// The light factor with a soft shoulder above 0.9 (value and slope continuous, tending to 1.2):
+// flat ground (0.81) is untouched, a crater wall facing the sun (1.06) gets 1.02, and a
+// granule's cap facing the low sun (up to 1.5, times the particle gain) 1.16 to 1.18 instead of
+// clipping the sand to white.
+float sp_shoulder(float light) { return light <= 0.9 ? light : 0.9 + 0.3 * (1.0 - exp(-(light - 0.9) / 0.3)); }
+// The sun's share scaled by its visibility in [0, 1] (1 = lit, 0 = in shadow) and the whole by
+// gain before the shoulder.
+vec3 sp_shade_gain(vec3 albedo, vec3 n, float visibility, float gain) {
   float diffuse = max(dot(n, u_sun_dir), 0.0);
-  return albedo * (0.35 + 0.75 * diffuse);
+  return albedo * sp_shoulder(gain * (kAmbient + kSun * diffuse * visibility));
 }
-// The same with the sun's share scaled by its visibility in [0, 1] (1 = lit, 0 = in shadow).
-vec3 sp_shade_visible(vec3 albedo, vec3 n, float visibility) {
-  float diffuse = max(dot(n, u_sun_dir), 0.0);
-  return albedo * (0.35 + 0.75 * diffuse * visibility);
-}
+vec3 sp_shade(vec3 albedo, vec3 n) { return sp_shade_gain(albedo, n, 1.0, 1.0); }
+vec3 sp_shade_visible(vec3 albedo, vec3 n, float visibility) { return sp_shade_gain(albedo, n, visibility, 1.0); }
 
 // Bodies' shadows (render.cpp: an orthographic depth map of the bodies seen from the sun).
 // u_shadow_matrix: local m -> [0, 1]^3 of the map; outside it everything is lit.
@@ -66,6 +74,7 @@ uniform bool u_shadow_on;
 uniform mat4 u_shadow_matrix;
 uniform sampler2DShadow u_shadow_map;  // depth compare, linear: 2 x 2 taps per lookup
 uniform float u_shadow_bias;           // depth units of the map
+uniform float u_shadow_texel;          // m, one texel's width (bodies' normal offset)
 float sp_sun_visibility(vec3 p) {
   if (!u_shadow_on) return 1.0;
   vec4 q = u_shadow_matrix * vec4(p, 1.0);

@@ -63,11 +63,17 @@ void main() {
       }
     }
   }
-  vec3 n = normalize(mix(n_sphere, n_bed, u_normal_bend));
+  // Granules a few pixels across cannot show their roundness, only noise: below 6 px in
+  // radius the sphere's own shading (normal, occlusion, half the tint) fades toward the bed's,
+  // so a distant patch reads as a sand surface, not as stipple (at 1.5 px none is left).
+  float r_px = v_radius * u_proj[1][1] * 0.5 * u_viewport.y / max(-v_center_eye.z, 1e-4);
+  float detail = smoothstep(1.5, 6.0, r_px);
+  vec3 n = normalize(mix(n_sphere, n_bed, mix(1.0, u_normal_bend, detail)));
   vec3 p = (u_view_inv * vec4(p_eye, 1.0)).xyz;
   // Granule-scale occlusion: a sphere in a packed bed is shaded by its neighbours below its
   // equator (factor 0.8 facing into the bed to 1 facing out of it), so each granule reads as a
   // ball; u_gain brings the bed's mean brightness back to the terrain's.
-  float occ = u_gain * mix(0.8, 1.0, clamp(0.5 + 0.5 * dot(n_sphere, n_bed), 0.0, 1.0));
-  o_color = vec4(occ * sp_shade_visible(v_tint * sp_blend_materials(v_weights, p.xz), n, sp_sun_visibility(p)), u_fade);
+  float occ = u_gain * mix(0.9, mix(0.8, 1.0, clamp(0.5 + 0.5 * dot(n_sphere, n_bed), 0.0, 1.0)), detail);
+  float tint = mix(1.0, v_tint, 0.5 + 0.5 * detail);
+  o_color = vec4(sp_shade_gain(tint * sp_blend_materials(v_weights, p.xz), n, sp_sun_visibility(p), occ), u_fade);
 }

@@ -15,8 +15,12 @@ uniform sampler2DArray u_normals;   // RGBA16F unit normal (x, y, z), linear, re
 uniform sampler2DArray u_materials; // RGBA8 weights of materials 0..3, linear, repeat
 // Footprints left out of this pass (local x0, z0, x1, z1, m): the live patches' in the second
 // terrain pass, where their granules are the surface (render.hpp).
-// Inside a footprint the terrain fades out over a band of u_cut_band[k] m from its edge
-// (alpha-blended over the granules below the surface there), so the patch has no hard seam.
+// Inside a footprint the terrain gives way to the granules over a band of u_cut_band[k] m
+// from its edge (six granule diameters): a ragged edge at granule scale, not a translucent
+// layer. At depth fraction a (1 at the footprint's edge, 0 at the band's inner end) the
+// terrain stays where a - fbm(x / one granule diameter) > 0, with a soft step of +-0.12 (a few
+// pixels), so near the edge it is whole, in the middle it breaks into holes of one or two
+// granules, and at the inner end only specks remain: sand running out into the patch.
 const int kMaxCuts = 32;
 uniform int u_cut_count;
 uniform vec4 u_cuts[kMaxCuts];
@@ -34,7 +38,12 @@ void main() {
   for (int k = 0; k < u_cut_count; ++k) {
     vec2 inside = min(v_xz - u_cuts[k].xy, u_cuts[k].zw - v_xz);  // m from the nearest edge, per axis
     float d = min(inside.x, inside.y);
-    if (d > 0.0) alpha = min(alpha, 1.0 - clamp(d / max(u_cut_band[k], 1e-6), 0.0, 1.0));
+    if (d > 0.0) {
+      float band = max(u_cut_band[k], 1e-6);
+      float a = 1.25 * (1.0 - clamp(d / band, 0.0, 1.0)) - 0.125;  // in [-0.125, 1.125]
+      float g = sp_fbm(v_xz * (6.0 / band) + vec2(17.0 * float(k)));  // one cell per granule diameter
+      alpha = min(alpha, smoothstep(g - 0.12, g + 0.12, a));
+    }
   }
   if (alpha <= 0.0) discard;
   int l = v_level;

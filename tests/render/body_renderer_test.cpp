@@ -162,3 +162,79 @@ TEST(BodyRenderer, BadBodiesAreRefusedAndNothingChanges) {
   ASSERT_TRUE(img.ok());
   EXPECT_EQ(s.renderer->stats().bodies, 1);
 }
+
+// Bodies receive the bodies' shadows: a grey sphere (albedo 0.5) lit at the pixel of its
+// projected centre, where the surface's normal points at the eye, then with a plate 1.5 m
+// toward the sun from it. Lit, the pixel is 0.5 S(0.3 + 1.2 n.sun) (common.glsl sp_shade, S its
+// shoulder above 0.9); in the plate's shadow only the ambient 0.5 x 0.3 is left, so the ratio
+// shadowed / lit is 0.3 / S(0.3 + 1.2 n.sun) (within 0.04: 8-bit rounding, ambient occlusion). Alone, the
+// sphere does not shadow its own lit side: its pixels equal those of a renderer without a
+// shadow map (mean difference below 1, of 0..255).
+TEST(BodyRenderer, BodiesReceiveShadowsAndDoNotShadowTheirLitSide) {
+  Scene s = make_scene(plane(0, 0));
+  if (!s.renderer) GTEST_SKIP() << "no GL context";
+  RendererDef no_shadows;
+  no_shadows.shadow_map_size = 0;
+  auto plain = SceneRenderer::create(*s.ctx, s.hf, no_shadows);
+  ASSERT_TRUE(plain.ok()) << plain.message();
+  s.cam.position = {30, 2, 38};
+  s.cam.target = {32, 0.5, 32};
+  BodyInstance ball;
+  ball.kind = BodyShapeKind::Sphere;
+  ball.radius = 0.3f;
+  ball.position = {32, 0.5, 32};
+  ball.albedo = {0.5f, 0.5f, 0.5f};
+  const Eigen::Vector3d sun = RendererDef{}.sun_direction.cast<double>().normalized();
+  BodyInstance plate;
+  plate.kind = BodyShapeKind::Box;
+  plate.half_extents = {0.5f, 0.05f, 0.5f};
+  plate.position = ball.position + 1.5 * sun;
+  plate.albedo = {0.2f, 0.6f, 0.2f};
+
+  FrameFlags ids;
+  ids.body_ids = true;
+  ASSERT_TRUE(s.renderer->set_bodies({ball, plate}).ok());
+  auto id_img = s.renderer->render(s.cam, ids);
+  ASSERT_TRUE(id_img.ok()) << id_img.message();
+  const auto c = s.renderer->project(s.cam, ball.position);
+  ASSERT_TRUE(c.has_value());
+  const int cx = int(c->pixel.x()), cy = int(c->pixel.y());
+  const auto id0 = body_id_color(0);
+  ASSERT_EQ(id_img->pixel(cx, cy)[2], id0[2]) << "the plate must not hide the ball's centre";
+  auto shadowed = s.renderer->render(s.cam);
+  ASSERT_TRUE(shadowed.ok());
+  ASSERT_TRUE(save_png(std::string(SANDPATCH_TEST_OUTPUT_DIR) + "/body_shadowed.actual.png", shadowed.value()).ok());
+
+  ASSERT_TRUE(s.renderer->set_bodies({ball}).ok());
+  id_img = s.renderer->render(s.cam, ids);
+  ASSERT_TRUE(id_img.ok());
+  auto lit = s.renderer->render(s.cam);
+  ASSERT_TRUE(lit.ok());
+  ASSERT_TRUE((*plain)->set_bodies({ball}).ok());
+  auto lit_plain = (*plain)->render(s.cam);
+  ASSERT_TRUE(lit_plain.ok());
+
+  const Eigen::Vector3d n = (s.cam.position - ball.position).normalized();
+  const double light = 0.3 + 1.2 * std::max(0.0, n.dot(sun));
+  const double shoulder = light <= 0.9 ? light : 0.9 + 0.3 * (1.0 - std::exp(-(light - 0.9) / 0.3));
+  const double ratio_expected = 0.3 / shoulder;
+  const double g_lit = lit->pixel(cx, cy)[1], g_shadow = shadowed->pixel(cx, cy)[1];
+  std::printf("ball centre: lit %.0f, in the plate's shadow %.0f: ratio %.3f (expected %.3f)\n", g_lit, g_shadow,
+              g_shadow / g_lit, ratio_expected);
+  ASSERT_GT(g_lit, 100.0);
+  EXPECT_NEAR(g_shadow / g_lit, ratio_expected, 0.04);
+
+  double sum = 0;
+  int count = 0;
+  for (int y = 0; y < id_img->height; ++y)
+    for (int x = 0; x < id_img->width; ++x) {
+      const std::uint8_t* p = id_img->pixel(x, y);
+      if (p[0] != id0[0] || p[1] != id0[1] || p[2] != id0[2]) continue;
+      const std::uint8_t *a = lit->pixel(x, y), *b = lit_plain->pixel(x, y);
+      sum += std::max({std::abs(a[0] - b[0]), std::abs(a[1] - b[1]), std::abs(a[2] - b[2])});
+      ++count;
+    }
+  ASSERT_GT(count, 50);
+  std::printf("ball alone, %d pixels: mean difference to no shadow map %.2f\n", count, sum / count);
+  EXPECT_LT(sum / count, 1.0);
+}

@@ -238,6 +238,45 @@ TEST(SceneRenderer, HeightfieldEditShowsNextFrame) {
   EXPECT_EQ(compare_images(edited.value(), fresh.value()).max_abs, 0);
 }
 
+// set_effects (the viewer's --quality low) gives exactly the frame of a renderer created with
+// those settings, and refuses bad values naming the field, changing nothing.
+TEST(SceneRenderer, SetEffectsEqualsARendererMadeSo) {
+  auto ctx = make_context();
+  ASSERT_TRUE(ctx);
+  const Heightfield hf = terrain(257, 1.0f, hills(4, 64));
+  BodyInstance ball;
+  ball.position = {140, 6, 140};
+  ball.radius = 1.0f;
+  CameraView cam;
+  cam.position = {120, 25, 120};
+  cam.target = {140, 0, 140};
+  auto r = SceneRenderer::create(*ctx, hf);
+  ASSERT_TRUE(r.ok());
+  ASSERT_TRUE((*r)->set_bodies({ball}).ok());
+  auto full = (*r)->render(cam);
+  ASSERT_TRUE(full.ok());
+  auto st = (*r)->set_effects(5.0f, 100);
+  ASSERT_FALSE(st.ok());
+  EXPECT_NE(st.message().find("ao_strength"), std::string::npos) << st.message();
+  EXPECT_NE(st.message().find("shadow_map_size = 100"), std::string::npos) << st.message();
+  auto again = (*r)->render(cam);
+  ASSERT_TRUE(again.ok());
+  EXPECT_EQ(compare_images(full.value(), again.value()).max_abs, 0) << "a refused change changed the frame";
+  ASSERT_TRUE((*r)->set_effects(0.0f, 512).ok());
+  auto light = (*r)->render(cam);
+  ASSERT_TRUE(light.ok());
+  RendererDef def;
+  def.ao_strength = 0;
+  def.shadow_map_size = 512;
+  auto made = SceneRenderer::create(*ctx, hf, def);
+  ASSERT_TRUE(made.ok());
+  ASSERT_TRUE((*made)->set_bodies({ball}).ok());
+  auto expected = (*made)->render(cam);
+  ASSERT_TRUE(expected.ok());
+  EXPECT_EQ(compare_images(light.value(), expected.value()).max_abs, 0);
+  EXPECT_GT(compare_images(light.value(), full.value()).max_abs, 0) << "ambient occlusion off changes the frame";
+}
+
 // Bad cameras are refused with errors naming the field.
 TEST(SceneRenderer, BadCameraIsRefused) {
   auto ctx = make_context();
@@ -257,8 +296,9 @@ TEST(SceneRenderer, BadCameraIsRefused) {
 // A crater in the heightfield one granule diameter deep (8 cm, radius 0.5 m, a cosine bowl; a
 // demoted patch's crater at 0.125 m spacing), reported through heightfield_changed and seen
 // 10 m away at 320 x 240. Metric: the mean over the crater's pixels (the ground disc of 0.6 m
-// around its centre) of |luma(after) - luma(before)|, Rec. 709 luma in 0..255: above 5 (its
-// walls lit as slopes by the full-resolution normals, its floor occluded).
+// around its centre) of |luma(after) - luma(before)|, Rec. 709 luma in 0..255: above 9 (its
+// walls lit as slopes by the full-resolution normals under a sun 25 degrees high, its floor
+// occluded; measured 11.3, and 6.4 with the sun at 37.5 degrees and the weaker sun term).
 TEST(SceneRenderer, HeightfieldCraterChangesItsPixels) {
   auto ctx = make_context();
   if (!ctx) GTEST_SKIP() << "no GL context";
@@ -302,5 +342,5 @@ TEST(SceneRenderer, HeightfieldCraterChangesItsPixels) {
     for (int x = 0; x < cam.width; ++x)
       if (mask[std::size_t(y) * cam.width + x]) sum += std::fabs(luma(before->pixel(x, y)) - luma(after->pixel(x, y)));
   std::printf("crater pixels %d: mean |luma change| %.1f\n", n_px, sum / n_px);
-  EXPECT_GT(sum / n_px, 5.0);
+  EXPECT_GT(sum / n_px, 9.0);
 }
