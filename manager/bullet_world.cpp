@@ -1090,10 +1090,10 @@ JointState BulletWorld::joint_state(JointId id) const {
 std::vector<std::int32_t> BulletWorld::joint_groups() const {
   // union-find over the slots, each root the lowest slot of its set
   const int n = int(impl_->bodies.size());
-  std::vector<int> up(std::size_t(n));
-  for (int i = 0; i < n; ++i) up[std::size_t(i)] = i;
+  std::vector<int> parent(static_cast<std::size_t>(n));
+  for (int i = 0; i < n; ++i) parent[std::size_t(i)] = i;
   auto root = [&](int i) {
-    while (up[std::size_t(i)] != i) i = up[std::size_t(i)] = up[std::size_t(up[std::size_t(i)])];
+    while (parent[std::size_t(i)] != i) i = parent[std::size_t(i)] = parent[std::size_t(parent[std::size_t(i)])];
     return i;
   };
   std::vector<char> jointed(std::size_t(n), 0);
@@ -1101,7 +1101,7 @@ std::vector<std::int32_t> BulletWorld::joint_groups() const {
     if (!j.c || !j.def.b.valid()) continue;
     const int a = root(j.def.a.index), b = root(j.def.b.index);
     jointed[std::size_t(j.def.a.index)] = jointed[std::size_t(j.def.b.index)] = 1;
-    if (a != b) up[std::size_t(std::max(a, b))] = std::min(a, b);
+    if (a != b) parent[std::size_t(std::max(a, b))] = std::min(a, b);
   }
   std::vector<std::int32_t> g(std::size_t(n), 0);
   for (int i = 0; i < n; ++i)
