@@ -293,6 +293,28 @@ JointState BulletWorld::joint_state(JointId id) const {
   return s;
 }
 
+std::vector<std::int32_t> BulletWorld::joint_groups() const {
+  // union-find over the slots, each root the lowest slot of its set
+  const int n = int(impl_->bodies.size());
+  std::vector<int> parent(static_cast<std::size_t>(n));
+  for (int i = 0; i < n; ++i) parent[std::size_t(i)] = i;
+  auto root = [&](int i) {
+    while (parent[std::size_t(i)] != i) i = parent[std::size_t(i)] = parent[std::size_t(parent[std::size_t(i)])];
+    return i;
+  };
+  std::vector<char> jointed(std::size_t(n), 0);
+  for (const auto& j : impl_->joints) {
+    if (!j.c || !j.def.b.valid()) continue;
+    const int a = root(j.def.a.index), b = root(j.def.b.index);
+    jointed[std::size_t(j.def.a.index)] = jointed[std::size_t(j.def.b.index)] = 1;
+    if (a != b) parent[std::size_t(std::max(a, b))] = std::min(a, b);
+  }
+  std::vector<std::int32_t> g(std::size_t(n), 0);
+  for (int i = 0; i < n; ++i)
+    if (jointed[std::size_t(i)]) g[std::size_t(i)] = std::int32_t(root(i) + 1);
+  return g;
+}
+
 std::vector<JointId> BulletWorld::joints() const {
   std::vector<JointId> out;
   for (int i = 0; i < int(impl_->joints.size()); ++i)

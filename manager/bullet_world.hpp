@@ -250,6 +250,12 @@ class BulletWorld {
   const RigidJointDef& joint_definition(JointId id) const;
   // Live joints in slot order.
   std::vector<JointId> joints() const;
+  // The joint groups, by body slot (RigidBodyId::index): bodies connected by joints, directly
+  // or through other bodies, share one group (1 + the lowest slot among them); a body with no
+  // joint to another body has 0 (joints to the world do not group). Bullet does not collide
+  // jointed bodies; the terrain manager hands these groups to the DEM so their shells do not
+  // touch either.
+  std::vector<std::int32_t> joint_groups() const;
 
  private:
   BulletWorld() = default;

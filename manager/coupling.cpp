@@ -228,6 +228,10 @@ Status TerrainManager::Impl::couple_before(Slot& slot, double dt) {
     if (Status e = slot.sim->set_body_enabled(it->shell, false); !e) return e.errors();
     it = slot.carried.erase(it);
   }
+  // Bodies joined by joints: one collision group in the DEM too, so their shells do not
+  // touch (Bullet does not collide them; a wheel's shell against its chassis' pushed the
+  // wheels outward with about 6 kN in the vehicle scene). Granules touch every shell.
+  const std::vector<std::int32_t> groups = world->joint_groups();
   for (RigidBodyId b : world->bodies()) {
     Eigen::Vector3d lo, hi;
     world->bounds(b, &lo, &hi);
@@ -254,6 +258,7 @@ Status TerrainManager::Impl::couple_before(Slot& slot, double dt) {
       }
       sh.position = slot.sim->def().scale.position_to_sim({st.position.x(), st.position.y(), st.position.z()});
       sh.orientation = quat(st.orientation);
+      sh.group = groups[std::size_t(b.index)];
       auto id = slot.sim->add_shell(sh);
       if (!id) return id.errors();
       Carried nc{b, *id, true, Eigen::Vector3f::Zero(), Eigen::Vector3f::Zero()};
@@ -264,6 +269,8 @@ Status TerrainManager::Impl::couple_before(Slot& slot, double dt) {
       it = slot.carried.end() - 1;
     }
     Carried& c = *it;
+    if (const std::int32_t g = groups[std::size_t(b.index)]; !fresh && slot.sim->body_group(c.shell) != g)
+      if (Status e = slot.sim->set_body_group(c.shell, g); !e) return e.errors();  // a joint added or removed
     const bool reenabled = touch && !c.enabled;  // parked until now: its state must be set
     if (touch != c.enabled) {
       if (Status e = slot.sim->set_body_enabled(c.shell, touch); !e) return e.errors();

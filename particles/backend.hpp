@@ -22,6 +22,9 @@ class DemBackend {
   virtual Result<BodyId> add_shell(const ShellDef& shell) = 0;
   virtual Status set_body_state(BodyId b, Vec3 position, Quat orientation, Vec3 velocity, Vec3 angular_velocity) = 0;
   virtual Status set_body_enabled(BodyId b, bool enabled) = 0;
+  // A shell's collision group (ShellDef::group): shells of one group > 0 do not touch.
+  virtual Status set_body_group(BodyId b, std::int32_t group) = 0;
+  virtual std::int32_t body_group(BodyId b) const = 0;
   virtual Status step(double dt_frame) = 0;
   // DEM substeps a frame of dt_frame seconds takes (dt_sub <= t_c / N), or the error step() gives.
   virtual Result<int> substeps_for(double dt_frame) const = 0;
@@ -61,6 +64,8 @@ class DemBackendOf final : public DemBackend {
   Result<BodyId> add_shell(const ShellDef& s) override { return sim_.add_shell(s); }
   Status set_body_state(BodyId b, Vec3 p, Quat q, Vec3 v, Vec3 w) override { return sim_.set_body_state(b, p, q, v, w); }
   Status set_body_enabled(BodyId b, bool e) override { return sim_.set_body_enabled(b, e); }
+  Status set_body_group(BodyId b, std::int32_t g) override { return sim_.set_body_group(b, g); }
+  std::int32_t body_group(BodyId b) const override { return sim_.body_group(b); }
   Status step(double dt) override { return sim_.step(dt); }
   Result<int> substeps_for(double dt) const override { return sim_.substeps_for(dt); }
   bool asleep() const override { return sim_.asleep(); }

@@ -196,6 +196,8 @@ Result<ShellPlan> plan_shell(const ShellDef& sh, int bodies_used, int max_bodies
   p.count = int(sh.offsets.size());
   const int count = p.count;
   if (count < 1) return Error{"", "ShellDef.offsets", "0 spheres", "must hold at least one sphere", ""};
+  if (sh.group < 0)
+    return Error{"", "ShellDef.group", std::to_string(sh.group), "must be >= 0 (0: no collision group)", ""};
   p.one_radius = sh.radii.size() == 1;
   if (!p.one_radius && int(sh.radii.size()) != count)
     return Error{"", "ShellDef.radii", format_number(double(sh.radii.size())) + " radii",
@@ -268,6 +270,7 @@ Result<BodyId> Simulation::add_shell(const ShellDef& sh) {
   int i = s.push_body(flags, sh.position, sh.orientation, sh.velocity, sh.angular_velocity,
                       sh.motion == MotionType::Dynamic ? sh.mass : 0.0f, invm, iI, sh.offsets.data(),
                       sh.radii.data(), count, one);
+  s.b.group[i] = sh.group;
   return BodyId{i};
 }
 
@@ -535,6 +538,26 @@ Status Simulation::set_body_enabled(BodyId id, bool enabled) {
   s.need_sort = true;
   wake();
   return Ok{};
+}
+
+Status Simulation::set_body_group(BodyId id, std::int32_t group) {
+  Impl& s = *impl_;
+  if (id.index < 0 || id.index >= s.nb)
+    return Error{"", "set_body_group.body", std::to_string(id.index), "must be a body of this simulation", ""};
+  if (group < 0)
+    return Error{"", "set_body_group.group", std::to_string(group), "must be >= 0 (0: no collision group)", ""};
+  if (s.b.flags[id.index] & kBodyGranule)
+    return Error{"", "set_body_group.body", std::to_string(id.index), "is a granule: only shells have a group", ""};
+  if (s.b.group[id.index] == group) return Ok{};
+  s.b.group[id.index] = group;
+  s.need_sort = true;  // the neighbour list holds the pairs that interact
+  wake();
+  return Ok{};
+}
+
+std::int32_t Simulation::body_group(BodyId id) const {
+  const Impl& s = *impl_;
+  return id.index >= 0 && id.index < s.nb ? s.b.group[id.index] : 0;
 }
 
 }  // namespace sandpatch

@@ -128,6 +128,10 @@ struct ShellDef {
   Quat orientation{};
   Vec3 velocity{};                       // m/s (kinematic and dynamic)
   Vec3 angular_velocity{};               // rad/s, world frame
+  // Collision group (>= 0): the spheres of two bodies of the same group > 0 do not touch
+  // (bodies joined by joints, which Bullet does not collide either); granules touch every
+  // group. 0: none (touches every other body). Changed later by Simulation::set_body_group.
+  std::int32_t group = 0;
 };
 
 // What a body of a shell needs, derived from a checked ShellDef: shared by both backends'
@@ -184,6 +188,10 @@ class Simulation {
   // A disabled body is parked: static, far above the domain, in contact with nothing, until
   // enabled again (then set its state). For shells of bodies that left the patch.
   Status set_body_enabled(BodyId b, bool enabled);
+  // A shell's collision group (ShellDef::group; >= 0). The neighbour list is rebuilt at the
+  // next substep when it changes. Errors name the body or the group.
+  Status set_body_group(BodyId b, std::int32_t group);
+  std::int32_t body_group(BodyId b) const;  // 0 for an id it does not hold
 
   // Advances dt_frame seconds in substeps of dt_frame / n, n = substeps_for(dt_frame).
   // Refuses (Error naming the parameter) when n would exceed max_substeps, and stops with an

@@ -298,6 +298,7 @@ int Simulation::Impl::push_body(std::uint32_t flags, Vec3 x, Quat q, Vec3 v, Vec
   b.flags[i] = flags;
   b.first[i] = np;
   b.count[i] = count;
+  b.group[i] = 0;  // add_shell sets a shell's
   for (int k = 0; k < count; ++k) {
     int s = np++;
     p.id[s] = s;

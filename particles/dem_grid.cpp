@@ -80,7 +80,8 @@ void Simulation::Impl::sort() {
   build_list(old_slot);
 }
 
-// Visits the spheres j > i (sorted order) of other bodies within r_i + r_j + skin of sphere
+// Visits the spheres j > i (sorted order) of other bodies (not of i's collision group,
+// physics_common.glsl spheres_interact) within r_i + r_j + skin of sphere
 // i, in a fixed order (the rows below, then sorted index): each pair of the grid is met once,
 // from its lower sorted index. The cells after i's own in the grid's (z, y, x) order that
 // can hold a partner are i's own cell and the next in its row, the row above (y + 1) and the
@@ -93,11 +94,13 @@ void Simulation::Impl::for_forward(int i, F&& f) const {
   const float* P = p.pos.data();
   const float* V = p.vel.data();
   const std::int32_t* BODY = p.body.data();
+  const std::int32_t* GROUP = b.group.data();
   const std::int32_t* CS = cell_start.data();
   const float sk = skin;
   const Vec3 pi{P[4 * i], P[4 * i + 1], P[4 * i + 2]};
   const float ri = P[4 * i + 3];
   const std::int32_t bi = BODY[i];
+  const std::int32_t gi = GROUP[bi];
   const bool dyn_i = V[4 * i + 3] > 0.0f;
   const int c = cell[i];
   const int cx = c % gx, cy = (c / gx) % gy, cz = c / (gx * gy);
@@ -106,7 +109,9 @@ void Simulation::Impl::for_forward(int i, F&& f) const {
     for (; j < j1; ++j) {
       const float dx = pi.x - P[4 * j], dy = pi.y - P[4 * j + 1], dz = pi.z - P[4 * j + 2];
       const float rs = ri + P[4 * j + 3] + sk;
-      if (dx * dx + dy * dy + dz * dz >= rs * rs || BODY[j] == bi) continue;
+      if (dx * dx + dy * dy + dz * dz >= rs * rs) continue;
+      const std::int32_t bj = BODY[j];
+      if (!physics::spheres_interact(bi, gi, bj, GROUP[bj])) continue;  // same body or group
       if (!dyn_i && V[4 * j + 3] == 0.0f) continue;  // neither moves under forces
       f(j);
     }
@@ -216,6 +221,8 @@ bool Simulation::Impl::kinematic_touch(double dt) {
             int cc = (zz * gy + yy) * gx + xx;
             for (int j = cell_start[cc]; j < cell_start[cc + 1]; ++j) {
               if (p.vel[4 * j + 3] == 0.0f) continue;
+              const int bj = p.body[j];
+              if (!physics::spheres_interact(i, b.group[i], bj, b.group[bj])) continue;  // jointed to it
               Vec3 d = xs - ld3(p.pos, j);
               float rs = r + p.pos[4 * j + 3] + 0.5f * skin;
               if (dot(d, d) < rs * rs) return true;

@@ -70,7 +70,8 @@
   X(float,         inv_inertia, 4, 0, BOTH, "1/(kg m^2); xyz = inverse principal inertia, body frame; 0 if not dynamic") \
   X(std::uint32_t, flags,       1, 1, BOTH, "BodyFlags: kind (granule/shell) | motion (static/kinematic/dynamic)") \
   X(std::int32_t,  first,       1, 0, BOTH, "id of the body's first sphere (its spheres have consecutive ids)")     \
-  X(std::int32_t,  count,       1, 0, BOTH, "number of spheres of the body")
+  X(std::int32_t,  count,       1, 0, BOTH, "number of spheres of the body")                  \
+  X(std::int32_t,  group,       1, 0, BOTH, "collision group: the spheres of two bodies of the same group > 0 never touch (bodies joined by joints); 0 = none")
 
 #define SANDPATCH_SPHERE_CONTACT_FIELDS(X)                                                        \
   X(float,         wall_xi,   18, 1, CPU,  "m; tangential springs against the 6 boundary planes (physics_common.glsl slots: floor, walls x0, x1, z0, z1, terrain), xyz each; read only where wall_mask has the plane's bit") \

@@ -114,6 +114,7 @@ struct GlSimulation::Impl {
   BodyStage bst;
   std::vector<std::uint32_t> host_flags;  // every body's flags (only the host changes them): no read-back
   std::vector<std::int32_t> host_count;   // every body's sphere count
+  std::vector<std::int32_t> host_group;   // every body's collision group (only the host changes them)
 
   // grid (sized as the CPU's: cell = 2 r_max + skin)
   float r_max = 0, skin = 0, h = 0;

@@ -111,6 +111,7 @@ Status GlSimulation::Impl::configure(const SimulationDef& d, const char* cap_pre
   bst.clear();
   host_flags.clear();
   host_count.clear();
+  host_group.clear();
   if (buf[kS0] != 0) {
     std::vector<std::uint32_t> zero(std::size_t(cap_p), 0u);
     glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
@@ -241,6 +242,8 @@ Result<BodyId> GlSimulation::add_shell(const ShellDef& sh) {
   const int i = s.push_body(flags, sh.position, sh.orientation, sh.velocity, sh.angular_velocity,
                             sh.motion == MotionType::Dynamic ? sh.mass : 0.0f, invm, iI, sh.offsets.data(),
                             sh.radii.data(), count, one);
+  s.bst.group[std::size_t(i - s.nb_gpu)] = sh.group;
+  s.host_group[std::size_t(i)] = sh.group;
   if (sh.motion == MotionType::Kinematic) s.has_moving_kinematic = true;
   return BodyId{i};
 }
@@ -306,6 +309,32 @@ Status GlSimulation::set_body_enabled(BodyId id, bool enabled) {
   if (!enabled) s.rebuild_body(id.index);  // its spheres leave with it (and stop moving)
   wake();
   return Ok{};
+}
+
+Status GlSimulation::set_body_group(BodyId id, std::int32_t group) {
+  Impl& s = *impl_;
+  if (id.index < 0 || id.index >= s.nb)
+    return Error{"", "set_body_group.body", std::to_string(id.index), "must be a body of this simulation", ""};
+  if (group < 0)
+    return Error{"", "set_body_group.group", std::to_string(group), "must be >= 0 (0: no collision group)", ""};
+  if (s.body_flags(id.index) & kBodyGranule)
+    return Error{"", "set_body_group.body", std::to_string(id.index), "is a granule: only shells have a group", ""};
+  std::int32_t& g = s.host_group[std::size_t(id.index)];
+  if (g == group) return Ok{};
+  g = group;
+  if (id.index >= s.nb_gpu) {
+    s.bst.group[std::size_t(id.index - s.nb_gpu)] = group;
+  } else {
+    glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
+    s.write(Impl::kB, s.boff(kBody_group) + std::size_t(id.index) * 4, 4, &group);
+  }
+  wake();  // (the force kernel searches the grid every substep: nothing to rebuild)
+  return Ok{};
+}
+
+std::int32_t GlSimulation::body_group(BodyId id) const {
+  const Impl& s = *impl_;
+  return id.index >= 0 && id.index < s.nb ? s.host_group[std::size_t(id.index)] : 0;
 }
 
 Result<int> GlSimulation::substeps_for(double dt_frame) const { return impl_->guard->substeps_for(dt_frame); }

@@ -72,6 +72,9 @@ class GlSimulation {
   // flagged), so the next substep's contacts already see the new pose.
   Status set_body_state(BodyId b, Vec3 position, Quat orientation, Vec3 velocity, Vec3 angular_velocity);
   Status set_body_enabled(BodyId b, bool enabled);
+  // As Simulation: a shell's collision group (ShellDef::group), written at its index.
+  Status set_body_group(BodyId b, std::int32_t group);
+  std::int32_t body_group(BodyId b) const;
 
   // Staged bodies: bytes still to upload; upload whole bodies in order within max_bytes
   // (with at_least_one, the first body goes however large); returns the bytes written.

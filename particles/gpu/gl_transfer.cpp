@@ -108,6 +108,7 @@ int GlSimulation::Impl::push_body(std::uint32_t flags, Vec3 x, Quat q, Vec3 v, V
   bst.flags[bi] = flags;
   host_flags.push_back(flags);
   host_count.push_back(count);
+  host_group.push_back(0);  // add_shell sets a shell's
   bst.first[bi] = np;
   bst.count[bi] = count;
   for (int k = 0; k < count; ++k) {

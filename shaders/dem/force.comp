@@ -16,6 +16,8 @@
 // spheres of a pair see the same overlap, so they keep the same dmax); a contact that ends
 // forgets its spring. A touching partner without a slot from the last
 // substep is a new contact (first substep).
+// Spheres of one body, or of two bodies of one collision group, do not touch
+// (physics_common.glsl spheres_interact).
 // Boundary planes (floor; side walls; terrain) use the same law with their own springs (W,
 // slot per plane; a plane not in the last substep's mask is new) and c_n from the sphere's
 // body mass.
@@ -43,6 +45,7 @@ void main() {
   uint owned = 0u;   // pairs this sphere owns in the CPU's count (lower id, or static partner)
   uint planes = 0u;
   const int bi = P.body[i];
+  const int gi = B.group[bi];
   if ((B.flags[bi] & SP_BODY_STATIC) == 0u) {
     const vec3 pi = P.pos[i].xyz;
     const float ri = P.pos[i].w;
@@ -66,7 +69,9 @@ void main() {
           const vec3 d = pi - pj.xyz;
           const float rs = ri + pj.w;
           const float d2 = d.x * d.x + d.y * d.y + d.z * d.z;
-          if (d2 >= rs * rs || d2 <= 0.0 || P.body[j] == bi) continue;
+          if (d2 >= rs * rs || d2 <= 0.0) continue;
+          const int bj = P.body[j];
+          if (!spheres_interact(bi, gi, bj, B.group[bj])) continue;  // same body or collision group
           const float invm_j = P.vel[j].w;
           if (!dyn_i && invm_j == 0.0) continue;  // neither moves under forces
           const int jid = P.id[j];

@@ -26,6 +26,8 @@ void main() {
       const uint j1 = G.cell_start[row + min(c.x + 1, u_grid.x - 1) + 1];
       for (uint j = G.cell_start[row + max(c.x - 1, 0)]; j < j1; ++j) {
         if (P.vel[j].w == 0.0) continue;  // not dynamic
+        const int bj = P.body[j];
+        if (!spheres_interact(b, B.group[b], bj, B.group[bj])) continue;  // jointed to it
         const vec3 d = xs - P.pos[j].xyz;
         const float rs = r + P.pos[j].w + u_half_skin;
         if (dot(d, d) < rs * rs) atomicOr(G.status.kinematic_touch, 1u);

@@ -59,6 +59,16 @@ struct DemStatus {
   uint grid_dispatch[SP_GRID_KERNELS * 3];  // dispatch-indirect arguments (x, y, z) per grid kernel
 };
 
+// ---- Which spheres touch ----
+// Two spheres interact unless they belong to the same body, or to two bodies of the same
+// collision group > 0 (ShellDef::group, Simulation::set_body_group: the terrain manager puts bodies joined
+// by joints in one group, as Bullet stops colliding jointed bodies, so a vehicle's wheel and
+// chassis shells do not push each other apart). Granules are in no group (0): they touch
+// every shell. Both backends' pair searches ask this (dem_grid.cpp, force.comp).
+SP_INLINE bool spheres_interact(int body_i, int group_i, int body_j, int group_j) {
+  return body_i != body_j && (group_i == 0 || group_i != group_j);
+}
+
 // ---- Contact law (Bell et al. 2005 normal spring-dashpot; Cundall & Strack 1979 spring) ----
 // For one sphere of a pair or a sphere against a plane. Notation: n = unit normal from the
 // partner to this sphere; delta = overlap (m); v = velocity of this sphere's contact point

@@ -118,6 +118,53 @@ TEST(BulletWorld, RefusesBadMassAndDetectsStaleHandles) {
   EXPECT_TRUE((*w)->alive(*id2));
 }
 
+// Joint groups (handed to the DEM as collision groups): bodies connected by joints, directly
+// or through others, share 1 + their lowest slot; a body alone or jointed only to the world
+// has 0; removing a joint or a body splits the group.
+TEST(BulletWorld, JointGroupsFollowTheJoints) {
+  Heightfield hf = flat(9, 1.0f, 8);
+  auto w = BulletWorld::create(hf, {0, -9.81f, 0});
+  ASSERT_TRUE(w.ok());
+  std::vector<RigidBodyId> b;
+  for (int k = 0; k < 5; ++k) {
+    auto id = (*w)->add_body(ball({1.0 + 1.5 * k, 3, 4}, 0.4f));
+    ASSERT_TRUE(id.ok());
+    b.push_back(*id);
+  }
+  auto joint = [&](RigidBodyId a, RigidBodyId c) {
+    RigidJointDef j;
+    j.kind = JointKind::Fixed;
+    j.a = a;
+    j.b = c;
+    j.anchor = (*w)->state(a).position;
+    auto id = (*w)->add_joint(j);
+    EXPECT_TRUE(id.ok()) << id.message();
+    return *id;
+  };
+  const JointId j34 = joint(b[3], b[4]);
+  joint(b[1], b[4]);  // 1 - 4 - 3: one group, lowest slot 1
+  RigidJointDef to_world;
+  to_world.kind = JointKind::Fixed;
+  to_world.a = b[0];
+  to_world.anchor = (*w)->state(b[0]).position;
+  ASSERT_TRUE((*w)->add_joint(to_world).ok());
+  std::vector<std::int32_t> g = (*w)->joint_groups();
+  ASSERT_EQ(g.size(), 5u);
+  EXPECT_EQ(g[0], 0);  // jointed to the world only
+  EXPECT_EQ(g[1], 2);
+  EXPECT_EQ(g[2], 0);  // alone
+  EXPECT_EQ(g[3], 2);
+  EXPECT_EQ(g[4], 2);
+  (*w)->remove_joint(j34);
+  g = (*w)->joint_groups();
+  EXPECT_EQ(g[3], 0);
+  EXPECT_EQ(g[1], 2);
+  EXPECT_EQ(g[4], 2);
+  (*w)->remove_body(b[1]);  // its joint goes with it
+  g = (*w)->joint_groups();
+  EXPECT_EQ(g[4], 0);
+}
+
 // Bullet reads the heightfield's own tile arrays (no copy): raise the terrain by 1 m after
 // the world was built and a sphere dropped on it rests 1 m higher (2 cm tolerance).
 TEST(BulletWorld, SeesHeightfieldEditsWithoutCopy) {

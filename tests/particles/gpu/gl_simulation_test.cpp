@@ -17,6 +17,7 @@
 #include "particles/gpu/layout.hpp"
 #include "tests/particles/gpu/gl_test_util.hpp"
 #include "tests/particles/head_on.hpp"
+#include "tests/particles/jointed_shells.hpp"
 
 namespace sandpatch::gpu {
 namespace {
@@ -798,6 +799,24 @@ TEST(GlSimulation, ParkedShellExertsNoForce) {
                 n, cmp.worst_abs, cmp.nonzero, cmp.checked, dev, cpu_force, cpu_dev);
     EXPECT_LT(dev, 1e-6);
   }
+  EXPECT_EQ(gl::Context::drain_errors(), "");
+}
+
+// Collision groups as on the CPU (tests/particles/jointed_shells.hpp): shells of one group do
+// not touch, granules touch both, a group set between steps holds from the next substep.
+TEST(GlSimulation, ShellsOfOneGroupDoNotTouch) {
+  auto ctx = context();
+  ASSERT_TRUE(ctx);
+  sandpatch::testutil::check_collision_groups(
+      [](const SimulationDef& d) {
+        auto s = GlSimulation::create(d);
+        EXPECT_TRUE(s.ok()) << s.message();
+        return std::move(*s);
+      },
+      [](GlSimulation& s) {
+        ASSERT_TRUE(s.step(1e-6).ok());
+        ASSERT_EQ(s.last_step().substeps, 1);
+      });
   EXPECT_EQ(gl::Context::drain_errors(), "");
 }
 
