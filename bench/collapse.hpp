@@ -24,6 +24,8 @@
 // has moved by 1 % of L0 for 0.3 s after 3 sqrt(H0 / g), or after max_flow.
 #pragma once
 
+#include "bench/power_fit.hpp"
+
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -73,15 +75,6 @@ struct CollapseResult {
 Status check_collapse(const CollapseDef& def);
 Result<CollapseResult> run_collapse(const CollapseDef& def);
 
-// Least-squares power law y = k x^n on log-log over the points with lo <= x <= hi: n, its
-// standard error, k and the standard error of ln k (both 0 with fewer than 3 points).
-struct PowerFit {
-  double exponent = 0, exponent_se = 0;
-  double prefactor = 0, log_prefactor_se = 0;
-  int points = 0;
-};
-PowerFit fit_power_law(const std::vector<double>& x, const std::vector<double>& y, double lo = 0,
-                       double hi = 1e300);
 
 // bench collapse: one collapse per aspect ratio, one thread each, then the fits against the
 // published exponents. Prints a table (with json, one JSON object on the last line).

@@ -6,36 +6,6 @@
 
 namespace sandpatch {
 
-PowerFit fit_power_law(const std::vector<double>& x, const std::vector<double>& y) {
-  PowerFit f;
-  std::vector<double> lx, ly;
-  for (std::size_t i = 0; i < std::min(x.size(), y.size()); ++i)
-    if (x[i] > 0 && y[i] > 0) lx.push_back(std::log(x[i])), ly.push_back(std::log(y[i]));
-  const int n = int(lx.size());
-  f.n = n;
-  if (n < 2) return f;
-  double mx = 0, my = 0;
-  for (int i = 0; i < n; ++i) mx += lx[i], my += ly[i];
-  mx /= n, my /= n;
-  double sxx = 0, sxy = 0;
-  for (int i = 0; i < n; ++i) sxx += (lx[i] - mx) * (lx[i] - mx), sxy += (lx[i] - mx) * (ly[i] - my);
-  if (!(sxx > 0)) return f;
-  f.exponent = sxy / sxx;
-  const double a = my - f.exponent * mx;
-  f.prefactor = std::exp(a);
-  if (n > 2) {
-    double ss = 0;
-    for (int i = 0; i < n; ++i) {
-      const double r = ly[i] - (a + f.exponent * lx[i]);
-      ss += r * r;
-    }
-    const double s2 = ss / (n - 2);
-    f.exponent_se = std::sqrt(s2 / sxx);
-    f.log_prefactor_se = std::sqrt(s2 * (1.0 / n + mx * mx / sxx));
-  }
-  return f;
-}
-
 double uehara_depth(double mu, double rho_b, double rho_g, double diameter, double h) {
   if (!(mu > 0) || !(rho_b > 0) || !(rho_g > 0) || !(diameter > 0) || !(h >= 0)) return 0;
   const double c = 0.14 / mu * std::sqrt(rho_b / rho_g) * std::cbrt(diameter * diameter);

@@ -7,6 +7,8 @@
 // distance, mu = tan(angle of repose), rho_g the bed's bulk density.
 #pragma once
 
+#include "bench/power_fit.hpp"
+
 #include <vector>
 
 #include "bench/bench_tradeoff.hpp"
@@ -15,14 +17,6 @@
 
 namespace sandpatch {
 
-// y = a x^b by least squares on (ln x, ln y): b and its standard error, a and the standard
-// error of ln a (n >= 3 for the errors; 0 with n = 2). Needs n >= 2 positive pairs.
-struct PowerFit {
-  double exponent = 0, exponent_se = 0;
-  double prefactor = 0, log_prefactor_se = 0;
-  int n = 0;
-};
-PowerFit fit_power_law(const std::vector<double>& x, const std::vector<double>& y);
 
 // Uehara et al. (2003) / Ambroso et al. (2005): final penetration depth (m) of a ball of
 // diameter D_b (m) and density rho_b, dropped from h (m, its bottom above the surface), into a

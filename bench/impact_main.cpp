@@ -122,9 +122,9 @@ int run_series(const DropDef& d, const TradeoffKnobs& k) {
   f["bulk_density"] = r->bulk_density;
   f["ball_diameter_soil"] = Db;
   f["depth_vs_H"] = {{"exponent", r->depth_vs_total_drop.exponent}, {"se", r->depth_vs_total_drop.exponent_se},
-                     {"prefactor", r->depth_vs_total_drop.prefactor}, {"n", r->depth_vs_total_drop.n}};
+                     {"prefactor", r->depth_vs_total_drop.prefactor}, {"n", r->depth_vs_total_drop.points}};
   f["depth_vs_rho"] = {{"exponent", r->depth_vs_density.exponent}, {"se", r->depth_vs_density.exponent_se},
-                       {"prefactor", r->depth_vs_density.prefactor}, {"n", r->depth_vs_density.n}};
+                       {"prefactor", r->depth_vs_density.prefactor}, {"n", r->depth_vs_density.points}};
   f["worst_rebound"] = r->worst_rebound;
   std::cout << f.dump() << "\n";
   return 0;

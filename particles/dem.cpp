@@ -542,12 +542,8 @@ Status Simulation::set_body_enabled(BodyId id, bool enabled) {
 
 Status Simulation::set_body_group(BodyId id, std::int32_t group) {
   Impl& s = *impl_;
-  if (id.index < 0 || id.index >= s.nb)
-    return Error{"", "set_body_group.body", std::to_string(id.index), "must be a body of this simulation", ""};
-  if (group < 0)
-    return Error{"", "set_body_group.group", std::to_string(group), "must be >= 0 (0: no collision group)", ""};
-  if (s.b.flags[id.index] & kBodyGranule)
-    return Error{"", "set_body_group.body", std::to_string(id.index), "is a granule: only shells have a group", ""};
+  const bool in = id.index >= 0 && id.index < s.nb;
+  if (Status st = check_body_group(id.index, s.nb, in ? s.b.flags[id.index] : 0u, group); !st) return st;  // dem_control.hpp
   if (s.b.group[id.index] == group) return Ok{};
   s.b.group[id.index] = group;
   s.need_sort = true;  // the neighbour list holds the pairs that interact

@@ -14,6 +14,7 @@
 #pragma once
 
 #include <cstdint>
+#include <string>
 
 #include "particles/dem.hpp"
 #include "particles/fields.hpp"
@@ -45,6 +46,18 @@ inline void update_sleep(const SimulationDef& d, float vmax, double dt_frame, do
   } else {
     below_time = 0;
   }
+}
+
+// Whether body `index` (of `bodies`, with `flags`) may take collision group `group`
+// (set_body_group): a shell of this simulation, a group >= 0 (0: none).
+inline Status check_body_group(int index, int bodies, std::uint32_t flags, std::int32_t group) {
+  if (index < 0 || index >= bodies)
+    return Error{"", "set_body_group.body", std::to_string(index), "must be a body of this simulation", ""};
+  if (group < 0)
+    return Error{"", "set_body_group.group", std::to_string(group), "must be >= 0 (0: no collision group)", ""};
+  if (flags & kBodyGranule)
+    return Error{"", "set_body_group.body", std::to_string(index), "is a granule: only shells have a group", ""};
+  return Ok{};
 }
 
 }  // namespace sandpatch

@@ -313,12 +313,8 @@ Status GlSimulation::set_body_enabled(BodyId id, bool enabled) {
 
 Status GlSimulation::set_body_group(BodyId id, std::int32_t group) {
   Impl& s = *impl_;
-  if (id.index < 0 || id.index >= s.nb)
-    return Error{"", "set_body_group.body", std::to_string(id.index), "must be a body of this simulation", ""};
-  if (group < 0)
-    return Error{"", "set_body_group.group", std::to_string(group), "must be >= 0 (0: no collision group)", ""};
-  if (s.body_flags(id.index) & kBodyGranule)
-    return Error{"", "set_body_group.body", std::to_string(id.index), "is a granule: only shells have a group", ""};
+  const bool in = id.index >= 0 && id.index < s.nb;
+  if (Status st = check_body_group(id.index, s.nb, in ? s.body_flags(id.index) : 0u, group); !st) return st;  // dem_control.hpp, as the CPU
   std::int32_t& g = s.host_group[std::size_t(id.index)];
   if (g == group) return Ok{};
   g = group;
