@@ -30,6 +30,10 @@ struct BenchDemArgs {
   // the dashpot's restitution; < 0: 0.3 with the linear spring, 1 with the hysteretic one (e =
   // 1/sqrt(unloading) from the spring alone)
   double restitution = -1.0;
+  // GL backend: substeps per step (one step = one frame: its substeps are queued, then the
+  // status is read back once, as a scene's frame does); the CPU backend takes 1 only
+  int substeps = 1;
+  int workgroup = 0;  // GL backend: invocations per work group (0: the backend's default)
   bool json = false;
 };
 

@@ -15,13 +15,17 @@
 
 namespace sandpatch::gpu {
 
-int run_bench_dem_gl(int granules, int steps, bool json) {
+int run_bench_dem_gl(int granules, int steps, int substeps, int workgroup, bool json) {
   if (granules < 1 || granules > 4000000) {
     std::fprintf(stderr, "bench dem: --granules = %d: must be in [1, 4000000]\n", granules);
     return 2;
   }
   if (steps < 1) {
     std::fprintf(stderr, "bench dem: --steps = %d: must be >= 1\n", steps);
+    return 2;
+  }
+  if (substeps < 1 || substeps > 10000) {
+    std::fprintf(stderr, "bench dem: --substeps = %d: must be in [1, 10000]\n", substeps);
     return 2;
   }
   // 1. the bed of bench/bench_dem.cpp, through the public API
@@ -78,7 +82,8 @@ int run_bench_dem_gl(int granules, int steps, bool json) {
   }
   const std::string renderer = (*ctx)->info().gl_renderer;
   GlOptions opt;
-  opt.profile = std::getenv("SANDPATCH_GL_PROFILE") != nullptr;  // per-kernel times (slower)
+  opt.profile = std::getenv("SANDPATCH_GL_PROFILE") != nullptr;  // per-kernel GPU times
+  if (workgroup > 0) opt.workgroup_size = workgroup;  // else GlOptions' default
   auto gsim = GlSimulation::create(def, opt);
   if (!gsim) {
     std::fprintf(stderr, "bench dem: %s", gsim.message().c_str());
@@ -104,38 +109,44 @@ int run_bench_dem_gl(int granules, int steps, bool json) {
       return 1;
     }
 
-  // 4. timed (each step ends with the 32-byte status read-back, so the GPU has finished)
-  std::int64_t contacts = 0, resorts = 0;
+  // 4. timed (each step ends with the 32-byte status read-back, so the GPU has finished). A
+  // step of `substeps` substeps is one frame of substeps x dt: the backend splits it into
+  // substeps of at most its max_substep_dt (counted, not assumed).
+  const double frame_dt = substeps * dt;
+  std::int64_t contacts = 0, resorts = 0, gpu_substeps = 0;
+  const std::vector<std::pair<std::string, double>> gpu_before = gsim->kernel_seconds();
   t0 = std::chrono::steady_clock::now();
   for (int k = 0; k < steps; ++k) {
-    if (auto st = gsim->step(dt); !st) {
+    if (auto st = gsim->step(frame_dt); !st) {
       std::fprintf(stderr, "bench dem: timed step %d: %s", k, st.message().c_str());
       return 1;
     }
     contacts += gsim->last_step().contacts;
     resorts += gsim->last_step().resorts;
+    gpu_substeps += gsim->last_step().substeps;
   }
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  const double ssps = double(spheres) * steps / wall;
+  const double ssps = double(spheres) * double(gpu_substeps) / wall;
   const double cps = 2.0 * double(contacts) / steps / spheres;
   const double vmax = gsim->max_granule_speed();
 
-  // 5. the CPU backend on the same settled bed, same steps, beside it (all OpenMP threads)
+  // 5. the CPU backend on the same settled bed, as many steps of dt as the GL backend ran
+  // substeps, beside it (all OpenMP threads)
   const auto c0 = std::chrono::steady_clock::now();
-  for (int k = 0; k < steps; ++k)
+  for (std::int64_t k = 0; k < gpu_substeps; ++k)
     if (auto st = cpu->step(dt); !st) {
-      std::fprintf(stderr, "bench dem: CPU timed step %d: %s", k, st.message().c_str());
+      std::fprintf(stderr, "bench dem: CPU timed step %lld: %s", (long long)k, st.message().c_str());
       return 1;
     }
   const double cpu_wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - c0).count();
-  const double cpu_ssps = double(cpu->particle_count()) * steps / cpu_wall;
+  const double cpu_ssps = double(cpu->particle_count()) * double(gpu_substeps) / cpu_wall;
   if (!json)
-    std::printf("timed: %d steps in %.3f s: %.3g sphere-steps/s (%.2f ms/step), contacts per sphere %.2f, "
+    std::printf("timed: %d steps (%lld substeps) in %.3f s: %.3g sphere-steps/s (%.3f ms/substep), contacts per sphere %.2f, "
                 "grid rebuilds %lld, max granule speed %.4f m/s\n",
-                steps, wall, ssps, 1e3 * wall / steps, cps, (long long)resorts, vmax);
+                steps, (long long)gpu_substeps, wall, ssps, 1e3 * wall / double(gpu_substeps), cps, (long long)resorts, vmax);
   if (!json)
-    std::printf("CPU backend, same bed and steps: %.3g sphere-steps/s (%.2f ms/step); GL / CPU = %.3g\n", cpu_ssps,
-                1e3 * cpu_wall / steps, ssps / cpu_ssps);
+    std::printf("CPU backend, same bed, as many steps: %.3g sphere-steps/s (%.3f ms/step); GL / CPU = %.3g\n", cpu_ssps,
+                1e3 * cpu_wall / double(gpu_substeps), ssps / cpu_ssps);
   nlohmann::json j = {{"bench", "dem"},
                       {"backend", "gl"},
                       {"renderer", renderer},
@@ -150,11 +161,25 @@ int run_bench_dem_gl(int granules, int steps, bool json) {
                       {"settle_steps_cpu", settle + 1},
                       {"max_granule_speed", vmax},
                       {"gpu_bytes", gsim->gpu_bytes()},
+                      {"substeps_per_step", double(gpu_substeps) / steps},
+                      {"workgroup_size", opt.workgroup_size},
+                      {"substep_dt", frame_dt * steps / double(gpu_substeps)},
                       {"cpu_sphere_steps_per_s", cpu_ssps},
                       {"contact_model", "linear spring-dashpot + tangential spring with history"}};
-  if (opt.profile && !json)
-    for (const auto& [kernel, sec] : gsim->kernel_seconds())
-      std::printf("  %-26s %8.3f s (%.1f %%)\n", kernel.c_str(), sec, 100.0 * sec / wall);
+  if (opt.profile) {  // GPU seconds of each kernel over the timed steps, against the wall time
+    const auto after = gsim->kernel_seconds();
+    double busy = 0;
+    nlohmann::json kj = nlohmann::json::object();
+    for (std::size_t k = 0; k < after.size(); ++k) {
+      const double sec = after[k].second - gpu_before[k].second;
+      busy += sec;
+      kj[after[k].first] = sec;
+      if (!json) std::printf("  %-26s %8.4f s GPU (%.1f %% of the wall time)\n", after[k].first.c_str(), sec, 100.0 * sec / wall);
+    }
+    if (!json) std::printf("  GPU busy %.4f s of %.4f s wall (%.1f %%)\n", busy, wall, 100.0 * busy / wall);
+    j["kernel_gpu_seconds"] = kj;
+    j["gpu_busy_seconds"] = busy;
+  }
   if (json) std::printf("%s\n", j.dump().c_str());
   return 0;
 }

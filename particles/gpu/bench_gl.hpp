@@ -9,10 +9,14 @@ namespace sandpatch::gpu {
 // at least 0.3 s, at most 1.5 s), copies the settled bodies into a GlSimulation, runs 20
 // warm-up steps, then times `steps` steps of dt = 5e-5 s on whatever renderer EGL finds, and
 // then the same steps of the CPU backend on the same settled bed (cpu_sphere_steps_per_s).
-// Prints sphere-steps/s and the renderer; with json, one JSON object on the last line with
-// sphere_steps_per_s, spheres, dt, renderer (and more). With the environment variable
-// SANDPATCH_GL_PROFILE set, prints the time of each kernel (a glFinish around each dispatch).
+// With substeps > 1 each GL step is a frame of that many substeps of 5e-5 s (a scene's frame:
+// the substeps are queued and the status read back once), `steps` of them: it times the GPU's
+// work without a CPU-GPU round trip per substep. Prints sphere-steps/s and the renderer; with
+// json, one JSON object on the last line with sphere_steps_per_s, spheres, dt, renderer (and
+// more). With the environment variable SANDPATCH_GL_PROFILE set, also the GPU time of each
+// kernel (timer queries) and their sum against the wall time.
+// workgroup > 0 sets GlOptions::workgroup_size (invocations per work group; the default if 0).
 // Exit code 0 ok, 1 runtime failure, 2 bad input.
-int run_bench_dem_gl(int granules, int steps, bool json);
+int run_bench_dem_gl(int granules, int steps, int substeps, int workgroup, bool json);
 
 }  // namespace sandpatch::gpu

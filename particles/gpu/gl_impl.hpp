@@ -124,6 +124,9 @@ struct GlSimulation::Impl {
   enum Buf { kP0, kP1, kB, kG, kS0, kS1, kW, kSort, kBufCount };
   GLuint buf[kBufCount] = {};
   std::size_t buf_bytes[kBufCount] = {};
+  // The grid kernels' dispatch-indirect arguments, copied from the status block after
+  // grid_decide.comp: a buffer of its own that no shader binds (substep()).
+  GLuint args_buf = 0;
   gl::Program prog[kKernelCount];
   int cur_p = 0;  // P is buffer kP0 + cur_p, the grid's scratch copy the other (cur_p stays 0:
                   // grid_copyback.comp copies the sorted particles back)
@@ -136,10 +139,18 @@ struct GlSimulation::Impl {
   bool has_moving_kinematic = false;
   float last_vmax = 0;
   StepStats stats;
-  double kernel_seconds[kKernelCount] = {};  // GlOptions::profile
+  double kernel_seconds[kKernelCount] = {};  // GlOptions::profile: GPU seconds per kernel
+  std::vector<GLuint> queries;                // GlOptions::profile: GL_TIME_ELAPSED query objects, reused
+  std::vector<int> query_kernel;              // the kernel of each query issued this step
+  // The per-dispatch uniforms' locations in each program (-1 where a program lacks one: GL
+  // ignores a write to -1), looked up once after linking rather than by name every substep.
+  struct Uniforms {
+    GLint dt = -1, first_law = -1, pred = -1, mode = -1, first_body = -1, np = -1, nb = -1;
+  } u[kKernelCount];
 
   Status configure(const SimulationDef& d, const char* cap_prefix);
   Status build_programs();  // gl_programs.cpp
+  void resolve_queries();   // GlOptions::profile: adds this step's GPU times to kernel_seconds
 
   std::size_t poff(int f) const { return std430_offset(kParticleFields, f, std::size_t(cap_p)); }
   std::size_t boff(int f) const { return std430_offset(kBodyFields, f, std::size_t(cap_b)); }
@@ -157,6 +168,8 @@ struct GlSimulation::Impl {
     bool any = false;
     for (GLuint b : buf) any = any || b != 0;
     if (any) glDeleteBuffers(kBufCount, buf);
+    if (args_buf != 0) glDeleteBuffers(1, &args_buf);
+    if (!queries.empty()) glDeleteQueries(GLsizei(queries.size()), queries.data());
   }
 
   std::string preamble() const;
@@ -191,42 +204,44 @@ struct GlSimulation::Impl {
     write(kSort, sort_terrain_offset(), def.terrain.heights.size() * 4, def.terrain.heights.data());
   }
   void set_counts() {
-    for (auto& p : prog) {
-      glProgramUniform1ui(p.id(), glGetUniformLocation(p.id(), "u_np"), GLuint(np_gpu));
-      glProgramUniform1ui(p.id(), glGetUniformLocation(p.id(), "u_nb"), GLuint(nb_gpu));
+    for (int k = 0; k < kKernelCount; ++k) {
+      glProgramUniform1ui(prog[k].id(), u[k].np, GLuint(np_gpu));
+      glProgramUniform1ui(prog[k].id(), u[k].nb, GLuint(nb_gpu));
     }
   }
 
   void dispatch(Kernel k, int items, int per_group) {
     if (items <= 0) return;
-    std::chrono::steady_clock::time_point t0;
-    if (opt.profile) {
-      glFinish();
-      t0 = std::chrono::steady_clock::now();
-    }
+    begin_query(k);
     glUseProgram(prog[k].id());
     glDispatchCompute(GLuint((items + per_group - 1) / per_group), 1, 1);
+    end_query();
     glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
-    if (opt.profile) {
-      glFinish();
-      kernel_seconds[k] += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    }
   }
 
-  // A grid kernel with the arguments grid_decide.comp wrote (0 workgroups: no re-sort).
+  // A grid kernel with the arguments grid_decide.comp wrote (0 workgroups: no re-sort), from
+  // args_buf bound as GL_DISPATCH_INDIRECT_BUFFER.
   void dispatch_indirect(Kernel k) {
-    std::chrono::steady_clock::time_point t0;
-    if (opt.profile) {
-      glFinish();
-      t0 = std::chrono::steady_clock::now();
-    }
+    begin_query(k);
     glUseProgram(prog[k].id());
-    glDispatchComputeIndirect(GLintptr(offsetof(physics::DemStatus, grid_dispatch) + 12 * std::size_t(k - kGridCount)));
+    glDispatchComputeIndirect(GLintptr(12 * std::size_t(k - kGridCount)));  // args_buf
+    end_query();
     glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
-    if (opt.profile) {
-      glFinish();
-      kernel_seconds[k] += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  }
+
+  // GlOptions::profile: a GL_TIME_ELAPSED query around one dispatch, read at the end of the
+  // step (no stall between kernels, so the step runs as it does unprofiled).
+  void begin_query(Kernel k) {
+    if (!opt.profile) return;
+    if (query_kernel.size() == queries.size()) {
+      queries.push_back(0);
+      glGenQueries(1, &queries.back());
     }
+    glBeginQuery(GL_TIME_ELAPSED, queries[query_kernel.size()]);
+    query_kernel.push_back(k);
+  }
+  void end_query() {
+    if (opt.profile) glEndQuery(GL_TIME_ELAPSED);
   }
 
   // One word of the status block (physics::DemStatus, at the start of the grid buffer).
@@ -276,7 +291,7 @@ struct GlSimulation::Impl {
   // jumped, so the cells and the neighbour search must be rebuilt before the next contacts.
   void rebuild_body(int i);
 
-  void substep(float dt);
+  void substep();
 
   // Appends a body and its spheres to the staging arrays (caller checked capacities).
   int push_body(std::uint32_t flags, Vec3 x, Quat q, Vec3 v, Vec3 w, float mass, float invm, Vec3 inv_inertia, const Vec3* offsets, const float* radii, int count, bool one_radius);

@@ -45,6 +45,11 @@ Status GlSimulation::Impl::build_programs() {
     auto p = gl::Program::compute(std::string("shaders/") + kKernelFile[k], pre + std::string(src));
     if (!p) return p.errors();
     prog[k] = std::move(*p);
+    const GLuint id = prog[k].id();
+    u[k] = Uniforms{glGetUniformLocation(id, "u_dt"),         glGetUniformLocation(id, "u_first_law"),
+                    glGetUniformLocation(id, "u_pred"),       glGetUniformLocation(id, "u_mode"),
+                    glGetUniformLocation(id, "u_first_body"), glGetUniformLocation(id, "u_np"),
+                    glGetUniformLocation(id, "u_nb")};
   }
   return check_layout();
 }

@@ -17,24 +17,37 @@
 
 namespace sandpatch::gpu {
 
-void GlSimulation::Impl::substep(float dt) {
-  bind_all();
+// One substep. The caller (step) bound the buffers and set the substep's uniforms (u_dt,
+// u_first_law, u_pred: the same for every substep of a frame).
+void GlSimulation::Impl::substep() {
   // grid: decided on the GPU, then the counting sort by indirect dispatches
   dispatch(kGridDecide, 1, 1);
-  glMemoryBarrier(GL_COMMAND_BARRIER_BIT);
-  glBindBuffer(GL_DISPATCH_INDIRECT_BUFFER, buf[kG]);
+  // The arguments are copied into a small buffer of their own and read from there. Read in
+  // place, from the grid block that the grid kernels write, every indirect dispatch after a
+  // kernel that wrote the block cost on NVIDIA's driver about as much as the force kernel
+  // (docs/BENCHMARKS.md "GL backend on a GPU").
+  glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
+  glBindBuffer(GL_COPY_READ_BUFFER, buf[kG]);
+  glBindBuffer(GL_COPY_WRITE_BUFFER, args_buf);
+  glCopyBufferSubData(GL_COPY_READ_BUFFER, GL_COPY_WRITE_BUFFER, GLintptr(offsetof(physics::DemStatus, grid_dispatch)), 0,
+                      GLsizeiptr(12 * physics::kGridKernels));
+  glBindBuffer(GL_DISPATCH_INDIRECT_BUFFER, args_buf);
   for (int k = kGridCount; k <= kGridCopyBack; ++k) dispatch_indirect(Kernel(k));
   glBindBuffer(GL_DISPATCH_INDIRECT_BUFFER, 0);
-  glProgramUniform1f(prog[kForce].id(), glGetUniformLocation(prog[kForce].id(), "u_dt"), dt);
-  glProgramUniform1i(prog[kForce].id(), glGetUniformLocation(prog[kForce].id(), "u_first_law"),
-                     guard->contact_timing_on(dt) ? 1 : 0);
   dispatch(kForce, np_gpu, wg);
   cur_s = 1 - cur_s;  // the springs written become the ones read next substep
-  bind_all();
-  glProgramUniform1f(prog[kBodies].id(), glGetUniformLocation(prog[kBodies].id(), "u_dt"), dt);
-  glProgramUniform1f(prog[kBodies].id(), glGetUniformLocation(prog[kBodies].id(), "u_pred"),
-                     float(guard->velocity_predictor_gain(dt)));
+  glBindBufferBase(GL_SHADER_STORAGE_BUFFER, kBindSIn, buf[kS0 + cur_s]);
+  glBindBufferBase(GL_SHADER_STORAGE_BUFFER, kBindSOut, buf[kS0 + 1 - cur_s]);
   dispatch(kBodies, nb_gpu, wg);
+}
+
+void GlSimulation::Impl::resolve_queries() {
+  for (std::size_t i = 0; i < query_kernel.size(); ++i) {
+    GLuint64 ns = 0;
+    glGetQueryObjectui64v(queries[i], GL_QUERY_RESULT, &ns);
+    kernel_seconds[query_kernel[i]] += 1e-9 * double(ns);
+  }
+  query_kernel.clear();
 }
 
 // ---------------------------------------------------------------------------------------
@@ -180,6 +193,10 @@ Result<GlSimulation> GlSimulation::create(const SimulationDef& d, const GlOption
     glBufferData(GL_SHADER_STORAGE_BUFFER, GLsizeiptr(s.buf_bytes[b]), zero.data(), GL_DYNAMIC_COPY);
   }
   glBindBuffer(GL_SHADER_STORAGE_BUFFER, 0);
+  glGenBuffers(1, &s.args_buf);
+  glBindBuffer(GL_DISPATCH_INDIRECT_BUFFER, s.args_buf);
+  glBufferData(GL_DISPATCH_INDIRECT_BUFFER, GLsizeiptr(12 * physics::kGridKernels), nullptr, GL_DYNAMIC_COPY);
+  glBindBuffer(GL_DISPATCH_INDIRECT_BUFFER, 0);
   s.set_static_uniforms();
   s.set_counts();
   s.upload_terrain();
@@ -358,17 +375,17 @@ Status GlSimulation::step(double dt_frame) {
       s.set_status_word(offsetof(physics::DemStatus, kinematic_touch), 0);
       s.bind_all();
       const GLuint tp = s.prog[kKinematicTouch].id();
-      glProgramUniform1f(tp, glGetUniformLocation(tp, "u_dt"), float(dt_frame));
+      glProgramUniform1f(tp, s.u[kKinematicTouch].dt, float(dt_frame));
       s.dispatch(kKinematicTouch, s.np_gpu, s.wg);
       std::uint32_t flag = 0;
       s.read(Impl::kG, offsetof(physics::DemStatus, kinematic_touch), 4, &flag);
       touch = flag != 0;
       if (!touch) {
         const GLuint bp = s.prog[kBodies].id();
-        glProgramUniform1i(bp, glGetUniformLocation(bp, "u_mode"), 2);
-        glProgramUniform1f(bp, glGetUniformLocation(bp, "u_dt"), float(dt_frame));
+        glProgramUniform1i(bp, s.u[kBodies].mode, 2);
+        glProgramUniform1f(bp, s.u[kBodies].dt, float(dt_frame));
         s.dispatch(kBodies, s.nb_gpu, s.wg);
-        glProgramUniform1i(bp, glGetUniformLocation(bp, "u_mode"), 0);
+        glProgramUniform1i(bp, s.u[kBodies].mode, 0);
       }
       glUseProgram(0);
     }
@@ -392,6 +409,11 @@ Status GlSimulation::step(double dt_frame) {
   s.write(Impl::kG, 0, offsetof(physics::DemStatus, resort), &status);
   s.write(Impl::kG, offsetof(physics::DemStatus, grid_rebuilds), 4, &status.grid_rebuilds);
   const float dt = float(dt_frame / *ns);
+  s.bind_all();
+  glProgramUniform1f(s.prog[kForce].id(), s.u[kForce].dt, dt);
+  glProgramUniform1i(s.prog[kForce].id(), s.u[kForce].first_law, s.guard->contact_timing_on(dt) ? 1 : 0);
+  glProgramUniform1f(s.prog[kBodies].id(), s.u[kBodies].dt, dt);
+  glProgramUniform1f(s.prog[kBodies].id(), s.u[kBodies].pred, float(s.guard->velocity_predictor_gain(dt)));
   for (int k = 0; k < *ns; ++k) {
     if (k + 1 == *ns) {  // the counters describe the last substep, as on the CPU
       glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
@@ -399,11 +421,12 @@ Status GlSimulation::step(double dt_frame) {
       s.write(Impl::kG, first, offsetof(physics::DemStatus, resort) - first, &status.max_partners);
       s.write(Impl::kG, offsetof(physics::DemStatus, max_granule_speed), 4, &status.max_granule_speed);
     }
-    s.substep(dt);
+    s.substep();
     s.time += dt;
   }
   glUseProgram(0);
   s.read(Impl::kG, 0, offsetof(physics::DemStatus, grid_dispatch), &status);
+  if (s.opt.profile) s.resolve_queries();
   float vmax;
   std::memcpy(&vmax, &status.max_granule_speed, 4);
   s.last_vmax = vmax;

@@ -46,7 +46,7 @@ struct GlOptions {
   // values they were added with).
   std::size_t upload_bytes_per_step = 0;
   bool upload_in_step = true;  // false: only upload() uploads (the caller budgets its frames)
-  bool profile = false;        // time every dispatch (glFinish around it; slows the step)
+  bool profile = false;        // time every dispatch on the GPU (GL_TIME_ELAPSED queries, read at the end of each step)
 };
 
 // GPU counterpart of Simulation, created from the same SimulationDef. Capacities
@@ -126,7 +126,7 @@ class GlSimulation {
   unsigned particle_buffer() const;
   std::vector<unsigned> gl_programs() const;
   std::size_t gpu_bytes() const;  // bytes of GPU buffer storage held
-  // With GlOptions::profile: wall seconds spent in each kernel so far, in stage order.
+  // With GlOptions::profile: GPU seconds spent in each kernel so far, in stage order.
   std::vector<std::pair<std::string, double>> kernel_seconds() const;
 
   struct Impl;

@@ -48,10 +48,10 @@ SANDPATCH_FIELD_ON(GL, backend, write(kB, boff(kBody_##name) + b0 * 4 * (n), bn 
   set_counts();
   bind_all();
   glMemoryBarrier(GL_ALL_BARRIER_BITS);
-  glProgramUniform1i(prog[kBodies].id(), glGetUniformLocation(prog[kBodies].id(), "u_mode"), 1);
-  glProgramUniform1ui(prog[kBodies].id(), glGetUniformLocation(prog[kBodies].id(), "u_first_body"), GLuint(b0));
+  glProgramUniform1i(prog[kBodies].id(), u[kBodies].mode, 1);
+  glProgramUniform1ui(prog[kBodies].id(), u[kBodies].first_body, GLuint(b0));
   dispatch(kBodies, int(bn), wg);
-  glProgramUniform1i(prog[kBodies].id(), glGetUniformLocation(prog[kBodies].id(), "u_mode"), 0);
+  glProgramUniform1i(prog[kBodies].id(), u[kBodies].mode, 0);
   glUseProgram(0);
   return bytes;
 }
@@ -78,12 +78,13 @@ void GlSimulation::Impl::rebuild_body(int i) {
   bind_all();
   glMemoryBarrier(GL_ALL_BARRIER_BITS);
   const GLuint bp = prog[kBodies].id();
-  glProgramUniform1i(bp, glGetUniformLocation(bp, "u_mode"), 1);
-  glProgramUniform1ui(bp, glGetUniformLocation(bp, "u_first_body"), GLuint(i));
-  glProgramUniform1ui(bp, glGetUniformLocation(bp, "u_nb"), GLuint(i + 1));
+  const Uniforms& ub = u[kBodies];
+  glProgramUniform1i(bp, ub.mode, 1);
+  glProgramUniform1ui(bp, ub.first_body, GLuint(i));
+  glProgramUniform1ui(bp, ub.nb, GLuint(i + 1));
   dispatch(kBodies, 1, wg);
-  glProgramUniform1ui(bp, glGetUniformLocation(bp, "u_nb"), GLuint(nb_gpu));
-  glProgramUniform1i(bp, glGetUniformLocation(bp, "u_mode"), 0);
+  glProgramUniform1ui(bp, ub.nb, GLuint(nb_gpu));
+  glProgramUniform1i(bp, ub.mode, 0);
   glUseProgram(0);
   set_status_word(offsetof(physics::DemStatus, resort), 1);
 }

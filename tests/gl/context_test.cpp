@@ -25,6 +25,11 @@ TEST(GlContext, SoftwareRendererCanBeForced) {
   gl::ContextDef def;
   def.prefer_software = true;
   auto ctx = gl::Context::create(def);
+  // A machine with a GPU driver and no Mesa (a GPU server) has no software renderer to force:
+  // every display answers with its GPU. Anything else that fails is a failure.
+  if (!ctx.ok() && ctx.message().find("not a software renderer") != std::string::npos &&
+      ctx.message().find("failed") == std::string::npos)
+    GTEST_SKIP() << "no software renderer installed: " << ctx.message();
   ASSERT_TRUE(ctx.ok()) << ctx.message();
   EXPECT_TRUE((*ctx)->info().software) << (*ctx)->info().gl_renderer;
 }

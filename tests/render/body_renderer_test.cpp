@@ -203,7 +203,7 @@ TEST(BodyRenderer, BodiesReceiveShadowsAndDoNotShadowTheirLitSide) {
   ASSERT_EQ(id_img->pixel(cx, cy)[2], id0[2]) << "the plate must not hide the ball's centre";
   auto shadowed = s.renderer->render(s.cam);
   ASSERT_TRUE(shadowed.ok());
-  ASSERT_TRUE(save_png(std::string(SANDPATCH_TEST_OUTPUT_DIR) + "/body_shadowed.actual.png", shadowed.value()).ok());
+  ASSERT_TRUE(save_png(output_path("body_shadowed.actual.png"), shadowed.value()).ok());
 
   ASSERT_TRUE(s.renderer->set_bodies({ball}).ok());
   id_img = s.renderer->render(s.cam, ids);

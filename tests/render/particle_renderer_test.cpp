@@ -138,9 +138,9 @@ TEST(ParticleRenderer, FadedInPatchLooksLikeTheHeightfield) {
                 d.p99, d.max_abs, lp, la);
     luma_gap[k] = lp - la;
     mean[k++] = d.mean_abs;
-    if (fade == 1.0f) save_png(std::string(SANDPATCH_TEST_OUTPUT_DIR) + "/patch_fade1.actual.png", img.value());
+    if (fade == 1.0f) save_png(output_path("patch_fade1.actual.png"), img.value());
   }
-  save_png(std::string(SANDPATCH_TEST_OUTPUT_DIR) + "/patch_alone.actual.png", alone.value());
+  save_png(output_path("patch_alone.actual.png"), alone.value());
   // Alike: the documented bound (docs/rendering.md; measured 13.1: granules under 6 px in
   // radius are shaded as the bed they make up, with half their tint; 19.7 with full sphere
   // shading at every size, which this bound refuses).
@@ -359,7 +359,7 @@ TEST(ParticleRenderer, CraterInAPatchShowsWithItsFootprintCutOut) {
       ASSERT_TRUE(res.ok()) << res.message();
       img[k] = std::move(res.value());
     }
-    if (cut) ASSERT_TRUE(save_png(std::string(SANDPATCH_TEST_OUTPUT_DIR) + "/patch_crater.actual.png", img[1]).ok());
+    if (cut) ASSERT_TRUE(save_png(output_path("patch_crater.actual.png"), img[1]).ok());
     change[cut] = mean_smooth_luma_change(img[0], img[1], mask);
     raw[cut] = mean_luma_change(img[0], img[1], mask);
     if (cut) {

@@ -198,7 +198,7 @@ TEST(SceneRenderer, RenderPngWritesTheImage) {
   CameraView cam;
   cam.position = {10, 20, 10};
   cam.target = {64, 0, 64};
-  const std::string path = std::string(SANDPATCH_TEST_OUTPUT_DIR) + "/render_png_test.png";
+  const std::string path = output_path("render_png_test.png");
   ASSERT_TRUE((*r)->render_png(cam, path).ok());
   auto back = load_png(path);
   ASSERT_TRUE(back.ok()) << back.message();
@@ -335,7 +335,7 @@ TEST(SceneRenderer, HeightfieldCraterChangesItsPixels) {
   (*r)->heightfield_changed({i0, i0, n, n});
   auto after = (*r)->render(cam);
   ASSERT_TRUE(after.ok()) << after.message();
-  ASSERT_TRUE(save_png(std::string(SANDPATCH_TEST_OUTPUT_DIR) + "/heightfield_crater.actual.png", after.value()).ok());
+  ASSERT_TRUE(save_png(output_path("heightfield_crater.actual.png"), after.value()).ok());
   auto luma = [](const std::uint8_t* q) { return 0.2126 * q[0] + 0.7152 * q[1] + 0.0722 * q[2]; };
   double sum = 0;
   for (int y = 0; y < cam.height; ++y)

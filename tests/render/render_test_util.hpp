@@ -68,12 +68,20 @@ inline bool updating_references() {
   return e && std::string(e) == "1";
 }
 
+// Where a test writes a picture for inspection: <test output dir>/<file>, the directory made if
+// missing (a test binary may run from a copy of the tree without its build folder).
+inline std::string output_path(const std::string& file) {
+  std::error_code ec;
+  std::filesystem::create_directories(SANDPATCH_TEST_OUTPUT_DIR, ec);
+  return std::string(SANDPATCH_TEST_OUTPUT_DIR) + "/" + file;
+}
+
 // Compares img with tests/render/reference/<name>.png; with SANDPATCH_UPDATE_REFERENCES=1,
 // writes it there instead. The rendering is always written beside the test binary
 // (<name>.actual.png) for inspection.
 inline void expect_matches_reference(const Image& img, const std::string& name) {
   const std::string ref = std::string(SANDPATCH_TEST_DATA_DIR) + "/reference/" + name + ".png";
-  const std::string actual = std::string(SANDPATCH_TEST_OUTPUT_DIR) + "/" + name + ".actual.png";
+  const std::string actual = output_path(name + ".actual.png");
   ASSERT_TRUE(save_png(actual, img).ok());
   if (updating_references()) {
     std::filesystem::create_directories(std::filesystem::path(ref).parent_path());

@@ -10,9 +10,11 @@
 #include "manager/run_outputs.hpp"
 #include "manager/scene_world.hpp"
 #include "render/body_renderer.hpp"
+#include "render_test_util.hpp"
 #include "scene/scene.hpp"
 
 using namespace sandpatch;
+using render::test::output_path;
 
 namespace {
 
@@ -64,7 +66,7 @@ TEST(SceneFrames, DefaultSceneShowsBothBodiesWhereTheReportSaysTheyAre) {
   auto lit = images.render(cam);
   auto none = images.render(cam, bare);
   ASSERT_TRUE(lit.ok() && none.ok());
-  ASSERT_TRUE(render::save_png(std::string(SANDPATCH_TEST_OUTPUT_DIR) + "/default_bodies.actual.png", lit.value()).ok());
+  ASSERT_TRUE(render::save_png(output_path("default_bodies.actual.png"), lit.value()).ok());
   const auto report = r.world->report();
   ASSERT_EQ(report["bodies"].size(), 2u);
   for (std::size_t k = 0; k < 2; ++k) {
