@@ -59,6 +59,8 @@ Result<std::unique_ptr<SceneRenderer>> SceneRenderer::create(gl::Context& ctx, c
     return Error{"", "ao_strength", std::to_string(def.ao_strength), "must be in [0, 4] (0 = off)"};
   if (def.shadow_map_size != 0 && (def.shadow_map_size < 256 || def.shadow_map_size > 8192))
     return Error{"", "shadow_map_size", std::to_string(def.shadow_map_size), "must be 0 (no shadows) or in [256, 8192] texels"};
+  if (def.terrain_shadow_steps != 0 && (def.terrain_shadow_steps < 8 || def.terrain_shadow_steps > 64))
+    return Error{"", "terrain_shadow_steps", std::to_string(def.terrain_shadow_steps), "must be 0 (none) or in [8, 64]"};
   if (def.ao_samples < 1 || def.ao_samples > 64)
     return Error{"", "ao_samples", std::to_string(def.ao_samples), "must be in [1, 64]"};
   if (auto st = ctx.make_current(); !st) return st.errors();
@@ -76,6 +78,7 @@ Result<std::unique_ptr<SceneRenderer>> SceneRenderer::create(gl::Context& ctx, c
   r->def_ = def;
   r->terrain_ = std::move(terrain.value());
   r->terrain_->set_sun_direction(def.sun_direction);
+  r->terrain_->set_terrain_shadow_steps(def.terrain_shadow_steps);
   r->particle_renderer_ = std::move(particles.value());
   r->body_renderer_ = std::move(bodies.value());
   r->ao_program_ = std::move(ao.value());
@@ -231,14 +234,18 @@ ShadowMap SceneRenderer::shadow_pass(const Eigen::Vector3d& origin) {
   return sm;
 }
 
-Status SceneRenderer::set_effects(float ao_strength, int shadow_map_size) {
+Status SceneRenderer::set_effects(float ao_strength, int shadow_map_size, int terrain_shadow_steps) {
   std::vector<Error> es;
   if (!(ao_strength >= 0 && ao_strength <= 4))
     es.push_back(Error{"", "ao_strength", std::to_string(ao_strength), "must be in [0, 4] (0 = off)"});
   if (shadow_map_size != 0 && (shadow_map_size < 256 || shadow_map_size > 8192))
     es.push_back(Error{"", "shadow_map_size", std::to_string(shadow_map_size), "must be 0 (none) or in [256, 8192] texels"});
+  if (terrain_shadow_steps != 0 && (terrain_shadow_steps < 8 || terrain_shadow_steps > 64))
+    es.push_back(Error{"", "terrain_shadow_steps", std::to_string(terrain_shadow_steps), "must be 0 (none) or in [8, 64]"});
   if (!es.empty()) return es;
   def_.ao_strength = ao_strength;
+  def_.terrain_shadow_steps = terrain_shadow_steps;
+  terrain_->set_terrain_shadow_steps(terrain_shadow_steps);
   if (shadow_map_size != def_.shadow_map_size) {  // the map is made again at its new size when next needed
     if (shadow_fbo_) glDeleteFramebuffers(1, &shadow_fbo_);
     if (shadow_tex_) glDeleteTextures(1, &shadow_tex_);

@@ -75,6 +75,10 @@ struct RendererDef {
   // bodies seen from the sun, this many texels a side over their bounding sphere; 0 = none,
   // else in [256, 8192].
   int shadow_map_size = 2048;
+  // The terrain shadows itself: each terrain pixel marches this many steps toward the sun
+  // through the clipmap's heights (steps growing from two sample spacings by a fifth each, so 32
+  // reach about 700 spacings), a soft edge from the nearest miss; 0 = none, else in [8, 64].
+  int terrain_shadow_steps = 32;
 };
 
 // A camera in world coordinates (m), y up.
@@ -153,8 +157,9 @@ class SceneRenderer {
   void clear_bodies() { bodies_.clear(); }
   // Lighter or fuller frames without a new renderer (the viewer's --quality): the ambient
   // occlusion's strength (in [0, 4], 0 = off) and the bodies' shadow map size (0 = none, else
-  // in [256, 8192] texels a side). Errors name the field; nothing changes then.
-  Status set_effects(float ao_strength, int shadow_map_size);
+  // in [256, 8192] texels a side), and the terrain's shadow march (steps, 0 = none, else in
+  // [8, 64]). Errors name the field; nothing changes then.
+  Status set_effects(float ao_strength, int shadow_map_size, int terrain_shadow_steps);
 
   RenderStats stats() const { return stats_; }
   const RendererDef& def() const { return def_; }

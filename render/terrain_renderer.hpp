@@ -81,6 +81,9 @@ class TerrainRenderer {
   unsigned materials_texture() const { return tex_[2]; }
   int first_active_level() const;
   void set_sun_direction(const Eigen::Vector3f& toward_sun) { sun_ = toward_sun.normalized(); }
+  // The terrain's shadow on itself: steps of the march toward the sun through the clipmap's
+  // heights (terrain.frag), 0 = none.
+  void set_terrain_shadow_steps(int steps) { shadow_steps_ = steps; }
   // The bodies' shadows on the terrain from now on (off: ShadowMap{}).
   void set_shadow(const ShadowMap& s) { shadow_ = s; }
   const Eigen::Vector3f& sun_direction() const { return sun_; }
@@ -109,6 +112,7 @@ class TerrainRenderer {
   Eigen::Vector3f viewer_{0, 0, 0};
   Eigen::Matrix4f view_proj_ = Eigen::Matrix4f::Identity();
   Eigen::Vector3f sun_ = Eigen::Vector3f(-0.6f, 0.6f, 0.55f).normalized();
+  int shadow_steps_ = 0;
   ClipmapSelection selection_;
   ShadowMap shadow_;
   std::map<std::pair<int, int>, Mesh> meshes_;  // grid meshes by (cells_x, cells_z)

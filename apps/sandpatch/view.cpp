@@ -531,7 +531,7 @@ int run_view(const ViewArgs& a) {
         }
         auto img = images.render(view);
         if (img && !effects_set && images.renderer()) {  // the renderer exists from the first image on
-          if (Status s = images.renderer()->set_effects(0.0f, 512); !s) {
+          if (Status s = images.renderer()->set_effects(0.0f, 512, 0); !s) {
             code = failed(s.message());
             break;
           }

@@ -255,19 +255,21 @@ TEST(SceneRenderer, SetEffectsEqualsARendererMadeSo) {
   ASSERT_TRUE((*r)->set_bodies({ball}).ok());
   auto full = (*r)->render(cam);
   ASSERT_TRUE(full.ok());
-  auto st = (*r)->set_effects(5.0f, 100);
+  auto st = (*r)->set_effects(5.0f, 100, 100);
   ASSERT_FALSE(st.ok());
   EXPECT_NE(st.message().find("ao_strength"), std::string::npos) << st.message();
   EXPECT_NE(st.message().find("shadow_map_size = 100"), std::string::npos) << st.message();
+  EXPECT_NE(st.message().find("terrain_shadow_steps = 100"), std::string::npos) << st.message();
   auto again = (*r)->render(cam);
   ASSERT_TRUE(again.ok());
   EXPECT_EQ(compare_images(full.value(), again.value()).max_abs, 0) << "a refused change changed the frame";
-  ASSERT_TRUE((*r)->set_effects(0.0f, 512).ok());
+  ASSERT_TRUE((*r)->set_effects(0.0f, 512, 0).ok());
   auto light = (*r)->render(cam);
   ASSERT_TRUE(light.ok());
   RendererDef def;
   def.ao_strength = 0;
   def.shadow_map_size = 512;
+  def.terrain_shadow_steps = 0;
   auto made = SceneRenderer::create(*ctx, hf, def);
   ASSERT_TRUE(made.ok());
   ASSERT_TRUE((*made)->set_bodies({ball}).ok());
@@ -343,4 +345,59 @@ TEST(SceneRenderer, HeightfieldCraterChangesItsPixels) {
       if (mask[std::size_t(y) * cam.width + x]) sum += std::fabs(luma(before->pixel(x, y)) - luma(after->pixel(x, y)));
   std::printf("crater pixels %d: mean |luma change| %.1f\n", n_px, sum / n_px);
   EXPECT_GT(sum / n_px, 9.0);
+}
+
+// The terrain shadows itself (terrain.frag terrain_sun_visibility): a wall 1 m high and 0.5 m
+// thick across flat ground, the default sun 25 degrees high from -x. Behind the wall, within
+// its shadow's length H / tan 25 deg = 2.1 m (1.6 m along x), the ground gets the ambient light
+// only: luma 0.3 / (0.3 + 1.2 sin 25 deg) = 0.370 of the lit ground beyond the shadow (common.glsl
+// sp_shade; ambient occlusion off), within 0.05. Without the march (terrain_shadow_steps = 0)
+// both are lit alike (ratio 1 within 0.05).
+TEST(SceneRenderer, TerrainShadowsItselfBehindAWall) {
+  auto ctx = make_context();
+  if (!ctx) GTEST_SKIP() << "no GL context";
+  Heightfield hf = terrain(257, 0.125f, plane(0, 0));
+  for (int j = 64; j <= 192; ++j)  // z in [8, 24] m
+    for (int i = 128; i <= 132; ++i) hf.set_height(i, j, 1.0f);  // x in [16, 16.5] m
+  CameraView cam;
+  cam.position = {24, 7, 16};
+  cam.target = {17.5, 0, 16};
+  cam.fov_deg = 50;
+  cam.width = 320;
+  cam.height = 240;
+  auto mean_luma = [&](SceneRenderer& r, const Image& img, double x0, double x1) {
+    double sum = 0;
+    int n = 0;
+    for (double z = 15.0; z <= 17.0; z += 0.05)
+      for (double x = x0; x <= x1; x += 0.05) {
+        auto p = r.project(cam, {x, 0.0, z});
+        if (!p) continue;
+        const int px = int(p->pixel.x()), py = int(p->pixel.y());
+        if (px < 0 || px >= img.width || py < 0 || py >= img.height) continue;
+        const std::uint8_t* q = img.pixel(px, py);
+        sum += 0.2126 * q[0] + 0.7152 * q[1] + 0.0722 * q[2];
+        ++n;
+      }
+    EXPECT_GT(n, 200);
+    return sum / std::max(n, 1);
+  };
+  for (int steps : {32, 0}) {
+    RendererDef def;
+    def.ao_strength = 0;
+    def.terrain_shadow_steps = steps;
+    auto r = SceneRenderer::create(*ctx, hf, def);
+    ASSERT_TRUE(r.ok()) << r.message();
+    auto img = (*r)->render(cam);
+    ASSERT_TRUE(img.ok()) << img.message();
+    if (steps > 0) ASSERT_TRUE(save_png(output_path("terrain_shadow.actual.png"), img.value()).ok());
+    const double shade = mean_luma(**r, *img, 16.9, 17.6), lit = mean_luma(**r, *img, 19.0, 20.0);
+    std::printf("terrain_shadow_steps %d: ground behind the wall %.1f, beyond its shadow %.1f: ratio %.3f\n", steps, shade,
+                lit, shade / lit);
+    EXPECT_NEAR(shade / lit, steps > 0 ? 0.370 : 1.0, 0.05);
+  }
+  RendererDef bad;
+  bad.terrain_shadow_steps = 4;
+  auto r = SceneRenderer::create(*ctx, hf, bad);
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.message().find("terrain_shadow_steps"), std::string::npos) << r.message();
 }
