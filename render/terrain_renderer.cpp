@@ -250,6 +250,7 @@ void TerrainRenderer::draw_selection(const std::vector<Eigen::Vector4f>& cuts, c
   glUniform1i(loc(p, "u_levels"), def_.levels);
   glUniform3f(loc(p, "u_sun_dir"), sun_.x(), sun_.y(), sun_.z());
   glUniform1i(loc(p, "u_terrain_shadow_steps"), shadow_steps_);
+  if (shadow_steps_ > 0) glUniform1f(loc(p, "u_max_height"), hf_->max_height());  // cached per tile
   bind_shadow(p, shadow_);
   const int n_cuts = std::min(int(cuts.size()), kMaxCuts);
   glUniform1i(loc(p, "u_cut_count"), n_cuts);

@@ -18,6 +18,7 @@ uniform int u_n;                    // vertices per ring side
 uniform float u_w;                  // transition width (samples)
 uniform vec2 u_viewer;              // viewer (x, z), local m: the rings' centre
 uniform int u_terrain_shadow_steps; // the march toward the sun (0 = no terrain shadow)
+uniform float u_max_height;         // m, local: the heightfield's highest sample
 // Footprints left out of this pass (local x0, z0, x1, z1, m): the live patches' in the second
 // terrain pass, where their granules are the surface (render.hpp).
 // Inside a footprint the terrain gives way to the granules over a band of u_cut_band[k] m
@@ -77,12 +78,18 @@ bool surface_height(vec2 xz, out float h) {
 // Soft edge, a penumbra that widens with distance: the least of k (ray height - surface height
 // + 0.02 t) / t over the march, k = 8 (the 0.02 t, about 1 degree, keeps the surface between a
 // coarse level's samples from shadowing itself).
+// The march ends as soon as no point further on can lower it: once (ray height - the highest
+// sample + 0.02 t) / t >= 1/8, that only grows along the ray (toward sin(elevation) + 0.02 >
+// 1/8 for a sun above 6 degrees), so the result is the full march's, in a few steps on gentle
+// ground.
 float terrain_sun_visibility(vec3 p) {
   if (u_terrain_shadow_steps <= 0 || u_sun_dir.y <= 0.0) return 1.0;
+  const bool can_stop = u_sun_dir.y + 0.02 > 0.125;
   float t = 2.0 * u_base_spacing;
   float vis = 1.0;
   for (int k = 0; k < u_terrain_shadow_steps; ++k) {
     vec3 q = p + u_sun_dir * t;
+    if (can_stop && 8.0 * (q.y - u_max_height + 0.02 * t) >= t) break;
     float h;
     if (!surface_height(q.xz, h)) break;
     vis = min(vis, 8.0 * (q.y - h + 0.02 * t) / t);
