@@ -77,9 +77,10 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
   if (!opt.video.empty()) {
     if (scene.cameras.empty())
       return fail(ExitCode::BadInput, "options", "--video " + opt.video + ": the scene has no camera to film");
-    if (!(opt.video_fps > 0 && opt.video_fps <= 1.0 / dt * (1 + 1e-9)))
-      return fail(ExitCode::BadInput, "options", "--video-fps " + format_number(opt.video_fps) + ": must be in (0, 1 / dt = " +
-                                                      format_number(1.0 / dt) + "] frames per simulated second");
+    if (!(knobs::kVideoFps.allows(opt.video_fps) && opt.video_fps <= 1.0 / dt * (1 + 1e-9)))
+      return fail(ExitCode::BadInput, "options", "--video-fps " + format_number(opt.video_fps) + ": must be in " +
+                                                      knobs::describe_range(knobs::kVideoFps) + " and at most 1 / dt = " +
+                                                      format_number(1.0 / dt) + " frames per simulated second");
     if (Status s = VideoWriter::available(); !s) return fail(ExitCode::BadInput, "options", "--video " + opt.video + ": " + s.message());
   }
   std::string failed_part;

@@ -51,8 +51,6 @@ const std::vector<std::string> kHeightfieldFormats = {"png16", "raw_f32", "esri_
 
 // Value limits, one place (docs/scene-format.md lists the same).
 const Range kWorldCoord = closed(-1e9, 1e9, "m");
-// Shape sizes: Bullet keeps them as float; below 1e-6 m a shape is a point to it.
-const Range kSize = closed(1e-6, 1e4, "m");
 
 TerrainDef parse_terrain(Ctx& c, const json& j) {
   TerrainDef t;
@@ -266,20 +264,20 @@ BodyDef parse_body(Ctx& c, const json& j, const std::string& path, std::optional
     auto& sh = b.shape;
     if (s.enumeration_req("type", sh.kind, kShapeKinds) && s.valid()) {
       switch (sh.kind) {
-        case ShapeKind::Sphere: s.number_req("radius", sh.radius, kSize); break;
-        case ShapeKind::Box: s.vec3_req("half_extents", sh.half_extents, kSize); break;
+        case ShapeKind::Sphere: s.number_req("radius", sh.radius, range_of(knobs::kShapeRadius)); break;
+        case ShapeKind::Box: s.vec3_req("half_extents", sh.half_extents, range_of(knobs::kShapeHalfExtent)); break;
         case ShapeKind::Cylinder:
-          s.number_req("radius", sh.radius, kSize);
-          s.number_req("height", sh.height, kSize);
+          s.number_req("radius", sh.radius, range_of(knobs::kShapeRadius));
+          s.number_req("height", sh.height, range_of(knobs::kCylinderHeight));
           break;
         case ShapeKind::Capsule:
-          s.number_req("radius", sh.radius, kSize);
-          s.number_req("height", sh.height, closed(0.0, 1e4, "m"));
+          s.number_req("radius", sh.radius, range_of(knobs::kShapeRadius));
+          s.number_req("height", sh.height, range_of(knobs::kCapsuleHeight));
           break;
         case ShapeKind::Mesh: {
           bool scale_ok = true;
           if (const json* v = s.get("scale")) {
-            const auto x = read_number(c, *v, s.at("scale"), closed(1e-6, 1e6, "m per OBJ unit"));
+            const auto x = read_number(c, *v, s.at("scale"), range_of(knobs::kMeshScale));
             if (x) sh.scale = *x;
             scale_ok = x.has_value();
           }
@@ -508,7 +506,7 @@ CameraDef parse_camera(Ctx& c, const json& j, const std::string& path) {
     for_each_element(c, *pj, o.at("path"), [&](const json& e, const std::string& p) {
       CameraKeyDef k;
       Obj ko(c, e, p);
-      const bool t_ok = ko.number_req("time", k.time, closed(0.0, 1e6, "s"));
+      const bool t_ok = ko.number_req("time", k.time, range_of(knobs::kCameraKeyTime));
       const bool v_ok = ko.vec3_req("position", k.position, kWorldCoord) & ko.vec3_req("target", k.target, kWorldCoord);
       ko.finish();
       if (t_ok && !cam.path.empty() && k.time <= cam.path.back().time) {
@@ -523,9 +521,9 @@ CameraDef parse_camera(Ctx& c, const json& j, const std::string& path) {
     const bool ok = o.vec3_req("position", cam.position, kWorldCoord) & o.vec3_req("target", cam.target, kWorldCoord);
     if (ok) check_view(cam.position, cam.target, o.at("target"), *o.get("target"));
   }
-  o.number("fov_deg", cam.fov_deg, closed(1.0, 179.0, "deg"));
-  o.integer("width", cam.width, 16, 16384, "px");
-  o.integer("height", cam.height, 16, 16384, "px");
+  o.knob("fov_deg", cam.fov_deg, knobs::kCameraFov);
+  o.knob("width", cam.width, knobs::kCameraWidth);
+  o.knob("height", cam.height, knobs::kCameraHeight);
   o.finish();
   return cam;
 }
@@ -540,7 +538,7 @@ OutputsDef parse_outputs(Ctx& c, const json& j) {
       fo.string_req("camera", f.camera, "the name of a camera");
       if (!fo.both("times", "every_k_frames")) {
         if (const json* t = fo.get("times")) f.times = read_times(c, *t, fo.at("times"));
-        fo.integer("every_k_frames", f.every_k_frames, 1, 1e6);
+        fo.knob("every_k_frames", f.every_k_frames, knobs::kEveryKFrames);
         if (!fo.has("times") && !fo.has("every_k_frames") && fo.valid()) {
           c.missing(fo.at("times"), "one of 'times' (s) or 'every_k_frames'");
         }
