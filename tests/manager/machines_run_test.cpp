@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "manager/run.hpp"
+#include "tests/manager/fresh_dir.hpp"
 #include "manager/run_outputs.hpp"
 #include "scene/scene.hpp"
 
@@ -21,12 +22,6 @@ namespace fs = std::filesystem;
 using namespace sandpatch;
 
 namespace {
-
-fs::path fresh_dir(const std::string& name) {
-  fs::path p = fs::temp_directory_path() / ("sandpatch_machines_test_" + name);
-  fs::remove_all(p);
-  return p;
-}
 
 // A flat 16 m terrain at y = 1 m without patches, and `bodies` (a JSON array's items).
 std::string scene_with(const std::string& bodies, const std::string& outputs = R"({"report": true})") {
@@ -132,7 +127,7 @@ TEST(SceneMotion, BadMotionAndKeyframesAreRefusedNamingTheField) {
                                   R"({"report": true, "csv": "series.csv"})"),
                         "deep.json", "");
   ASSERT_TRUE(s.ok()) << s.message();
-  const fs::path dir = fresh_dir("bedrock");
+  const fs::path dir = test::fresh_dir("machines_test", "bedrock");
   RunOptions opt;
   opt.out_dir = dir.string();
   opt.progress = ProgressStyle::None;
@@ -151,7 +146,7 @@ TEST(SceneMotion, BadMotionAndKeyframesAreRefusedNamingTheField) {
 TEST(RunCsv, OneRowPerFramePerBodyAndTheLastMatchesTheReport) {
   auto s = parse_scene(scene_with(kBodies, R"({"report": true, "csv": "series/bodies.csv"})"), "m.json", "");
   ASSERT_TRUE(s.ok()) << s.message();
-  const fs::path dir = fresh_dir("csv");
+  const fs::path dir = test::fresh_dir("machines_test", "csv");
   RunOptions opt;
   opt.out_dir = dir.string();
   opt.progress = ProgressStyle::None;
