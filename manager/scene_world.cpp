@@ -123,40 +123,9 @@ RigidJointDef vehicle_joint_def(const VehicleJoint& j) {
   return d;
 }
 
-api::BodyDef body_def(const SceneDef& scene, std::size_t index) {
-  const BodyDef& b = scene.bodies[index];
-  api::BodyDef d;
-  d.name = b.name;
-  d.motion = b.motion == MotionKind::Kinematic ? api::BodyMotion::Kinematic
-             : b.motion == MotionKind::Static  ? api::BodyMotion::Static
-                                               : api::BodyMotion::Dynamic;
-  d.mass = b.mass_value();
-  d.position = b.pose.position;
-  const auto& q = b.pose.orientation;
-  d.orientation = {float(q[0]), float(q[1]), float(q[2]), float(q[3])};
-  d.linear_velocity = {float(b.linear_velocity[0]), float(b.linear_velocity[1]), float(b.linear_velocity[2])};
-  d.angular_velocity = {float(b.angular_velocity[0]), float(b.angular_velocity[1]), float(b.angular_velocity[2])};
-  d.friction = b.friction;
-  d.restitution = b.restitution;
-  d.rolling_friction = b.rolling_friction;
-  const ShapeDef& s = b.shape;
-  d.shape.radius = s.radius;
-  d.shape.height = s.height;
-  d.shape.half_extents = s.half_extents;
-  switch (s.kind) {
-    case ShapeKind::Sphere: d.shape.kind = api::ShapeKind::Sphere; break;
-    case ShapeKind::Box: d.shape.kind = api::ShapeKind::Box; break;
-    case ShapeKind::Cylinder: d.shape.kind = api::ShapeKind::Cylinder; break;
-    case ShapeKind::Capsule: d.shape.kind = api::ShapeKind::Capsule; break;
-    case ShapeKind::Mesh:
-      d.shape.kind = api::ShapeKind::Mesh;
-      d.shape.mesh_file = s.file;
-      d.shape.mesh_scale = s.scale;
-      d.shape.solid = s.solid;
-      break;
-  }
-  return d;
-}
+// The parser filled the library's BodyDef; what only scene files have (keyframes, loads, the
+// spawn time) the run schedules beside it.
+api::BodyDef body_def(const SceneDef& scene, std::size_t index) { return scene.bodies[index]; }
 
 Result<RigidBodyDef> to_rigid_body(const SceneDef& scene, std::size_t index) {
   auto r = rigid_body_def(body_def(scene, index));
@@ -212,13 +181,7 @@ api::TerrainDef terrain_def(const SceneDef& scene, int threads, const std::strin
       break;
     }
   }
-  t.material.granule_radius = mat->granule_radius;
-  t.material.density = mat->density;
-  t.material.friction = mat->friction;
-  t.material.restitution = mat->restitution_value();
-  t.material.stiffness = mat->stiffness;
-  t.material.tangential_stiffness_ratio = mat->tangential_stiffness_ratio;
-  t.material.unloading_stiffness_ratio = mat->unloading_stiffness_ratio;
+  t.material = *mat;
   t.particle_scale = sim.particle_scale;
   t.steps_per_contact = sim.steps_per_contact;
   t.max_substeps = sim.max_substeps;
@@ -281,13 +244,13 @@ Result<std::unique_ptr<World>> make_world(const SceneDef& scene, int threads, co
   for (std::size_t i = 0; i < scene.bodies.size(); ++i) {
     const BodyDef& b = scene.bodies[i];
     if (b.motion != MotionKind::Dynamic) continue;  // Bullet does not push a kinematic or static body out of the ground
-    const double x = b.pose.position[0] - hf.origin_x(), z = b.pose.position[2] - hf.origin_z();
+    const double x = b.position[0] - hf.origin_x(), z = b.position[2] - hf.origin_z();
     if (x < 0 || z < 0 || x > w || z > d) continue;  // no terrain under it
     const double surface = hf.origin_y() + hf.sample(float(x), float(z));
-    if (b.pose.position[1] >= surface) continue;
+    if (b.position[1] >= surface) continue;
     inside.push_back(Error{scene.source_path, "bodies[" + std::to_string(i) + "].pose.position",
-                           "[" + format_number(b.pose.position[0]) + ", " + format_number(b.pose.position[1]) + ", " +
-                               format_number(b.pose.position[2]) + "]",
+                           "[" + format_number(b.position[0]) + ", " + format_number(b.position[1]) + ", " +
+                               format_number(b.position[2]) + "]",
                            "body '" + b.name + "' starts inside the terrain: its centre is below the surface (world y = " +
                                format_number(surface) + " m there); it must start at or above it",
                            "its lowest point may touch or enter the ground, its centre may not"});

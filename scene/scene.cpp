@@ -146,9 +146,11 @@ MaterialDef parse_material(Ctx& c, const json& j, const std::string& path) {
   o.knob("friction", m.friction, knobs::kFriction);
   if (!o.both("restitution", "damping_ratio")) {
     const bool given = o.has("restitution") || o.has("damping_ratio");
-    m.restitution = o.number_opt("restitution", {knobs::kRestitution.lo, knobs::kRestitution.hi, knobs::kRestitution.lo_open,
-                                                 knobs::kRestitution.hi_open, knobs::kRestitution.unit});
+    const auto e = o.number_opt("restitution", range_of(knobs::kRestitution));
     m.damping_ratio = o.number_opt("damping_ratio", {0.0, 100.0, false, false, ""});
+    // The library takes e; ζ given gives e through the contact law (particles/material.hpp).
+    if (e) m.restitution = *e;
+    else if (m.damping_ratio) m.restitution = clamped_restitution(*m.damping_ratio);
     if (!given && o.valid()) c.missing(o.at("restitution"), "one of 'restitution' (e in (0, 1]) or 'damping_ratio' (ζ in [0, 100])");
   }
   o.knob("stiffness", m.stiffness, knobs::kStiffness);
@@ -160,6 +162,10 @@ MaterialDef parse_material(Ctx& c, const json& j, const std::string& path) {
   return m;
 }
 
+// The library's float quaternion and vectors from the file's doubles (as the library takes them).
+api::Quat to_quat(const std::array<double, 4>& q) { return {float(q[0]), float(q[1]), float(q[2]), float(q[3])}; }
+api::Vec3f to_vec3f(const Vec3d& v) { return {float(v[0]), float(v[1]), float(v[2])}; }
+
 // Quaternion [w, x, y, z] from extrinsic x-y-z Euler angles in degrees: R = Rz(γ)·Ry(β)·Rx(α).
 std::array<double, 4> euler_deg_to_quaternion(const Vec3d& e) {
   const double d = kPi / 180.0;
@@ -170,8 +176,9 @@ std::array<double, 4> euler_deg_to_quaternion(const Vec3d& e) {
 }
 
 // The mesh of a body's shape if it loads (errors added to `c` otherwise).
-std::optional<TriangleMesh> load_body_mesh(Ctx& c, ShapeDef& s, const std::string& field, const std::string& written) {
-  auto r = load_obj_mesh(s.file, s.scale);
+std::optional<TriangleMesh> load_body_mesh(Ctx& c, BodyDef& b, const std::string& field, const std::string& written) {
+  const api::ShapeDef& s = b.shape;
+  auto r = load_obj_mesh(s.mesh_file, s.mesh_scale);
   if (!r) {
     for (const auto& e : r.errors()) {
       c.error(field, json_quote(written), e.allowed.empty() ? "must be a readable Wavefront OBJ file" : "must be " + e.allowed,
@@ -180,10 +187,10 @@ std::optional<TriangleMesh> load_body_mesh(Ctx& c, ShapeDef& s, const std::strin
     return std::nullopt;
   }
   if (s.solid) {
-    const auto errs = check_solid_mesh(*r, s.file, field);
+    const auto errs = check_solid_mesh(*r, s.mesh_file, field);
     for (const auto& e : errs) c.error(field, json_quote(written), "must be " + e.allowed + " for a solid body", e.file + ": " + e.detail);
     if (!errs.empty()) return std::nullopt;
-    s.mesh_volume = r->signed_volume();
+    b.mesh_volume = r->signed_volume();
   }
   return std::move(r).value();
 }
@@ -223,8 +230,10 @@ LoadDef parse_load(Ctx& c, const json& j, const std::string& path) {
   return l;
 }
 
-// "orientation" (a unit quaternion) or "euler_deg" of object `p` into q.
-void parse_orientation(Ctx& c, Obj& p, std::array<double, 4>& q_out) {
+// "orientation" (a unit quaternion) or "euler_deg" of object `p` into q. `float_unit`: a
+// quaternion already unit to float precision (|q| within 1e-6 of 1, as scene_to_json writes a
+// body's float orientation back) is kept as written, so that it reads back the same floats.
+void parse_orientation(Ctx& c, Obj& p, std::array<double, 4>& q_out, bool float_unit = false) {
   if (p.both("orientation", "euler_deg")) return;
   if (const json* q = p.get("orientation")) {
     if (auto v = read_numbers<4>(c, *q, p.at("orientation"), closed(-1.0 - 1e-3, 1.0 + 1e-3, ""))) {
@@ -233,7 +242,8 @@ void parse_orientation(Ctx& c, Obj& p, std::array<double, 4>& q_out) {
         c.error(p.at("orientation"), show(*q), "must be a unit quaternion [w, x, y, z] (|q| = 1 ± 0.001)",
                 "|q| = " + fmt_num(n));
       } else {
-        q_out = {(*v)[0] / n, (*v)[1] / n, (*v)[2] / n, (*v)[3] / n};
+        const double k = float_unit && std::abs(n - 1.0) <= 1e-6 ? 1.0 : n;
+        q_out = {(*v)[0] / k, (*v)[1] / k, (*v)[2] / k, (*v)[3] / k};
       }
     }
   }
@@ -278,15 +288,15 @@ BodyDef parse_body(Ctx& c, const json& j, const std::string& path, std::optional
           bool scale_ok = true;
           if (const json* v = s.get("scale")) {
             const auto x = read_number(c, *v, s.at("scale"), range_of(knobs::kMeshScale));
-            if (x) sh.scale = *x;
+            if (x) sh.mesh_scale = *x;
             scale_ok = x.has_value();
           }
           s.boolean("solid", sh.solid);
           std::string written;
           if (s.string_req("file", written, "the OBJ file's path")) {
-            sh.file = resolve(c, written);
-            if (check_readable(c, s.at("file"), written, sh.file, "OBJ file") && scale_ok) {
-              mesh = load_body_mesh(c, sh, s.at("file"), written);
+            sh.mesh_file = resolve(c, written);
+            if (check_readable(c, s.at("file"), written, sh.mesh_file, "OBJ file") && scale_ok) {
+              mesh = load_body_mesh(c, b, s.at("file"), written);
             }
           }
           break;
@@ -303,20 +313,22 @@ BodyDef parse_body(Ctx& c, const json& j, const std::string& path, std::optional
                 "leave it out: a " + std::string(to_string(b.motion)) + " body has no mass (nothing moves it)");
   } else if (!o.both("mass", "density")) {
     const bool given = o.has("mass") || o.has("density");
-    b.mass = o.number_opt("mass", positive(1e9, "kg"));
+    const auto mass = o.number_opt("mass", positive(1e9, "kg"));
     b.density = o.number_opt("density", positive(1e5, "kg/m^3"));
     if (!given && o.valid()) c.missing(o.at("mass"), "one of 'mass' (kg) or 'density' (kg/m^3)");
+    // The library takes the mass: given, or density × the shape's volume.
+    b.mass = mass ? *mass : b.density.value_or(0.0) * b.volume();
     // The mass run gives Bullet (a float): a tiny shape or density must not make it 0.
-    const bool shape_known = b.shape.kind != ShapeKind::Mesh || b.shape.mesh_volume > 0;
+    const bool shape_known = b.shape.kind != ShapeKind::Mesh || b.mesh_volume > 0;
     if (b.density && shape_known && o.valid()) {
-      const double m = b.mass_value();
+      const double m = b.mass;
       if (!(m >= limits::kMinBodyMass && m <= limits::kMaxBodyMass))
         c.error(o.at("density"), show(*o.get("density")),
                 "density × shape volume must give a mass in [" + fmt_num(limits::kMinBodyMass) + ", " +
                     fmt_num(limits::kMaxBodyMass) + "] kg",
-                "mass = " + fmt_num(m) + " kg (volume " + fmt_num(b.shape.volume()) + " m^3)");
+                "mass = " + fmt_num(m) + " kg (volume " + fmt_num(b.volume()) + " m^3)");
     }
-    if (b.mass && *b.mass < limits::kMinBodyMass)
+    if (mass && *mass < limits::kMinBodyMass)
       c.error(o.at("mass"), show(*o.get("mass")), "must be in [" + fmt_num(limits::kMinBodyMass) + ", " +
                                                       fmt_num(limits::kMaxBodyMass) + "] kg");
     if (o.has("density") && b.shape.kind == ShapeKind::Mesh && !b.shape.solid) {
@@ -326,20 +338,25 @@ BodyDef parse_body(Ctx& c, const json& j, const std::string& path, std::optional
   }
   if (const json* pj = o.get("pose")) {
     Obj p(c, *pj, o.at("pose"));
-    p.vec3("position", b.pose.position, kWorldCoord);
-    parse_orientation(c, p, b.pose.orientation);
+    p.vec3("position", b.position, kWorldCoord);
+    std::array<double, 4> q = {1.0, 0.0, 0.0, 0.0};
+    parse_orientation(c, p, q, /*float_unit=*/true);
+    b.orientation = to_quat(q);
     p.finish();
   }
-  o.vec3("linear_velocity", b.linear_velocity, closed(-limits::kMaxBodySpeed, limits::kMaxBodySpeed, "m/s"));
-  o.vec3("angular_velocity", b.angular_velocity, closed(-limits::kMaxBodySpin, limits::kMaxBodySpin, "rad/s"));
+  Vec3d linear = {0.0, 0.0, 0.0}, angular = {0.0, 0.0, 0.0};
+  o.vec3("linear_velocity", linear, closed(-limits::kMaxBodySpeed, limits::kMaxBodySpeed, "m/s"));
+  o.vec3("angular_velocity", angular, closed(-limits::kMaxBodySpin, limits::kMaxBodySpin, "rad/s"));
   // The limits are on the magnitudes (common/limits.hpp), as in the library.
-  for (const auto& [key, v, limit, unit] : {std::tuple{"linear_velocity", b.linear_velocity, limits::kMaxBodySpeed, "m/s"},
-                                            std::tuple{"angular_velocity", b.angular_velocity, limits::kMaxBodySpin, "rad/s"}}) {
+  for (const auto& [key, v, limit, unit] : {std::tuple{"linear_velocity", linear, limits::kMaxBodySpeed, "m/s"},
+                                            std::tuple{"angular_velocity", angular, limits::kMaxBodySpin, "rad/s"}}) {
     const double n = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
     if (n > limit)
       c.error(o.at(key), show(*o.get(key)), "the magnitude must be at most " + fmt_num(limit) + " " + unit,
               "|v| = " + fmt_num(n) + " " + unit);
   }
+  b.linear_velocity = to_vec3f(linear);
+  b.angular_velocity = to_vec3f(angular);
   o.number("spawn_time", b.spawn_time, closed(0.0, 1e6, "s"));
   o.knob("friction", b.friction, knobs::kBodyFriction);
   o.knob("restitution", b.restitution, knobs::kBodyRestitution);
@@ -366,7 +383,7 @@ BodyDef parse_body(Ctx& c, const json& j, const std::string& path, std::optional
   }
   if (b.motion == MotionKind::Static) {
     for (const char* key : {"linear_velocity", "angular_velocity"})
-      if (o.has(key) && o.valid() && (key[0] == 'l' ? b.linear_velocity : b.angular_velocity) != Vec3d{0.0, 0.0, 0.0})
+      if (o.has(key) && o.valid() && (key[0] == 'l' ? b.linear_velocity : b.angular_velocity) != api::Vec3f{0.0f, 0.0f, 0.0f})
         c.error(o.at(key), show(*o.get(key)), "must be [0, 0, 0] or left out: a static body never moves");
   }
   if (!dynamic && o.has("loads"))
@@ -383,16 +400,16 @@ BodyDef parse_body(Ctx& c, const json& j, const std::string& path, std::optional
     std::size_t k = 0;
     while (k + 1 < ks.size() && ks[k + 1].t <= b.spawn_time) ++k;
     const KeyframeDef& a = ks[k];
-    b.pose.position = a.position;
-    b.pose.orientation = a.orientation;
+    b.position = a.position;
+    b.orientation = to_quat(a.orientation);
     if (k + 1 < ks.size() && b.spawn_time > a.t) {
       const KeyframeDef& n = ks[k + 1];
       const double u = (b.spawn_time - a.t) / (n.t - a.t);
-      for (int i = 0; i < 3; ++i) b.pose.position[i] = a.position[i] + u * (n.position[i] - a.position[i]);
+      for (int i = 0; i < 3; ++i) b.position[i] = a.position[i] + u * (n.position[i] - a.position[i]);
       const Eigen::Quaterniond qa(a.orientation[0], a.orientation[1], a.orientation[2], a.orientation[3]);
       const Eigen::Quaterniond qn(n.orientation[0], n.orientation[1], n.orientation[2], n.orientation[3]);
       const Eigen::Quaterniond q = qa.slerp(u, qn);
-      b.pose.orientation = {q.w(), q.x(), q.y(), q.z()};
+      b.orientation = to_quat({q.w(), q.x(), q.y(), q.z()});
     }
   }
   o.finish();
@@ -595,14 +612,14 @@ std::vector<std::string> names_of(const std::vector<T>& items) {
   return n;
 }
 
-std::array<double, 9> rotation_rows(const std::array<double, 4>& q) {
+std::array<double, 9> rotation_rows(const api::Quat& q) {
   const Eigen::Matrix3d r = Eigen::Quaterniond(q[0], q[1], q[2], q[3]).normalized().toRotationMatrix();
   return {r(0, 0), r(0, 1), r(0, 2), r(1, 0), r(1, 1), r(1, 2), r(2, 0), r(2, 1), r(2, 2)};
 }
 
 // Distance (m, ≥ 0) from the body's position down to its lowest point.
 double lowest_offset(const BodyDef& b, const TriangleMesh* mesh) {
-  const auto r = rotation_rows(b.pose.orientation);
+  const auto r = rotation_rows(b.orientation);
   const double r10 = r[3], r11 = r[4], r12 = r[5];  // world y row
   const auto& s = b.shape;
   switch (s.kind) {
@@ -628,9 +645,9 @@ void check_flat_bedrock(Ctx& c, const SceneDef& s, const std::vector<std::option
   for (std::size_t i = 0; i < s.bodies.size(); ++i) {
     const auto& b = s.bodies[i];
     if (b.shape.kind == ShapeKind::Mesh && !meshes[i]) continue;
-    const double low = b.pose.position[1] - lowest_offset(b, meshes[i] ? &*meshes[i] : nullptr);
+    const double low = b.position[1] - lowest_offset(b, meshes[i] ? &*meshes[i] : nullptr);
     if (low < bedrock) {
-      c.error("bodies[" + std::to_string(i) + "].pose.position", json(b.pose.position).dump(),
+      c.error("bodies[" + std::to_string(i) + "].pose.position", json(b.position).dump(),
               "the body's lowest point must start at or above the bedrock (world y = " + fmt_num(bedrock) +
                   " m: terrain.origin[1] + terrain.bedrock_height)",
               "body below bedrock: its lowest point is at y = " + fmt_num(low) + " m");
@@ -652,16 +669,13 @@ std::array<double, 2> TerrainDef::spacing_xz(int nx, int nz) const {
 // never pulls (particles/material.hpp; docs/dem.md "Restitution").
 double MaterialDef::damping_ratio_value() const {
   if (damping_ratio) return *damping_ratio;
-  return damping_ratio_from_restitution(restitution.value_or(1.0));
+  return damping_ratio_from_restitution(restitution);
 }
 
-double MaterialDef::restitution_value() const {
-  if (restitution) return *restitution;
-  return clamped_restitution(damping_ratio.value_or(0.0));
-}
-
-double ShapeDef::volume() const {
-  switch (kind) {
+double BodyDef::volume() const {
+  const double radius = shape.radius, height = shape.height;
+  const auto& half_extents = shape.half_extents;
+  switch (shape.kind) {
     case ShapeKind::Sphere: return 4.0 / 3.0 * kPi * radius * radius * radius;
     case ShapeKind::Box: return 8.0 * half_extents[0] * half_extents[1] * half_extents[2];
     case ShapeKind::Cylinder: return kPi * radius * radius * height;
@@ -671,7 +685,6 @@ double ShapeDef::volume() const {
   return 0.0;
 }
 
-double BodyDef::mass_value() const { return mass ? *mass : density.value_or(0.0) * shape.volume(); }
 
 const MaterialDef* SceneDef::find_material(const std::string& n) const {
   for (const auto& m : materials) {
@@ -842,7 +855,7 @@ Result<SceneDef> load_default_scene() { return parse_scene(default_scene_json(),
 
 double body_extent_below(const BodyDef& body) {
   if (body.shape.kind != ShapeKind::Mesh) return lowest_offset(body, nullptr);
-  auto mesh = load_obj_mesh(body.shape.file, body.shape.scale);
+  auto mesh = load_obj_mesh(body.shape.mesh_file, body.shape.mesh_scale);
   return mesh ? lowest_offset(body, &*mesh) : 0.0;
 }
 
@@ -851,12 +864,12 @@ std::vector<Error> check_bodies_against_terrain(
   std::vector<Error> errors;
   for (std::size_t i = 0; i < scene.bodies.size(); ++i) {
     const auto& b = scene.bodies[i];
-    const double x = b.pose.position[0], z = b.pose.position[2];
+    const double x = b.position[0], z = b.position[2];
     const double bedrock = bedrock_world_height(x, z);
-    const double low = b.pose.position[1] - body_extent_below(b);
+    const double low = b.position[1] - body_extent_below(b);
     if (low < bedrock) {
       errors.push_back({scene.source_path, "bodies[" + std::to_string(i) + "].pose.position",
-                        json(b.pose.position).dump(),
+                        json(b.position).dump(),
                         "the body's lowest point must start at or above the bedrock (world y = " + fmt_num(bedrock) +
                             " m under x = " + fmt_num(x) + ", z = " + fmt_num(z) + ")",
                         "body below bedrock: its lowest point is at y = " + fmt_num(low) + " m"});
@@ -864,13 +877,13 @@ std::vector<Error> check_bodies_against_terrain(
     // A kinematic body goes where its keyframes send it: none may put it through the bedrock.
     for (std::size_t k = 0; k < b.keyframes.size(); ++k) {
       BodyDef at = b;
-      at.pose.position = b.keyframes[k].position;
-      at.pose.orientation = b.keyframes[k].orientation;
-      const double kx = at.pose.position[0], kz = at.pose.position[2];
-      const double rock = bedrock_world_height(kx, kz), klow = at.pose.position[1] - body_extent_below(at);
+      at.position = b.keyframes[k].position;
+      at.orientation = to_quat(b.keyframes[k].orientation);
+      const double kx = at.position[0], kz = at.position[2];
+      const double rock = bedrock_world_height(kx, kz), klow = at.position[1] - body_extent_below(at);
       if (klow < rock)
         errors.push_back({scene.source_path, "bodies[" + std::to_string(i) + "].keyframes[" + std::to_string(k) + "].position",
-                          json(at.pose.position).dump(),
+                          json(at.position).dump(),
                           "the body's lowest point must stay at or above the bedrock (world y = " + fmt_num(rock) +
                               " m under x = " + fmt_num(kx) + ", z = " + fmt_num(kz) + ")",
                           "at t = " + fmt_num(b.keyframes[k].t) + " s its lowest point would be at y = " + fmt_num(klow) + " m"});

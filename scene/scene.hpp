@@ -82,52 +82,28 @@ struct TerrainDef {
 
 // ---- materials ----
 
-struct MaterialDef {
+// A material of the scene: the library's MaterialDef (density, friction, restitution,
+// stiffnesses, granule radius: the parser fills it as the library takes it) with its name and
+// what only scene files give.
+struct MaterialDef : api::MaterialDef {
   std::string name;                            // unique, referenced by terrain.material
-  double density = knobs::kDensity.def;        // kg/m³ of the grain solid (quartz)
-  double friction = knobs::kFriction.def;      // μ, Coulomb coefficient between spheres
-  std::optional<double> restitution;           // e in (0, 1]  } exactly one of the two is set
-  std::optional<double> damping_ratio;         // ζ in [0, 1)  }
-  double stiffness = knobs::kStiffness.def;    // k_n, N/m, normal contact stiffness
-  double tangential_stiffness_ratio = knobs::kTangentialRatio.def;  // k_t / k_n
-  double unloading_stiffness_ratio = knobs::kUnloadingRatio.def;    // hysteretic normal spring; 1 = linear
-  double granule_radius = knobs::kGranuleRadius.def;  // m, radius of each of the 4 spheres of a granule
+  // ζ in [0, 100] when the file gave damping_ratio instead of restitution (then `restitution`
+  // holds the e it gives: e = clamped_restitution(ζ), particles/material.hpp).
+  std::optional<double> damping_ratio;
   // φ, granule solid volume / bulk volume: validated, not used by the simulation (the
   // pre-settled tile measures its own φ; the report gives it as tile.packing_fraction).
   double packing_fraction = 0.6;
 
   // ζ from whichever was given: ζ = −ln e / sqrt(π² + ln² e).
   double damping_ratio_value() const;
-  // e from whichever was given: e = exp(−π ζ / sqrt(1 − ζ²)).
-  double restitution_value() const;
 };
 
 // ---- bodies ----
 
-enum class ShapeKind { Sphere, Box, Cylinder, Capsule, Mesh };
-
-// Shapes are centred on the body frame's origin; cylinders and capsules have their axis on y.
-struct ShapeDef {
-  ShapeKind kind = ShapeKind::Sphere;
-  double radius = 0.5;                         // m (sphere, cylinder, capsule)
-  Vec3d half_extents = {0.5, 0.5, 0.5};        // m (box)
-  double height = 1.0;                         // m (cylinder: total height; capsule: distance
-                                               //   between the cap centres, total = height + 2·radius)
-  std::string file;                            // resolved path of the OBJ (mesh)
-  double scale = 1.0;                          // OBJ units → m (mesh)
-  bool solid = true;                           // mesh: must be closed (needed for density, DEM shell)
-  double mesh_volume = 0.0;                    // m³, filled by the loader from the OBJ (mesh)
-
-  // Volume (m³): analytic for primitives, mesh_volume for meshes.
-  double volume() const;
-};
-
-struct PoseDef {
-  Vec3d position = {0.0, 0.0, 0.0};                   // m, world
-  std::array<double, 4> orientation = {1.0, 0.0, 0.0, 0.0};  // unit quaternion [w, x, y, z]
-  // In the file either "orientation" or "euler_deg" [α, β, γ] (degrees, R = Rz(γ)·Ry(β)·Rx(α));
-  // both are stored here as the normalised quaternion.
-};
+// Shapes and motions are the library's (api::ShapeDef: centred on the body frame's origin,
+// cylinders and capsules with their axis on y; a mesh is an OBJ file, mesh_file and mesh_scale).
+using ShapeKind = api::ShapeKind;
+using MotionKind = api::BodyMotion;
 
 // A force and / or torque put on a body while the simulated time t of a step's start is in
 // [from, until) (World::set_loads): a push, a wheel's traction, a thrust.
@@ -144,10 +120,6 @@ struct LoadDef {
   LoadFrame frame = LoadFrame::World;          // body: force and torque turn with the body
 };
 
-// How a body moves (docs/scene-format.md "motion"): by the forces on it, along its keyframes
-// (or its velocities, held), or not at all.
-enum class MotionKind { Dynamic, Kinematic, Static };
-
 // A kinematic body's pose at simulated time t; between keyframes the position is linear and
 // the orientation a slerp, before the first and after the last they hold.
 inline constexpr int kMaxKeyframesPerBody = 100000;
@@ -157,24 +129,19 @@ struct KeyframeDef {
   std::array<double, 4> orientation = {1.0, 0.0, 0.0, 0.0};  // unit quaternion [w, x, y, z] (or euler_deg in the file)
 };
 
-struct BodyDef {
-  std::string name;                            // unique
-  ShapeDef shape;
-  MotionKind motion = MotionKind::Dynamic;
+// A body of the scene: the library's BodyDef (name, shape, motion, mass, pose, velocities,
+// friction, restitution, rolling friction: the parser fills it as the library takes it, so a
+// run adds it as it is) and what only scene files give. The pose is the body's at spawn_time
+// (a kinematic body's: its keyframes' there).
+struct BodyDef : api::BodyDef {
+  std::optional<double> density;               // kg/m³ when the file gave it instead of mass (mass = density × volume())
+  double mesh_volume = 0.0;                    // m³, mesh: the signed volume of the OBJ, filled by the loader
   std::vector<KeyframeDef> keyframes;          // kinematic only; the pose comes from them
-  std::optional<double> mass;                  // kg        } exactly one of the two is set
-  std::optional<double> density;               // kg/m³     }
-  PoseDef pose;
-  Vec3d linear_velocity = {0.0, 0.0, 0.0};     // m/s, world
-  Vec3d angular_velocity = {0.0, 0.0, 0.0};    // rad/s, world
   double spawn_time = 0.0;                     // s, simulated time at which the body appears
-  double friction = knobs::kBodyFriction.def;  // μ against terrain and other bodies
-  double restitution = knobs::kBodyRestitution.def;  // e in [0, 1] for body–body / body–heightfield contacts
-  double rolling_friction = knobs::kBodyRollingFriction.def;  // rolling resistance (torque arm / radius)
   std::vector<LoadDef> loads;                  // at most kMaxLoadsPerBody
 
-  // Mass in kg: `mass`, or density × shape.volume().
-  double mass_value() const;
+  // Volume of the shape (m³): analytic for primitives, mesh_volume for meshes.
+  double volume() const;
 };
 
 // ---- joints (docs/scene-format.md "joints") ----
@@ -398,7 +365,7 @@ Result<SceneDef> load_default_scene();
 nlohmann::json scene_to_json(const SceneDef& scene);
 
 // Lowest point of a body below its position (m, ≥ 0), for its pose's orientation. Meshes
-// are reloaded from shape.file; if that fails the mesh's bounds are unknown and 0 is returned.
+// are reloaded from shape.mesh_file; if that fails the mesh's bounds are unknown and 0 is returned.
 double body_extent_below(const BodyDef& body);
 
 // The check only the terrain can answer: a body whose lowest point starts below the

@@ -56,7 +56,7 @@ nlohmann::json scene_to_json(const SceneDef& s) {
     mj["density"] = m.density;
     mj["friction"] = m.friction;
     if (m.damping_ratio) mj["damping_ratio"] = *m.damping_ratio;
-    else mj["restitution"] = m.restitution_value();
+    else mj["restitution"] = m.restitution;
     mj["stiffness"] = m.stiffness;
     mj["tangential_stiffness_ratio"] = m.tangential_stiffness_ratio;
     mj["unloading_stiffness_ratio"] = m.unloading_stiffness_ratio;
@@ -79,17 +79,17 @@ nlohmann::json scene_to_json(const SceneDef& s) {
         sh["height"] = b.shape.height;
         break;
       case ShapeKind::Mesh:
-        sh["file"] = b.shape.file;
-        sh["scale"] = b.shape.scale;
+        sh["file"] = b.shape.mesh_file;
+        sh["scale"] = b.shape.mesh_scale;
         sh["solid"] = b.shape.solid;
         break;
     }
     bj["shape"] = sh;
     bj["motion"] = to_string(b.motion);
     if (b.density) bj["density"] = *b.density;
-    else if (b.motion == MotionKind::Dynamic) bj["mass"] = b.mass.value_or(0.0);
+    else if (b.motion == MotionKind::Dynamic) bj["mass"] = b.mass;
     if (b.keyframes.empty()) {
-      bj["pose"] = {{"position", b.pose.position}, {"orientation", b.pose.orientation}};
+      bj["pose"] = {{"position", b.position}, {"orientation", b.orientation}};
     } else {
       json ks = json::array();
       for (const KeyframeDef& k : b.keyframes) ks.push_back({{"t", k.t}, {"position", k.position}, {"orientation", k.orientation}});

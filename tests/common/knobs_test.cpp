@@ -81,7 +81,7 @@ std::vector<Case> cases() {
       {&knobs::kFriction, mat("friction"), [](S s) { return s.materials[0].friction; },
        [](T t, D, double v) { t.material.friction = v; }, td.material.friction,
        [](S s) { return manager_field(s, [](M m) { return double(m.material.friction); }); }},
-      {&knobs::kRestitution, mat("restitution"), [](S s) { return s.materials[0].restitution_value(); },
+      {&knobs::kRestitution, mat("restitution"), [](S s) { return s.materials[0].restitution; },
        [](T t, D, double v) { t.material.restitution = v; }, td.material.restitution,
        [](S s) { return manager_field(s, [](M m) { return double(m.material.restitution); }); }},
       {&knobs::kStiffness, mat("stiffness"), [](S s) { return s.materials[0].stiffness; },
@@ -482,16 +482,13 @@ TEST(Knobs, BothDoorsRefuseTheSameLimits) {
   }
 }
 
-// The defaults of the table are those of the public ShapeDef, the scene's structs and the run.
+// The defaults of the table are those of the public ShapeDef, the scene's cameras and the run.
 TEST(Knobs, LimitDefaultsAgree) {
-  const api::ShapeDef a;
-  const ShapeDef s;
+  const api::ShapeDef a;  // scene files' shapes are the library's
   EXPECT_EQ(a.radius, knobs::kShapeRadius.def);
-  EXPECT_EQ(s.radius, knobs::kShapeRadius.def);
   EXPECT_EQ(a.half_extents[0], knobs::kShapeHalfExtent.def);
-  EXPECT_EQ(s.half_extents[0], knobs::kShapeHalfExtent.def);
   EXPECT_EQ(a.height, knobs::kCylinderHeight.def);
-  EXPECT_EQ(s.height, knobs::kCapsuleHeight.def);
+  EXPECT_EQ(a.height, knobs::kCapsuleHeight.def);
   EXPECT_EQ(a.mesh_scale, knobs::kMeshScale.def);
   const CameraDef cam;
   EXPECT_EQ(cam.fov_deg, knobs::kCameraFov.def);

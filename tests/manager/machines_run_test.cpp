@@ -80,7 +80,7 @@ TEST(SceneMotion, MotionAndKeyframesParse) {
   EXPECT_EQ(s->bodies[0].motion, MotionKind::Kinematic);
   ASSERT_EQ(s->bodies[0].keyframes.size(), 3u);
   EXPECT_NEAR(s->bodies[0].keyframes[2].orientation[2], std::sin(M_PI / 4), 1e-12);  // 90° about y
-  EXPECT_EQ(s->bodies[0].pose.position[0], 4.0) << "the pose at spawn_time is the first keyframe's";
+  EXPECT_EQ(s->bodies[0].position[0], 4.0) << "the pose at spawn_time is the first keyframe's";
   EXPECT_EQ(s->bodies[1].motion, MotionKind::Static);
   EXPECT_EQ(s->bodies[2].motion, MotionKind::Dynamic);
   auto again = parse_scene(scene_to_json(*s).dump(), "m2.json", "");
