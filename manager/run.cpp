@@ -36,7 +36,7 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
       return r;
     }
     SceneDef s = scene;
-    s.simulation.frame_budget_ms = opt.frame_budget_ms;
+    s.terrain.frame_budget_ms = opt.frame_budget_ms;
     RunOptions o = opt;
     o.frame_budget_ms.reset();
     return run_scene(s, o);
@@ -55,8 +55,8 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
     return fail(ExitCode::BadInput, "options", "--backend " + opt.backend + ": allowed values are cpu, gl");
   if (!opt.final_camera.empty() && !scene.find_camera(opt.final_camera))
     return fail(ExitCode::BadInput, "options", "--camera " + opt.final_camera + ": the scene has no such camera");
-  const std::string backend = opt.backend.empty() ? to_string(sim.backend) : opt.backend;
-  const int threads_req = opt.threads >= 0 ? opt.threads : sim.threads;
+  const std::string backend = opt.backend.empty() ? scene.terrain.backend : opt.backend;
+  const int threads_req = opt.threads >= 0 ? opt.threads : scene.terrain.threads;
   const int threads = threads_req > 0 ? threads_req : omp_get_num_procs();
   omp_set_num_threads(threads);
 

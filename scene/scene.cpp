@@ -52,49 +52,58 @@ const std::vector<std::string> kHeightfieldFormats = {"png16", "raw_f32", "esri_
 // Value limits, one place (docs/scene-format.md lists the same).
 const Range kWorldCoord = closed(-1e9, 1e9, "m");
 
-TerrainDef parse_terrain(Ctx& c, const json& j) {
-  TerrainDef t;
+// The terrain section into the library's fields of `t` (scene.hpp TerrainDef).
+void parse_terrain(Ctx& c, const json& j, TerrainDef& t) {
   Obj o(c, j, "terrain");
+  TerrainSourceKind kind = TerrainSourceKind::Procedural;
   if (const json* src = o.require("source", "an object with \"type\": " + join(kSourceTypes, " | "))) {
     Obj s(c, *src, o.at("source"));
-    auto& d = t.source;
-    if (s.enumeration_req("type", d.kind, kSourceTypes) && s.valid()) {
-      if (d.kind == TerrainSourceKind::Procedural) {
-        auto& p = d.procedural;
-        s.enumeration("kind", p.kind, kProceduralKinds);
-        s.number("height", p.height, closed(-1e5, 1e5, "m"));
-        s.number("slope_x", p.slope_x, closed(-100.0, 100.0, "m/m"));
-        s.number("slope_z", p.slope_z, closed(-100.0, 100.0, "m/m"));
-        s.number("amplitude", p.amplitude, closed(0.0, 1e5, "m"));
-        s.number("wavelength", p.wavelength, positive(1e7, "m"));
+    if (s.enumeration_req("type", kind, kSourceTypes) && s.valid()) {
+      if (kind == TerrainSourceKind::Procedural) {
+        // The generator's parameters, as the library takes them (float).
+        auto number_f = [&](const char* key, float& out, const Range& r) {
+          double v = out;
+          s.number(key, v, r);
+          out = float(v);
+        };
+        ProceduralKind pk = ProceduralKind::Flat;
+        s.enumeration("kind", pk, kProceduralKinds);
+        t.procedural = to_string(pk);
+        number_f("height", t.base_height, closed(-1e5, 1e5, "m"));
+        number_f("slope_x", t.slope_x, closed(-100.0, 100.0, "m/m"));
+        number_f("slope_z", t.slope_z, closed(-100.0, 100.0, "m/m"));
+        number_f("amplitude", t.amplitude, closed(0.0, 1e5, "m"));
+        number_f("wavelength", t.wavelength, positive(1e7, "m"));
         if (const json* v = s.get("seed")) {
-          if (auto x = read_integer(c, *v, s.at("seed"), 0, 4294967295.0)) p.seed = static_cast<std::uint64_t>(*x);
+          if (auto x = read_integer(c, *v, s.at("seed"), 0, 4294967295.0)) t.noise_seed = static_cast<std::uint32_t>(*x);
         }
-        s.integer("octaves", p.octaves, 1, 16);
-        s.integer("samples_x", p.samples_x, 2, 65536);
-        s.integer("samples_z", p.samples_z, 2, 65536);
-        if (auto e = limits::check_grid_size(c.file, s.at("samples_x") + " × samples_z", p.samples_x, p.samples_z))
+        s.integer("octaves", t.octaves, 1, 16);
+        t.samples_x = t.samples_z = 129;
+        s.integer("samples_x", t.samples_x, 2, 65536);
+        s.integer("samples_z", t.samples_z, 2, 65536);
+        if (auto e = limits::check_grid_size(c.file, s.at("samples_x") + " × samples_z", t.samples_x, t.samples_z))
           c.errors.push_back(*e);
       } else {
+        t.file_type = to_string(kind);
         std::string written;
-        const bool raw = d.kind == TerrainSourceKind::RawF32;
+        const bool raw = kind == TerrainSourceKind::RawF32;
         bool dims = true;
         if (raw) {
-          dims = s.integer_req("samples_x", d.samples_x, 2, 65536) & s.integer_req("samples_z", d.samples_z, 2, 65536);
+          dims = s.integer_req("samples_x", t.samples_x, 2, 65536) & s.integer_req("samples_z", t.samples_z, 2, 65536);
           if (dims) {
-            if (auto e = limits::check_grid_size(c.file, s.at("samples_x") + " × samples_z", d.samples_x, d.samples_z)) {
+            if (auto e = limits::check_grid_size(c.file, s.at("samples_x") + " × samples_z", t.samples_x, t.samples_z)) {
               c.errors.push_back(*e);
               dims = false;
             }
           }
         }
         if (s.string_req("file", written, "the heightmap's path")) {
-          d.file = resolve(c, written);
+          t.file = resolve(c, written);
           const std::string field = s.at("file");
-          if (check_readable(c, field, written, d.file, "heightmap")) {
-            if (d.kind == TerrainSourceKind::Png16) check_png16(c, field, written, d.file);
-            if (raw && dims) check_raw_f32(c, field, written, d.file, d.samples_x, d.samples_z);
-            if (d.kind == TerrainSourceKind::EsriAscii) check_esri_ascii(c, field, written, d.file);
+          if (check_readable(c, field, written, t.file, "heightmap")) {
+            if (kind == TerrainSourceKind::Png16) check_png16(c, field, written, t.file);
+            if (raw && dims) check_raw_f32(c, field, written, t.file, t.samples_x, t.samples_z);
+            if (kind == TerrainSourceKind::EsriAscii) check_esri_ascii(c, field, written, t.file);
           }
         }
       }
@@ -102,16 +111,16 @@ TerrainDef parse_terrain(Ctx& c, const json& j) {
     s.finish();
   }
   if (!o.both("spacing", "size")) {
-    t.spacing_given = o.has("spacing");
+    // An esri_ascii grid has its own cellsize: a spacing given overrides it.
+    t.spacing_overrides_file = kind == TerrainSourceKind::EsriAscii && o.has("spacing");
     o.number("spacing", t.spacing, closed(1e-4, 1e4, "m"));
     if (const json* v = o.get("size")) {
       if (auto sz = read_numbers<2>(c, *v, o.at("size"), positive(1e7, "m"))) t.size = *sz;
     }
   }
-  if (t.size && t.source.kind == TerrainSourceKind::Procedural) {
+  if (t.size && kind == TerrainSourceKind::Procedural) {
     // The grid has one spacing: size must give square cells for the generator's sample count.
-    const auto& p = t.source.procedural;
-    const auto sp = t.spacing_xz(p.samples_x, p.samples_z);
+    const auto sp = t.spacing_xz(t.samples_x, t.samples_z);
     if (std::abs(sp[0] - sp[1]) > 1e-9 * std::max(sp[0], sp[1])) {
       c.error(o.at("size"), show(*o.get("size")), "must give square cells: size[0] / (samples_x - 1) = size[1] / (samples_z - 1)",
               "spacing would be " + fmt_num(sp[0]) + " m in x and " + fmt_num(sp[1]) + " m in z");
@@ -120,22 +129,24 @@ TerrainDef parse_terrain(Ctx& c, const json& j) {
   o.number("vertical_scale", t.vertical_scale, positive(1e5, "m"));
   o.number("vertical_offset", t.vertical_offset, closed(-1e6, 1e6, "m"));
   o.vec3("origin", t.origin, kWorldCoord);
+  std::optional<double> soil;
   if (!o.both("soil_depth", "bedrock_height")) {
-    t.soil_depth = o.number_opt("soil_depth", positive(1e4, "m"));
+    soil = o.number_opt("soil_depth", positive(1e4, "m"));
     t.bedrock_height = o.number_opt("bedrock_height", closed(-1e6, 1e6, "m"));
   }
-  if (!t.soil_depth && !t.bedrock_height && !o.has("soil_depth") && !o.has("bedrock_height")) t.soil_depth = knobs::kSoilDepth.def;
+  if (!soil && !t.bedrock_height && !o.has("soil_depth") && !o.has("bedrock_height")) soil = knobs::kSoilDepth.def;
+  // With a flat bedrock the library's soil_depth keeps its default (the patches take the bedrock).
+  t.soil_depth = soil.value_or(knobs::kSoilDepth.def);
   // patch_depth: given, at most the soil depth; left out, the default or the soil depth if less.
   if (o.has("patch_depth")) {
     o.knob("patch_depth", t.patch_depth, knobs::kPatchDepth);
-    if (t.soil_depth && t.patch_depth > *t.soil_depth)
-      c.error(o.at("patch_depth"), fmt_num(t.patch_depth), "must be at most terrain.soil_depth (" + fmt_num(*t.soil_depth) + " m)");
-  } else if (t.soil_depth) {
-    t.patch_depth = std::min(t.patch_depth, *t.soil_depth);
+    if (soil && t.patch_depth > *soil)
+      c.error(o.at("patch_depth"), fmt_num(t.patch_depth), "must be at most terrain.soil_depth (" + fmt_num(*soil) + " m)");
+  } else if (soil) {
+    t.patch_depth = std::min(t.patch_depth, *soil);
   }
-  o.string("material", t.material);
+  o.string("material", t.material_name);
   o.finish();
-  return t;
 }
 
 MaterialDef parse_material(Ctx& c, const json& j, const std::string& path) {
@@ -416,8 +427,9 @@ BodyDef parse_body(Ctx& c, const json& j, const std::string& path, std::optional
   return b;
 }
 
-SceneSimulationDef parse_simulation(Ctx& c, const json& j) {
-  SceneSimulationDef s;
+// The simulation section: its knobs into the library's fields of `t` (scene.hpp TerrainDef),
+// the rest into `s`.
+void parse_simulation(Ctx& c, const json& j, TerrainDef& t, SceneSimulationDef& s) {
   Obj o(c, j, "simulation");
   // A preset first: the fields below override it.
   if (const json* pj = o.get("preset")) {
@@ -426,9 +438,9 @@ SceneSimulationDef parse_simulation(Ctx& c, const json& j) {
     if (auto x = read_enum(c, *pj, o.at("preset"), names)) {
       const SimulationPreset& p = simulation_presets()[std::size_t(*x)];
       s.preset = p.name;
-      s.particle_scale = p.particle_scale;
-      s.pool.granules_per_slot = p.granules_per_slot;
-      s.steps_per_contact = p.steps_per_contact;
+      t.particle_scale = p.particle_scale;
+      t.granules_per_slot = p.granules_per_slot;
+      t.steps_per_contact = p.steps_per_contact;
     }
   }
   o.number("dt", s.dt, {0.0, 0.1, true, false, "s"});
@@ -438,37 +450,39 @@ SceneSimulationDef parse_simulation(Ctx& c, const json& j) {
     c.error(o.at("duration"), fmt_num(s.duration),
             "simulation.duration / simulation.dt must be at most " + fmt_num(kMaxRunFrames) + " steps",
             "dt = " + fmt_num(s.dt) + " s gives " + fmt_num(std::ceil(s.duration / s.dt)) + " steps");
-  o.enumeration("backend", s.backend, kBackends);
-  o.knob("threads", s.threads, knobs::kThreads);
+  Backend backend = Backend::Cpu;
+  o.enumeration("backend", backend, kBackends);
+  t.backend = to_string(backend);
+  o.knob("threads", t.threads, knobs::kThreads);
   if (const json* pj = o.get("pool")) {
     Obj p(c, *pj, o.at("pool"));
-    p.knob("slots", s.pool.slots, knobs::kSlots);
-    p.knob("granules_per_slot", s.pool.granules_per_slot, knobs::kGranulesPerSlot);
-    p.knob("shell_spheres_per_slot", s.pool.shell_spheres_per_slot, knobs::kShellSpheresPerSlot);
-    if (double(s.pool.slots) * s.pool.granules_per_slot > double(limits::kMaxPoolGranules))
-      c.error(p.at("slots"), std::to_string(s.pool.slots) + " × granules_per_slot " + std::to_string(s.pool.granules_per_slot),
+    p.knob("slots", t.slots, knobs::kSlots);
+    p.knob("granules_per_slot", t.granules_per_slot, knobs::kGranulesPerSlot);
+    p.knob("shell_spheres_per_slot", t.shell_spheres_per_slot, knobs::kShellSpheresPerSlot);
+    if (double(t.slots) * t.granules_per_slot > double(limits::kMaxPoolGranules))
+      c.error(p.at("slots"), std::to_string(t.slots) + " × granules_per_slot " + std::to_string(t.granules_per_slot),
               "slots × granules_per_slot must be at most " + std::to_string(limits::kMaxPoolGranules) +
                   " granules (every slot is allocated at full capacity)",
               "lower slots or granules_per_slot");
     p.finish();
   }
-  o.knob("particle_scale", s.particle_scale, knobs::kParticleScale);
-  o.knob("steps_per_contact", s.steps_per_contact, knobs::kStepsPerContact);
-  o.knob("max_substeps", s.max_substeps, knobs::kMaxSubsteps);
+  o.knob("particle_scale", t.particle_scale, knobs::kParticleScale);
+  o.knob("steps_per_contact", t.steps_per_contact, knobs::kStepsPerContact);
+  o.knob("max_substeps", t.max_substeps, knobs::kMaxSubsteps);
   if (const json* bj = o.get("frame_budget_ms")) {
     if (bj->is_string() && bj->get<std::string>() == "off") {
-      s.frame_budget_ms = std::numeric_limits<double>::infinity();
+      t.frame_budget_ms = std::numeric_limits<double>::infinity();
     } else if (bj->is_string()) {
       c.error(o.at("frame_budget_ms"), show(*bj), "must be a number of ms in (0, 1e+06] or \"off\"");
     } else if (auto x = read_number(c, *bj, o.at("frame_budget_ms"), {0.0, 1e6, true, false, "ms"})) {
-      s.frame_budget_ms = *x;
+      t.frame_budget_ms = *x;
     }
   }
   if (const json* lj = o.get("lod")) {
     Obj p(c, *lj, o.at("lod"));
-    p.knob("horizon", s.lod.horizon, knobs::kLodHorizon);
-    p.knob("margin", s.lod.margin, knobs::kLodMargin);
-    p.knob("apron", s.lod.apron, knobs::kLodApron);
+    p.knob("horizon", t.lod_horizon, knobs::kLodHorizon);
+    p.knob("margin", t.lod_margin, knobs::kLodMargin);
+    p.knob("apron", t.lod_apron, knobs::kLodApron);
     p.finish();
   }
   if (const json* bj = o.get("scale_by_distance")) {
@@ -497,16 +511,15 @@ SceneSimulationDef parse_simulation(Ctx& c, const json& j) {
   }
   if (const json* sj = o.get("sleep")) {
     Obj p(c, *sj, o.at("sleep"));
-    p.knob("speed_threshold", s.sleep.speed_threshold, knobs::kSleepSpeed);
-    p.knob("hold_time", s.sleep.hold_time, knobs::kSleepTime);
+    p.knob("speed_threshold", t.sleep_speed, knobs::kSleepSpeed);
+    p.knob("hold_time", t.sleep_time, knobs::kSleepTime);
     p.finish();
   }
-  o.knob("idle_timeout", s.idle_timeout, knobs::kIdleTimeout);
-  o.boolean("granular_patches", s.granular_patches);
-  o.vec3("gravity", s.gravity, closed(-1e3, 1e3, "m/s^2"));
-  o.u64("seed", s.seed);
+  o.knob("idle_timeout", t.idle_timeout, knobs::kIdleTimeout);
+  o.boolean("granular_patches", t.granular_patches);
+  o.vec3("gravity", t.gravity, closed(-1e3, 1e3, "m/s^2"));
+  o.u64("seed", t.seed);
   o.finish();
-  return s;
 }
 
 CameraDef parse_camera(Ctx& c, const json& j, const std::string& path) {
@@ -660,6 +673,11 @@ void check_flat_bedrock(Ctx& c, const SceneDef& s, const std::vector<std::option
 // ---------------------------------------------------------------------------------------
 // Public API
 
+TerrainSourceKind TerrainDef::source_kind() const {
+  if (!procedural.empty()) return TerrainSourceKind::Procedural;
+  return file_type == "raw_f32" ? TerrainSourceKind::RawF32 : file_type == "esri_ascii" ? TerrainSourceKind::EsriAscii : TerrainSourceKind::Png16;
+}
+
 std::array<double, 2> TerrainDef::spacing_xz(int nx, int nz) const {
   if (size) return {(*size)[0] / std::max(1, nx - 1), (*size)[1] / std::max(1, nz - 1)};
   return {spacing, spacing};
@@ -767,7 +785,7 @@ Result<SceneDef> parse_scene(const std::string& json_text, const std::string& so
     });
     if (mj->is_array() && mj->empty()) c.error("materials", "[]", "must hold at least one material");
   }
-  if (const json* tj = top.require("terrain", "an object with a \"source\"")) s.terrain = parse_terrain(c, *tj);
+  if (const json* tj = top.require("terrain", "an object with a \"source\"")) parse_terrain(c, *tj, s.terrain);
   std::vector<std::optional<TriangleMesh>> meshes;
   if (const json* bj = top.get("bodies")) {
     for_each_element(c, *bj, "bodies", [&](const json& e, const std::string& p) {
@@ -778,7 +796,7 @@ Result<SceneDef> parse_scene(const std::string& json_text, const std::string& so
   }
   if (const json* vj = top.get("vehicles")) s.vehicles = parse_vehicles(c, *vj);
   if (const json* jj = top.get("joints")) s.joints = parse_joints(c, *jj);
-  if (const json* sj = top.get("simulation")) s.simulation = parse_simulation(c, *sj);
+  if (const json* sj = top.get("simulation")) parse_simulation(c, *sj, s.terrain, s.simulation);
   if (const json* cj = top.get("cameras")) {
     for_each_element(c, *cj, "cameras", [&](const json& e, const std::string& p) {
       s.cameras.push_back(parse_camera(c, e, p));
@@ -792,12 +810,12 @@ Result<SceneDef> parse_scene(const std::string& json_text, const std::string& so
   check_unique_names(c, s.bodies, "bodies");
   check_unique_names(c, s.cameras, "cameras");
   check_joints(c, s);
-  if (s.terrain.material.empty()) {
-    if (!s.materials.empty()) s.terrain.material = s.materials.front().name;
-  } else if (!s.find_material(s.terrain.material) && !s.materials.empty()) {
+  if (s.terrain.material_name.empty()) {
+    if (!s.materials.empty()) s.terrain.material_name = s.materials.front().name;
+  } else if (!s.find_material(s.terrain.material_name) && !s.materials.empty()) {
     const auto names = names_of(s.materials);
-    c.error("terrain.material", json_quote(s.terrain.material), "must name a material: " + join(names),
-            did_you_mean(s.terrain.material, names));
+    c.error("terrain.material", json_quote(s.terrain.material_name), "must name a material: " + join(names),
+            did_you_mean(s.terrain.material_name, names));
   }
   for (std::size_t i = 0; i < s.outputs.frames.size(); ++i) {
     const auto& cam = s.outputs.frames[i].camera;
@@ -815,6 +833,9 @@ Result<SceneDef> parse_scene(const std::string& json_text, const std::string& so
             did_you_mean(sd->camera, names));
   }
   check_flat_bedrock(c, s, meshes);
+  // With a procedural source and a size, the library's spacing is the size's (square cells).
+  if (s.terrain.size && !s.terrain.procedural.empty()) s.terrain.spacing = s.terrain.spacing_xz(s.terrain.samples_x, s.terrain.samples_z)[0];
+  if (const MaterialDef* m = s.find_material(s.terrain.material_name)) s.terrain.material = *m;
 
   if (!c.errors.empty()) return std::move(c.errors);
 

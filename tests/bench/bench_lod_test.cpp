@@ -25,8 +25,8 @@ TEST(BenchLod, ScenesValidateForEverySize) {
   for (int n : {64, 512, 8192})
     for (auto kind : {LodBenchScene::Drop, LodBenchScene::Idle, LodBenchScene::Asleep}) {
       const SceneDef s = parse(lod_bench_scene(kind, n, 2));
-      EXPECT_EQ(s.terrain.source.procedural.samples_x, n + 1);
-      EXPECT_EQ(s.terrain.source.procedural.samples_z, n + 1);
+      EXPECT_EQ(s.terrain.samples_x, n + 1);
+      EXPECT_EQ(s.terrain.samples_z, n + 1);
       EXPECT_DOUBLE_EQ(s.terrain.spacing, 0.5);
       EXPECT_FALSE(s.outputs.report);  // the bench writes nothing
     }

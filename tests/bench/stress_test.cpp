@@ -26,7 +26,7 @@ TEST(Stress, SceneCopiesTheFirstBodyOntoAGrid) {
   auto s = make_stress_scene(*base, 5, 1.5, 240);
   ASSERT_TRUE(s.ok()) << s.message();
   ASSERT_EQ(s->bodies.size(), 5u);
-  EXPECT_EQ(s->simulation.pool.slots, 5);
+  EXPECT_EQ(s->terrain.slots, 5);
   EXPECT_NEAR(s->simulation.duration, 240 * base->simulation.dt, 1e-9);
   EXPECT_FALSE(s->outputs.report);
   std::set<std::pair<long, long>> spots;
