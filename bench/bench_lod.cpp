@@ -116,7 +116,7 @@ Result<std::unique_ptr<Lane>> make_lane(const nlohmann::json& scene_json, int ce
   lane->setup_terrain_s = seconds_since(t0);
   const TerrainManagerDef md = manager_def(s, *hf, threads, "cpu");
   t0 = Clock::now();
-  const Vec3d& g = s.simulation.gravity;
+  const Vec3d& g = s.terrain.gravity;
   auto world = World::create(std::move(*hf), Eigen::Vector3f(float(g[0]), float(g[1]), float(g[2])));
   if (!world) return world.errors();
   lane->world = std::move(*world);

@@ -38,7 +38,7 @@ namespace {
 using ojson = nlohmann::ordered_json;
 
 double bounding_radius(const BodyDef& b) {
-  const ShapeDef& s = b.shape;
+  const api::ShapeDef& s = b.shape;
   switch (s.kind) {
     case ShapeKind::Sphere: return s.radius;
     case ShapeKind::Box: return std::sqrt(s.half_extents[0] * s.half_extents[0] + s.half_extents[1] * s.half_extents[1] +
@@ -78,7 +78,7 @@ Result<SceneDef> make_stress_scene(const SceneDef& base, int sims, double interv
   const double pitch = 2.0 * bounding_radius(tpl) + 4.0;
   const int cols = int(std::ceil(std::sqrt(double(sims))));
   const int rows = (sims + cols - 1) / cols;
-  const double cx = tpl.pose.position[0], cz = tpl.pose.position[2];
+  const double cx = tpl.position[0], cz = tpl.position[2];
   const double ground0 = hf->origin_y() + hf->sample(float(cx - hf->origin_x()), float(cz - hf->origin_z()));
   nlohmann::json s = scene_to_json(base);
   s["name"] = base.name + "_stress_" + std::to_string(sims);
@@ -99,7 +99,7 @@ Result<SceneDef> make_stress_scene(const SceneDef& base, int sims, double interv
     const double ground = hf->origin_y() + hf->sample(float(x - hf->origin_x()), float(z - hf->origin_z()));
     nlohmann::json b = tj;
     b["name"] = tpl.name + "_" + std::to_string(k);
-    b["pose"]["position"] = {x, tpl.pose.position[1] + (ground - ground0), z};
+    b["pose"]["position"] = {x, tpl.position[1] + (ground - ground0), z};
     b["spawn_time"] = tpl.spawn_time + k * interval;
     bodies.push_back(b);
   }

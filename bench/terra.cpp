@@ -53,13 +53,13 @@ Result<Rig> make_rig(SceneDef scene, const RigSetup& s, double x0, double z0, do
   rig.wall0 = std::chrono::steady_clock::now();
   scene.bodies.clear();
   scene.joints.clear();  // the tests add their own bodies and joints
-  scene.simulation.lod.apron = kRigApron;
-  scene.simulation.threads = s.threads;
+  scene.terrain.lod_apron = kRigApron;
+  scene.terrain.threads = s.threads;
   if (s.bed_depth > 0) {
     scene.terrain.patch_depth = s.bed_depth;
-    scene.terrain.soil_depth = std::max(scene.terrain.soil_depth.value_or(2.0), s.bed_depth + 0.5);
+    scene.terrain.soil_depth = std::max(scene.terrain.soil_depth, s.bed_depth + 0.5);
   }
-  const MaterialDef* mat = scene.find_material(scene.terrain.material);
+  const MaterialDef* mat = scene.find_material(scene.terrain.material_name);
   if (!mat && !scene.materials.empty()) mat = &scene.materials.front();
   if (!mat) return Error{s.scene, "materials", "none", "the bed's material", ""};
   rig.rs = mat->granule_radius;

@@ -35,9 +35,10 @@ struct BasicChecker {
   }
   void positive(const std::string& f, double v, double hi, const char* unit = "") { number(f, v, 0.0, hi, true, false, unit); }
   // A setting of the knob table (common/knobs.hpp): its range; the field is the table's name.
-  void knob(const knobs::Knob& k, double v) {
+  // `suffix` names an element of the field ("[1]" of half_extents).
+  void knob(const knobs::Knob& k, double v, const std::string& suffix = "") {
     if (k.allows(v)) return;
-    errs.push_back(E{"", k.api, format_number(v), "must be in " + knobs::describe_range(k), detail});
+    errs.push_back(E{"", k.api + suffix, format_number(v), "must be in " + knobs::describe_range(k), detail});
   }
   void integer(const std::string& field, long long v, long long lo, long long hi) {
     if (v < lo || v > hi) add(field, std::to_string(v), "must be in [" + std::to_string(lo) + ", " + std::to_string(hi) + "]");

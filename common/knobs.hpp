@@ -6,11 +6,13 @@
 // the numbers; tests/common/knobs_test.cpp checks that every copy agrees, and that the field
 // tables in docs/scene-format.md and docs/api.md are the ones `knob_table_markdown` prints).
 //
-// A setting only one door has is listed with the reason in `one_door`.
+// A setting only one door has is listed with the reason in `one_door`. The limits of shapes,
+// cameras and outputs (kLimits) are a second table of the same form, printed after the first.
 #pragma once
 
 #include <array>
 #include <cmath>
+#include <limits>
 #include <string>
 
 #include "common/error.hpp"
@@ -73,6 +75,32 @@ inline constexpr std::array<const Knob*, 25> kAll = {
     &kSlots, &kGranulesPerSlot, &kShellSpheresPerSlot, &kParticleScale, &kStepsPerContact, &kMaxSubsteps, &kPatchDepth,
     &kSoilDepth, &kSleepSpeed, &kSleepTime, &kIdleTimeout, &kThreads, &kLodHorizon, &kLodMargin,
     &kLodApron, &kBodyFriction, &kBodyRestitution, &kBodyRollingFriction};
+
+// ---- limits: the ranges of shapes, cameras and outputs ----
+// The same form as the knobs, for fields that are sizes and times rather than tuning: the
+// parser, the API's validation (manager/definitions.cpp) and the docs read these numbers. A
+// NaN default: none (the field is required, or absent means unused).
+inline constexpr double kNoDefault = std::numeric_limits<double>::quiet_NaN();
+// Shapes: Bullet keeps sizes as float; below 1e-6 m a shape is a point to it.
+inline constexpr Knob kShapeRadius{"bodies[].shape.radius", "BodyDef.shape.radius", 0.5, 1e-6, 1e4, false, false, false, "m", "radius of a sphere, cylinder or capsule"};
+inline constexpr Knob kShapeHalfExtent{"bodies[].shape.half_extents", "BodyDef.shape.half_extents", 0.5, 1e-6, 1e4, false, false, false, "m", "each half extent of a box"};
+inline constexpr Knob kCylinderHeight{"bodies[].shape.height", "BodyDef.shape.height", 1, 1e-6, 1e4, false, false, false, "m", "cylinder: total height"};
+inline constexpr Knob kCapsuleHeight{"bodies[].shape.height", "BodyDef.shape.height", 1, 0, 1e4, false, false, false, "m", "capsule: distance between the cap centres (total height + 2 radius)"};
+inline constexpr Knob kMeshScale{"bodies[].shape.scale", "BodyDef.shape.mesh_scale", 1, 1e-6, 1e4, false, false, false, "m per OBJ unit", "mesh: OBJ units to m"};
+// Cameras and outputs: a scene run renders and writes files; a game does that itself.
+inline constexpr const char* kRunOnly = "a scene run renders and writes files; a game does that itself";
+inline constexpr Knob kCameraFov{"cameras[].fov_deg", "", 60, 1, 179, false, false, false, "deg", "vertical field of view", kRunOnly};
+inline constexpr Knob kCameraWidth{"cameras[].width", "", 1280, 16, 16384, false, false, true, "px", "image width", kRunOnly};
+inline constexpr Knob kCameraHeight{"cameras[].height", "", 720, 16, 16384, false, false, true, "px", "image height", kRunOnly};
+inline constexpr Knob kCameraKeyTime{"cameras[].path[].time", "", kNoDefault, 0, 1e6, false, false, false, "s", "time of a camera keyframe (strictly ascending)", kRunOnly};
+inline constexpr Knob kOutputTime{"outputs.frames[].times", "", kNoDefault, 0, 1e6, false, false, false, "s", "each time an image is written (strictly ascending); outputs.heightfields[].times the same", kRunOnly};
+inline constexpr Knob kEveryKFrames{"outputs.frames[].every_k_frames", "", kNoDefault, 1, 1e6, false, false, true, "", "an image every k fixed steps (instead of times)", kRunOnly};
+inline constexpr Knob kVideoFps{"", "", 30, 0, 1e6, true, false, false, "1/s", "video frames per simulated second; also at most 1 / simulation.dt",
+                                "`sandpatch run --video-fps` (a command-line option)"};
+
+inline constexpr std::array<const Knob*, 12> kLimits = {
+    &kShapeRadius, &kShapeHalfExtent, &kCylinderHeight, &kCapsuleHeight, &kMeshScale, &kCameraFov,
+    &kCameraWidth, &kCameraHeight, &kCameraKeyTime, &kOutputTime, &kEveryKFrames, &kVideoFps};
 
 // Every other setting: not a number with a range, or in one door only (then `note` says why).
 // Scene paths name a field or a whole section ("cameras" covers everything under it).
@@ -137,10 +165,16 @@ inline std::string knob_table_markdown() {
   auto cell = [](const char* field, const char* why) {
     return *field ? std::string("`") + field + "`" : std::string("— (") + why + ")";
   };
-  std::string t = "| scene file | library | default | allowed | meaning |\n|---|---|---|---|---|\n";
-  for (const Knob* k : kAll)
-    t += "| " + cell(k->scene, k->one_door) + " | " + cell(k->api, k->one_door) + " | " + format_number(k->def) +
-         (*k->unit ? std::string(" ") + k->unit : "") + " | " + describe_range(*k) + " | " + k->what + " |\n";
+  auto rows = [&](const auto& table) {
+    std::string r = "| scene file | library | default | allowed | meaning |\n|---|---|---|---|---|\n";
+    for (const Knob* k : table)
+      r += "| " + cell(k->scene, k->one_door) + " | " + cell(k->api, k->one_door) + " | " +
+           (std::isnan(k->def) ? std::string("—") : format_number(k->def) + (*k->unit ? std::string(" ") + k->unit : "")) +
+           " | " + describe_range(*k) + " | " + k->what + " |\n";
+    return r;
+  };
+  std::string t = rows(kAll);
+  t += "\nThe limits of shapes, cameras and outputs:\n\n" + rows(kLimits);
   t += "\nThe other settings, and those only one door has:\n\n| scene file | library | note |\n|---|---|---|\n";
   auto plain = [](const char* field) { return *field ? std::string("`") + field + "`" : std::string("—"); };
   for (const Field& f : kOtherFields) t += "| " + plain(f.scene) + " | " + plain(f.api) + " | " + f.note + " |\n";

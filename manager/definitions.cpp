@@ -247,21 +247,21 @@ Result<RigidBodyDef> rigid_body_def(const api::BodyDef& d) {
   r.name = d.name;
   switch (s.kind) {
     case api::ShapeKind::Sphere:
-      c.positive("shape.radius", s.radius, 1e4, "m");
+      c.knob(knobs::kShapeRadius, s.radius);
       r.shape.kind = RigidShapeKind::Sphere;
       break;
     case api::ShapeKind::Box:
-      for (int k = 0; k < 3; ++k) c.positive("shape.half_extents[" + std::to_string(k) + "]", s.half_extents[k], 1e4, "m");
+      for (int k = 0; k < 3; ++k) c.knob(knobs::kShapeHalfExtent, s.half_extents[k], "[" + std::to_string(k) + "]");
       r.shape.kind = RigidShapeKind::Box;
       break;
     case api::ShapeKind::Cylinder:
-      c.positive("shape.radius", s.radius, 1e4, "m");
-      c.positive("shape.height", s.height, 1e4, "m");
+      c.knob(knobs::kShapeRadius, s.radius);
+      c.knob(knobs::kCylinderHeight, s.height);
       r.shape.kind = RigidShapeKind::Cylinder;
       break;
     case api::ShapeKind::Capsule:
-      c.positive("shape.radius", s.radius, 1e4, "m");
-      c.closed("shape.height", s.height, 0.0, 1e4, "m");
+      c.knob(knobs::kShapeRadius, s.radius);
+      c.knob(knobs::kCapsuleHeight, s.height);
       r.shape.kind = RigidShapeKind::Capsule;
       break;
     default:
@@ -276,7 +276,7 @@ Result<RigidBodyDef> rigid_body_def(const api::BodyDef& d) {
       }
       TriangleMesh mesh;
       if (!s.mesh_file.empty()) {
-        c.positive("shape.mesh_scale", s.mesh_scale, 1e4);
+        c.knob(knobs::kMeshScale, s.mesh_scale);
         if (!c.errs.empty()) break;
         auto m = load_obj_mesh(s.mesh_file, s.mesh_scale);
         if (!m) {

@@ -1,7 +1,7 @@
 // The one chain from the public definitions (include/sandpatch/sandpatch.hpp: TerrainDef,
 // BodyDef) to what the frame is made of. Both doors come through here: the library's
-// Terrain::create / add_body, and scene files, which the scene layer (manager/scene_world.cpp)
-// maps onto the same TerrainDef and BodyDef first. So a setting is validated by one rule,
+// Terrain::create / add_body, and scene files, whose parser (scene/scene.hpp) fills the same
+// TerrainDef and BodyDef. So a setting is validated by one rule,
 // turned into the internal definition in one place, and means the same in a scene file and
 // in a game.
 //

@@ -36,7 +36,7 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
       return r;
     }
     SceneDef s = scene;
-    s.simulation.frame_budget_ms = opt.frame_budget_ms;
+    s.terrain.frame_budget_ms = opt.frame_budget_ms;
     RunOptions o = opt;
     o.frame_budget_ms.reset();
     return run_scene(s, o);
@@ -55,8 +55,8 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
     return fail(ExitCode::BadInput, "options", "--backend " + opt.backend + ": allowed values are cpu, gl");
   if (!opt.final_camera.empty() && !scene.find_camera(opt.final_camera))
     return fail(ExitCode::BadInput, "options", "--camera " + opt.final_camera + ": the scene has no such camera");
-  const std::string backend = opt.backend.empty() ? to_string(sim.backend) : opt.backend;
-  const int threads_req = opt.threads >= 0 ? opt.threads : sim.threads;
+  const std::string backend = opt.backend.empty() ? scene.terrain.backend : opt.backend;
+  const int threads_req = opt.threads >= 0 ? opt.threads : scene.terrain.threads;
   const int threads = threads_req > 0 ? threads_req : omp_get_num_procs();
   omp_set_num_threads(threads);
 
@@ -77,9 +77,10 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
   if (!opt.video.empty()) {
     if (scene.cameras.empty())
       return fail(ExitCode::BadInput, "options", "--video " + opt.video + ": the scene has no camera to film");
-    if (!(opt.video_fps > 0 && opt.video_fps <= 1.0 / dt * (1 + 1e-9)))
-      return fail(ExitCode::BadInput, "options", "--video-fps " + format_number(opt.video_fps) + ": must be in (0, 1 / dt = " +
-                                                      format_number(1.0 / dt) + "] frames per simulated second");
+    if (!(knobs::kVideoFps.allows(opt.video_fps) && opt.video_fps <= 1.0 / dt * (1 + 1e-9)))
+      return fail(ExitCode::BadInput, "options", "--video-fps " + format_number(opt.video_fps) + ": must be in " +
+                                                      knobs::describe_range(knobs::kVideoFps) + " and at most 1 / dt = " +
+                                                      format_number(1.0 / dt) + " frames per simulated second");
     if (Status s = VideoWriter::available(); !s) return fail(ExitCode::BadInput, "options", "--video " + opt.video + ": " + s.message());
   }
   std::string failed_part;

@@ -42,7 +42,7 @@ struct RunOptions {
   std::string final_image;    // when set: after the last frame, render this PNG (`sandpatch render`)
   std::string final_camera;   // camera for final_image ("" = the scene's first, or a default view)
   std::string video;          // when set: a video of the scene's first camera piped to ffmpeg (run_outputs.hpp VideoWriter)
-  double video_fps = 30;      // video frames per simulated second, in (0, 1 / dt]
+  double video_fps = knobs::kVideoFps.def;  // video frames per simulated second, in (0, 1 / dt] (knobs::kVideoFps)
   // When set: the run's time series to this file (and its stem + "_patches.csv"), instead of
   // the scene's outputs.csv (relative to the output directory). RunCsv, docs/cli.md "CSV".
   std::string csv;

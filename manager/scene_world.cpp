@@ -123,40 +123,9 @@ RigidJointDef vehicle_joint_def(const VehicleJoint& j) {
   return d;
 }
 
-api::BodyDef body_def(const SceneDef& scene, std::size_t index) {
-  const BodyDef& b = scene.bodies[index];
-  api::BodyDef d;
-  d.name = b.name;
-  d.motion = b.motion == MotionKind::Kinematic ? api::BodyMotion::Kinematic
-             : b.motion == MotionKind::Static  ? api::BodyMotion::Static
-                                               : api::BodyMotion::Dynamic;
-  d.mass = b.mass_value();
-  d.position = b.pose.position;
-  const auto& q = b.pose.orientation;
-  d.orientation = {float(q[0]), float(q[1]), float(q[2]), float(q[3])};
-  d.linear_velocity = {float(b.linear_velocity[0]), float(b.linear_velocity[1]), float(b.linear_velocity[2])};
-  d.angular_velocity = {float(b.angular_velocity[0]), float(b.angular_velocity[1]), float(b.angular_velocity[2])};
-  d.friction = b.friction;
-  d.restitution = b.restitution;
-  d.rolling_friction = b.rolling_friction;
-  const ShapeDef& s = b.shape;
-  d.shape.radius = s.radius;
-  d.shape.height = s.height;
-  d.shape.half_extents = s.half_extents;
-  switch (s.kind) {
-    case ShapeKind::Sphere: d.shape.kind = api::ShapeKind::Sphere; break;
-    case ShapeKind::Box: d.shape.kind = api::ShapeKind::Box; break;
-    case ShapeKind::Cylinder: d.shape.kind = api::ShapeKind::Cylinder; break;
-    case ShapeKind::Capsule: d.shape.kind = api::ShapeKind::Capsule; break;
-    case ShapeKind::Mesh:
-      d.shape.kind = api::ShapeKind::Mesh;
-      d.shape.mesh_file = s.file;
-      d.shape.mesh_scale = s.scale;
-      d.shape.solid = s.solid;
-      break;
-  }
-  return d;
-}
+// The parser filled the library's BodyDef; what only scene files have (keyframes, loads, the
+// spawn time) the run schedules beside it.
+api::BodyDef body_def(const SceneDef& scene, std::size_t index) { return scene.bodies[index]; }
 
 Result<RigidBodyDef> to_rigid_body(const SceneDef& scene, std::size_t index) {
   auto r = rigid_body_def(body_def(scene, index));
@@ -171,75 +140,15 @@ Result<RigidBodyDef> to_rigid_body(const SceneDef& scene, std::size_t index) {
   return es;
 }
 
+// The parser filled the library's TerrainDef (the terrain and simulation sections and the
+// named material); a run gives its own thread count and backend, and renders the demotion's
+// depth on GL when it can make a context.
 api::TerrainDef terrain_def(const SceneDef& scene, int threads, const std::string& backend) {
-  const SceneSimulationDef& sim = scene.simulation;
-  const MaterialDef* mat = scene.terrain.material.empty() ? &scene.materials.front()
-                                                         : scene.find_material(scene.terrain.material);
-  api::TerrainDef t;
-  // The heightfield's source: a file of the scene's type, or the generator on its grid.
-  const TerrainDef& ter = scene.terrain;
-  const TerrainSourceDef& src = ter.source;
-  t.origin = ter.origin;
-  t.spacing = ter.spacing;
-  t.vertical_scale = ter.vertical_scale;
-  t.vertical_offset = ter.vertical_offset;
-  switch (src.kind) {
-    case TerrainSourceKind::Png16: t.file = src.file; t.file_type = "png16"; break;
-    case TerrainSourceKind::RawF32:
-      t.file = src.file;
-      t.file_type = "raw_f32";
-      t.samples_x = src.samples_x;
-      t.samples_z = src.samples_z;
-      break;
-    case TerrainSourceKind::EsriAscii:
-      t.file = src.file;
-      t.file_type = "esri_ascii";
-      t.spacing_overrides_file = ter.spacing_given;  // else the file's cellsize
-      break;
-    case TerrainSourceKind::Procedural: {
-      const ProceduralDef& p = src.procedural;
-      t.procedural = to_string(p.kind);
-      t.samples_x = p.samples_x;
-      t.samples_z = p.samples_z;
-      t.spacing = ter.spacing_xz(p.samples_x, p.samples_z)[0];
-      t.base_height = float(p.height);
-      t.slope_x = float(p.slope_x);
-      t.slope_z = float(p.slope_z);
-      t.amplitude = float(p.amplitude);
-      t.wavelength = float(p.wavelength);
-      t.noise_seed = std::uint32_t(p.seed);
-      t.octaves = p.octaves;
-      break;
-    }
-  }
-  t.material.granule_radius = mat->granule_radius;
-  t.material.density = mat->density;
-  t.material.friction = mat->friction;
-  t.material.restitution = mat->restitution_value();
-  t.material.stiffness = mat->stiffness;
-  t.material.tangential_stiffness_ratio = mat->tangential_stiffness_ratio;
-  t.material.unloading_stiffness_ratio = mat->unloading_stiffness_ratio;
-  t.particle_scale = sim.particle_scale;
-  t.steps_per_contact = sim.steps_per_contact;
-  t.max_substeps = sim.max_substeps;
-  t.frame_budget_ms = sim.frame_budget_ms;
-  t.slots = sim.pool.slots;
-  t.granules_per_slot = sim.pool.granules_per_slot;
-  t.shell_spheres_per_slot = sim.pool.shell_spheres_per_slot;
-  t.soil_depth = scene.terrain.soil_depth.value_or(knobs::kSoilDepth.def);
-  t.patch_depth = std::min(scene.terrain.patch_depth, t.soil_depth);
-  t.lod_horizon = sim.lod.horizon;
-  t.lod_margin = sim.lod.margin;
-  t.lod_apron = sim.lod.apron;
-  t.sleep_speed = sim.sleep.speed_threshold;
-  t.sleep_time = sim.sleep.hold_time;
-  t.idle_timeout = sim.idle_timeout;
-  t.gravity = {sim.gravity[0], sim.gravity[1], sim.gravity[2]};
-  t.granular_patches = sim.granular_patches;
+  api::TerrainDef t = scene.terrain;
+  t.patch_depth = std::min(t.patch_depth, t.soil_depth);  // with a flat bedrock, at most the default soil depth
   t.threads = threads;
-  t.seed = sim.seed;
   t.backend = backend;
-  t.gl_depth_render = true;  // a run renders the demotion's depth on GL when it can make a context
+  t.gl_depth_render = true;
   return t;
 }
 
@@ -281,13 +190,13 @@ Result<std::unique_ptr<World>> make_world(const SceneDef& scene, int threads, co
   for (std::size_t i = 0; i < scene.bodies.size(); ++i) {
     const BodyDef& b = scene.bodies[i];
     if (b.motion != MotionKind::Dynamic) continue;  // Bullet does not push a kinematic or static body out of the ground
-    const double x = b.pose.position[0] - hf.origin_x(), z = b.pose.position[2] - hf.origin_z();
+    const double x = b.position[0] - hf.origin_x(), z = b.position[2] - hf.origin_z();
     if (x < 0 || z < 0 || x > w || z > d) continue;  // no terrain under it
     const double surface = hf.origin_y() + hf.sample(float(x), float(z));
-    if (b.pose.position[1] >= surface) continue;
+    if (b.position[1] >= surface) continue;
     inside.push_back(Error{scene.source_path, "bodies[" + std::to_string(i) + "].pose.position",
-                           "[" + format_number(b.pose.position[0]) + ", " + format_number(b.pose.position[1]) + ", " +
-                               format_number(b.pose.position[2]) + "]",
+                           "[" + format_number(b.position[0]) + ", " + format_number(b.position[1]) + ", " +
+                               format_number(b.position[2]) + "]",
                            "body '" + b.name + "' starts inside the terrain: its centre is below the surface (world y = " +
                                format_number(surface) + " m there); it must start at or above it",
                            "its lowest point may touch or enter the ground, its centre may not"});
@@ -383,7 +292,7 @@ Result<std::unique_ptr<World>> make_world(const SceneDef& scene, int threads, co
   // that a body it would refuse is bad input before frame 0 and not a failure mid-run.
   {
     part = "bodies";
-    auto scratch = BulletWorld::create(hf, vec3f(scene.simulation.gravity));
+    auto scratch = BulletWorld::create(hf, vec3f(scene.terrain.gravity));
     if (!scratch) return scratch.errors();
     std::vector<RigidBodyId> ids;
     for (std::size_t i = 0; i < body_defs.size(); ++i) {
@@ -420,17 +329,17 @@ Result<std::unique_ptr<World>> make_world(const SceneDef& scene, int threads, co
     }
   }
   TerrainManagerDef md;
-  if (scene.simulation.granular_patches) md = manager_def(scene, hf, threads, backend);
+  if (scene.terrain.granular_patches) md = manager_def(scene, hf, threads, backend);
   md.on_settle = on_settle;
-  auto world = World::create(std::move(*hf_result), vec3f(scene.simulation.gravity));
+  auto world = World::create(std::move(*hf_result), vec3f(scene.terrain.gravity));
   if (!world) return world.errors();
-  if (scene.simulation.granular_patches && patches) {
+  if (scene.terrain.granular_patches && patches) {
     part = "activation";
     if (Status s = (*world)->enable_patches(md); !s) return s.errors();
   }
   // Every body's shell (the vehicles' parts too) must fit a slot: checked here whether or not
   // the pool is built (`sandpatch check`).
-  for (std::size_t i = 0; i < body_defs.size() && scene.simulation.granular_patches; ++i)
+  for (std::size_t i = 0; i < body_defs.size() && scene.terrain.granular_patches; ++i)
     if (Status s = check_shell(md, body_defs[i].shape); !s) {
       part = "bodies";
       std::vector<Error> es = s.errors();

@@ -23,9 +23,9 @@
 
 namespace sandpatch {
 
-// The library's TerrainDef for a scene's terrain, material and simulation section
-// (docs/scene-format.md): its heightfield source and every setting both doors share.
-// `backend`: "cpu" or "gl".
+// The library's TerrainDef of a scene: the one the parser filled (scene.terrain: its
+// heightfield source, material and every setting both doors share) with the run's thread
+// count and `backend` ("cpu" or "gl"), and the demotion's depth rendered on GL when it can.
 api::TerrainDef terrain_def(const SceneDef& scene, int threads, const std::string& backend);
 
 // The terrain manager's definition of a scene: manager_def(terrain_def(...))
@@ -33,9 +33,9 @@ api::TerrainDef terrain_def(const SceneDef& scene, int threads, const std::strin
 // t = 0) and the flat bedrock, which need the heightfield.
 TerrainManagerDef manager_def(const SceneDef& scene, const Heightfield& hf, int threads, const std::string& backend);
 
-// Scene body `index` as the library's BodyDef: its mass (given, or density × volume), pose,
-// velocities, shape (a mesh by its resolved OBJ path) and contact settings. Its motion's
-// keyframes, loads and spawn time stay with the scene (make_world schedules them).
+// Scene body `index` as the library's BodyDef: the one the parser filled (mass given or
+// density × volume, pose, velocities, shape with a mesh's resolved OBJ path, contact
+// settings). Its keyframes, loads and spawn time stay with the scene (make_world schedules them).
 api::BodyDef body_def(const SceneDef& scene, std::size_t index);
 
 // rigid_body_def(body_def(scene, index)), errors named after the scene's field

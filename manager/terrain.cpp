@@ -10,7 +10,6 @@
 namespace sandpatch {
 namespace {
 
-constexpr double kDefaultSoilDepth = knobs::kSoilDepth.def;  // m, terrain.soil_depth
 
 // Re-grids `hf` to another (square) spacing, keeping the samples: used when the scene gives
 // the terrain's size instead of its spacing, which is only known after the file is read.
@@ -36,7 +35,6 @@ Result<Heightfield> with_spacing(const Heightfield& hf, float spacing) {
 
 Result<Heightfield> load_scene_terrain(const SceneDef& scene) {
   const TerrainDef& t = scene.terrain;
-  const TerrainSourceDef& s = t.source;
   // The library's heightfield builder, on the scene's terrain as a TerrainDef (one chain).
   Result<Heightfield> hf = build_heightfield(terrain_def(scene, 0, "cpu"));
   if (!hf) {
@@ -50,7 +48,7 @@ Result<Heightfield> load_scene_terrain(const SceneDef& scene) {
     }
     return errs;
   }
-  if (t.size && s.kind != TerrainSourceKind::Procedural) {
+  if (t.size && t.source_kind() != TerrainSourceKind::Procedural) {
     const auto sp = t.spacing_xz(hf->samples_x(), hf->samples_z());
     if (std::abs(sp[0] - sp[1]) > 1e-6 * sp[0]) {
       return Error{scene.source_path, "terrain.size",
@@ -68,7 +66,7 @@ double bedrock_world_height(const SceneDef& scene, const Heightfield& hf, double
   const TerrainDef& t = scene.terrain;
   if (t.bedrock_height) return t.origin[1] + *t.bedrock_height;
   const double surface = hf.origin_y() + hf.sample(float(x - hf.origin_x()), float(z - hf.origin_z()));
-  return surface - t.soil_depth.value_or(kDefaultSoilDepth);
+  return surface - t.soil_depth;
 }
 
 }  // namespace sandpatch

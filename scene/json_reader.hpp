@@ -282,6 +282,9 @@ struct Range {
 inline Range closed(double lo, double hi, const char* unit) { return {lo, hi, false, false, unit}; }
 inline Range positive(double hi, const char* unit) { return {0.0, hi, true, false, unit}; }
 
+// The range of a knob or limit of the table (common/knobs.hpp).
+inline Range range_of(const knobs::Knob& k) { return {k.lo, k.hi, k.lo_open, k.hi_open, k.unit}; }
+
 struct Ctx {
   std::string file;
   fs::path base_dir;
@@ -459,7 +462,7 @@ class Obj {
 
   // Optional fields from the knob table (common/knobs.hpp): its range and unit.
   void knob(const std::string& key, double& out, const knobs::Knob& k) {
-    number(key, out, Range{k.lo, k.hi, k.lo_open, k.hi_open, k.unit});
+    number(key, out, range_of(k));
   }
   void knob(const std::string& key, int& out, const knobs::Knob& k) { integer(key, out, k.lo, k.hi, k.unit); }
 
@@ -581,11 +584,11 @@ inline bool for_each_element(Ctx& c, const json& v, const std::string& f, F&& ea
   return true;
 }
 
-// Times in seconds: ascending, each in [0, 1e6].
+// Times in seconds: ascending, each in the range of knobs::kOutputTime.
 inline std::vector<double> read_times(Ctx& c, const json& v, const std::string& f) {
   std::vector<double> times;
   for_each_element(c, v, f, [&](const json& e, const std::string& p) {
-    if (auto t = read_number(c, e, p, closed(0.0, 1e6, "s"))) {
+    if (auto t = read_number(c, e, p, range_of(knobs::kOutputTime))) {
       if (!times.empty() && *t <= times.back()) {
         c.error(p, show(e), "times must be strictly ascending", "follows " + fmt_num(times.back()));
       }

@@ -51,52 +51,59 @@ const std::vector<std::string> kHeightfieldFormats = {"png16", "raw_f32", "esri_
 
 // Value limits, one place (docs/scene-format.md lists the same).
 const Range kWorldCoord = closed(-1e9, 1e9, "m");
-// Shape sizes: Bullet keeps them as float; below 1e-6 m a shape is a point to it.
-const Range kSize = closed(1e-6, 1e4, "m");
 
-TerrainDef parse_terrain(Ctx& c, const json& j) {
-  TerrainDef t;
+// The terrain section into the library's fields of `t` (scene.hpp TerrainDef).
+void parse_terrain(Ctx& c, const json& j, TerrainDef& t) {
   Obj o(c, j, "terrain");
+  TerrainSourceKind kind = TerrainSourceKind::Procedural;
   if (const json* src = o.require("source", "an object with \"type\": " + join(kSourceTypes, " | "))) {
     Obj s(c, *src, o.at("source"));
-    auto& d = t.source;
-    if (s.enumeration_req("type", d.kind, kSourceTypes) && s.valid()) {
-      if (d.kind == TerrainSourceKind::Procedural) {
-        auto& p = d.procedural;
-        s.enumeration("kind", p.kind, kProceduralKinds);
-        s.number("height", p.height, closed(-1e5, 1e5, "m"));
-        s.number("slope_x", p.slope_x, closed(-100.0, 100.0, "m/m"));
-        s.number("slope_z", p.slope_z, closed(-100.0, 100.0, "m/m"));
-        s.number("amplitude", p.amplitude, closed(0.0, 1e5, "m"));
-        s.number("wavelength", p.wavelength, positive(1e7, "m"));
+    if (s.enumeration_req("type", kind, kSourceTypes) && s.valid()) {
+      if (kind == TerrainSourceKind::Procedural) {
+        // The generator's parameters, as the library takes them (float).
+        auto number_f = [&](const char* key, float& out, const Range& r) {
+          double v = out;
+          s.number(key, v, r);
+          out = float(v);
+        };
+        ProceduralKind pk = ProceduralKind::Flat;
+        s.enumeration("kind", pk, kProceduralKinds);
+        t.procedural = to_string(pk);
+        number_f("height", t.base_height, closed(-1e5, 1e5, "m"));
+        number_f("slope_x", t.slope_x, closed(-100.0, 100.0, "m/m"));
+        number_f("slope_z", t.slope_z, closed(-100.0, 100.0, "m/m"));
+        number_f("amplitude", t.amplitude, closed(0.0, 1e5, "m"));
+        number_f("wavelength", t.wavelength, positive(1e7, "m"));
         if (const json* v = s.get("seed")) {
-          if (auto x = read_integer(c, *v, s.at("seed"), 0, 4294967295.0)) p.seed = static_cast<std::uint64_t>(*x);
+          if (auto x = read_integer(c, *v, s.at("seed"), 0, 4294967295.0)) t.noise_seed = static_cast<std::uint32_t>(*x);
         }
-        s.integer("octaves", p.octaves, 1, 16);
-        s.integer("samples_x", p.samples_x, 2, 65536);
-        s.integer("samples_z", p.samples_z, 2, 65536);
-        if (auto e = limits::check_grid_size(c.file, s.at("samples_x") + " × samples_z", p.samples_x, p.samples_z))
+        s.integer("octaves", t.octaves, 1, 16);
+        t.samples_x = t.samples_z = 129;
+        s.integer("samples_x", t.samples_x, 2, 65536);
+        s.integer("samples_z", t.samples_z, 2, 65536);
+        if (auto e = limits::check_grid_size(c.file, s.at("samples_x") + " × samples_z", t.samples_x, t.samples_z))
           c.errors.push_back(*e);
       } else {
+        t.file_type = to_string(kind);
         std::string written;
-        const bool raw = d.kind == TerrainSourceKind::RawF32;
+        const bool raw = kind == TerrainSourceKind::RawF32;
         bool dims = true;
         if (raw) {
-          dims = s.integer_req("samples_x", d.samples_x, 2, 65536) & s.integer_req("samples_z", d.samples_z, 2, 65536);
+          dims = s.integer_req("samples_x", t.samples_x, 2, 65536) & s.integer_req("samples_z", t.samples_z, 2, 65536);
           if (dims) {
-            if (auto e = limits::check_grid_size(c.file, s.at("samples_x") + " × samples_z", d.samples_x, d.samples_z)) {
+            if (auto e = limits::check_grid_size(c.file, s.at("samples_x") + " × samples_z", t.samples_x, t.samples_z)) {
               c.errors.push_back(*e);
               dims = false;
             }
           }
         }
         if (s.string_req("file", written, "the heightmap's path")) {
-          d.file = resolve(c, written);
+          t.file = resolve(c, written);
           const std::string field = s.at("file");
-          if (check_readable(c, field, written, d.file, "heightmap")) {
-            if (d.kind == TerrainSourceKind::Png16) check_png16(c, field, written, d.file);
-            if (raw && dims) check_raw_f32(c, field, written, d.file, d.samples_x, d.samples_z);
-            if (d.kind == TerrainSourceKind::EsriAscii) check_esri_ascii(c, field, written, d.file);
+          if (check_readable(c, field, written, t.file, "heightmap")) {
+            if (kind == TerrainSourceKind::Png16) check_png16(c, field, written, t.file);
+            if (raw && dims) check_raw_f32(c, field, written, t.file, t.samples_x, t.samples_z);
+            if (kind == TerrainSourceKind::EsriAscii) check_esri_ascii(c, field, written, t.file);
           }
         }
       }
@@ -104,16 +111,16 @@ TerrainDef parse_terrain(Ctx& c, const json& j) {
     s.finish();
   }
   if (!o.both("spacing", "size")) {
-    t.spacing_given = o.has("spacing");
+    // An esri_ascii grid has its own cellsize: a spacing given overrides it.
+    t.spacing_overrides_file = kind == TerrainSourceKind::EsriAscii && o.has("spacing");
     o.number("spacing", t.spacing, closed(1e-4, 1e4, "m"));
     if (const json* v = o.get("size")) {
       if (auto sz = read_numbers<2>(c, *v, o.at("size"), positive(1e7, "m"))) t.size = *sz;
     }
   }
-  if (t.size && t.source.kind == TerrainSourceKind::Procedural) {
+  if (t.size && kind == TerrainSourceKind::Procedural) {
     // The grid has one spacing: size must give square cells for the generator's sample count.
-    const auto& p = t.source.procedural;
-    const auto sp = t.spacing_xz(p.samples_x, p.samples_z);
+    const auto sp = t.spacing_xz(t.samples_x, t.samples_z);
     if (std::abs(sp[0] - sp[1]) > 1e-9 * std::max(sp[0], sp[1])) {
       c.error(o.at("size"), show(*o.get("size")), "must give square cells: size[0] / (samples_x - 1) = size[1] / (samples_z - 1)",
               "spacing would be " + fmt_num(sp[0]) + " m in x and " + fmt_num(sp[1]) + " m in z");
@@ -122,22 +129,24 @@ TerrainDef parse_terrain(Ctx& c, const json& j) {
   o.number("vertical_scale", t.vertical_scale, positive(1e5, "m"));
   o.number("vertical_offset", t.vertical_offset, closed(-1e6, 1e6, "m"));
   o.vec3("origin", t.origin, kWorldCoord);
+  std::optional<double> soil;
   if (!o.both("soil_depth", "bedrock_height")) {
-    t.soil_depth = o.number_opt("soil_depth", positive(1e4, "m"));
+    soil = o.number_opt("soil_depth", positive(1e4, "m"));
     t.bedrock_height = o.number_opt("bedrock_height", closed(-1e6, 1e6, "m"));
   }
-  if (!t.soil_depth && !t.bedrock_height && !o.has("soil_depth") && !o.has("bedrock_height")) t.soil_depth = knobs::kSoilDepth.def;
+  if (!soil && !t.bedrock_height && !o.has("soil_depth") && !o.has("bedrock_height")) soil = knobs::kSoilDepth.def;
+  // With a flat bedrock the library's soil_depth keeps its default (the patches take the bedrock).
+  t.soil_depth = soil.value_or(knobs::kSoilDepth.def);
   // patch_depth: given, at most the soil depth; left out, the default or the soil depth if less.
   if (o.has("patch_depth")) {
     o.knob("patch_depth", t.patch_depth, knobs::kPatchDepth);
-    if (t.soil_depth && t.patch_depth > *t.soil_depth)
-      c.error(o.at("patch_depth"), fmt_num(t.patch_depth), "must be at most terrain.soil_depth (" + fmt_num(*t.soil_depth) + " m)");
-  } else if (t.soil_depth) {
-    t.patch_depth = std::min(t.patch_depth, *t.soil_depth);
+    if (soil && t.patch_depth > *soil)
+      c.error(o.at("patch_depth"), fmt_num(t.patch_depth), "must be at most terrain.soil_depth (" + fmt_num(*soil) + " m)");
+  } else if (soil) {
+    t.patch_depth = std::min(t.patch_depth, *soil);
   }
-  o.string("material", t.material);
+  o.string("material", t.material_name);
   o.finish();
-  return t;
 }
 
 MaterialDef parse_material(Ctx& c, const json& j, const std::string& path) {
@@ -148,9 +157,11 @@ MaterialDef parse_material(Ctx& c, const json& j, const std::string& path) {
   o.knob("friction", m.friction, knobs::kFriction);
   if (!o.both("restitution", "damping_ratio")) {
     const bool given = o.has("restitution") || o.has("damping_ratio");
-    m.restitution = o.number_opt("restitution", {knobs::kRestitution.lo, knobs::kRestitution.hi, knobs::kRestitution.lo_open,
-                                                 knobs::kRestitution.hi_open, knobs::kRestitution.unit});
+    const auto e = o.number_opt("restitution", range_of(knobs::kRestitution));
     m.damping_ratio = o.number_opt("damping_ratio", {0.0, 100.0, false, false, ""});
+    // The library takes e; ζ given gives e through the contact law (particles/material.hpp).
+    if (e) m.restitution = *e;
+    else if (m.damping_ratio) m.restitution = clamped_restitution(*m.damping_ratio);
     if (!given && o.valid()) c.missing(o.at("restitution"), "one of 'restitution' (e in (0, 1]) or 'damping_ratio' (ζ in [0, 100])");
   }
   o.knob("stiffness", m.stiffness, knobs::kStiffness);
@@ -162,6 +173,10 @@ MaterialDef parse_material(Ctx& c, const json& j, const std::string& path) {
   return m;
 }
 
+// The library's float quaternion and vectors from the file's doubles (as the library takes them).
+api::Quat to_quat(const std::array<double, 4>& q) { return {float(q[0]), float(q[1]), float(q[2]), float(q[3])}; }
+api::Vec3f to_vec3f(const Vec3d& v) { return {float(v[0]), float(v[1]), float(v[2])}; }
+
 // Quaternion [w, x, y, z] from extrinsic x-y-z Euler angles in degrees: R = Rz(γ)·Ry(β)·Rx(α).
 std::array<double, 4> euler_deg_to_quaternion(const Vec3d& e) {
   const double d = kPi / 180.0;
@@ -172,8 +187,9 @@ std::array<double, 4> euler_deg_to_quaternion(const Vec3d& e) {
 }
 
 // The mesh of a body's shape if it loads (errors added to `c` otherwise).
-std::optional<TriangleMesh> load_body_mesh(Ctx& c, ShapeDef& s, const std::string& field, const std::string& written) {
-  auto r = load_obj_mesh(s.file, s.scale);
+std::optional<TriangleMesh> load_body_mesh(Ctx& c, BodyDef& b, const std::string& field, const std::string& written) {
+  const api::ShapeDef& s = b.shape;
+  auto r = load_obj_mesh(s.mesh_file, s.mesh_scale);
   if (!r) {
     for (const auto& e : r.errors()) {
       c.error(field, json_quote(written), e.allowed.empty() ? "must be a readable Wavefront OBJ file" : "must be " + e.allowed,
@@ -182,10 +198,10 @@ std::optional<TriangleMesh> load_body_mesh(Ctx& c, ShapeDef& s, const std::strin
     return std::nullopt;
   }
   if (s.solid) {
-    const auto errs = check_solid_mesh(*r, s.file, field);
+    const auto errs = check_solid_mesh(*r, s.mesh_file, field);
     for (const auto& e : errs) c.error(field, json_quote(written), "must be " + e.allowed + " for a solid body", e.file + ": " + e.detail);
     if (!errs.empty()) return std::nullopt;
-    s.mesh_volume = r->signed_volume();
+    b.mesh_volume = r->signed_volume();
   }
   return std::move(r).value();
 }
@@ -225,8 +241,10 @@ LoadDef parse_load(Ctx& c, const json& j, const std::string& path) {
   return l;
 }
 
-// "orientation" (a unit quaternion) or "euler_deg" of object `p` into q.
-void parse_orientation(Ctx& c, Obj& p, std::array<double, 4>& q_out) {
+// "orientation" (a unit quaternion) or "euler_deg" of object `p` into q. `float_unit`: a
+// quaternion already unit to float precision (|q| within 1e-6 of 1, as scene_to_json writes a
+// body's float orientation back) is kept as written, so that it reads back the same floats.
+void parse_orientation(Ctx& c, Obj& p, std::array<double, 4>& q_out, bool float_unit = false) {
   if (p.both("orientation", "euler_deg")) return;
   if (const json* q = p.get("orientation")) {
     if (auto v = read_numbers<4>(c, *q, p.at("orientation"), closed(-1.0 - 1e-3, 1.0 + 1e-3, ""))) {
@@ -235,7 +253,8 @@ void parse_orientation(Ctx& c, Obj& p, std::array<double, 4>& q_out) {
         c.error(p.at("orientation"), show(*q), "must be a unit quaternion [w, x, y, z] (|q| = 1 ± 0.001)",
                 "|q| = " + fmt_num(n));
       } else {
-        q_out = {(*v)[0] / n, (*v)[1] / n, (*v)[2] / n, (*v)[3] / n};
+        const double k = float_unit && std::abs(n - 1.0) <= 1e-6 ? 1.0 : n;
+        q_out = {(*v)[0] / k, (*v)[1] / k, (*v)[2] / k, (*v)[3] / k};
       }
     }
   }
@@ -266,29 +285,29 @@ BodyDef parse_body(Ctx& c, const json& j, const std::string& path, std::optional
     auto& sh = b.shape;
     if (s.enumeration_req("type", sh.kind, kShapeKinds) && s.valid()) {
       switch (sh.kind) {
-        case ShapeKind::Sphere: s.number_req("radius", sh.radius, kSize); break;
-        case ShapeKind::Box: s.vec3_req("half_extents", sh.half_extents, kSize); break;
+        case ShapeKind::Sphere: s.number_req("radius", sh.radius, range_of(knobs::kShapeRadius)); break;
+        case ShapeKind::Box: s.vec3_req("half_extents", sh.half_extents, range_of(knobs::kShapeHalfExtent)); break;
         case ShapeKind::Cylinder:
-          s.number_req("radius", sh.radius, kSize);
-          s.number_req("height", sh.height, kSize);
+          s.number_req("radius", sh.radius, range_of(knobs::kShapeRadius));
+          s.number_req("height", sh.height, range_of(knobs::kCylinderHeight));
           break;
         case ShapeKind::Capsule:
-          s.number_req("radius", sh.radius, kSize);
-          s.number_req("height", sh.height, closed(0.0, 1e4, "m"));
+          s.number_req("radius", sh.radius, range_of(knobs::kShapeRadius));
+          s.number_req("height", sh.height, range_of(knobs::kCapsuleHeight));
           break;
         case ShapeKind::Mesh: {
           bool scale_ok = true;
           if (const json* v = s.get("scale")) {
-            const auto x = read_number(c, *v, s.at("scale"), closed(1e-6, 1e6, "m per OBJ unit"));
-            if (x) sh.scale = *x;
+            const auto x = read_number(c, *v, s.at("scale"), range_of(knobs::kMeshScale));
+            if (x) sh.mesh_scale = *x;
             scale_ok = x.has_value();
           }
           s.boolean("solid", sh.solid);
           std::string written;
           if (s.string_req("file", written, "the OBJ file's path")) {
-            sh.file = resolve(c, written);
-            if (check_readable(c, s.at("file"), written, sh.file, "OBJ file") && scale_ok) {
-              mesh = load_body_mesh(c, sh, s.at("file"), written);
+            sh.mesh_file = resolve(c, written);
+            if (check_readable(c, s.at("file"), written, sh.mesh_file, "OBJ file") && scale_ok) {
+              mesh = load_body_mesh(c, b, s.at("file"), written);
             }
           }
           break;
@@ -305,20 +324,22 @@ BodyDef parse_body(Ctx& c, const json& j, const std::string& path, std::optional
                 "leave it out: a " + std::string(to_string(b.motion)) + " body has no mass (nothing moves it)");
   } else if (!o.both("mass", "density")) {
     const bool given = o.has("mass") || o.has("density");
-    b.mass = o.number_opt("mass", positive(1e9, "kg"));
+    const auto mass = o.number_opt("mass", positive(1e9, "kg"));
     b.density = o.number_opt("density", positive(1e5, "kg/m^3"));
     if (!given && o.valid()) c.missing(o.at("mass"), "one of 'mass' (kg) or 'density' (kg/m^3)");
+    // The library takes the mass: given, or density × the shape's volume.
+    b.mass = mass ? *mass : b.density.value_or(0.0) * b.volume();
     // The mass run gives Bullet (a float): a tiny shape or density must not make it 0.
-    const bool shape_known = b.shape.kind != ShapeKind::Mesh || b.shape.mesh_volume > 0;
+    const bool shape_known = b.shape.kind != ShapeKind::Mesh || b.mesh_volume > 0;
     if (b.density && shape_known && o.valid()) {
-      const double m = b.mass_value();
+      const double m = b.mass;
       if (!(m >= limits::kMinBodyMass && m <= limits::kMaxBodyMass))
         c.error(o.at("density"), show(*o.get("density")),
                 "density × shape volume must give a mass in [" + fmt_num(limits::kMinBodyMass) + ", " +
                     fmt_num(limits::kMaxBodyMass) + "] kg",
-                "mass = " + fmt_num(m) + " kg (volume " + fmt_num(b.shape.volume()) + " m^3)");
+                "mass = " + fmt_num(m) + " kg (volume " + fmt_num(b.volume()) + " m^3)");
     }
-    if (b.mass && *b.mass < limits::kMinBodyMass)
+    if (mass && *mass < limits::kMinBodyMass)
       c.error(o.at("mass"), show(*o.get("mass")), "must be in [" + fmt_num(limits::kMinBodyMass) + ", " +
                                                       fmt_num(limits::kMaxBodyMass) + "] kg");
     if (o.has("density") && b.shape.kind == ShapeKind::Mesh && !b.shape.solid) {
@@ -328,20 +349,25 @@ BodyDef parse_body(Ctx& c, const json& j, const std::string& path, std::optional
   }
   if (const json* pj = o.get("pose")) {
     Obj p(c, *pj, o.at("pose"));
-    p.vec3("position", b.pose.position, kWorldCoord);
-    parse_orientation(c, p, b.pose.orientation);
+    p.vec3("position", b.position, kWorldCoord);
+    std::array<double, 4> q = {1.0, 0.0, 0.0, 0.0};
+    parse_orientation(c, p, q, /*float_unit=*/true);
+    b.orientation = to_quat(q);
     p.finish();
   }
-  o.vec3("linear_velocity", b.linear_velocity, closed(-limits::kMaxBodySpeed, limits::kMaxBodySpeed, "m/s"));
-  o.vec3("angular_velocity", b.angular_velocity, closed(-limits::kMaxBodySpin, limits::kMaxBodySpin, "rad/s"));
+  Vec3d linear = {0.0, 0.0, 0.0}, angular = {0.0, 0.0, 0.0};
+  o.vec3("linear_velocity", linear, closed(-limits::kMaxBodySpeed, limits::kMaxBodySpeed, "m/s"));
+  o.vec3("angular_velocity", angular, closed(-limits::kMaxBodySpin, limits::kMaxBodySpin, "rad/s"));
   // The limits are on the magnitudes (common/limits.hpp), as in the library.
-  for (const auto& [key, v, limit, unit] : {std::tuple{"linear_velocity", b.linear_velocity, limits::kMaxBodySpeed, "m/s"},
-                                            std::tuple{"angular_velocity", b.angular_velocity, limits::kMaxBodySpin, "rad/s"}}) {
+  for (const auto& [key, v, limit, unit] : {std::tuple{"linear_velocity", linear, limits::kMaxBodySpeed, "m/s"},
+                                            std::tuple{"angular_velocity", angular, limits::kMaxBodySpin, "rad/s"}}) {
     const double n = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
     if (n > limit)
       c.error(o.at(key), show(*o.get(key)), "the magnitude must be at most " + fmt_num(limit) + " " + unit,
               "|v| = " + fmt_num(n) + " " + unit);
   }
+  b.linear_velocity = to_vec3f(linear);
+  b.angular_velocity = to_vec3f(angular);
   o.number("spawn_time", b.spawn_time, closed(0.0, 1e6, "s"));
   o.knob("friction", b.friction, knobs::kBodyFriction);
   o.knob("restitution", b.restitution, knobs::kBodyRestitution);
@@ -368,7 +394,7 @@ BodyDef parse_body(Ctx& c, const json& j, const std::string& path, std::optional
   }
   if (b.motion == MotionKind::Static) {
     for (const char* key : {"linear_velocity", "angular_velocity"})
-      if (o.has(key) && o.valid() && (key[0] == 'l' ? b.linear_velocity : b.angular_velocity) != Vec3d{0.0, 0.0, 0.0})
+      if (o.has(key) && o.valid() && (key[0] == 'l' ? b.linear_velocity : b.angular_velocity) != api::Vec3f{0.0f, 0.0f, 0.0f})
         c.error(o.at(key), show(*o.get(key)), "must be [0, 0, 0] or left out: a static body never moves");
   }
   if (!dynamic && o.has("loads"))
@@ -385,24 +411,25 @@ BodyDef parse_body(Ctx& c, const json& j, const std::string& path, std::optional
     std::size_t k = 0;
     while (k + 1 < ks.size() && ks[k + 1].t <= b.spawn_time) ++k;
     const KeyframeDef& a = ks[k];
-    b.pose.position = a.position;
-    b.pose.orientation = a.orientation;
+    b.position = a.position;
+    b.orientation = to_quat(a.orientation);
     if (k + 1 < ks.size() && b.spawn_time > a.t) {
       const KeyframeDef& n = ks[k + 1];
       const double u = (b.spawn_time - a.t) / (n.t - a.t);
-      for (int i = 0; i < 3; ++i) b.pose.position[i] = a.position[i] + u * (n.position[i] - a.position[i]);
+      for (int i = 0; i < 3; ++i) b.position[i] = a.position[i] + u * (n.position[i] - a.position[i]);
       const Eigen::Quaterniond qa(a.orientation[0], a.orientation[1], a.orientation[2], a.orientation[3]);
       const Eigen::Quaterniond qn(n.orientation[0], n.orientation[1], n.orientation[2], n.orientation[3]);
       const Eigen::Quaterniond q = qa.slerp(u, qn);
-      b.pose.orientation = {q.w(), q.x(), q.y(), q.z()};
+      b.orientation = to_quat({q.w(), q.x(), q.y(), q.z()});
     }
   }
   o.finish();
   return b;
 }
 
-SceneSimulationDef parse_simulation(Ctx& c, const json& j) {
-  SceneSimulationDef s;
+// The simulation section: its knobs into the library's fields of `t` (scene.hpp TerrainDef),
+// the rest into `s`.
+void parse_simulation(Ctx& c, const json& j, TerrainDef& t, SceneSimulationDef& s) {
   Obj o(c, j, "simulation");
   // A preset first: the fields below override it.
   if (const json* pj = o.get("preset")) {
@@ -411,9 +438,9 @@ SceneSimulationDef parse_simulation(Ctx& c, const json& j) {
     if (auto x = read_enum(c, *pj, o.at("preset"), names)) {
       const SimulationPreset& p = simulation_presets()[std::size_t(*x)];
       s.preset = p.name;
-      s.particle_scale = p.particle_scale;
-      s.pool.granules_per_slot = p.granules_per_slot;
-      s.steps_per_contact = p.steps_per_contact;
+      t.particle_scale = p.particle_scale;
+      t.granules_per_slot = p.granules_per_slot;
+      t.steps_per_contact = p.steps_per_contact;
     }
   }
   o.number("dt", s.dt, {0.0, 0.1, true, false, "s"});
@@ -423,37 +450,39 @@ SceneSimulationDef parse_simulation(Ctx& c, const json& j) {
     c.error(o.at("duration"), fmt_num(s.duration),
             "simulation.duration / simulation.dt must be at most " + fmt_num(kMaxRunFrames) + " steps",
             "dt = " + fmt_num(s.dt) + " s gives " + fmt_num(std::ceil(s.duration / s.dt)) + " steps");
-  o.enumeration("backend", s.backend, kBackends);
-  o.knob("threads", s.threads, knobs::kThreads);
+  Backend backend = Backend::Cpu;
+  o.enumeration("backend", backend, kBackends);
+  t.backend = to_string(backend);
+  o.knob("threads", t.threads, knobs::kThreads);
   if (const json* pj = o.get("pool")) {
     Obj p(c, *pj, o.at("pool"));
-    p.knob("slots", s.pool.slots, knobs::kSlots);
-    p.knob("granules_per_slot", s.pool.granules_per_slot, knobs::kGranulesPerSlot);
-    p.knob("shell_spheres_per_slot", s.pool.shell_spheres_per_slot, knobs::kShellSpheresPerSlot);
-    if (double(s.pool.slots) * s.pool.granules_per_slot > double(limits::kMaxPoolGranules))
-      c.error(p.at("slots"), std::to_string(s.pool.slots) + " × granules_per_slot " + std::to_string(s.pool.granules_per_slot),
+    p.knob("slots", t.slots, knobs::kSlots);
+    p.knob("granules_per_slot", t.granules_per_slot, knobs::kGranulesPerSlot);
+    p.knob("shell_spheres_per_slot", t.shell_spheres_per_slot, knobs::kShellSpheresPerSlot);
+    if (double(t.slots) * t.granules_per_slot > double(limits::kMaxPoolGranules))
+      c.error(p.at("slots"), std::to_string(t.slots) + " × granules_per_slot " + std::to_string(t.granules_per_slot),
               "slots × granules_per_slot must be at most " + std::to_string(limits::kMaxPoolGranules) +
                   " granules (every slot is allocated at full capacity)",
               "lower slots or granules_per_slot");
     p.finish();
   }
-  o.knob("particle_scale", s.particle_scale, knobs::kParticleScale);
-  o.knob("steps_per_contact", s.steps_per_contact, knobs::kStepsPerContact);
-  o.knob("max_substeps", s.max_substeps, knobs::kMaxSubsteps);
+  o.knob("particle_scale", t.particle_scale, knobs::kParticleScale);
+  o.knob("steps_per_contact", t.steps_per_contact, knobs::kStepsPerContact);
+  o.knob("max_substeps", t.max_substeps, knobs::kMaxSubsteps);
   if (const json* bj = o.get("frame_budget_ms")) {
     if (bj->is_string() && bj->get<std::string>() == "off") {
-      s.frame_budget_ms = std::numeric_limits<double>::infinity();
+      t.frame_budget_ms = std::numeric_limits<double>::infinity();
     } else if (bj->is_string()) {
       c.error(o.at("frame_budget_ms"), show(*bj), "must be a number of ms in (0, 1e+06] or \"off\"");
     } else if (auto x = read_number(c, *bj, o.at("frame_budget_ms"), {0.0, 1e6, true, false, "ms"})) {
-      s.frame_budget_ms = *x;
+      t.frame_budget_ms = *x;
     }
   }
   if (const json* lj = o.get("lod")) {
     Obj p(c, *lj, o.at("lod"));
-    p.knob("horizon", s.lod.horizon, knobs::kLodHorizon);
-    p.knob("margin", s.lod.margin, knobs::kLodMargin);
-    p.knob("apron", s.lod.apron, knobs::kLodApron);
+    p.knob("horizon", t.lod_horizon, knobs::kLodHorizon);
+    p.knob("margin", t.lod_margin, knobs::kLodMargin);
+    p.knob("apron", t.lod_apron, knobs::kLodApron);
     p.finish();
   }
   if (const json* bj = o.get("scale_by_distance")) {
@@ -482,16 +511,15 @@ SceneSimulationDef parse_simulation(Ctx& c, const json& j) {
   }
   if (const json* sj = o.get("sleep")) {
     Obj p(c, *sj, o.at("sleep"));
-    p.knob("speed_threshold", s.sleep.speed_threshold, knobs::kSleepSpeed);
-    p.knob("hold_time", s.sleep.hold_time, knobs::kSleepTime);
+    p.knob("speed_threshold", t.sleep_speed, knobs::kSleepSpeed);
+    p.knob("hold_time", t.sleep_time, knobs::kSleepTime);
     p.finish();
   }
-  o.knob("idle_timeout", s.idle_timeout, knobs::kIdleTimeout);
-  o.boolean("granular_patches", s.granular_patches);
-  o.vec3("gravity", s.gravity, closed(-1e3, 1e3, "m/s^2"));
-  o.u64("seed", s.seed);
+  o.knob("idle_timeout", t.idle_timeout, knobs::kIdleTimeout);
+  o.boolean("granular_patches", t.granular_patches);
+  o.vec3("gravity", t.gravity, closed(-1e3, 1e3, "m/s^2"));
+  o.u64("seed", t.seed);
   o.finish();
-  return s;
 }
 
 CameraDef parse_camera(Ctx& c, const json& j, const std::string& path) {
@@ -508,7 +536,7 @@ CameraDef parse_camera(Ctx& c, const json& j, const std::string& path) {
     for_each_element(c, *pj, o.at("path"), [&](const json& e, const std::string& p) {
       CameraKeyDef k;
       Obj ko(c, e, p);
-      const bool t_ok = ko.number_req("time", k.time, closed(0.0, 1e6, "s"));
+      const bool t_ok = ko.number_req("time", k.time, range_of(knobs::kCameraKeyTime));
       const bool v_ok = ko.vec3_req("position", k.position, kWorldCoord) & ko.vec3_req("target", k.target, kWorldCoord);
       ko.finish();
       if (t_ok && !cam.path.empty() && k.time <= cam.path.back().time) {
@@ -523,9 +551,9 @@ CameraDef parse_camera(Ctx& c, const json& j, const std::string& path) {
     const bool ok = o.vec3_req("position", cam.position, kWorldCoord) & o.vec3_req("target", cam.target, kWorldCoord);
     if (ok) check_view(cam.position, cam.target, o.at("target"), *o.get("target"));
   }
-  o.number("fov_deg", cam.fov_deg, closed(1.0, 179.0, "deg"));
-  o.integer("width", cam.width, 16, 16384, "px");
-  o.integer("height", cam.height, 16, 16384, "px");
+  o.knob("fov_deg", cam.fov_deg, knobs::kCameraFov);
+  o.knob("width", cam.width, knobs::kCameraWidth);
+  o.knob("height", cam.height, knobs::kCameraHeight);
   o.finish();
   return cam;
 }
@@ -540,7 +568,7 @@ OutputsDef parse_outputs(Ctx& c, const json& j) {
       fo.string_req("camera", f.camera, "the name of a camera");
       if (!fo.both("times", "every_k_frames")) {
         if (const json* t = fo.get("times")) f.times = read_times(c, *t, fo.at("times"));
-        fo.integer("every_k_frames", f.every_k_frames, 1, 1e6);
+        fo.knob("every_k_frames", f.every_k_frames, knobs::kEveryKFrames);
         if (!fo.has("times") && !fo.has("every_k_frames") && fo.valid()) {
           c.missing(fo.at("times"), "one of 'times' (s) or 'every_k_frames'");
         }
@@ -597,14 +625,14 @@ std::vector<std::string> names_of(const std::vector<T>& items) {
   return n;
 }
 
-std::array<double, 9> rotation_rows(const std::array<double, 4>& q) {
+std::array<double, 9> rotation_rows(const api::Quat& q) {
   const Eigen::Matrix3d r = Eigen::Quaterniond(q[0], q[1], q[2], q[3]).normalized().toRotationMatrix();
   return {r(0, 0), r(0, 1), r(0, 2), r(1, 0), r(1, 1), r(1, 2), r(2, 0), r(2, 1), r(2, 2)};
 }
 
 // Distance (m, ≥ 0) from the body's position down to its lowest point.
 double lowest_offset(const BodyDef& b, const TriangleMesh* mesh) {
-  const auto r = rotation_rows(b.pose.orientation);
+  const auto r = rotation_rows(b.orientation);
   const double r10 = r[3], r11 = r[4], r12 = r[5];  // world y row
   const auto& s = b.shape;
   switch (s.kind) {
@@ -630,9 +658,9 @@ void check_flat_bedrock(Ctx& c, const SceneDef& s, const std::vector<std::option
   for (std::size_t i = 0; i < s.bodies.size(); ++i) {
     const auto& b = s.bodies[i];
     if (b.shape.kind == ShapeKind::Mesh && !meshes[i]) continue;
-    const double low = b.pose.position[1] - lowest_offset(b, meshes[i] ? &*meshes[i] : nullptr);
+    const double low = b.position[1] - lowest_offset(b, meshes[i] ? &*meshes[i] : nullptr);
     if (low < bedrock) {
-      c.error("bodies[" + std::to_string(i) + "].pose.position", json(b.pose.position).dump(),
+      c.error("bodies[" + std::to_string(i) + "].pose.position", json(b.position).dump(),
               "the body's lowest point must start at or above the bedrock (world y = " + fmt_num(bedrock) +
                   " m: terrain.origin[1] + terrain.bedrock_height)",
               "body below bedrock: its lowest point is at y = " + fmt_num(low) + " m");
@@ -645,6 +673,11 @@ void check_flat_bedrock(Ctx& c, const SceneDef& s, const std::vector<std::option
 // ---------------------------------------------------------------------------------------
 // Public API
 
+TerrainSourceKind TerrainDef::source_kind() const {
+  if (!procedural.empty()) return TerrainSourceKind::Procedural;
+  return file_type == "raw_f32" ? TerrainSourceKind::RawF32 : file_type == "esri_ascii" ? TerrainSourceKind::EsriAscii : TerrainSourceKind::Png16;
+}
+
 std::array<double, 2> TerrainDef::spacing_xz(int nx, int nz) const {
   if (size) return {(*size)[0] / std::max(1, nx - 1), (*size)[1] / std::max(1, nz - 1)};
   return {spacing, spacing};
@@ -654,16 +687,13 @@ std::array<double, 2> TerrainDef::spacing_xz(int nx, int nz) const {
 // never pulls (particles/material.hpp; docs/dem.md "Restitution").
 double MaterialDef::damping_ratio_value() const {
   if (damping_ratio) return *damping_ratio;
-  return damping_ratio_from_restitution(restitution.value_or(1.0));
+  return damping_ratio_from_restitution(restitution);
 }
 
-double MaterialDef::restitution_value() const {
-  if (restitution) return *restitution;
-  return clamped_restitution(damping_ratio.value_or(0.0));
-}
-
-double ShapeDef::volume() const {
-  switch (kind) {
+double BodyDef::volume() const {
+  const double radius = shape.radius, height = shape.height;
+  const auto& half_extents = shape.half_extents;
+  switch (shape.kind) {
     case ShapeKind::Sphere: return 4.0 / 3.0 * kPi * radius * radius * radius;
     case ShapeKind::Box: return 8.0 * half_extents[0] * half_extents[1] * half_extents[2];
     case ShapeKind::Cylinder: return kPi * radius * radius * height;
@@ -673,7 +703,6 @@ double ShapeDef::volume() const {
   return 0.0;
 }
 
-double BodyDef::mass_value() const { return mass ? *mass : density.value_or(0.0) * shape.volume(); }
 
 const MaterialDef* SceneDef::find_material(const std::string& n) const {
   for (const auto& m : materials) {
@@ -756,7 +785,7 @@ Result<SceneDef> parse_scene(const std::string& json_text, const std::string& so
     });
     if (mj->is_array() && mj->empty()) c.error("materials", "[]", "must hold at least one material");
   }
-  if (const json* tj = top.require("terrain", "an object with a \"source\"")) s.terrain = parse_terrain(c, *tj);
+  if (const json* tj = top.require("terrain", "an object with a \"source\"")) parse_terrain(c, *tj, s.terrain);
   std::vector<std::optional<TriangleMesh>> meshes;
   if (const json* bj = top.get("bodies")) {
     for_each_element(c, *bj, "bodies", [&](const json& e, const std::string& p) {
@@ -767,7 +796,7 @@ Result<SceneDef> parse_scene(const std::string& json_text, const std::string& so
   }
   if (const json* vj = top.get("vehicles")) s.vehicles = parse_vehicles(c, *vj);
   if (const json* jj = top.get("joints")) s.joints = parse_joints(c, *jj);
-  if (const json* sj = top.get("simulation")) s.simulation = parse_simulation(c, *sj);
+  if (const json* sj = top.get("simulation")) parse_simulation(c, *sj, s.terrain, s.simulation);
   if (const json* cj = top.get("cameras")) {
     for_each_element(c, *cj, "cameras", [&](const json& e, const std::string& p) {
       s.cameras.push_back(parse_camera(c, e, p));
@@ -781,12 +810,12 @@ Result<SceneDef> parse_scene(const std::string& json_text, const std::string& so
   check_unique_names(c, s.bodies, "bodies");
   check_unique_names(c, s.cameras, "cameras");
   check_joints(c, s);
-  if (s.terrain.material.empty()) {
-    if (!s.materials.empty()) s.terrain.material = s.materials.front().name;
-  } else if (!s.find_material(s.terrain.material) && !s.materials.empty()) {
+  if (s.terrain.material_name.empty()) {
+    if (!s.materials.empty()) s.terrain.material_name = s.materials.front().name;
+  } else if (!s.find_material(s.terrain.material_name) && !s.materials.empty()) {
     const auto names = names_of(s.materials);
-    c.error("terrain.material", json_quote(s.terrain.material), "must name a material: " + join(names),
-            did_you_mean(s.terrain.material, names));
+    c.error("terrain.material", json_quote(s.terrain.material_name), "must name a material: " + join(names),
+            did_you_mean(s.terrain.material_name, names));
   }
   for (std::size_t i = 0; i < s.outputs.frames.size(); ++i) {
     const auto& cam = s.outputs.frames[i].camera;
@@ -804,6 +833,9 @@ Result<SceneDef> parse_scene(const std::string& json_text, const std::string& so
             did_you_mean(sd->camera, names));
   }
   check_flat_bedrock(c, s, meshes);
+  // With a procedural source and a size, the library's spacing is the size's (square cells).
+  if (s.terrain.size && !s.terrain.procedural.empty()) s.terrain.spacing = s.terrain.spacing_xz(s.terrain.samples_x, s.terrain.samples_z)[0];
+  if (const MaterialDef* m = s.find_material(s.terrain.material_name)) s.terrain.material = *m;
 
   if (!c.errors.empty()) return std::move(c.errors);
 
@@ -844,7 +876,7 @@ Result<SceneDef> load_default_scene() { return parse_scene(default_scene_json(),
 
 double body_extent_below(const BodyDef& body) {
   if (body.shape.kind != ShapeKind::Mesh) return lowest_offset(body, nullptr);
-  auto mesh = load_obj_mesh(body.shape.file, body.shape.scale);
+  auto mesh = load_obj_mesh(body.shape.mesh_file, body.shape.mesh_scale);
   return mesh ? lowest_offset(body, &*mesh) : 0.0;
 }
 
@@ -853,12 +885,12 @@ std::vector<Error> check_bodies_against_terrain(
   std::vector<Error> errors;
   for (std::size_t i = 0; i < scene.bodies.size(); ++i) {
     const auto& b = scene.bodies[i];
-    const double x = b.pose.position[0], z = b.pose.position[2];
+    const double x = b.position[0], z = b.position[2];
     const double bedrock = bedrock_world_height(x, z);
-    const double low = b.pose.position[1] - body_extent_below(b);
+    const double low = b.position[1] - body_extent_below(b);
     if (low < bedrock) {
       errors.push_back({scene.source_path, "bodies[" + std::to_string(i) + "].pose.position",
-                        json(b.pose.position).dump(),
+                        json(b.position).dump(),
                         "the body's lowest point must start at or above the bedrock (world y = " + fmt_num(bedrock) +
                             " m under x = " + fmt_num(x) + ", z = " + fmt_num(z) + ")",
                         "body below bedrock: its lowest point is at y = " + fmt_num(low) + " m"});
@@ -866,13 +898,13 @@ std::vector<Error> check_bodies_against_terrain(
     // A kinematic body goes where its keyframes send it: none may put it through the bedrock.
     for (std::size_t k = 0; k < b.keyframes.size(); ++k) {
       BodyDef at = b;
-      at.pose.position = b.keyframes[k].position;
-      at.pose.orientation = b.keyframes[k].orientation;
-      const double kx = at.pose.position[0], kz = at.pose.position[2];
-      const double rock = bedrock_world_height(kx, kz), klow = at.pose.position[1] - body_extent_below(at);
+      at.position = b.keyframes[k].position;
+      at.orientation = to_quat(b.keyframes[k].orientation);
+      const double kx = at.position[0], kz = at.position[2];
+      const double rock = bedrock_world_height(kx, kz), klow = at.position[1] - body_extent_below(at);
       if (klow < rock)
         errors.push_back({scene.source_path, "bodies[" + std::to_string(i) + "].keyframes[" + std::to_string(k) + "].position",
-                          json(at.pose.position).dump(),
+                          json(at.position).dump(),
                           "the body's lowest point must stay at or above the bedrock (world y = " + fmt_num(rock) +
                               " m under x = " + fmt_num(kx) + ", z = " + fmt_num(kz) + ")",
                           "at t = " + fmt_num(b.keyframes[k].t) + " s its lowest point would be at y = " + fmt_num(klow) + " m"});

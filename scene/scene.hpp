@@ -32,102 +32,60 @@ using Vec3d = std::array<double, 3>;  // x, y, z
 enum class TerrainSourceKind { Png16, RawF32, EsriAscii, Procedural };
 enum class ProceduralKind { Flat, Plane, Hills, Noise };
 
-// A generated elevation grid (the generator is heightfield/procedural.hpp's make_procedural,
-// which documents the exact formulas). Local heights before vertical_scale/offset:
-//   flat:  height
-//   plane: height + slope_x·x + slope_z·z                   (x, z in m from sample (0, 0))
-//   hills: height + amplitude·c(x)·c(z), c a smooth periodic wave of period `wavelength`
-//   noise: height + amplitude·(fractal value noise, coarsest feature `wavelength`, `octaves`)
-struct ProceduralDef {
-  ProceduralKind kind = ProceduralKind::Flat;
-  double height = 0.0;         // m, base height
-  double slope_x = 0.0;        // m/m, dh/dx (plane)
-  double slope_z = 0.0;        // m/m, dh/dz (plane)
-  double amplitude = 1.0;      // m, peak height variation (hills, noise)
-  double wavelength = 32.0;    // m, hills period / noise coarsest feature
-  std::uint64_t seed = 1;      // noise lattice seed, in [0, 2^32 − 1]
-  int octaves = 4;             // noise octaves, each half the wavelength and amplitude
-  int samples_x = 129;         // grid samples along x
-  int samples_z = 129;         // grid samples along z
-};
-
-struct TerrainSourceDef {
-  TerrainSourceKind kind = TerrainSourceKind::Procedural;
-  std::string file;            // resolved path of the heightmap (png16, raw_f32, esri_ascii)
-  int samples_x = 0;           // raw_f32 only: samples along x (row length, x fastest)
-  int samples_z = 0;           // raw_f32 only: samples along z (rows)
-  ProceduralDef procedural;    // procedural only
-};
-
-// World height of sample s:  y = origin[1] + vertical_offset + vertical_scale · s, where s is
-// the 16-bit value / 65535 for png16 and the stored value for raw_f32 / esri_ascii.
-// Sample (i, j) sits at world x = origin[0] + i·spacing_x, z = origin[2] + j·spacing_z.
-struct TerrainDef {
-  TerrainSourceDef source;
-  double spacing = 1.0;                        // m between samples in x and z (when size is not given)
-  bool spacing_given = false;                  // "spacing" was in the file (esri_ascii: overrides cellsize)
+// The terrain of a scene: the library's TerrainDef as the scene gives it, filled by the
+// parser as the library takes it (one chain, manager/definitions.hpp):
+//   - the terrain section: the heightfield's source (file + file_type "png16" | "raw_f32" |
+//     "esri_ascii", samples_x / samples_z of a raw file; or procedural "flat" | "plane" |
+//     "hills" | "noise" with base_height ("height" in the file), slopes, amplitude,
+//     wavelength, noise_seed ("seed"), octaves and its samples_x / samples_z, default 129),
+//     spacing (spacing_overrides_file: "spacing" given with an esri_ascii file), vertical
+//     scale and offset, origin, soil_depth (default knobs::kSoilDepth), patch_depth;
+//   - `material`: the named one of the scene's materials (the first when none is named);
+//   - the simulation section's knobs: pool (slots, granules_per_slot, shell_spheres_per_slot),
+//     particle_scale, steps_per_contact, max_substeps, frame_budget_ms, lod (lod_horizon,
+//     lod_margin, lod_apron), sleep (sleep_speed, sleep_time), idle_timeout,
+//     granular_patches, gravity, seed, threads, backend.
+// The generator's formulas are heightfield/procedural.hpp's. World height of sample s:
+// y = origin[1] + vertical_offset + vertical_scale · s (s: the 16-bit value / 65535 for png16,
+// the stored value for raw_f32 / esri_ascii, the generator's height); sample (i, j) sits at
+// world x = origin[0] + i·spacing_x, z = origin[2] + j·spacing_z.
+struct TerrainDef : api::TerrainDef {
+  // What only scene files have:
   std::optional<std::array<double, 2>> size;   // m, total extent [x, z]; overrides spacing:
                                                //   spacing_x = size[0] / (samples_x − 1)
-  double vertical_scale = 1.0;                 // m per sample unit (png16: m for the full 0..65535 range)
-  double vertical_offset = 0.0;                // m, added after scaling
-  Vec3d origin = {0.0, 0.0, 0.0};              // m, world position of sample (0, 0) at height 0
-  std::optional<double> soil_depth;            // m, bedrock = surface − soil_depth (default knobs::kSoilDepth, 2 m)
-  double patch_depth = knobs::kPatchDepth.def; // m of granules under a patch's lowest surface point (<= soil depth)
   std::optional<double> bedrock_height;        // m above origin[1], flat bedrock (instead of soil_depth)
-  std::string material;                        // name of a MaterialDef (default: the first material)
+  std::string material_name;                   // the name of the MaterialDef in `material`
 
+  // The source's type as a scene file names it (procedural, or file_type).
+  TerrainSourceKind source_kind() const;
   // Spacing along x and z (m) for a grid of nx × nz samples.
   std::array<double, 2> spacing_xz(int nx, int nz) const;
 };
 
 // ---- materials ----
 
-struct MaterialDef {
+// A material of the scene: the library's MaterialDef (density, friction, restitution,
+// stiffnesses, granule radius: the parser fills it as the library takes it) with its name and
+// what only scene files give.
+struct MaterialDef : api::MaterialDef {
   std::string name;                            // unique, referenced by terrain.material
-  double density = knobs::kDensity.def;        // kg/m³ of the grain solid (quartz)
-  double friction = knobs::kFriction.def;      // μ, Coulomb coefficient between spheres
-  std::optional<double> restitution;           // e in (0, 1]  } exactly one of the two is set
-  std::optional<double> damping_ratio;         // ζ in [0, 1)  }
-  double stiffness = knobs::kStiffness.def;    // k_n, N/m, normal contact stiffness
-  double tangential_stiffness_ratio = knobs::kTangentialRatio.def;  // k_t / k_n
-  double unloading_stiffness_ratio = knobs::kUnloadingRatio.def;    // hysteretic normal spring; 1 = linear
-  double granule_radius = knobs::kGranuleRadius.def;  // m, radius of each of the 4 spheres of a granule
+  // ζ in [0, 100] when the file gave damping_ratio instead of restitution (then `restitution`
+  // holds the e it gives: e = clamped_restitution(ζ), particles/material.hpp).
+  std::optional<double> damping_ratio;
   // φ, granule solid volume / bulk volume: validated, not used by the simulation (the
   // pre-settled tile measures its own φ; the report gives it as tile.packing_fraction).
   double packing_fraction = 0.6;
 
   // ζ from whichever was given: ζ = −ln e / sqrt(π² + ln² e).
   double damping_ratio_value() const;
-  // e from whichever was given: e = exp(−π ζ / sqrt(1 − ζ²)).
-  double restitution_value() const;
 };
 
 // ---- bodies ----
 
-enum class ShapeKind { Sphere, Box, Cylinder, Capsule, Mesh };
-
-// Shapes are centred on the body frame's origin; cylinders and capsules have their axis on y.
-struct ShapeDef {
-  ShapeKind kind = ShapeKind::Sphere;
-  double radius = 0.5;                         // m (sphere, cylinder, capsule)
-  Vec3d half_extents = {0.5, 0.5, 0.5};        // m (box)
-  double height = 1.0;                         // m (cylinder: total height; capsule: distance
-                                               //   between the cap centres, total = height + 2·radius)
-  std::string file;                            // resolved path of the OBJ (mesh)
-  double scale = 1.0;                          // OBJ units → m (mesh)
-  bool solid = true;                           // mesh: must be closed (needed for density, DEM shell)
-  double mesh_volume = 0.0;                    // m³, filled by the loader from the OBJ (mesh)
-
-  // Volume (m³): analytic for primitives, mesh_volume for meshes.
-  double volume() const;
-};
-
-struct PoseDef {
-  Vec3d position = {0.0, 0.0, 0.0};                   // m, world
-  std::array<double, 4> orientation = {1.0, 0.0, 0.0, 0.0};  // unit quaternion [w, x, y, z]
-  // In the file either "orientation" or "euler_deg" [α, β, γ] (degrees, R = Rz(γ)·Ry(β)·Rx(α));
-  // both are stored here as the normalised quaternion.
-};
+// Shapes and motions are the library's (api::ShapeDef: centred on the body frame's origin,
+// cylinders and capsules with their axis on y; a mesh is an OBJ file, mesh_file and mesh_scale).
+using ShapeKind = api::ShapeKind;
+using MotionKind = api::BodyMotion;
 
 // A force and / or torque put on a body while the simulated time t of a step's start is in
 // [from, until) (World::set_loads): a push, a wheel's traction, a thrust.
@@ -144,10 +102,6 @@ struct LoadDef {
   LoadFrame frame = LoadFrame::World;          // body: force and torque turn with the body
 };
 
-// How a body moves (docs/scene-format.md "motion"): by the forces on it, along its keyframes
-// (or its velocities, held), or not at all.
-enum class MotionKind { Dynamic, Kinematic, Static };
-
 // A kinematic body's pose at simulated time t; between keyframes the position is linear and
 // the orientation a slerp, before the first and after the last they hold.
 inline constexpr int kMaxKeyframesPerBody = 100000;
@@ -157,24 +111,19 @@ struct KeyframeDef {
   std::array<double, 4> orientation = {1.0, 0.0, 0.0, 0.0};  // unit quaternion [w, x, y, z] (or euler_deg in the file)
 };
 
-struct BodyDef {
-  std::string name;                            // unique
-  ShapeDef shape;
-  MotionKind motion = MotionKind::Dynamic;
+// A body of the scene: the library's BodyDef (name, shape, motion, mass, pose, velocities,
+// friction, restitution, rolling friction: the parser fills it as the library takes it, so a
+// run adds it as it is) and what only scene files give. The pose is the body's at spawn_time
+// (a kinematic body's: its keyframes' there).
+struct BodyDef : api::BodyDef {
+  std::optional<double> density;               // kg/m³ when the file gave it instead of mass (mass = density × volume())
+  double mesh_volume = 0.0;                    // m³, mesh: the signed volume of the OBJ, filled by the loader
   std::vector<KeyframeDef> keyframes;          // kinematic only; the pose comes from them
-  std::optional<double> mass;                  // kg        } exactly one of the two is set
-  std::optional<double> density;               // kg/m³     }
-  PoseDef pose;
-  Vec3d linear_velocity = {0.0, 0.0, 0.0};     // m/s, world
-  Vec3d angular_velocity = {0.0, 0.0, 0.0};    // rad/s, world
   double spawn_time = 0.0;                     // s, simulated time at which the body appears
-  double friction = knobs::kBodyFriction.def;  // μ against terrain and other bodies
-  double restitution = knobs::kBodyRestitution.def;  // e in [0, 1] for body–body / body–heightfield contacts
-  double rolling_friction = knobs::kBodyRollingFriction.def;  // rolling resistance (torque arm / radius)
   std::vector<LoadDef> loads;                  // at most kMaxLoadsPerBody
 
-  // Mass in kg: `mass`, or density × shape.volume().
-  double mass_value() const;
+  // Volume of the shape (m³): analytic for primitives, mesh_volume for meshes.
+  double volume() const;
 };
 
 // ---- joints (docs/scene-format.md "joints") ----
@@ -231,17 +180,6 @@ struct VehicleSceneDef {
 
 enum class Backend { Cpu, Gl };
 
-struct PoolDef {
-  int slots = int(knobs::kSlots.def);          // simulations kept ready (active patches at once)
-  int granules_per_slot = int(knobs::kGranulesPerSlot.def);  // capacity of each slot
-  int shell_spheres_per_slot = int(knobs::kShellSpheresPerSlot.def);  // body-shell spheres each slot holds
-};
-
-struct SleepDef {
-  double speed_threshold = knobs::kSleepSpeed.def;  // m/s, every granule slower than this ...
-  double hold_time = knobs::kSleepTime.def;    // s, ... for this long puts a patch to sleep
-};
-
 // Particle scale by distance from a camera (Leach & Marais §4.3, §6.3 scenario 2): a patch is
 // promoted at the particle_scale of the first band whose max_distance reaches the distance from
 // the camera (its position at the time of promotion) to the patch's centre on the surface;
@@ -255,34 +193,13 @@ struct ScaleByDistanceDef {
   std::vector<ScaleBandDef> bands;             // 1 to 16
 };
 
-// Contact prediction (manager/lod.hpp): a patch is requested when a body's ballistic path
-// comes within `margin` of the terrain inside `horizon`.
-struct LodSectionDef {
-  double horizon = knobs::kLodHorizon.def;     // s
-  double margin = knobs::kLodMargin.def;       // m
-  double apron = knobs::kLodApron.def;         // m, around a contact's footprint on every side
-};
-
+// The simulation section's fields that are not the terrain's knobs (those are in TerrainDef:
+// pool, particle_scale, steps_per_contact, ... see there).
 struct SceneSimulationDef {
   double dt = 1.0 / 60.0;                      // s, fixed step of bodies and the frame
   int substeps = 1;                            // substeps per step (the DEM may substep further)
   double duration = 10.0;                      // s, simulated time of a run
-  Backend backend = Backend::Cpu;              // DEM backend
-  int threads = 0;                             // worker threads, 0 = all hardware threads
-  PoolDef pool;
-  double particle_scale = knobs::kParticleScale.def;  // render size / simulated size (Leach §4.3)
-  int steps_per_contact = int(knobs::kStepsPerContact.def);  // N: the DEM substeps at dt <= t_c / N (t_c: contact time)
-  int max_substeps = int(knobs::kMaxSubsteps.def);  // most DEM substeps per frame, 0 = max(64, 64 N / 20)
-  // ms of wall time a frame's patches may take (docs/manager.md "Frame budget"); absent: half
-  // of dt; "off" (infinity here): none.
-  std::optional<double> frame_budget_ms;
-  LodSectionDef lod;
   std::optional<ScaleByDistanceDef> scale_by_distance;  // instead of one particle_scale for every patch
-  SleepDef sleep;
-  double idle_timeout = knobs::kIdleTimeout.def;  // s asleep and untouched before demotion (Leach & Marais)
-  bool granular_patches = true;                // false: no patches, bodies meet the heightfield only (LOD off the other way)
-  Vec3d gravity = {0.0, -9.81, 0.0};           // m/s²
-  std::uint64_t seed = 1;                      // all randomness of a run
   std::string preset;                          // "" or the preset applied first (simulation_presets())
 };
 
@@ -369,7 +286,7 @@ struct SceneDef {
   std::vector<CameraDef> cameras;
   OutputsDef outputs;
 
-  const MaterialDef* find_material(const std::string& n) const;
+  const MaterialDef* find_material(const std::string& n) const;  // by name
   const CameraDef* find_camera(const std::string& n) const;
 };
 
@@ -398,7 +315,7 @@ Result<SceneDef> load_default_scene();
 nlohmann::json scene_to_json(const SceneDef& scene);
 
 // Lowest point of a body below its position (m, ≥ 0), for its pose's orientation. Meshes
-// are reloaded from shape.file; if that fails the mesh's bounds are unknown and 0 is returned.
+// are reloaded from shape.mesh_file; if that fails the mesh's bounds are unknown and 0 is returned.
 double body_extent_below(const BodyDef& body);
 
 // The check only the terrain can answer: a body whose lowest point starts below the

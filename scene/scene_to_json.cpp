@@ -15,38 +15,38 @@ nlohmann::json scene_to_json(const SceneDef& s) {
   j["name"] = s.name;
   j["description"] = s.description;
 
+  const TerrainDef& ter = s.terrain;
   json t;
   json src;
-  src["type"] = to_string(s.terrain.source.kind);
-  if (s.terrain.source.kind == TerrainSourceKind::Procedural) {
-    const auto& p = s.terrain.source.procedural;
-    src["kind"] = to_string(p.kind);
-    src["height"] = p.height;
-    src["slope_x"] = p.slope_x;
-    src["slope_z"] = p.slope_z;
-    src["amplitude"] = p.amplitude;
-    src["wavelength"] = p.wavelength;
-    src["seed"] = p.seed;
-    src["octaves"] = p.octaves;
-    src["samples_x"] = p.samples_x;
-    src["samples_z"] = p.samples_z;
+  src["type"] = to_string(ter.source_kind());
+  if (!ter.procedural.empty()) {
+    src["kind"] = ter.procedural;
+    src["height"] = ter.base_height;
+    src["slope_x"] = ter.slope_x;
+    src["slope_z"] = ter.slope_z;
+    src["amplitude"] = ter.amplitude;
+    src["wavelength"] = ter.wavelength;
+    src["seed"] = ter.noise_seed;
+    src["octaves"] = ter.octaves;
+    src["samples_x"] = ter.samples_x;
+    src["samples_z"] = ter.samples_z;
   } else {
-    src["file"] = s.terrain.source.file;
-    if (s.terrain.source.kind == TerrainSourceKind::RawF32) {
-      src["samples_x"] = s.terrain.source.samples_x;
-      src["samples_z"] = s.terrain.source.samples_z;
+    src["file"] = ter.file;
+    if (ter.source_kind() == TerrainSourceKind::RawF32) {
+      src["samples_x"] = ter.samples_x;
+      src["samples_z"] = ter.samples_z;
     }
   }
   t["source"] = src;
-  if (s.terrain.size) t["size"] = *s.terrain.size;
-  else t["spacing"] = s.terrain.spacing;
-  t["vertical_scale"] = s.terrain.vertical_scale;
-  t["vertical_offset"] = s.terrain.vertical_offset;
-  t["origin"] = s.terrain.origin;
-  if (s.terrain.bedrock_height) t["bedrock_height"] = *s.terrain.bedrock_height;
-  else t["soil_depth"] = s.terrain.soil_depth.value_or(knobs::kSoilDepth.def);
-  t["patch_depth"] = s.terrain.patch_depth;
-  t["material"] = s.terrain.material;
+  if (ter.size) t["size"] = *ter.size;
+  else t["spacing"] = ter.spacing;
+  t["vertical_scale"] = ter.vertical_scale;
+  t["vertical_offset"] = ter.vertical_offset;
+  t["origin"] = ter.origin;
+  if (ter.bedrock_height) t["bedrock_height"] = *ter.bedrock_height;
+  else t["soil_depth"] = ter.soil_depth;
+  t["patch_depth"] = ter.patch_depth;
+  t["material"] = ter.material_name;
   j["terrain"] = t;
 
   j["materials"] = json::array();
@@ -56,7 +56,7 @@ nlohmann::json scene_to_json(const SceneDef& s) {
     mj["density"] = m.density;
     mj["friction"] = m.friction;
     if (m.damping_ratio) mj["damping_ratio"] = *m.damping_ratio;
-    else mj["restitution"] = m.restitution_value();
+    else mj["restitution"] = m.restitution;
     mj["stiffness"] = m.stiffness;
     mj["tangential_stiffness_ratio"] = m.tangential_stiffness_ratio;
     mj["unloading_stiffness_ratio"] = m.unloading_stiffness_ratio;
@@ -79,17 +79,17 @@ nlohmann::json scene_to_json(const SceneDef& s) {
         sh["height"] = b.shape.height;
         break;
       case ShapeKind::Mesh:
-        sh["file"] = b.shape.file;
-        sh["scale"] = b.shape.scale;
+        sh["file"] = b.shape.mesh_file;
+        sh["scale"] = b.shape.mesh_scale;
         sh["solid"] = b.shape.solid;
         break;
     }
     bj["shape"] = sh;
     bj["motion"] = to_string(b.motion);
     if (b.density) bj["density"] = *b.density;
-    else if (b.motion == MotionKind::Dynamic) bj["mass"] = b.mass.value_or(0.0);
+    else if (b.motion == MotionKind::Dynamic) bj["mass"] = b.mass;
     if (b.keyframes.empty()) {
-      bj["pose"] = {{"position", b.pose.position}, {"orientation", b.pose.orientation}};
+      bj["pose"] = {{"position", b.position}, {"orientation", b.orientation}};
     } else {
       json ks = json::array();
       for (const KeyframeDef& k : b.keyframes) ks.push_back({{"t", k.t}, {"position", k.position}, {"orientation", k.orientation}});
@@ -193,27 +193,27 @@ nlohmann::json scene_to_json(const SceneDef& s) {
       {"dt", sim.dt},
       {"substeps", sim.substeps},
       {"duration", sim.duration},
-      {"backend", to_string(sim.backend)},
-      {"threads", sim.threads},
-      {"pool", {{"slots", sim.pool.slots}, {"granules_per_slot", sim.pool.granules_per_slot},
-                {"shell_spheres_per_slot", sim.pool.shell_spheres_per_slot}}},
-      {"particle_scale", sim.particle_scale},
-      {"steps_per_contact", sim.steps_per_contact},
-      {"max_substeps", sim.max_substeps},
-      {"lod", {{"horizon", sim.lod.horizon}, {"margin", sim.lod.margin}, {"apron", sim.lod.apron}}},
-      {"sleep", {{"speed_threshold", sim.sleep.speed_threshold}, {"hold_time", sim.sleep.hold_time}}},
-      {"idle_timeout", sim.idle_timeout},
-      {"granular_patches", sim.granular_patches},
-      {"gravity", sim.gravity},
-      {"seed", sim.seed},
+      {"backend", ter.backend},
+      {"threads", ter.threads},
+      {"pool", {{"slots", ter.slots}, {"granules_per_slot", ter.granules_per_slot},
+                {"shell_spheres_per_slot", ter.shell_spheres_per_slot}}},
+      {"particle_scale", ter.particle_scale},
+      {"steps_per_contact", ter.steps_per_contact},
+      {"max_substeps", ter.max_substeps},
+      {"lod", {{"horizon", ter.lod_horizon}, {"margin", ter.lod_margin}, {"apron", ter.lod_apron}}},
+      {"sleep", {{"speed_threshold", ter.sleep_speed}, {"hold_time", ter.sleep_time}}},
+      {"idle_timeout", ter.idle_timeout},
+      {"granular_patches", ter.granular_patches},
+      {"gravity", ter.gravity},
+      {"seed", ter.seed},
   };
   // Only when one was applied (every field above already holds its values), so scenes without
   // a preset keep their canonical JSON and hash.
   if (!sim.preset.empty()) j["simulation"]["preset"] = sim.preset;
   // Only when given (absent: half of dt), so scenes without one keep their canonical JSON.
-  if (sim.frame_budget_ms) {
-    if (std::isinf(*sim.frame_budget_ms)) j["simulation"]["frame_budget_ms"] = "off";
-    else j["simulation"]["frame_budget_ms"] = *sim.frame_budget_ms;
+  if (ter.frame_budget_ms) {
+    if (std::isinf(*ter.frame_budget_ms)) j["simulation"]["frame_budget_ms"] = "off";
+    else j["simulation"]["frame_budget_ms"] = *ter.frame_budget_ms;
   }
   if (sim.scale_by_distance) {
     json bands = json::array();

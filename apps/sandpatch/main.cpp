@@ -251,7 +251,7 @@ int cmd_check(const std::string& path, bool tiles) {
   // --tiles: the pool too, as run makes it (one thread: the tiles do not depend on it, and a
   // build running beside other jobs gains nothing from two)
   ProgressPrinter progress(ProgressStyle::Lines, 1, scene->simulation.dt);
-  auto world = make_world(*scene, 1, to_string(scene->simulation.backend), &stage, /*patches=*/tiles,
+  auto world = make_world(*scene, 1, scene->terrain.backend, &stage, /*patches=*/tiles,
                           [&](const std::string& what, double done, double max, double wall) { progress.note(what, done / max, wall); });
   if (!world) {
     print_errors(path + ": invalid scene (" + std::to_string(world.errors().size()) + " error(s) at the " + stage +

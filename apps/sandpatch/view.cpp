@@ -398,16 +398,16 @@ int run_view(const ViewArgs& a) {
   }
   SceneDef scene = *loaded;
   if (a.frame_budget == "off") {
-    scene.simulation.frame_budget_ms = std::numeric_limits<double>::infinity();
+    scene.terrain.frame_budget_ms = std::numeric_limits<double>::infinity();
   } else if (!a.frame_budget.empty()) {
     char* end = nullptr;
     const double v = std::strtod(a.frame_budget.c_str(), &end);
     if (!end || *end != '\0' || end == a.frame_budget.c_str() || !(v > 0) || !std::isfinite(v))
       return bad("--frame-budget " + a.frame_budget + ": must be a number of ms > 0, or off");
-    scene.simulation.frame_budget_ms = v;
+    scene.terrain.frame_budget_ms = v;
   }
   if (!a.camera.empty() && !scene.find_camera(a.camera)) return bad("--camera " + a.camera + ": the scene has no such camera");
-  const std::string backend = a.backend.empty() ? to_string(scene.simulation.backend) : a.backend;
+  const std::string backend = a.backend.empty() ? scene.terrain.backend : a.backend;
   if (backend != "cpu" && backend != "gl") return bad("--backend " + backend + ": allowed values are cpu, gl");
 
   // ---- the display ----
@@ -424,7 +424,7 @@ int run_view(const ViewArgs& a) {
   } glfw_guard;
 
   // ---- the world ----
-  const int threads_req = a.threads >= 0 ? a.threads : scene.simulation.threads;
+  const int threads_req = a.threads >= 0 ? a.threads : scene.terrain.threads;
   omp_set_num_threads(threads_req > 0 ? threads_req : omp_get_num_procs());
   std::string stage;
   const auto t_setup = Clock::now();

@@ -197,17 +197,17 @@ enum class ShapeKind { Sphere, Box, Cylinder, Capsule, Mesh };
 // the body's y.
 struct ShapeDef {
   ShapeKind kind = ShapeKind::Sphere;
-  double radius = 0.5;                         // m (sphere, cylinder, capsule), (0, 1e4]
-  double height = 1.0;                         // m, cylinder: total height, (0, 1e4];
+  double radius = 0.5;                         // m (sphere, cylinder, capsule), [1e-6, 1e4]
+  double height = 1.0;                         // m, cylinder: total height, [1e-6, 1e4];
                                                //    capsule: between the cap centres, [0, 1e4]
-  Vec3 half_extents = {0.5, 0.5, 0.5};         // m (box), each (0, 1e4]
+  Vec3 half_extents = {0.5, 0.5, 0.5};         // m (box), each [1e-6, 1e4]
   // Mesh: a closed triangle mesh from an OBJ file, or given here (vertices: x, y, z per
   // vertex, m; triangles: 3 indices each, counter-clockwise seen from outside). The mesh is
   // re-centred on its centroid. Bullet collides with its convex hull, with the mesh's exact
   // inertia about its own axes; patches see the mesh (a shell from its signed distance field).
   // No degenerate (zero-area) triangles.
   std::string mesh_file;
-  double mesh_scale = 1.0;                     // OBJ units → m, (0, 1e4]
+  double mesh_scale = 1.0;                     // OBJ units → m, [1e-6, 1e4]
   // true: a closed solid (checked: every edge shared by two triangles, outward winding), with
   // an inside for the particle shell; false: a thin surface (a shell of its own), taken as is.
   bool solid = true;

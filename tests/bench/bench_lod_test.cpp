@@ -25,8 +25,8 @@ TEST(BenchLod, ScenesValidateForEverySize) {
   for (int n : {64, 512, 8192})
     for (auto kind : {LodBenchScene::Drop, LodBenchScene::Idle, LodBenchScene::Asleep}) {
       const SceneDef s = parse(lod_bench_scene(kind, n, 2));
-      EXPECT_EQ(s.terrain.source.procedural.samples_x, n + 1);
-      EXPECT_EQ(s.terrain.source.procedural.samples_z, n + 1);
+      EXPECT_EQ(s.terrain.samples_x, n + 1);
+      EXPECT_EQ(s.terrain.samples_z, n + 1);
       EXPECT_DOUBLE_EQ(s.terrain.spacing, 0.5);
       EXPECT_FALSE(s.outputs.report);  // the bench writes nothing
     }
@@ -45,10 +45,10 @@ TEST(BenchLod, BodiesStayPutWhileTheTerrainGrows) {
   // Bodies sit well inside the smallest terrain (64 cells = 32 m) and far from each other's patches.
   const SceneDef s = parse(lod_bench_scene(LodBenchScene::Drop, 64, 2));
   for (const auto& b : s.bodies) {
-    EXPECT_GT(b.pose.position[0], 2.0);
-    EXPECT_LT(b.pose.position[0], 30.0);
-    EXPECT_GT(b.pose.position[2], 2.0);
-    EXPECT_LT(b.pose.position[2], 30.0);
+    EXPECT_GT(b.position[0], 2.0);
+    EXPECT_LT(b.position[0], 30.0);
+    EXPECT_GT(b.position[2], 2.0);
+    EXPECT_LT(b.position[2], 30.0);
   }
 }
 
@@ -56,8 +56,8 @@ TEST(BenchLod, FullTerrainBodyCoversTheTerrain) {
   // The ball's patch is its footprint (0.5 m) plus a 1 m apron each side: 2.5 m > the 2 m terrain.
   const SceneDef s = parse(lod_bench_scene(LodBenchScene::Full, 4, 2));
   ASSERT_EQ(s.bodies.size(), 1u);
-  EXPECT_DOUBLE_EQ(s.bodies[0].pose.position[0], 1.0);
-  EXPECT_DOUBLE_EQ(s.bodies[0].pose.position[2], 1.0);
+  EXPECT_DOUBLE_EQ(s.bodies[0].position[0], 1.0);
+  EXPECT_DOUBLE_EQ(s.bodies[0].position[2], 1.0);
   EXPECT_LE(4 * 0.5, 2 * s.bodies[0].shape.radius + 2.0);
   const SceneDef slab = parse(lod_bench_scene(LodBenchScene::FullSlab, 8, 2));
   ASSERT_EQ(slab.bodies.size(), 1u);

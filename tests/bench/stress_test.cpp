@@ -26,7 +26,7 @@ TEST(Stress, SceneCopiesTheFirstBodyOntoAGrid) {
   auto s = make_stress_scene(*base, 5, 1.5, 240);
   ASSERT_TRUE(s.ok()) << s.message();
   ASSERT_EQ(s->bodies.size(), 5u);
-  EXPECT_EQ(s->simulation.pool.slots, 5);
+  EXPECT_EQ(s->terrain.slots, 5);
   EXPECT_NEAR(s->simulation.duration, 240 * base->simulation.dt, 1e-9);
   EXPECT_FALSE(s->outputs.report);
   std::set<std::pair<long, long>> spots;
@@ -35,11 +35,11 @@ TEST(Stress, SceneCopiesTheFirstBodyOntoAGrid) {
     EXPECT_EQ(b.shape.kind, base->bodies[0].shape.kind);
     EXPECT_DOUBLE_EQ(b.shape.radius, base->bodies[0].shape.radius);
     EXPECT_NEAR(b.spawn_time, base->bodies[0].spawn_time + 1.5 * double(k), 1e-12);
-    spots.insert({std::lround(b.pose.position[0] * 100), std::lround(b.pose.position[2] * 100)});
+    spots.insert({std::lround(b.position[0] * 100), std::lround(b.position[2] * 100)});
     // Patches (footprint + 1 m apron) of neighbours do not overlap: pitch = 2 R + 4 m.
     for (std::size_t m = 0; m < k; ++m) {
-      const double dx = b.pose.position[0] - s->bodies[m].pose.position[0];
-      const double dz = b.pose.position[2] - s->bodies[m].pose.position[2];
+      const double dx = b.position[0] - s->bodies[m].position[0];
+      const double dz = b.position[2] - s->bodies[m].position[2];
       EXPECT_GE(std::max(std::abs(dx), std::abs(dz)), 2 * base->bodies[0].shape.radius + 4.0 - 1e-9);
     }
   }

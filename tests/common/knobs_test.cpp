@@ -16,6 +16,7 @@
 
 #include "manager/bullet_world.hpp"
 #include "manager/lod.hpp"
+#include "manager/run.hpp"
 #include "manager/scene_world.hpp"
 #include "manager/terrain_manager.hpp"
 #include "sandpatch/sandpatch.hpp"
@@ -80,7 +81,7 @@ std::vector<Case> cases() {
       {&knobs::kFriction, mat("friction"), [](S s) { return s.materials[0].friction; },
        [](T t, D, double v) { t.material.friction = v; }, td.material.friction,
        [](S s) { return manager_field(s, [](M m) { return double(m.material.friction); }); }},
-      {&knobs::kRestitution, mat("restitution"), [](S s) { return s.materials[0].restitution_value(); },
+      {&knobs::kRestitution, mat("restitution"), [](S s) { return s.materials[0].restitution; },
        [](T t, D, double v) { t.material.restitution = v; }, td.material.restitution,
        [](S s) { return manager_field(s, [](M m) { return double(m.material.restitution); }); }},
       {&knobs::kStiffness, mat("stiffness"), [](S s) { return s.materials[0].stiffness; },
@@ -92,49 +93,49 @@ std::vector<Case> cases() {
       {&knobs::kUnloadingRatio, mat("unloading_stiffness_ratio"), [](S s) { return s.materials[0].unloading_stiffness_ratio; },
        [](T t, D, double v) { t.material.unloading_stiffness_ratio = v; }, td.material.unloading_stiffness_ratio,
        [](S s) { return manager_field(s, [](M m) { return double(m.material.unloading_stiffness_ratio); }); }},
-      {&knobs::kSlots, sim2("pool", "slots"), [](S s) { return double(s.simulation.pool.slots); },
+      {&knobs::kSlots, sim2("pool", "slots"), [](S s) { return double(s.terrain.slots); },
        [](T t, D, double v) { t.slots = int(v); }, double(td.slots),
        [](S s) { return manager_field(s, [](M m) { return double(m.slots); }); }},
-      {&knobs::kGranulesPerSlot, sim2("pool", "granules_per_slot"), [](S s) { return double(s.simulation.pool.granules_per_slot); },
+      {&knobs::kGranulesPerSlot, sim2("pool", "granules_per_slot"), [](S s) { return double(s.terrain.granules_per_slot); },
        [](T t, D, double v) { t.granules_per_slot = int(v); }, double(td.granules_per_slot),
        [](S s) { return manager_field(s, [](M m) { return double(m.granules_per_slot); }); }},
-      {&knobs::kShellSpheresPerSlot, sim2("pool", "shell_spheres_per_slot"), [](S s) { return double(s.simulation.pool.shell_spheres_per_slot); },
+      {&knobs::kShellSpheresPerSlot, sim2("pool", "shell_spheres_per_slot"), [](S s) { return double(s.terrain.shell_spheres_per_slot); },
        [](T t, D, double v) { t.shell_spheres_per_slot = int(v); }, double(td.shell_spheres_per_slot),
        [](S s) { return manager_field(s, [](M m) { return double(m.shell_particles_per_slot); }); }},
-      {&knobs::kParticleScale, sim("particle_scale"), [](S s) { return s.simulation.particle_scale; },
+      {&knobs::kParticleScale, sim("particle_scale"), [](S s) { return s.terrain.particle_scale; },
        [](T t, D, double v) { t.particle_scale = v; }, td.particle_scale,
        [](S s) { return manager_field(s, [](M m) { return m.particle_scale; }); }},
-      {&knobs::kStepsPerContact, sim("steps_per_contact"), [](S s) { return double(s.simulation.steps_per_contact); },
+      {&knobs::kStepsPerContact, sim("steps_per_contact"), [](S s) { return double(s.terrain.steps_per_contact); },
        [](T t, D, double v) { t.steps_per_contact = int(v); }, double(td.steps_per_contact),
        [](S s) { return manager_field(s, [](M m) { return double(m.steps_per_contact); }); }},
-      {&knobs::kMaxSubsteps, sim("max_substeps"), [](S s) { return double(s.simulation.max_substeps); },
+      {&knobs::kMaxSubsteps, sim("max_substeps"), [](S s) { return double(s.terrain.max_substeps); },
        [](T t, D, double v) { t.max_substeps = int(v); }, double(td.max_substeps),
        [](S s) { return manager_field(s, [](M m) { return double(m.max_substeps); }); }},
       {&knobs::kPatchDepth, ter("patch_depth"), [](S s) { return s.terrain.patch_depth; },
        [](T t, D, double v) { t.patch_depth = v; }, td.patch_depth,
        [](S s) { return manager_field(s, [](M m) { return m.patch_depth; }); }},
-      {&knobs::kSoilDepth, ter("soil_depth"), [](S s) { return s.terrain.soil_depth.value_or(-1); },
+      {&knobs::kSoilDepth, ter("soil_depth"), [](S s) { return s.terrain.soil_depth; },
        [](T t, D, double v) { t.soil_depth = v; }, td.soil_depth,
        [](S s) { return manager_field(s, [](M m) { return m.soil_depth; }); }},
-      {&knobs::kSleepSpeed, sim2("sleep", "speed_threshold"), [](S s) { return s.simulation.sleep.speed_threshold; },
+      {&knobs::kSleepSpeed, sim2("sleep", "speed_threshold"), [](S s) { return s.terrain.sleep_speed; },
        [](T t, D, double v) { t.sleep_speed = v; }, td.sleep_speed,
        [](S s) { return manager_field(s, [](M m) { return m.sleep_speed; }); }},
-      {&knobs::kSleepTime, sim2("sleep", "hold_time"), [](S s) { return s.simulation.sleep.hold_time; },
+      {&knobs::kSleepTime, sim2("sleep", "hold_time"), [](S s) { return s.terrain.sleep_time; },
        [](T t, D, double v) { t.sleep_time = v; }, td.sleep_time,
        [](S s) { return manager_field(s, [](M m) { return m.sleep_time; }); }},
-      {&knobs::kIdleTimeout, sim("idle_timeout"), [](S s) { return s.simulation.idle_timeout; },
+      {&knobs::kIdleTimeout, sim("idle_timeout"), [](S s) { return s.terrain.idle_timeout; },
        [](T t, D, double v) { t.idle_timeout = v; }, td.idle_timeout,
        [](S s) { return manager_field(s, [](M m) { return m.idle_timeout; }); }},
-      {&knobs::kThreads, sim("threads"), [](S s) { return double(s.simulation.threads); },
+      {&knobs::kThreads, sim("threads"), [](S s) { return double(s.terrain.threads); },
        [](T t, D, double v) { t.threads = int(v); }, double(td.threads),
-       [](S s) { return double(s.simulation.threads); }},  // the run picks the thread count (RunOptions)
-      {&knobs::kLodHorizon, sim2("lod", "horizon"), [](S s) { return s.simulation.lod.horizon; },
+       [](S s) { return double(s.terrain.threads); }},  // the run picks the thread count (RunOptions)
+      {&knobs::kLodHorizon, sim2("lod", "horizon"), [](S s) { return s.terrain.lod_horizon; },
        [](T t, D, double v) { t.lod_horizon = v; }, td.lod_horizon,
        [](S s) { return manager_field(s, [](M m) { return m.lod.horizon; }); }},
-      {&knobs::kLodMargin, sim2("lod", "margin"), [](S s) { return s.simulation.lod.margin; },
+      {&knobs::kLodMargin, sim2("lod", "margin"), [](S s) { return s.terrain.lod_margin; },
        [](T t, D, double v) { t.lod_margin = v; }, td.lod_margin,
        [](S s) { return manager_field(s, [](M m) { return m.lod.margin; }); }},
-      {&knobs::kLodApron, sim2("lod", "apron"), [](S s) { return s.simulation.lod.apron; },
+      {&knobs::kLodApron, sim2("lod", "apron"), [](S s) { return s.terrain.lod_apron; },
        [](T t, D, double v) { t.lod_apron = v; }, td.lod_apron,
        [](S s) { return manager_field(s, [](M m) { return m.lod.apron; }); }},
       {&knobs::kBodyFriction, body("friction"), [](S s) { return s.bodies[0].friction; },
@@ -331,6 +332,169 @@ TEST(Knobs, DocsHoldTheTable) {
     EXPECT_EQ(text.substr(a + begin.size(), b - a - begin.size()), knobs::knob_table_markdown())
         << "regenerate the block with `sandpatch info --knobs`";
   }
+}
+
+// ---- the limits of shapes, cameras and outputs (knobs::kLimits) ----
+
+// A scene with one body of `shape` and a camera that an output films.
+json limits_scene(const json& shape) {
+  json j = base_scene();
+  j["bodies"][0]["shape"] = shape;
+  j["cameras"] = json::parse(R"([{"name": "cam", "position": [0, 5, 10], "target": [4, 0, 4]}])");
+  j["outputs"] = json::parse(R"({"frames": [{"camera": "cam", "times": [0.5]}]})");
+  return j;
+}
+const std::string kBarrel = std::string(SANDPATCH_SOURCE_DIR) + "/scenes/meshes/barrel.obj";
+
+struct LimitCase {
+  const knobs::Knob* knob;
+  std::function<json(double)> scene;                 // a scene with the value at the limit's field
+  std::string scene_field;                           // the field its error names
+  std::function<void(api::BodyDef&, double)> set_api;  // nullptr: a scene-only limit
+  std::string api_field;
+};
+
+std::vector<LimitCase> limit_cases() {
+  const json sphere = {{"type", "sphere"}, {"radius", 0.2}};
+  auto with = [](json shape, const char* key, double v) {
+    shape[key] = v;
+    return limits_scene(shape);
+  };
+  auto cam = [sphere](const char* key) {
+    return [sphere, key](double v) {
+      json j = limits_scene(sphere);
+      j["cameras"][0][key] = v;
+      return j;
+    };
+  };
+  return {
+      {&knobs::kShapeRadius, [=](double v) { return with(sphere, "radius", v); }, "bodies[0].shape.radius",
+       [](api::BodyDef& b, double v) { b.shape.radius = v; }, "BodyDef.shape.radius"},
+      {&knobs::kShapeHalfExtent,
+       [](double v) { return limits_scene({{"type", "box"}, {"half_extents", {0.2, v, 0.2}}}); }, "bodies[0].shape.half_extents[1]",
+       [](api::BodyDef& b, double v) {
+         b.shape.kind = api::ShapeKind::Box;
+         b.shape.half_extents = {0.2, v, 0.2};
+       },
+       "BodyDef.shape.half_extents[1]"},
+      {&knobs::kCylinderHeight, [=](double v) { return with({{"type", "cylinder"}, {"radius", 0.2}}, "height", v); },
+       "bodies[0].shape.height",
+       [](api::BodyDef& b, double v) {
+         b.shape.kind = api::ShapeKind::Cylinder;
+         b.shape.height = v;
+       },
+       "BodyDef.shape.height"},
+      {&knobs::kCapsuleHeight, [=](double v) { return with({{"type", "capsule"}, {"radius", 0.2}}, "height", v); },
+       "bodies[0].shape.height",
+       [](api::BodyDef& b, double v) {
+         b.shape.kind = api::ShapeKind::Capsule;
+         b.shape.height = v;
+       },
+       "BodyDef.shape.height"},
+      {&knobs::kMeshScale, [=](double v) { return with({{"type", "mesh"}, {"file", kBarrel}}, "scale", v); }, "bodies[0].shape.scale",
+       [](api::BodyDef& b, double v) {
+         b.shape.kind = api::ShapeKind::Mesh;
+         b.shape.mesh_file = kBarrel;
+         b.shape.mesh_scale = v;
+       },
+       "BodyDef.shape.mesh_scale"},
+      {&knobs::kCameraFov, cam("fov_deg"), "cameras[0].fov_deg", nullptr, ""},
+      {&knobs::kCameraWidth, cam("width"), "cameras[0].width", nullptr, ""},
+      {&knobs::kCameraHeight, cam("height"), "cameras[0].height", nullptr, ""},
+      {&knobs::kCameraKeyTime,
+       [=](double v) {
+         json j = limits_scene(sphere);
+         j["cameras"][0].erase("position");
+         j["cameras"][0].erase("target");
+         j["cameras"][0]["path"] = {{{"time", v}, {"position", {0, 5, 10}}, {"target", {4, 0, 4}}}};
+         return j;
+       },
+       "cameras[0].path[0].time", nullptr, ""},
+      {&knobs::kOutputTime,
+       [=](double v) {
+         json j = limits_scene(sphere);
+         j["outputs"]["frames"][0]["times"] = {v};
+         return j;
+       },
+       "outputs.frames[0].times[0]", nullptr, ""},
+      {&knobs::kEveryKFrames,
+       [=](double v) {
+         json j = limits_scene(sphere);
+         j["outputs"]["frames"][0].erase("times");
+         j["outputs"]["frames"][0]["every_k_frames"] = v;
+         return j;
+       },
+       "outputs.frames[0].every_k_frames", nullptr, ""},
+      // kVideoFps: a command-line option, refused by the run (tests/manager/run_outputs_test.cpp).
+  };
+}
+
+// Values outside a limit's range at both ends (a whole number inside it for integers).
+std::vector<double> outside(const knobs::Knob& k) {
+  return {k.hi_open ? k.hi : k.hi * 10 + 1, k.lo_open ? k.lo : (k.lo > 0 ? k.lo / 2 : k.lo - 1)};
+}
+
+TEST(Knobs, EveryLimitHasACase) {
+  const auto cs = limit_cases();
+  ASSERT_EQ(cs.size() + 1, knobs::kLimits.size()) << "every limit but kVideoFps has a case";
+  for (std::size_t i = 0; i < cs.size(); ++i) {
+    EXPECT_EQ(cs[i].knob, knobs::kLimits[i]) << "limit_cases() in the order of kLimits";
+    EXPECT_EQ(cs[i].scene_field.substr(0, cs[i].scene_field.find('[')),
+              std::string(cs[i].knob->scene).substr(0, std::string(cs[i].knob->scene).find('[')));
+    EXPECT_EQ(cs[i].set_api != nullptr, *cs[i].knob->api != '\0') << cs[i].knob->scene;
+    EXPECT_TRUE(*cs[i].knob->api || *cs[i].knob->one_door) << cs[i].knob->scene << ": no API field and no reason";
+  }
+  for (const knobs::Knob* k : knobs::kLimits)
+    EXPECT_TRUE(std::isnan(k->def) || k->allows(k->def)) << k->scene << ": the default is outside its range";
+}
+
+// A value inside the range is taken by both doors; one outside, at either end, is refused by
+// both, naming the field, the value and the table's range.
+TEST(Knobs, BothDoorsRefuseTheSameLimits) {
+  for (const LimitCase& c : limit_cases()) {
+    SCOPED_TRACE(c.knob->scene);
+    const double inside = std::isnan(c.knob->def) ? c.knob->lo : c.knob->def;
+    auto good = parse_scene(c.scene(inside).dump(), "limits.json", "");
+    ASSERT_TRUE(good.ok()) << inside << ": " << good.message();
+    for (double v : outside(*c.knob)) {
+      auto scene = parse_scene(c.scene(v).dump(), "limits.json", "");
+      ASSERT_FALSE(scene.ok()) << "scene file accepted " << v;
+      EXPECT_NE(scene.message().find(c.scene_field), std::string::npos) << scene.message();
+      const std::string range = format_number(c.knob->lo) + ", " + format_number(c.knob->hi);
+      EXPECT_NE(scene.message().find(range), std::string::npos) << scene.message();
+      if (!c.set_api) continue;
+      api::TerrainDef t;
+      t.procedural = "flat";
+      t.samples_x = t.samples_z = 9;
+      t.granular_patches = false;
+      auto terrain = api::Terrain::create(t);
+      ASSERT_TRUE(terrain.ok()) << terrain.message();
+      api::BodyDef b;
+      b.position = {4.0, 2.0, 4.0};
+      c.set_api(b, inside);
+      EXPECT_TRUE(terrain->add_body(b).ok()) << "BodyDef refused " << inside;
+      c.set_api(b, v);
+      auto h = terrain->add_body(b);
+      ASSERT_FALSE(h.ok()) << "BodyDef accepted " << v;
+      EXPECT_NE(h.message().find(c.api_field), std::string::npos) << h.message();
+      EXPECT_NE(h.message().find(knobs::describe_range(*c.knob)), std::string::npos) << h.message();
+    }
+  }
+}
+
+// The defaults of the table are those of the public ShapeDef, the scene's cameras and the run.
+TEST(Knobs, LimitDefaultsAgree) {
+  const api::ShapeDef a;  // scene files' shapes are the library's
+  EXPECT_EQ(a.radius, knobs::kShapeRadius.def);
+  EXPECT_EQ(a.half_extents[0], knobs::kShapeHalfExtent.def);
+  EXPECT_EQ(a.height, knobs::kCylinderHeight.def);
+  EXPECT_EQ(a.height, knobs::kCapsuleHeight.def);
+  EXPECT_EQ(a.mesh_scale, knobs::kMeshScale.def);
+  const CameraDef cam;
+  EXPECT_EQ(cam.fov_deg, knobs::kCameraFov.def);
+  EXPECT_EQ(cam.width, knobs::kCameraWidth.def);
+  EXPECT_EQ(cam.height, knobs::kCameraHeight.def);
+  EXPECT_EQ(RunOptions{}.video_fps, knobs::kVideoFps.def);
 }
 
 }  // namespace

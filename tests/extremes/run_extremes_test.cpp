@@ -7,18 +7,13 @@
 #include <string>
 
 #include "manager/run.hpp"
+#include "tests/manager/fresh_dir.hpp"
 #include "scene/scene.hpp"
 
 namespace fs = std::filesystem;
 using namespace sandpatch;
 
 namespace {
-
-fs::path fresh_dir(const std::string& name) {
-  fs::path p = fs::temp_directory_path() / ("sandpatch_extremes_run_" + name);
-  fs::remove_all(p);
-  return p;
-}
 
 // A 6.4 m flat terrain at y = 1 m, one sphere of radius 0.2 m at height `y` (its centre), no
 // patches unless `patches`.
@@ -41,7 +36,7 @@ RunResult run(const std::string& json, const std::string& dir) {
   EXPECT_TRUE(s.ok()) << (s.ok() ? "" : s.message());
   if (!s.ok()) return {};
   RunOptions opt;
-  opt.out_dir = fresh_dir(dir).string();
+  opt.out_dir = test::fresh_dir("extremes_run", dir).string();
   opt.progress = ProgressStyle::None;
   opt.threads = 1;
   return run_scene(*s, opt);
@@ -62,7 +57,7 @@ TEST(ExtremesRun, BodySpawnedInsideTheTerrainIsRefused) {
                            "starts inside the terrain", "world y = 1 m"})
     EXPECT_NE(r.message.find(part), std::string::npos) << part << " not in: " << r.message;
   EXPECT_TRUE(r.report_path.empty());
-  EXPECT_FALSE(fs::exists(fresh_dir(dir) / "report.json"));
+  EXPECT_FALSE(fs::exists(test::fresh_dir("extremes_run", dir) / "report.json"));
 }
 
 // Centre 5 cm above the surface (the sphere 15 cm into the ground): accepted, pushed out by

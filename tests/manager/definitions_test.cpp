@@ -33,7 +33,7 @@ TEST(Definitions, EveryShippedSceneIsAValidLibraryDefinition) {
     SCOPED_TRACE(entry.path().string());
     auto scene = load_scene_file(entry.path().string());
     ASSERT_TRUE(scene.ok()) << scene.message();
-    const api::TerrainDef t = terrain_def(*scene, 0, to_string(scene->simulation.backend));
+    const api::TerrainDef t = terrain_def(*scene, 0, scene->terrain.backend);
     EXPECT_TRUE(validate(t).empty()) << all(validate(t));
     for (std::size_t i = 0; i < scene->bodies.size(); ++i) {
       auto b = rigid_body_def(body_def(*scene, i));
@@ -113,7 +113,7 @@ namespace {
 TEST(Definitions, ABodyTooBigForTheShellCapacityIsRefusedBeforeTheRun) {
   auto scene = load_scene_file(kScenes + "/barrel_drop.json");
   ASSERT_TRUE(scene.ok()) << scene.message();
-  scene->simulation.pool.shell_spheres_per_slot = 64;
+  scene->terrain.shell_spheres_per_slot = 64;
   auto world = make_world(*scene, 1, "cpu", nullptr, /*patches=*/false);
   ASSERT_FALSE(world.ok());
   const Error& e = world.errors()[0];
@@ -121,7 +121,7 @@ TEST(Definitions, ABodyTooBigForTheShellCapacityIsRefusedBeforeTheRun) {
   EXPECT_EQ(e.value, "64");
   EXPECT_NE(e.allowed.find("too small for a body shell of"), std::string::npos) << e.message();
   EXPECT_NE(e.detail.find("bodies[0]"), std::string::npos) << e.message();
-  scene->simulation.pool.shell_spheres_per_slot = 8192;
+  scene->terrain.shell_spheres_per_slot = 8192;
   EXPECT_TRUE(make_world(*scene, 1, "cpu", nullptr, false).ok());
 }
 

@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "manager/run.hpp"
+#include "tests/manager/fresh_dir.hpp"
 #include "manager/run_outputs.hpp"
 #include "scene/scene.hpp"
 
@@ -21,12 +22,6 @@ namespace fs = std::filesystem;
 using namespace sandpatch;
 
 namespace {
-
-fs::path fresh_dir(const std::string& name) {
-  fs::path p = fs::temp_directory_path() / ("sandpatch_machines_test_" + name);
-  fs::remove_all(p);
-  return p;
-}
 
 // A flat 16 m terrain at y = 1 m without patches, and `bodies` (a JSON array's items).
 std::string scene_with(const std::string& bodies, const std::string& outputs = R"({"report": true})") {
@@ -85,7 +80,7 @@ TEST(SceneMotion, MotionAndKeyframesParse) {
   EXPECT_EQ(s->bodies[0].motion, MotionKind::Kinematic);
   ASSERT_EQ(s->bodies[0].keyframes.size(), 3u);
   EXPECT_NEAR(s->bodies[0].keyframes[2].orientation[2], std::sin(M_PI / 4), 1e-12);  // 90° about y
-  EXPECT_EQ(s->bodies[0].pose.position[0], 4.0) << "the pose at spawn_time is the first keyframe's";
+  EXPECT_EQ(s->bodies[0].position[0], 4.0) << "the pose at spawn_time is the first keyframe's";
   EXPECT_EQ(s->bodies[1].motion, MotionKind::Static);
   EXPECT_EQ(s->bodies[2].motion, MotionKind::Dynamic);
   auto again = parse_scene(scene_to_json(*s).dump(), "m2.json", "");
@@ -132,7 +127,7 @@ TEST(SceneMotion, BadMotionAndKeyframesAreRefusedNamingTheField) {
                                   R"({"report": true, "csv": "series.csv"})"),
                         "deep.json", "");
   ASSERT_TRUE(s.ok()) << s.message();
-  const fs::path dir = fresh_dir("bedrock");
+  const fs::path dir = test::fresh_dir("machines_test", "bedrock");
   RunOptions opt;
   opt.out_dir = dir.string();
   opt.progress = ProgressStyle::None;
@@ -151,7 +146,7 @@ TEST(SceneMotion, BadMotionAndKeyframesAreRefusedNamingTheField) {
 TEST(RunCsv, OneRowPerFramePerBodyAndTheLastMatchesTheReport) {
   auto s = parse_scene(scene_with(kBodies, R"({"report": true, "csv": "series/bodies.csv"})"), "m.json", "");
   ASSERT_TRUE(s.ok()) << s.message();
-  const fs::path dir = fresh_dir("csv");
+  const fs::path dir = test::fresh_dir("machines_test", "csv");
   RunOptions opt;
   opt.out_dir = dir.string();
   opt.progress = ProgressStyle::None;

@@ -10,18 +10,13 @@
 #include <nlohmann/json.hpp>
 
 #include "manager/run.hpp"
+#include "tests/manager/fresh_dir.hpp"
 #include "scene/scene.hpp"
 
 namespace fs = std::filesystem;
 using namespace sandpatch;
 
 namespace {
-
-fs::path fresh_dir(const std::string& name) {
-  fs::path p = fs::temp_directory_path() / ("sandpatch_run_test_" + name);
-  fs::remove_all(p);
-  return p;
-}
 
 SceneDef scene_from(const std::string& json) {
   auto s = parse_scene(json, "test.json", "");
@@ -48,7 +43,7 @@ TEST(Run, DefaultSceneWritesCompleteReport) {
   auto scene = load_default_scene();
   ASSERT_TRUE(scene.ok()) << scene.message();
   RunOptions opt;
-  opt.out_dir = fresh_dir("default").string();
+  opt.out_dir = test::fresh_dir("run_test", "default").string();
   opt.seconds = 1.0;
   opt.progress = ProgressStyle::None;
   RunResult r = run_scene(*scene, opt);
@@ -89,7 +84,7 @@ TEST(Run, FinalStateHashIsDeterministic) {
   const int threads[3] = {1, 1, 2};
   for (int k = 0; k < 3; ++k) {
     RunOptions opt;
-    opt.out_dir = fresh_dir("det" + std::to_string(k)).string();
+    opt.out_dir = test::fresh_dir("run_test", "det" + std::to_string(k)).string();
     opt.seconds = 1.0;
     opt.threads = threads[k];
     opt.frame_budget_ms = std::numeric_limits<double>::infinity();  // the budget's choices follow the clock
@@ -108,7 +103,7 @@ TEST(Run, FinalStateHashIsDeterministic) {
 TEST(Run, BodyRestsOnTheHeightfieldFarFromOrigin) {
   SceneDef scene = scene_from(kFlatScene);
   RunOptions opt;
-  opt.out_dir = fresh_dir("flat").string();
+  opt.out_dir = test::fresh_dir("run_test", "flat").string();
   opt.progress = ProgressStyle::None;
   RunResult r = run_scene(scene, opt);
   ASSERT_EQ(r.code, ExitCode::Ok) << r.message;
@@ -128,7 +123,7 @@ TEST(Run, BodyBelowBedrockIsRefusedAndNothingWritten) {
   json.replace(json.find("[5016.0, 104.0, -2984.0]"), 24, "[5016.0, 99.00, -2984.0]");
   SceneDef scene = scene_from(json);
   RunOptions opt;
-  opt.out_dir = fresh_dir("below").string();
+  opt.out_dir = test::fresh_dir("run_test", "below").string();
   opt.progress = ProgressStyle::None;
   RunResult r = run_scene(scene, opt);
   EXPECT_EQ(r.code, ExitCode::BadInput);
@@ -142,7 +137,7 @@ TEST(Run, BodyBelowBedrockIsRefusedAndNothingWritten) {
 TEST(Run, StepCountIsCheckedBeforeTheFirstFrame) {
   const SceneDef scene = scene_from(kFlatScene);
   RunOptions opt;
-  opt.out_dir = fresh_dir("steps").string();
+  opt.out_dir = test::fresh_dir("run_test", "steps").string();
   opt.progress = ProgressStyle::None;
   opt.seconds = std::numeric_limits<double>::quiet_NaN();
   RunResult r = run_scene(scene, opt);
@@ -172,7 +167,7 @@ TEST(Run, GlBackendDrivesThePatches) {
   auto scene = load_default_scene();
   ASSERT_TRUE(scene.ok());
   RunOptions opt;
-  opt.out_dir = fresh_dir("gl").string();
+  opt.out_dir = test::fresh_dir("run_test", "gl").string();
   opt.seconds = 0.3;
   opt.backend = "gl";
   opt.progress = ProgressStyle::None;

@@ -138,8 +138,7 @@ TEST(SceneVehicles, ShippedVehicleDriveIsAFourWheeledVehicle) {
   EXPECT_LE(v.wheel_radius, 0.45);
   ASSERT_FALSE(s->vehicles[0].throttle.empty());
   EXPECT_GT(s->vehicles[0].throttle[0].wheel_speed * v.wheel_radius * s->simulation.duration, 20.0) << "m at ω r";
-  const auto& p = s->terrain.source.procedural;
-  const double x_end = s->terrain.origin[0] + (p.samples_x - 1) * s->terrain.spacing;
+  const double x_end = s->terrain.origin[0] + (s->terrain.samples_x - 1) * s->terrain.spacing;
   EXPECT_GT(x_end - v.position[0] - v.chassis_half_extents[0], 20.0) << "room for 20 m of sand";
   ASSERT_EQ(s->bodies.size(), 1u);
   EXPECT_EQ(s->bodies[0].shape.kind, ShapeKind::Sphere);

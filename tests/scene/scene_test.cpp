@@ -65,20 +65,24 @@ TEST(Scene, EveryFieldOfTheFullSceneIsParsed) {
   EXPECT_EQ(s.hash.size(), 16u);
 
   const auto& t = s.terrain;
-  EXPECT_EQ(t.source.kind, TerrainSourceKind::EsriAscii);
-  EXPECT_EQ(t.source.file, (fs::path(kData) / "tiny.asc").lexically_normal().string());
+  EXPECT_EQ(t.source_kind(), TerrainSourceKind::EsriAscii);
+  EXPECT_EQ(t.file_type, "esri_ascii");
+  EXPECT_EQ(t.file, (fs::path(kData) / "tiny.asc").lexically_normal().string());
   ASSERT_TRUE(t.size.has_value());
   EXPECT_EQ((*t.size)[0], 40.0);
   EXPECT_EQ((*t.size)[1], 20.0);
   EXPECT_EQ(t.spacing_xz(3, 2)[0], 20.0);
   EXPECT_EQ(t.spacing_xz(3, 2)[1], 20.0);
-  EXPECT_FALSE(t.spacing_given);
+  EXPECT_FALSE(t.spacing_overrides_file);
   EXPECT_EQ(t.vertical_scale, 2.5);
   EXPECT_EQ(t.vertical_offset, -1.25);
   EXPECT_EQ(t.origin, (Vec3d{1000000.5, -3.0, -2000000.25}));
-  EXPECT_FALSE(t.soil_depth.has_value());
+  EXPECT_EQ(t.soil_depth, knobs::kSoilDepth.def);  // the library's default: the flat bedrock bounds the patches
   EXPECT_EQ(t.bedrock_height, -4.0);
-  EXPECT_EQ(t.material, "gravel");
+  EXPECT_EQ(t.material_name, "gravel");
+  ASSERT_EQ(s.materials.size(), 2u);
+  EXPECT_EQ(t.material.granule_radius, s.materials[1].granule_radius) << "the named material, as the library takes it";
+  EXPECT_EQ(t.material.restitution, s.materials[1].restitution);
 
   ASSERT_EQ(s.materials.size(), 2u);
   const auto& sand = s.materials[0];
@@ -99,15 +103,15 @@ TEST(Scene, EveryFieldOfTheFullSceneIsParsed) {
       << "the clamp needs more damping than the textbook formula for the same e";
   const auto& gravel = s.materials[1];
   EXPECT_EQ(gravel.damping_ratio, 0.4);
-  EXPECT_FALSE(gravel.restitution.has_value());
   EXPECT_EQ(gravel.stiffness, 2.0e6);
   EXPECT_EQ(gravel.tangential_stiffness_ratio, 0.25);
   EXPECT_EQ(gravel.granule_radius, 0.05);
   EXPECT_EQ(gravel.packing_fraction, 0.58);
   EXPECT_EQ(gravel.density, 2700.0);
   EXPECT_EQ(gravel.friction, 0.8);
-  EXPECT_NEAR(gravel.restitution_value(), clamped_restitution(0.4), 1e-12);
-  EXPECT_GT(gravel.restitution_value(), std::exp(-kPi * 0.4 / std::sqrt(1 - 0.16)))
+  // The library's restitution holds the e that ζ gives.
+  EXPECT_NEAR(gravel.restitution, clamped_restitution(0.4), 1e-12);
+  EXPECT_GT(gravel.restitution, std::exp(-kPi * 0.4 / std::sqrt(1 - 0.16)))
       << "the contact ends before the overlap closes: more rebound than the textbook law";
 
   ASSERT_EQ(s.bodies.size(), 5u);
@@ -117,24 +121,23 @@ TEST(Scene, EveryFieldOfTheFullSceneIsParsed) {
   EXPECT_EQ(ball.shape.radius, 0.4);
   EXPECT_EQ(ball.mass, 12.5);
   EXPECT_FALSE(ball.density.has_value());
-  EXPECT_EQ(ball.pose.position, (Vec3d{1000001.0, 5.0, -2000000.0}));
-  EXPECT_EQ(ball.pose.orientation, (std::array<double, 4>{0.0, 1.0, 0.0, 0.0}));
-  EXPECT_EQ(ball.linear_velocity, (Vec3d{1.0, -2.0, 3.0}));
-  EXPECT_EQ(ball.angular_velocity, (Vec3d{0.1, 0.2, 0.3}));
+  EXPECT_EQ(ball.position, (Vec3d{1000001.0, 5.0, -2000000.0}));
+  EXPECT_EQ(ball.orientation, (api::Quat{0.0f, 1.0f, 0.0f, 0.0f}));
+  EXPECT_EQ(ball.linear_velocity, (api::Vec3f{1.0f, -2.0f, 3.0f}));  // as the library takes them (float)
+  EXPECT_EQ(ball.angular_velocity, (api::Vec3f{0.1f, 0.2f, 0.3f}));
   EXPECT_EQ(ball.spawn_time, 0.75);
   EXPECT_EQ(ball.friction, 0.45);
   EXPECT_EQ(ball.restitution, 0.65);
-  EXPECT_EQ(ball.mass_value(), 12.5);
 
   const auto& crate = s.bodies[1];
   EXPECT_EQ(crate.shape.kind, ShapeKind::Box);
   EXPECT_EQ(crate.shape.half_extents, (Vec3d{0.5, 0.25, 0.125}));
   EXPECT_EQ(crate.density, 800.0);
-  EXPECT_NEAR(crate.mass_value(), 800.0 * 8 * 0.5 * 0.25 * 0.125, 1e-9);
-  // euler_deg [0, 90, 0]: a quarter turn about y.
-  const double h = std::sqrt(0.5);
-  EXPECT_NEAR(crate.pose.orientation[0], h, 1e-12);
-  EXPECT_NEAR(crate.pose.orientation[2], h, 1e-12);
+  EXPECT_NEAR(crate.mass, 800.0 * 8 * 0.5 * 0.25 * 0.125, 1e-9);
+  // euler_deg [0, 90, 0]: a quarter turn about y (a float quaternion, as the library's).
+  const float h = float(std::sqrt(0.5));
+  EXPECT_EQ(crate.orientation[0], h);
+  EXPECT_EQ(crate.orientation[2], h);
   EXPECT_EQ(crate.friction, 0.5);  // defaults
   EXPECT_EQ(crate.restitution, knobs::kBodyRestitution.def);
   EXPECT_EQ(crate.rolling_friction, knobs::kBodyRollingFriction.def);
@@ -144,39 +147,39 @@ TEST(Scene, EveryFieldOfTheFullSceneIsParsed) {
   EXPECT_EQ(can.shape.kind, ShapeKind::Cylinder);
   EXPECT_EQ(can.shape.radius, 0.3);
   EXPECT_EQ(can.shape.height, 0.9);
-  EXPECT_NEAR(can.shape.volume(), kPi * 0.09 * 0.9, 1e-12);
+  EXPECT_NEAR(can.volume(), kPi * 0.09 * 0.9, 1e-12);
 
   const auto& pill = s.bodies[3];
   EXPECT_EQ(pill.shape.kind, ShapeKind::Capsule);
   EXPECT_EQ(pill.shape.radius, 0.2);
   EXPECT_EQ(pill.shape.height, 0.6);
-  EXPECT_NEAR(pill.mass_value(), 1000.0 * (kPi * 0.04 * 0.6 + 4.0 / 3.0 * kPi * 0.008), 1e-9);
+  EXPECT_NEAR(pill.mass, 1000.0 * (kPi * 0.04 * 0.6 + 4.0 / 3.0 * kPi * 0.008), 1e-9);
 
   const auto& barrel = s.bodies[4];
   EXPECT_EQ(barrel.shape.kind, ShapeKind::Mesh);
-  EXPECT_EQ(barrel.shape.file, (fs::path(kScenes) / "meshes/barrel.obj").lexically_normal().string());
-  EXPECT_EQ(barrel.shape.scale, 2.0);
+  EXPECT_EQ(barrel.shape.mesh_file, (fs::path(kScenes) / "meshes/barrel.obj").lexically_normal().string());
+  EXPECT_EQ(barrel.shape.mesh_scale, 2.0);
   EXPECT_TRUE(barrel.shape.solid);
   // Scale 2: 8 × the barrel's volume (within the 0.16 % tessellation deficit).
-  EXPECT_NEAR(barrel.shape.mesh_volume, 8 * kPi * 0.09 * 0.9, 0.002 * 8 * kPi * 0.09 * 0.9);
+  EXPECT_NEAR(barrel.mesh_volume, 8 * kPi * 0.09 * 0.9, 0.002 * 8 * kPi * 0.09 * 0.9);
   EXPECT_NEAR(body_extent_below(barrel), 0.9, 1e-6);
 
   const auto& sim = s.simulation;
   EXPECT_EQ(sim.dt, 0.005);
   EXPECT_EQ(sim.substeps, 4);
   EXPECT_EQ(sim.duration, 12.5);
-  EXPECT_EQ(sim.backend, Backend::Gl);
-  EXPECT_EQ(sim.threads, 2);
-  EXPECT_EQ(sim.pool.slots, 8);
-  EXPECT_EQ(sim.pool.granules_per_slot, 100000);
-  EXPECT_EQ(sim.particle_scale, 4.0);
-  EXPECT_EQ(sim.steps_per_contact, 30);
-  EXPECT_EQ(sim.sleep.speed_threshold, 0.02);
-  EXPECT_EQ(sim.sleep.hold_time, 2.5);
-  EXPECT_EQ(sim.idle_timeout, 60.0);
-  EXPECT_EQ(sim.granular_patches, false);
-  EXPECT_EQ(sim.gravity, (Vec3d{0.0, -1.62, 0.0}));
-  EXPECT_EQ(sim.seed, 12345678901234u);
+  EXPECT_EQ(t.backend, "gl");
+  EXPECT_EQ(t.threads, 2);
+  EXPECT_EQ(t.slots, 8);
+  EXPECT_EQ(t.granules_per_slot, 100000);
+  EXPECT_EQ(t.particle_scale, 4.0);
+  EXPECT_EQ(t.steps_per_contact, 30);
+  EXPECT_EQ(t.sleep_speed, 0.02);
+  EXPECT_EQ(t.sleep_time, 2.5);
+  EXPECT_EQ(t.idle_timeout, 60.0);
+  EXPECT_EQ(t.granular_patches, false);
+  EXPECT_EQ(t.gravity, (Vec3d{0.0, -1.62, 0.0}));
+  EXPECT_EQ(t.seed, 12345678901234u);
 
   ASSERT_EQ(s.cameras.size(), 2u);
   const auto& fixed = s.cameras[0];
@@ -217,26 +220,27 @@ TEST(Scene, ProceduralFieldsAndDefaults) {
                                        {"amplitude", 2.0}, {"wavelength", 8.0}, {"seed", 99}, {"octaves", 2},
                                        {"samples_x", 33}, {"samples_z", 17}}}}}}));
   ASSERT_TRUE(r.ok()) << all(r);
-  const auto& p = r->terrain.source.procedural;
-  EXPECT_EQ(p.kind, ProceduralKind::Plane);
-  EXPECT_EQ(p.height, 1.5);
-  EXPECT_EQ(p.slope_x, 0.1);
-  EXPECT_EQ(p.slope_z, -0.2);
-  EXPECT_EQ(p.amplitude, 2.0);
-  EXPECT_EQ(p.wavelength, 8.0);
-  EXPECT_EQ(p.seed, 99u);
+  const auto& p = r->terrain;  // the generator's parameters as the library takes them (float)
+  EXPECT_EQ(p.procedural, "plane");
+  EXPECT_EQ(p.base_height, 1.5f);
+  EXPECT_EQ(p.slope_x, 0.1f);
+  EXPECT_EQ(p.slope_z, -0.2f);
+  EXPECT_EQ(p.amplitude, 2.0f);
+  EXPECT_EQ(p.wavelength, 8.0f);
+  EXPECT_EQ(p.noise_seed, 99u);
   EXPECT_EQ(p.octaves, 2);
   EXPECT_EQ(p.samples_x, 33);
   EXPECT_EQ(p.samples_z, 17);
   // Defaults of everything left out.
   EXPECT_EQ(r->name, "test");
   EXPECT_EQ(r->terrain.soil_depth, 2.0);
-  EXPECT_EQ(r->terrain.material, "sand");
+  EXPECT_EQ(r->terrain.material_name, "sand");
+  EXPECT_EQ(r->terrain.material.restitution, r->materials[0].restitution) << "the named material, as the library takes it";
   EXPECT_EQ(r->terrain.spacing_xz(33, 17)[0], 0.5);
   const SceneSimulationDef d;
-  EXPECT_TRUE(r->simulation.granular_patches);
-  EXPECT_EQ(r->simulation.idle_timeout, 120.0);
-  EXPECT_EQ(r->simulation.gravity, (Vec3d{0.0, -9.81, 0.0}));
+  EXPECT_TRUE(r->terrain.granular_patches);
+  EXPECT_EQ(r->terrain.idle_timeout, 120.0);
+  EXPECT_EQ(r->terrain.gravity, (Vec3d{0.0, -9.81, 0.0}));
   EXPECT_EQ(r->simulation.dt, d.dt);
   EXPECT_TRUE(r->outputs.report);
   EXPECT_NEAR(r->materials[0].tangential_stiffness_ratio, 2.0 / 7.0, 1e-15);
@@ -259,10 +263,10 @@ TEST(Scene, Png16AndRawF32SourcesAreChecked) {
       scene_with({{"terrain", {{"source", {{"type", "raw_f32"}, {"kind", nullptr}, {"file", "h.raw"}, {"samples_x", 3}, {"samples_z", 2}}}}}}),
       "t.json", dir.string());
   ASSERT_TRUE(raw.ok()) << all(raw);
-  EXPECT_EQ(raw->terrain.source.kind, TerrainSourceKind::RawF32);
-  EXPECT_EQ(raw->terrain.source.samples_x, 3);
-  EXPECT_EQ(raw->terrain.source.samples_z, 2);
-  EXPECT_EQ(raw->terrain.source.file, (dir / "h.raw").string());
+  EXPECT_EQ(raw->terrain.source_kind(), TerrainSourceKind::RawF32);
+  EXPECT_EQ(raw->terrain.samples_x, 3);
+  EXPECT_EQ(raw->terrain.samples_z, 2);
+  EXPECT_EQ(raw->terrain.file, (dir / "h.raw").string());
 
   auto raw_bad = parse_scene(
       scene_with({{"terrain", {{"source", {{"type", "raw_f32"}, {"kind", nullptr}, {"file", "h.raw"}, {"samples_x", 4}, {"samples_z", 2}}}}}}),
@@ -272,7 +276,7 @@ TEST(Scene, Png16AndRawF32SourcesAreChecked) {
   auto png = parse_scene(scene_with({{"terrain", {{"source", {{"type", "png16"}, {"kind", nullptr}, {"file", "h.png"}}}}}}), "t.json",
                          dir.string());
   ASSERT_TRUE(png.ok()) << all(png);
-  EXPECT_EQ(png->terrain.source.kind, TerrainSourceKind::Png16);
+  EXPECT_EQ(png->terrain.source_kind(), TerrainSourceKind::Png16);
   auto png_rgb = parse_scene(scene_with({{"terrain", {{"source", {{"type", "png16"}, {"kind", nullptr}, {"file", "rgb.png"}}}}}}),
                              "t.json", dir.string());
   EXPECT_TRUE(has_error(png_rgb, "terrain.source.file", "\"rgb.png\"", "colour type 2")) << all(png_rgb);
@@ -293,12 +297,12 @@ TEST(Scene, ShippedScenesParse) {
   EXPECT_EQ(barrel->bodies[0].shape.kind, ShapeKind::Cylinder);
   EXPECT_EQ(barrel->bodies[0].shape.radius, 0.3);
   EXPECT_EQ(barrel->bodies[0].shape.height, 0.9);
-  const double m = barrel->bodies[0].mass_value();
+  const double m = barrel->bodies[0].mass;
   EXPECT_GE(m, 50.0);
   EXPECT_LE(m, 200.0);
   const auto mesh = load_scene_file(kScenes + "/mesh_drop.json");
   ASSERT_TRUE(mesh.ok());
-  EXPECT_NEAR(mesh->bodies[0].mass_value(), 400.0 * kPi * 0.09 * 0.9, 0.01 * 400.0 * kPi * 0.09 * 0.9);
+  EXPECT_NEAR(mesh->bodies[0].mass, 400.0 * kPi * 0.09 * 0.9, 0.01 * 400.0 * kPi * 0.09 * 0.9);
 }
 
 TEST(Scene, EmbeddedDefaultIsScenesDefaultJson) {
@@ -306,9 +310,9 @@ TEST(Scene, EmbeddedDefaultIsScenesDefaultJson) {
   const auto r = load_default_scene();
   ASSERT_TRUE(r.ok()) << all(r);
   EXPECT_EQ(r->name, "default");
-  EXPECT_EQ(r->terrain.source.kind, TerrainSourceKind::Procedural);
+  EXPECT_EQ(r->terrain.source_kind(), TerrainSourceKind::Procedural);
   // 64 m × 64 m at 0.5 m spacing.
-  const auto& p = r->terrain.source.procedural;
+  const auto& p = r->terrain;
   EXPECT_EQ((p.samples_x - 1) * r->terrain.spacing_xz(p.samples_x, p.samples_z)[0], 64.0);
   EXPECT_EQ(r->bodies.size(), 2u);
   EXPECT_EQ(r->hash, load_scene_file(kScenes + "/default.json")->hash);
@@ -557,9 +561,9 @@ TEST(ScenePreset, EveryPresetSetsItsKnobs) {
     const auto r = parse(scene_with({{"simulation", {{"preset", name}}}}));
     ASSERT_TRUE(r.ok()) << all(r);
     EXPECT_EQ(r->simulation.preset, name);
-    EXPECT_DOUBLE_EQ(r->simulation.particle_scale, p->particle_scale);
-    EXPECT_EQ(r->simulation.pool.granules_per_slot, p->granules_per_slot);
-    EXPECT_EQ(r->simulation.steps_per_contact, p->steps_per_contact);
+    EXPECT_DOUBLE_EQ(r->terrain.particle_scale, p->particle_scale);
+    EXPECT_EQ(r->terrain.granules_per_slot, p->granules_per_slot);
+    EXPECT_EQ(r->terrain.steps_per_contact, p->steps_per_contact);
     // accurate from t_c / 20, stable to about t_c / 1.7 (docs/dem.md): presets stay in [10, 50]
     EXPECT_GE(p->steps_per_contact, 10);
     EXPECT_LE(p->steps_per_contact, 50);
@@ -579,17 +583,17 @@ TEST(ScenePreset, ExplicitFieldsOverrideThePreset) {
       {{"simulation", {{"particle_scale", 1.25}, {"preset", "game"}, {"pool", {{"slots", 2}}}}}}));
   ASSERT_TRUE(r.ok()) << all(r);
   EXPECT_EQ(r->simulation.preset, "game");
-  EXPECT_DOUBLE_EQ(r->simulation.particle_scale, 1.25);  // given: wins, whatever the key order
-  EXPECT_EQ(r->simulation.pool.slots, 2);
-  EXPECT_EQ(r->simulation.pool.granules_per_slot, find_simulation_preset("game")->granules_per_slot);  // not given
+  EXPECT_DOUBLE_EQ(r->terrain.particle_scale, 1.25);  // given: wins, whatever the key order
+  EXPECT_EQ(r->terrain.slots, 2);
+  EXPECT_EQ(r->terrain.granules_per_slot, find_simulation_preset("game")->granules_per_slot);  // not given
   const auto r2 = parse(scene_with({{"simulation", {{"preset", "game"}, {"pool", {{"granules_per_slot", 2048}}}}}}));
   ASSERT_TRUE(r2.ok()) << all(r2);
-  EXPECT_EQ(r2->simulation.pool.granules_per_slot, 2048);
-  EXPECT_EQ(r2->simulation.steps_per_contact, find_simulation_preset("game")->steps_per_contact);  // not given
+  EXPECT_EQ(r2->terrain.granules_per_slot, 2048);
+  EXPECT_EQ(r2->terrain.steps_per_contact, find_simulation_preset("game")->steps_per_contact);  // not given
   // steps_per_contact given beside a preset wins, before or after it
   const auto r3 = parse(scene_with({{"simulation", {{"steps_per_contact", 37}, {"preset", "game"}}}}));
   ASSERT_TRUE(r3.ok()) << all(r3);
-  EXPECT_EQ(r3->simulation.steps_per_contact, 37);
+  EXPECT_EQ(r3->terrain.steps_per_contact, 37);
 }
 
 TEST(SceneSimulation, ScaleByDistanceIsParsedAndRoundTrips) {
@@ -647,10 +651,10 @@ TEST(SceneSimulation, ScaleByDistanceErrorsNameFieldValueAndRange) {
 TEST(SceneSimulation, StepsPerContactDefaultsTo20AndIsChecked) {
   const auto plain = parse(scene_with(nlohmann::json::object()));
   ASSERT_TRUE(plain.ok()) << all(plain);
-  EXPECT_EQ(plain->simulation.steps_per_contact, 20);  // the DEM's default, t_c / 20
+  EXPECT_EQ(plain->terrain.steps_per_contact, 20);  // the DEM's default, t_c / 20
   const auto given = parse(scene_with({{"simulation", {{"steps_per_contact", 50}}}}));
   ASSERT_TRUE(given.ok()) << all(given);
-  EXPECT_EQ(given->simulation.steps_per_contact, 50);
+  EXPECT_EQ(given->terrain.steps_per_contact, 50);
   EXPECT_EQ(scene_to_json(*given)["simulation"]["steps_per_contact"], 50);
   // below 2 the DEM is unstable (t_c / 1.7), above 1000 absurd; fractions and strings are refused
   for (const nlohmann::json& bad : {nlohmann::json(1), nlohmann::json(1001), nlohmann::json(10.5), nlohmann::json("20")}) {
@@ -846,20 +850,20 @@ TEST(SceneLoads, BadLoadsNameTheField) {
   EXPECT_TRUE(has_error(not_array, "bodies[0].loads", "", "array")) << all(not_array);
 }
 
-// simulation.frame_budget_ms: a number of ms in (0, 1e6] or "off"; anything else is refused
+// terrain.frame_budget_ms: a number of ms in (0, 1e6] or "off"; anything else is refused
 // naming the field; written back by scene_to_json only when given.
 TEST(Scene, FrameBudget) {
   auto off = parse(scene_with({{"simulation", {{"frame_budget_ms", "off"}}}}));
   ASSERT_TRUE(off.ok()) << all(off);
-  ASSERT_TRUE(off->simulation.frame_budget_ms.has_value());
-  EXPECT_TRUE(std::isinf(*off->simulation.frame_budget_ms));
+  ASSERT_TRUE(off->terrain.frame_budget_ms.has_value());
+  EXPECT_TRUE(std::isinf(*off->terrain.frame_budget_ms));
   EXPECT_EQ(scene_to_json(*off)["simulation"]["frame_budget_ms"], "off");
   auto eight = parse(scene_with({{"simulation", {{"frame_budget_ms", 8.0}}}}));
   ASSERT_TRUE(eight.ok()) << all(eight);
-  EXPECT_EQ(*eight->simulation.frame_budget_ms, 8.0);
+  EXPECT_EQ(*eight->terrain.frame_budget_ms, 8.0);
   auto none = parse(scene_with(nlohmann::json::object()));
   ASSERT_TRUE(none.ok());
-  EXPECT_FALSE(none->simulation.frame_budget_ms.has_value());
+  EXPECT_FALSE(none->terrain.frame_budget_ms.has_value());
   EXPECT_FALSE(scene_to_json(*none)["simulation"].contains("frame_budget_ms"));
   for (const nlohmann::json& bad : {nlohmann::json(0.0), nlohmann::json(-1.0), nlohmann::json("fast"), nlohmann::json(2e6)}) {
     auto r = parse(scene_with({{"simulation", {{"frame_budget_ms", bad}}}}));
