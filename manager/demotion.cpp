@@ -148,17 +148,30 @@ Status TerrainManager::Impl::demote(Slot& slot, double time, bool gl_ok, bool st
   const auto t2 = Clock::now();
   const RenderBaseline base{&w.was, &rec.before_heights, rw, rec.fill_rise};
   const bool have_base = !rec.fill_spheres.empty() && rec.before_heights.size() == std::size_t(a.ni) * a.nj;
-  write_to_heightfield(w.now, a, *hf, 1, have_base ? &base : nullptr);
-  // The patch's own edge inside the apron: particles on one side, old terrain (or what
-  // spilled onto it) on the other; the same Gaussian band stitches it.
-  smooth_border_band(*hf, slot.region, 1);
-  set_bodies_down(slot, time);
   // The border band reaches one sample beyond the apron.
   GridRegion d{std::max(0, a.i0 - 1), std::max(0, a.j0 - 1), 0, 0};
   d.ni = std::min(hf->samples_x(), a.i0 + a.ni + 1) - d.i0;
   d.nj = std::min(hf->samples_z(), a.j0 + a.nj + 1) - d.j0;
+  DemotionSteps steps;
+  steps.ring = d;
+  auto read_ring = [&](std::vector<float>& v) {
+    v.resize(std::size_t(d.ni) * d.nj);
+    hf->read(d, v.data());
+  };
+  read_ring(steps.pre);
+  write_to_heightfield(w.now, a, *hf, 1, have_base ? &base : nullptr, &steps.write);
+  read_ring(steps.written);
+  // The patch's own edge inside the apron: particles on one side, old terrain (or what
+  // spilled onto it) on the other; the same Gaussian band stitches it.
+  smooth_border_band(*hf, slot.region, 1);
+  read_ring(steps.edged);
+  set_bodies_down(slot, time);
+  read_ring(steps.set_down);
+  conserve_volume(slot, rec, steps, xyzr, box);
+  world->terrain_changed();
+  read_ring(steps.conserved);
   dirty.push_back(d);
-  close_ledger(slot, rec, w.on_gl, xyzr);
+  close_ledger(slot, rec, w.on_gl, xyzr, steps, box);
   for (const Carried& c : slot.carried)
     if (c.enabled && world->alive(c.body)) world->set_terrain_collision(c.body, true);
   events.push_back({PatchEventKind::Demoted, slot.patch, time, w.ms + ms_since(t2), rec.granules});
@@ -298,7 +311,7 @@ void TerrainManager::Impl::set_bodies_down(const Slot& slot, double time) {
     st.angular_velocity.setZero();
     world->set_state(d.c->body, st);
   }
-  world->terrain_changed();
+  // (the caller tells Bullet the terrain changed, after conserve_volume)
   // Every body over the written heights (those it carried, and those resting on the
   // heightfield there: Bullet's contacts with the changed tiles are made again, and such a
   // body first falls g dt) is given 0.1 s (6 frames) to settle before it may ask for a patch.
@@ -311,6 +324,100 @@ void TerrainManager::Impl::set_bodies_down(const Slot& slot, double time) {
   }
 }
 
+// Volume change (m³) of the heights `ring_h` over steps.ring against the heights at promotion
+// (before_heights on the apron; on the ring's outer row, the heights just before the write):
+// the change of the bilinear surface's volume, every sample at full weight (a sample's hat
+// integrates to one cell).
+double TerrainManager::Impl::ring_change(const Slot& slot, const PatchRecord& rec, const DemotionSteps& steps,
+                                         const std::vector<float>& ring_h) const {
+  const GridRegion& a = slot.apron;
+  const GridRegion& g = steps.ring;
+  const double sp = hf->spacing();
+  double v = 0;
+  for (int j = g.j0; j < g.j0 + g.nj; ++j)
+    for (int i = g.i0; i < g.i0 + g.ni; ++i) {
+      const std::size_t k = std::size_t(j - g.j0) * g.ni + (i - g.i0);
+      const bool in_apron = i >= a.i0 && i < a.i0 + a.ni && j >= a.j0 && j < a.j0 + a.nj;
+      v += ring_h[k] - (in_apron ? rec.before_heights[std::size_t(j - a.j0) * a.ni + (i - a.i0)] : steps.pre[k]);
+    }
+  return v * sp * sp;
+}
+
+// Granule spheres the demotion's render does not see: centres outside the render box
+// (beyond the apron) or below the floor. `xyzr`: heightfield-local, m.
+long long TerrainManager::Impl::spheres_outside(const std::vector<float>& xyzr, const RenderBox& box) {
+  long long n = 0;
+  for (std::size_t k = 0; k + 3 < xyzr.size(); k += 4) {
+    const float x = xyzr[k], y = xyzr[k + 1], z = xyzr[k + 2];
+    n += x < box.x0 || x > box.x1 || z < box.z0 || z > box.z1 || y < box.floor;
+  }
+  return n;
+}
+
+// Mass conservation. The heightfield holds soil at the packing of the pre-settled tiles (a
+// later patch fills it at that packing), so a patch's soil comes back as the volume it took
+// less what left it: V_after = V_before − (granule spheres outside the apron) × v_sphere / φ
+// (φ: the fill tile's packing fraction). The depth render misses that by several per cent at
+// coarse particle scales (docs/manager.md "The ledger"): a loose surface and scattered granules
+// render high (a lone sphere drawn with the probe shows about 4 times its bulk volume), the
+// fill's own render is low, the Gaussian and the stitches move volume across the apron's
+// edge, and the heights under a body are cut to its lowest point. The difference is spread
+// over the ground that moved, in proportion to the demotion's moved weight 1 − w
+// (write_to_heightfield), never under or next to a body (their heights hold them up), never
+// below the floor; undisturbed ground keeps its old heights. Records the correction in
+// rec.ledger.
+void TerrainManager::Impl::conserve_volume(const Slot& slot, PatchRecord& rec, const DemotionSteps& steps,
+                                           const std::vector<float>& granule_xyzr, const RenderBox& box) {
+  const GridRegion& a = slot.apron;
+  const double sp = hf->spacing();
+  const double pf = rec.ledger.packing_fraction;
+  const double rw = radius_world(slot);
+  const double lost = pf > 0 ? double(spheres_outside(granule_xyzr, box)) * 4.0 / 3.0 * std::numbers::pi * rw * rw * rw / pf : 0.0;
+  const double rendered = rec.ledger.before + ring_change(slot, rec, steps, steps.set_down);
+  double left = rec.ledger.before - lost - rendered;  // m³ to place
+  rec.ledger.target = rec.ledger.before - lost;
+  rec.ledger.correction = 0;
+  if (!(rec.ledger.before > 0) || !std::isfinite(left)) return;
+  // Weights: the moved weight, 0 on the apron's outer row (its stitch to the ground outside)
+  // and over every body's bounds grown by one sample.
+  const std::size_t n = std::size_t(a.ni) * a.nj;
+  std::vector<double> m(n, 0.0);
+  const std::vector<float>& wt = steps.write.weight;
+  double total = 0;
+  for (int j = 1; j + 1 < a.nj; ++j)
+    for (int i = 1; i + 1 < a.ni; ++i) total += m[std::size_t(j) * a.ni + i] = wt.size() == n ? 1.0 - wt[std::size_t(j) * a.ni + i] : 1.0;
+  if (total < 1.0)  // (almost) nothing moved: the region, evenly
+    for (int j = slot.region.j0; j < slot.region.j0 + slot.region.nj; ++j)
+      for (int i = slot.region.i0; i < slot.region.i0 + slot.region.ni; ++i) m[std::size_t(j - a.j0) * a.ni + (i - a.i0)] = 1.0;
+  for (RigidBodyId b : world->bodies()) {
+    Eigen::Vector3d lo, hi;
+    world->bounds(b, &lo, &hi);
+    const int i0 = int(std::floor((lo.x() - hf->origin_x()) / sp)) - 1, i1 = int(std::ceil((hi.x() - hf->origin_x()) / sp)) + 1;
+    const int j0 = int(std::floor((lo.z() - hf->origin_z()) / sp)) - 1, j1 = int(std::ceil((hi.z() - hf->origin_z()) / sp)) + 1;
+    for (int j = std::max(j0, a.j0); j <= std::min(j1, a.j0 + a.nj - 1); ++j)
+      for (int i = std::max(i0, a.i0); i <= std::min(i1, a.i0 + a.ni - 1); ++i) m[std::size_t(j - a.j0) * a.ni + (i - a.i0)] = 0.0;
+  }
+  std::vector<float> h(n);
+  hf->read(a, h.data());
+  const float floor_h = float(slot.floor_local);
+  // A sample lowered to the floor takes no more: spread what it could not take over the rest.
+  for (int pass = 0; pass < 4 && std::abs(left) > 1e-9; ++pass) {
+    double sum = 0;
+    for (double x : m) sum += x;
+    if (!(sum > 0)) break;
+    const double c = left / (sum * sp * sp);  // m per unit weight
+    for (std::size_t k = 0; k < n; ++k) {
+      if (m[k] <= 0) continue;
+      const float nh = std::max(floor_h, float(h[k] + c * m[k]));
+      left -= double(nh - h[k]) * sp * sp;
+      rec.ledger.correction += double(nh - h[k]) * sp * sp;
+      if (nh <= floor_h) m[k] = 0;
+      h[k] = nh;
+    }
+  }
+  hf->write(a, h.data());
+}
+
 // Ledger: the region above the floor plus what spilled onto the apron, against the volume
 // before promotion; appended to the closed ledgers (the report's ledger.patches). With it, what
 // the patch raised above its old surface (a rim, a pile a tool poured out): the heightfield's
@@ -320,8 +427,9 @@ void TerrainManager::Impl::set_bodies_down(const Slot& slot, double time) {
 // gains `dilation_m3` = risen − spheres / packing; `error_less_dilation_pct` is the ledger
 // without it (docs/manager.md "Tools on a planned path"). `granule_xyzr`: the granules'
 // spheres (x, y, z heightfield-local, m; radii not read).
-void TerrainManager::Impl::close_ledger(const Slot& slot, PatchRecord& rec, bool on_gl, const std::vector<float>& granule_xyzr) {
-  rec.ledger.after = soil_volume_after(*hf, slot.region, slot.apron, slot.floor_local, rec.before_heights);
+void TerrainManager::Impl::close_ledger(const Slot& slot, PatchRecord& rec, bool on_gl, const std::vector<float>& granule_xyzr,
+                                       const DemotionSteps& steps, const RenderBox& box) {
+  rec.ledger.after = rec.ledger.before + ring_change(slot, rec, steps, steps.conserved);
   const double err = rec.ledger.before > 0 ? 100.0 * (rec.ledger.after - rec.ledger.before) / rec.ledger.before : 0;
   const GridRegion& a = slot.apron;
   const double sp = hf->spacing();
@@ -346,12 +454,59 @@ void TerrainManager::Impl::close_ledger(const Slot& slot, PatchRecord& rec, bool
   const double pf = rec.ledger.packing_fraction;
   const double dilation = pf > 0 ? risen - spheres / pf : 0.0;
   const double less = rec.ledger.before > 0 ? 100.0 * (rec.ledger.after - rec.ledger.before - dilation) / rec.ledger.before : 0;
+  // Terms (m³): where the ledger's volume went, step by step (each step's change of the
+  // heights' volume, ring_change).
+  const GridRegion& g = steps.ring;
+  auto change = [&](const std::vector<float>& ring_h) { return ring_change(slot, rec, steps, ring_h); };
+  // An apron-sized stage (write_to_heightfield's) on the ring: the ring's outer row as before the write.
+  auto on_ring = [&](const std::vector<float>& apron_h) {
+    std::vector<float> v = steps.pre;
+    if (apron_h.size() != std::size_t(a.ni) * a.nj) return v;
+    for (int j = 0; j < a.nj; ++j)
+      for (int i = 0; i < a.ni; ++i)
+        v[std::size_t(a.j0 + j - g.j0) * g.ni + (a.i0 + i - g.i0)] = apron_h[std::size_t(j) * a.ni + i];
+    return v;
+  };
+  const double d_hat = change(on_ring(steps.write.hat));
+  double fill_bias = 0, moved = 0;
+  if (!steps.write.hat_baseline.empty()) {
+    for (std::size_t k = 0; k < steps.write.hat_baseline.size(); ++k) {
+      fill_bias += steps.write.hat_baseline[k] + rec.fill_rise - rec.before_heights[k];
+      moved += 1.0 - steps.write.weight[k];
+    }
+    fill_bias *= sp * sp;
+    moved *= sp * sp;
+  }
+  const double d_blend = change(on_ring(steps.write.blended));
+  const double d_written = change(steps.written), d_edged = change(steps.edged), d_down = change(steps.set_down);
+  // Granule spheres the render did not see (outside the apron's box or under the floor), at the fill's packing.
+  const long long outside = spheres_outside(granule_xyzr, box);
+  const double sphere_v = 4.0 / 3.0 * std::numbers::pi * rw * rw * rw;
+  const double b = rec.ledger.before;
+  auto pct = [&](double v) { return b > 0 ? 100.0 * v / b : 0.0; };
+  nlohmann::ordered_json terms = {
+      {"fill_render_bias_pct", pct(fill_bias)},
+      {"render_change_pct", pct(d_hat - fill_bias)},
+      {"render_pct", pct(d_hat)},
+      {"blend_pct", pct(d_blend - d_hat)},
+      {"apron_stitch_pct", pct(d_written - d_blend)},
+      {"edge_stitch_pct", pct(d_edged - d_written)},
+      {"bodies_set_down_pct", pct(d_down - d_edged)},
+      {"rendered_pct", pct(d_down)},
+      {"conserved_pct", pct(rec.ledger.correction)},
+      {"spheres_outside", outside},
+      {"outside_pct", pf > 0 ? pct(-double(outside) * sphere_v / pf) : 0.0},
+      {"rise_excess_pct", pct(dilation)},
+      {"moved_m2", moved},
+      {"fill_cut_pct", pct(rec.ledger.active - b)}};
   ledgers.push_back({{"patch", slot.patch},
                      {"particle_scale", slot.scale},
                      {"region", {slot.region.i0, slot.region.j0, slot.region.ni, slot.region.nj}},
                      {"granules", rec.granules},
                      {"volume_before_m3", rec.ledger.before},
                      {"volume_active_m3", rec.ledger.active},
+                     {"volume_rendered_m3", rec.ledger.before + d_down},
+                     {"volume_target_m3", rec.ledger.target},
                      {"volume_after_m3", rec.ledger.after},
                      {"error_pct", err},
                      {"risen_m3", risen},
@@ -359,7 +514,8 @@ void TerrainManager::Impl::close_ledger(const Slot& slot, PatchRecord& rec, bool
                      {"packing_fraction", pf},
                      {"dilation_m3", dilation},
                      {"error_less_dilation_pct", less},
-                     {"depth_render", on_gl ? "gl" : "cpu"}});
+                     {"depth_render", on_gl ? "gl" : "cpu"},
+                     {"terms", terms}});
 }
 
 }  // namespace sandpatch

@@ -46,6 +46,8 @@ struct Carried {
 struct Ledger {
   double before = 0, active = 0, after = 0;
   double packing_fraction = 0;  // of the tile the fill was cut from (sphere volume / bulk volume)
+  double target = 0;            // m³: before less the granules that left the apron, at packing_fraction
+  double correction = 0;        // m³: what the demotion added to the rendered heights to reach target (conserve_volume)
   bool closed = false;
 };
 
