@@ -354,6 +354,29 @@ long long TerrainManager::Impl::spheres_outside(const std::vector<float>& xyzr, 
   return n;
 }
 
+// Granule spheres inside the render box whose centres lie above the old surface (the apron's
+// heights at promotion, bilinear). `xyzr`: heightfield-local, m.
+long long TerrainManager::Impl::spheres_above(const Slot& slot, const PatchRecord& rec, const std::vector<float>& xyzr,
+                                              const RenderBox& box) const {
+  const GridRegion& a = slot.apron;
+  const double sp = hf->spacing();
+  auto old_height = [&](double x, double z) {
+    const double u = std::clamp(x / sp - a.i0, 0.0, double(a.ni - 1)), v = std::clamp(z / sp - a.j0, 0.0, double(a.nj - 1));
+    const int i = std::min(int(u), std::max(0, a.ni - 2)), j = std::min(int(v), std::max(0, a.nj - 2));
+    const int i1 = std::min(i + 1, a.ni - 1), j1 = std::min(j + 1, a.nj - 1);
+    const double fu = u - i, fv = v - j;
+    auto h = [&](int ii, int jj) { return double(rec.before_heights[std::size_t(jj) * a.ni + ii]); };
+    return (1 - fv) * ((1 - fu) * h(i, j) + fu * h(i1, j)) + fv * ((1 - fu) * h(i, j1) + fu * h(i1, j1));
+  };
+  long long n = 0;
+  for (std::size_t k = 0; k + 3 < xyzr.size(); k += 4) {
+    const float x = xyzr[k], y = xyzr[k + 1], z = xyzr[k + 2];
+    if (x < box.x0 || x > box.x1 || z < box.z0 || z > box.z1) continue;
+    n += y > old_height(x, z);
+  }
+  return n;
+}
+
 // Mass conservation. The heightfield holds soil at the packing of the pre-settled tiles (a
 // later patch fills it at that packing), so a patch's soil comes back as the volume it took
 // less what left it: V_after = V_before − (granule spheres outside the apron) × v_sphere / φ
@@ -386,21 +409,55 @@ void TerrainManager::Impl::conserve_volume(const Slot& slot, PatchRecord& rec, c
   double total = 0;
   for (int j = 1; j + 1 < a.nj; ++j)
     for (int i = 1; i + 1 < a.ni; ++i) total += m[std::size_t(j) * a.ni + i] = wt.size() == n ? 1.0 - wt[std::size_t(j) * a.ni + i] : 1.0;
-  if (total < 1.0)  // (almost) nothing moved: the region, evenly
-    for (int j = slot.region.j0; j < slot.region.j0 + slot.region.nj; ++j)
-      for (int i = slot.region.i0; i < slot.region.i0 + slot.region.ni; ++i) m[std::size_t(j - a.j0) * a.ni + (i - a.i0)] = 1.0;
+  std::vector<char> free(n, 1);  // not under or next to a body
   for (RigidBodyId b : world->bodies()) {
     Eigen::Vector3d lo, hi;
     world->bounds(b, &lo, &hi);
     const int i0 = int(std::floor((lo.x() - hf->origin_x()) / sp)) - 1, i1 = int(std::ceil((hi.x() - hf->origin_x()) / sp)) + 1;
     const int j0 = int(std::floor((lo.z() - hf->origin_z()) / sp)) - 1, j1 = int(std::ceil((hi.z() - hf->origin_z()) / sp)) + 1;
     for (int j = std::max(j0, a.j0); j <= std::min(j1, a.j0 + a.nj - 1); ++j)
-      for (int i = std::max(i0, a.i0); i <= std::min(i1, a.i0 + a.ni - 1); ++i) m[std::size_t(j - a.j0) * a.ni + (i - a.i0)] = 0.0;
+      for (int i = std::max(i0, a.i0); i <= std::min(i1, a.i0 + a.ni - 1); ++i) free[std::size_t(j - a.j0) * a.ni + (i - a.i0)] = 0;
   }
+  for (std::size_t k = 0; k < n; ++k)
+    if (!free[k]) m[k] = 0.0;
   std::vector<float> h(n);
   hf->read(a, h.data());
   const float floor_h = float(slot.floor_local);
-  // A sample lowered to the floor takes no more: spread what it could not take over the rest.
+  // 1. The rise at the granules' packing: what the heights rose above the old surface is
+  // what the granules that came above it fill at φ (a loose pile, a rim, scattered granules render
+  // higher than that). The moved ground's rise is scaled down to it, never up (granules above
+  // the old surface may rest on a body, where no height can take them).
+  double risen = 0, adjustable = 0;  // m³
+  for (std::size_t k = 0; k < n; ++k) {
+    const double rise = std::max(0.0, double(h[k]) - rec.before_heights[k]);
+    risen += rise;
+    adjustable += m[k] * rise;
+  }
+  risen *= sp * sp;
+  adjustable *= sp * sp;
+  // (spheres above it now less those above it at the fill: the fill's top spheres reach above
+  // the surface it was cut to, and undisturbed ground comes back at its old height)
+  const long long gained = spheres_above(slot, rec, granule_xyzr, box) - spheres_above(slot, rec, rec.fill_spheres, box);
+  const double at_packing = pf > 0 ? double(std::max(0LL, gained)) * 4.0 / 3.0 * std::numbers::pi * rw * rw * rw / pf : risen;
+  const double cut = adjustable > 0 ? std::clamp((risen - at_packing) / adjustable, 0.0, 1.0) : 0.0;  // share of the moved rise taken off
+  rec.ledger.rise_cut = 0;
+  for (std::size_t k = 0; k < n; ++k) {
+    const double rise = std::max(0.0, double(h[k]) - rec.before_heights[k]);
+    const float nh = float(h[k] - cut * m[k] * rise);
+    rec.ledger.rise_cut += double(nh - h[k]) * sp * sp;
+    left -= double(nh - h[k]) * sp * sp;
+    h[k] = nh;
+  }
+  // 2. The rest (the heights cut under bodies, the stitches, the render of the crater, the
+  // granules that left), spread over the moved ground (if (almost) nothing moved, over the
+  // region evenly). A sample lowered to the floor takes no more: what it could not take goes
+  // to the rest.
+  if (total < 1.0)
+    for (int j = slot.region.j0; j < slot.region.j0 + slot.region.nj; ++j)
+      for (int i = slot.region.i0; i < slot.region.i0 + slot.region.ni; ++i) {
+        const std::size_t k = std::size_t(j - a.j0) * a.ni + (i - a.i0);
+        m[k] = free[k] ? 1.0 : 0.0;
+      }
   for (int pass = 0; pass < 4 && std::abs(left) > 1e-9; ++pass) {
     double sum = 0;
     for (double x : m) sum += x;
@@ -437,18 +494,7 @@ void TerrainManager::Impl::close_ledger(const Slot& slot, PatchRecord& rec, bool
   for (int j = 0; j < a.nj; ++j)
     for (int i = 0; i < a.ni; ++i)
       risen += std::max(0.0, double(hf->height(a.i0 + i, a.j0 + j)) - rec.before_heights[std::size_t(j) * a.ni + i]) * sp * sp;
-  // The old surface at heightfield-local (x, z), bilinear over the apron's heights at promotion.
-  auto old_height = [&](double x, double z) {
-    const double u = std::clamp(x / sp - a.i0, 0.0, double(a.ni - 1)), v = std::clamp(z / sp - a.j0, 0.0, double(a.nj - 1));
-    const int i = std::min(int(u), a.ni - 2 < 0 ? 0 : a.ni - 2), j = std::min(int(v), a.nj - 2 < 0 ? 0 : a.nj - 2);
-    const int i1 = std::min(i + 1, a.ni - 1), j1 = std::min(j + 1, a.nj - 1);
-    const double fu = u - i, fv = v - j;
-    auto h = [&](int ii, int jj) { return double(rec.before_heights[std::size_t(jj) * a.ni + ii]); };
-    return (1 - fv) * ((1 - fu) * h(i, j) + fu * h(i1, j)) + fv * ((1 - fu) * h(i, j1) + fu * h(i1, j1));
-  };
-  long long above = 0;
-  for (std::size_t k = 0; k + 3 < granule_xyzr.size(); k += 4)
-    above += granule_xyzr[k + 1] > old_height(granule_xyzr[k], granule_xyzr[k + 2]);
+  const long long above = spheres_above(slot, rec, granule_xyzr, box);
   const double rw = radius_world(slot);
   const double spheres = double(above) * 4.0 / 3.0 * std::numbers::pi * rw * rw * rw;  // m³
   const double pf = rec.ledger.packing_fraction;
@@ -493,6 +539,7 @@ void TerrainManager::Impl::close_ledger(const Slot& slot, PatchRecord& rec, bool
       {"edge_stitch_pct", pct(d_edged - d_written)},
       {"bodies_set_down_pct", pct(d_down - d_edged)},
       {"rendered_pct", pct(d_down)},
+      {"rise_at_packing_pct", pct(rec.ledger.rise_cut)},
       {"conserved_pct", pct(rec.ledger.correction)},
       {"spheres_outside", outside},
       {"outside_pct", pf > 0 ? pct(-double(outside) * sphere_v / pf) : 0.0},

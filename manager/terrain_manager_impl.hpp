@@ -343,6 +343,7 @@ struct TerrainManager::Impl {
     std::vector<float> conserved;  // after conserve_volume: what the demotion leaves
   };
   double ring_change(const Slot& slot, const PatchRecord& rec, const DemotionSteps& steps, const std::vector<float>& ring_h) const;
+  long long spheres_above(const Slot& slot, const PatchRecord& rec, const std::vector<float>& xyzr, const RenderBox& box) const;
   static long long spheres_outside(const std::vector<float>& xyzr, const RenderBox& box);
   void conserve_volume(const Slot& slot, PatchRecord& rec, const DemotionSteps& steps, const std::vector<float>& granule_xyzr,
                        const RenderBox& box);

@@ -51,16 +51,21 @@ TEST(Demotion, LedgerClosesWithinOnePercentAtFineAndCoarseScales) {
     ASSERT_FALSE(l.is_null());
     const auto& t = l["terms"];
     std::printf("scale %.0f: %d granules, ledger %+.3f %% (rendered %+.2f %%: fill render bias %+.2f, render change %+.2f, "
-                "blend %+.2f, apron stitch %+.2f, edge stitch %+.2f, bodies set down %+.2f; conserved %+.2f), moved %.2f m2\n",
+                "blend %+.2f, apron stitch %+.2f, edge stitch %+.2f, bodies set down %+.2f; rise at packing %+.2f, conserved %+.2f), "
+                "moved %.2f m2\n",
                 scale, l["granules"].get<int>(), l["error_pct"].get<double>(), t["rendered_pct"].get<double>(),
                 t["fill_render_bias_pct"].get<double>(), t["render_change_pct"].get<double>(), t["blend_pct"].get<double>(),
                 t["apron_stitch_pct"].get<double>(), t["edge_stitch_pct"].get<double>(), t["bodies_set_down_pct"].get<double>(),
-                t["conserved_pct"].get<double>(), t["moved_m2"].get<double>());
+                t["rise_at_packing_pct"].get<double>(), t["conserved_pct"].get<double>(), t["moved_m2"].get<double>());
     EXPECT_DOUBLE_EQ(l["particle_scale"].get<double>(), scale);
     EXPECT_EQ(t["spheres_outside"].get<long long>(), 0);
     EXPECT_DOUBLE_EQ(l["volume_target_m3"].get<double>(), l["volume_before_m3"].get<double>());
     EXPECT_LT(std::abs(l["error_pct"].get<double>()), 1.0) << l.dump();
     EXPECT_NEAR(l["volume_after_m3"].get<double>(), l["volume_target_m3"].get<double>(), 1e-4 * l["volume_before_m3"].get<double>());
+    // The ledger's change is the heightfield's: every sample's change times a cell (m³).
+    double change = 0;
+    for (std::size_t k = 0; k < before.size(); ++k) change += (after[k] - before[k]) * 0.1 * 0.1;
+    EXPECT_NEAR(l["volume_after_m3"].get<double>() - l["volume_before_m3"].get<double>(), change, 1e-6);
     // What the render alone gave is a few per cent off, not more (the correction is spread on moved ground).
     EXPECT_LT(std::abs(t["rendered_pct"].get<double>()), 5.0);
     const double d = 2 * 0.025 * scale;
