@@ -377,18 +377,20 @@ long long TerrainManager::Impl::spheres_above(const Slot& slot, const PatchRecor
   return n;
 }
 
-// Mass conservation. The heightfield holds soil at the packing of the pre-settled tiles (a
-// later patch fills it at that packing), so a patch's soil comes back as the volume it took
-// less what left it: V_after = V_before − (granule spheres outside the apron) × v_sphere / φ
-// (φ: the fill tile's packing fraction). The depth render misses that by several per cent at
-// coarse particle scales (docs/manager.md "The ledger"): a loose surface and scattered granules
-// render high (a lone sphere drawn with the probe shows about 4 times its bulk volume), the
-// fill's own render is low, the Gaussian and the stitches move volume across the apron's
-// edge, and the heights under a body are cut to its lowest point. The difference is spread
-// over the ground that moved, in proportion to the demotion's moved weight 1 − w
-// (write_to_heightfield), never under or next to a body (their heights hold them up), never
-// below the floor; undisturbed ground keeps its old heights. Records the correction in
-// rec.ledger.
+// Mass conservation (docs/manager.md "The volume ledger"). The heightfield holds soil at the
+// packing φ of the pre-settled tiles (a later patch fills it at that packing), so a patch's
+// soil comes back as the volume it took less what left it: V_target = V_before − (granule
+// spheres outside the apron or below the floor) × v_sphere / φ. The depth render misses that
+// by several per cent at coarse particle scales: a loose surface and scattered granules render
+// high (a lone sphere drawn with the 2 r probe shows (28/3) π r³ over the ground, about 4
+// times its bulk at φ = 0.6), the fill's own render is off, the stitches move volume across
+// the region's and apron's edges, and the heights under a body are cut to its lowest point.
+// Two steps, on the ground that moved (weight 1 − w, write_to_heightfield's blend), never
+// under or within one sample of a body's bounds (their heights hold them up), never on the
+// apron's outer row nor on bare rock: 1. the rise over the old surface cut down to what the
+// granules that came above it fill at φ; 2. the rest spread in proportion to 1 − w (evenly
+// over the region when less than one sample's worth moved), never below the floor. Undisturbed
+// ground keeps its old heights. Records target, rise_cut and correction in rec.ledger.
 void TerrainManager::Impl::conserve_volume(const Slot& slot, PatchRecord& rec, const DemotionSteps& steps,
                                            const std::vector<float>& granule_xyzr, const RenderBox& box) {
   const GridRegion& a = slot.apron;
@@ -410,19 +412,28 @@ void TerrainManager::Impl::conserve_volume(const Slot& slot, PatchRecord& rec, c
   for (int j = 1; j + 1 < a.nj; ++j)
     for (int i = 1; i + 1 < a.ni; ++i) total += m[std::size_t(j) * a.ni + i] = wt.size() == n ? 1.0 - wt[std::size_t(j) * a.ni + i] : 1.0;
   std::vector<char> free(n, 1);  // not under or next to a body
+  // A sample index from a coordinate (m, world), clamped near the apron before the cast (a
+  // body's bounds may be huge or not finite).
+  auto index = [&](double x, double o, int lo_i, int n_i) {
+    const double u = std::isfinite(x) ? (x - o) / sp : (x > 0 ? 1e9 : -1e9);
+    return std::clamp(u, double(lo_i - 2), double(lo_i + n_i + 2));
+  };
   for (RigidBodyId b : world->bodies()) {
     Eigen::Vector3d lo, hi;
     world->bounds(b, &lo, &hi);
-    const int i0 = int(std::floor((lo.x() - hf->origin_x()) / sp)) - 1, i1 = int(std::ceil((hi.x() - hf->origin_x()) / sp)) + 1;
-    const int j0 = int(std::floor((lo.z() - hf->origin_z()) / sp)) - 1, j1 = int(std::ceil((hi.z() - hf->origin_z()) / sp)) + 1;
+    const int i0 = int(std::floor(index(lo.x(), hf->origin_x(), a.i0, a.ni))) - 1, i1 = int(std::ceil(index(hi.x(), hf->origin_x(), a.i0, a.ni))) + 1;
+    const int j0 = int(std::floor(index(lo.z(), hf->origin_z(), a.j0, a.nj))) - 1, j1 = int(std::ceil(index(hi.z(), hf->origin_z(), a.j0, a.nj))) + 1;
     for (int j = std::max(j0, a.j0); j <= std::min(j1, a.j0 + a.nj - 1); ++j)
       for (int i = std::max(i0, a.i0); i <= std::min(i1, a.i0 + a.ni - 1); ++i) free[std::size_t(j - a.j0) * a.ni + (i - a.i0)] = 0;
   }
+  // Bare rock (old surface at or below the floor: floor_of, docs/extremes.md) is never raised.
+  const float floor_h = float(slot.floor_local);
+  for (std::size_t k = 0; k < n; ++k)
+    if (!(rec.before_heights[k] > floor_h)) free[k] = 0;
   for (std::size_t k = 0; k < n; ++k)
     if (!free[k]) m[k] = 0.0;
   std::vector<float> h(n);
   hf->read(a, h.data());
-  const float floor_h = float(slot.floor_local);
   // 1. The rise at the granules' packing: what the heights rose above the old surface is
   // what the granules that came above it fill at φ (a loose pile, a rim, scattered granules render
   // higher than that). The moved ground's rise is scaled down to it, never up (granules above
