@@ -177,7 +177,7 @@ void lower_by_probe(HeightImage& image, float floor_y, float probe) {
 }
 
 void write_to_heightfield(const HeightImage& image, GridRegion r, Heightfield& hf, int border_width,
-                          const RenderBaseline* base) {
+                          const RenderBaseline* base, WriteStages* stages) {
   const float sp = hf.spacing();
   const std::size_t n = std::size_t(r.ni) * r.nj;
   auto samples = [&](const HeightImage& img) {
@@ -188,9 +188,11 @@ void write_to_heightfield(const HeightImage& image, GridRegion r, Heightfield& h
   };
   const std::vector<float> p = samples(image);
   hf.write(r, p.data());
+  if (stages) stages->hat = p;
   if (base && base->image && base->heights && base->heights->size() == n) {
     std::vector<float> a = gaussian3x3_values(hf, r);
     const std::vector<float> p0 = samples(*base->image);
+    if (stages) stages->hat_baseline = p0, stages->weight.assign(n, 0.0f);
     // G(P − P₀) with the change zero outside the region: [1 2 1]/4 along x, then along z.
     std::vector<float> d(n), dx(n), gd(n);
     for (std::size_t k = 0; k < n; ++k) d[k] = p[k] - p0[k] - base->rise;
@@ -207,10 +209,15 @@ void write_to_heightfield(const HeightImage& image, GridRegion r, Heightfield& h
     for (std::size_t k = 0; k < n; ++k) {
       const float w = base->tolerance > 0 ? std::max(0.0f, 1.0f - std::abs(gd[k]) / base->tolerance) : 0.0f;
       h[k] = w * ((*base->heights)[k] + gd[k]) + (1.0f - w) * a[k];
+      if (stages) stages->weight[k] = w;
     }
     hf.write(r, h.data());
   } else {
     gaussian3x3(hf, r);
+  }
+  if (stages) {
+    stages->blended.resize(n);
+    hf.read(r, stages->blended.data());
   }
   if (border_width > 0) smooth_border_band(hf, r, border_width);
 }

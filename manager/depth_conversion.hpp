@@ -105,7 +105,15 @@ struct RenderBaseline {
 // taken as zero outside the region). Undisturbed ground comes back as it was, so patches
 // can come and go over the same place without roughening it; where granules moved (a
 // crater, a rim) the rendered surface is taken as Leach takes it.
+// What write_to_heightfield wrote at each of its steps (region values, ni × nj, i fastest; m,
+// heightfield-local), for the ledger's terms (demotion.cpp close_ledger): the hat means of the
+// image, of the baseline's image (empty without one), and the values after the Gaussian /
+// baseline blend (before the border band) and the blend's weights w (empty without a baseline).
+struct WriteStages {
+  std::vector<float> hat, hat_baseline, blended, weight;
+};
+
 void write_to_heightfield(const HeightImage& image, GridRegion region, Heightfield& hf, int border_width = 1,
-                          const RenderBaseline* baseline = nullptr);
+                          const RenderBaseline* baseline = nullptr, WriteStages* stages = nullptr);
 
 }  // namespace sandpatch

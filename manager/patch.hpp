@@ -46,6 +46,9 @@ struct Carried {
 struct Ledger {
   double before = 0, active = 0, after = 0;
   double packing_fraction = 0;  // of the tile the fill was cut from (sphere volume / bulk volume)
+  double target = 0;            // m³: before less the granules that left the apron, at packing_fraction
+  double rise_cut = 0;          // m³: what the demotion took off the rendered rise, to the granules' packing (conserve_volume, ≤ 0)
+  double correction = 0;        // m³: what it then added over the moved ground to reach target (conserve_volume)
   bool closed = false;
 };
 

@@ -394,19 +394,4 @@ double soil_volume(const Heightfield& hf, const GridRegion& region, double floor
   return v * double(sp) * sp;
 }
 
-double soil_volume_after(const Heightfield& hf, const GridRegion& region, const GridRegion& apron, double floor_local,
-                         const std::vector<float>& before_heights) {
-  const double sp = hf.spacing();
-  const GridRegion& a = apron;
-  double after = 0;
-  for (int j = a.j0; j < a.j0 + a.nj; ++j)
-    for (int i = a.i0; i < a.i0 + a.ni; ++i) {
-      const bool in = i >= region.i0 && i < region.i0 + region.ni && j >= region.j0 && j < region.j0 + region.nj;
-      const double h0 = before_heights[std::size_t(j - a.j0) * a.ni + (i - a.i0)];
-      after += in ? trapezoid_weight(i, j, region) * (hf.height(i, j) - floor_local)
-                  : (hf.height(i, j) - h0) * (1.0 - 0.0);
-    }
-  return after * sp * sp;
-}
-
 }  // namespace sandpatch

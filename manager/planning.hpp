@@ -39,11 +39,5 @@ double patch_floor(const Heightfield& hf, const GridRegion& region, double patch
 // weights: ½ on edges, ¼ at corners). The ledger's volume before promotion.
 double soil_volume(const Heightfield& hf, const GridRegion& region, double floor_local);
 
-// m³: the soil after a demotion: between the floor and the surface over `region`, plus what
-// the surface rose (or fell) against `before_heights` (the heights of `apron` at promotion,
-// row-major) on the rest of the apron. With the heights unchanged it equals
-// soil_volume(region, floor_local).
-double soil_volume_after(const Heightfield& hf, const GridRegion& region, const GridRegion& apron, double floor_local,
-                         const std::vector<float>& before_heights);
 
 }  // namespace sandpatch

@@ -330,7 +330,25 @@ struct TerrainManager::Impl {
                                      bool* on_gl) const;
   int render_resolution(const Slot& slot, const RenderBox& box) const;
   void set_bodies_down(const Slot& slot, double time);
-  void close_ledger(const Slot& slot, PatchRecord& rec, bool on_gl, const std::vector<float>& granule_xyzr);
+  // The heights a demotion wrote, step by step, for the ledger's terms (close_ledger): over
+  // `ring` (the apron grown by one sample, clipped to the grid: all the demotion may change),
+  // ni × nj, i fastest, m, heightfield-local.
+  struct DemotionSteps {
+    GridRegion ring;
+    std::vector<float> pre;        // before the write
+    WriteStages write;             // write_to_heightfield's own steps (apron only)
+    std::vector<float> written;    // after write_to_heightfield (its border band included)
+    std::vector<float> edged;      // after the region's own edge band
+    std::vector<float> set_down;   // after set_bodies_down
+    std::vector<float> conserved;  // after conserve_volume: what the demotion leaves
+  };
+  double ring_change(const Slot& slot, const PatchRecord& rec, const DemotionSteps& steps, const std::vector<float>& ring_h) const;
+  long long spheres_above(const Slot& slot, const PatchRecord& rec, const std::vector<float>& xyzr, const RenderBox& box) const;
+  static long long spheres_outside(const std::vector<float>& xyzr, const RenderBox& box);
+  void conserve_volume(const Slot& slot, PatchRecord& rec, const DemotionSteps& steps, const std::vector<float>& granule_xyzr,
+                       const RenderBox& box);
+  void close_ledger(const Slot& slot, PatchRecord& rec, bool on_gl, const std::vector<float>& granule_xyzr,
+                    const DemotionSteps& steps, const RenderBox& box);
 
   // ---- report (terrain_manager.cpp) ----
   nlohmann::ordered_json dem_report() const;  // the report's "dem" section

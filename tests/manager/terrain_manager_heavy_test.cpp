@@ -1,7 +1,9 @@
 // tests manager/terrain_manager.cpp, heavy part (ctest -L heavy): a barrel dropped on a
 // granular patch leaves a crater and a rim in the exported heightfield (measured 2026-11-22:
 // bottom 0.38 d into the sand, crater -0.95 d, rim +0.21 d, ledger -1.05 %; 5 min on 2
-// loaded cores), and a pool of one slot serves three landings in turn.
+// loaded cores; with the demotion conserving the volume: bottom 0.82 d, crater -1.12 d, rim
+// +0.21 d, ledger 0.00 %, 10 min at load 11), and a pool of one slot serves three landings in
+// turn.
 #include <gtest/gtest.h>
 
 #include <algorithm>
