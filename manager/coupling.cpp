@@ -16,6 +16,76 @@ using manager_detail::eig;
 using manager_detail::quat;
 using manager_detail::v3;
 
+namespace {
+
+// How far (sim units) a shell whose sphere centres are at `shell` (sim units) must rise so that
+// none of its spheres overlaps the ground that would hold it up in the patch's DEM, here and
+// anywhere along the horizontal displacement `sweep` (sim units, where the body goes in this
+// frame, sampled every r): a granule sphere below a shell sphere's centre (ids [0,
+// granule_spheres): the fill is uploaded before any shell), the terrain grid outside the
+// filled rectangle, or the rectangle's sides up to the outside surface (particles/dem.hpp
+// TerrainGrid; shaders/dem/physics_common.glsl boundary_plane). Granules beside or above a
+// sphere are left to the DEM (a lift would not clear them). At most 2 r: a shell deeper than
+// that is in the soil, not arriving on it.
+double lift_to_clear(const DemBackend& sim, std::size_t granule_spheres, const std::vector<Vec3>& shell, Vec3 sweep) {
+  if (shell.empty()) return 0;
+  const float r = sim.def().particle_radius, reach = 2.0f * r;
+  sweep.y = 0;
+  const float travel = std::sqrt(sweep.x * sweep.x + sweep.z * sweep.z);
+  const int samples = travel > 0 ? std::min(64, int(std::ceil(travel / r))) : 0;
+  Vec3 lo = shell[0], hi = shell[0];
+  for (const Vec3& w : shell) {
+    lo = {std::min(lo.x, w.x), std::min(lo.y, w.y), std::min(lo.z, w.z)};
+    hi = {std::max(hi.x, w.x), std::max(hi.y, w.y), std::max(hi.z, w.z)};
+  }
+  lo = {lo.x + std::min(0.0f, sweep.x), lo.y, lo.z + std::min(0.0f, sweep.z)};
+  hi = {hi.x + std::max(0.0f, sweep.x), hi.y, hi.z + std::max(0.0f, sweep.z)};
+  const std::vector<Vec3> all = sim.particle_positions();
+  std::vector<Vec3> near;
+  for (std::size_t k = 0; k < std::min(granule_spheres, all.size()); ++k) {
+    const Vec3& g = all[k];
+    if (g.x > lo.x - reach && g.x < hi.x + reach && g.z > lo.z - reach && g.z < hi.z + reach && g.y > lo.y - reach &&
+        g.y < hi.y)
+      near.push_back(g);
+  }
+  const TerrainGrid& t = sim.def().terrain;
+  double need = 0;
+  for (int k = 0; k <= samples; ++k) {
+    const float f = samples > 0 ? float(k) / float(samples) : 0.0f;
+    for (Vec3 w : shell) {
+      w = {w.x + f * sweep.x, w.y, w.z + f * sweep.z};
+      for (const Vec3& g : near) {
+        if (!(g.y < w.y)) continue;
+        const float dx = g.x - w.x, dz = g.z - w.z, dy = w.y - g.y, rho2 = dx * dx + dz * dz;
+        if (rho2 + dy * dy >= reach * reach) continue;
+        need = std::max(need, double(std::sqrt(reach * reach - rho2) - dy));
+      }
+      if (t.empty()) continue;
+      const bool outside = w.x < t.fill_min_x || w.x > t.fill_max_x || w.z < t.fill_min_z || w.z > t.fill_max_z;
+      if (outside) {
+        const float h = t.height(w.x, w.z), ny = t.normal(w.x, w.z).y;
+        if ((w.y - h) * ny < r) need = std::max(need, double(h + r / ny - w.y));
+        continue;
+      }
+      // a side of the filled rectangle: a wall up to the outside surface, then its top edge
+      const float gaps[4] = {w.x - t.fill_min_x, t.fill_max_x - w.x, w.z - t.fill_min_z, t.fill_max_z - w.z};
+      for (int e = 0; e < 4; ++e) {
+        if (!(gaps[e] < r)) continue;
+        const float top = e == 0   ? t.height(t.fill_min_x - r, w.z)
+                          : e == 1 ? t.height(t.fill_max_x + r, w.z)
+                          : e == 2 ? t.height(w.x, t.fill_min_z - r)
+                                   : t.height(w.x, t.fill_max_z + r);
+        if (w.y - top < -r) continue;
+        const float dy = std::max(0.0f, w.y - top);
+        if (gaps[e] * gaps[e] + dy * dy < r * r) need = std::max(need, double(top + std::sqrt(r * r - gaps[e] * gaps[e]) - w.y));
+      }
+    }
+  }
+  return std::min(need, double(reach));
+}
+
+}  // namespace
+
 Status TerrainManager::Impl::step_patches(double time, double dt) {
   choose_carriers();
   std::vector<Slot*> awake;
@@ -240,8 +310,35 @@ Status TerrainManager::Impl::couple_before(Slot& slot, double dt) {
     auto it = std::find_if(slot.carried.begin(), slot.carried.end(),
                            [&](const Carried& c) { return c.body.index == b.index && c.body.generation == b.generation; });
     if (!touch && it == slot.carried.end()) continue;
-    const BodyState st = world->state(b);
+    BodyState st = world->state(b);
     const bool fresh = it == slot.carried.end();
+    // A body arriving on the patch (its shell made or enabled this frame) starts touching the
+    // patch's ground, not inside it. Bullet held it on the heightfield, where its shell, whose
+    // spheres are centred on its surface, reaches a granule radius into the DEM's terrain grid
+    // and into the granules of a fill cut to that surface; started there, the spheres' overlap
+    // threw it up (a 20 kg box driven at 3.5 m/s onto a patch: 2.6 kN over its first frame,
+    // +2 m/s). It is set on that ground instead, its velocities kept: raised by the least
+    // height that clears the ground under its shell now and along its path over this frame
+    // (lift_to_clear, at most 2 r; none for a body coming down from above, nor for one in a
+    // hollow the fill left for it, clear_bodies, until it moves into the hollow's side). A body
+    // joined to others is not moved alone (its joints would pull it back): left to the DEM.
+    if (touch && (fresh || !it->enabled) && world->motion(b) == RigidMotion::Dynamic && groups[std::size_t(b.index)] == 0) {
+      auto pts = shell_points(b, s);
+      if (!pts) return pts.errors();
+      const Vec3 c = slot.sim->def().scale.position_to_sim({st.position.x(), st.position.y(), st.position.z()});
+      const Quat q = quat(st.orientation);
+      std::vector<Vec3> shell;
+      shell.reserve(pts->size());
+      for (const Eigen::Vector3f& e : *pts) shell.push_back(c + rotate(q, v3(e)));
+      const std::size_t granule_spheres = std::size_t(record(slot).granules) * slot.sim->granule_shape().offsets.size();
+      const Vec3 sweep = v3(Eigen::Vector3f(st.linear_velocity * float(dt / s)));
+      if (const double lift = lift_to_clear(*slot.sim, granule_spheres, shell, sweep); lift > 0) {
+        st.position.y() += lift * s;
+        world->set_state(b, st);
+        lift_max = std::max(lift_max, lift * s);
+        ++lifts;
+      }
+    }
     if (fresh) {
       auto pts = shell_points(b, s);
       if (!pts) return pts.errors();
@@ -327,7 +424,6 @@ Status TerrainManager::Impl::couple_before(Slot& slot, double dt) {
       return e.errors();
     if (st.linear_velocity.norm() > def.sleep_speed) slot.sim->wake();
   }
-  (void)dt;
   return Ok{};
 }
 

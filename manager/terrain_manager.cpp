@@ -491,6 +491,8 @@ nlohmann::ordered_json TerrainManager::report() const {
                     {"granules_per_slot", I.def.granules_per_slot}});
     r["planned_paths"] = pp;
   }
+  // Bodies set on a patch's ground as they arrived on it (coupling.cpp couple_before).
+  if (I.lifts > 0) r["arrivals"] = {{"lifted", I.lifts}, {"largest_lift_m", I.lift_max}};
   // Kinematic and static bodies that moved faster into a patch than its granules can stop
   // (coupling.cpp couple_before): their shells may have pushed granules through themselves.
   if (!I.fast_tools.empty()) {

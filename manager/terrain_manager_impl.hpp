@@ -213,6 +213,10 @@ struct TerrainManager::Impl {
   };
   std::vector<nlohmann::ordered_json> budget_log;  // one entry per promotion (the report's budget.patches)
   long long budget_waits = 0;      // request-frames a request waited in the queue because it did not fit
+  // Bodies set on a patch's ground as they arrived on it (coupling.cpp couple_before): how
+  // many times, and the largest rise (m, world). The report's arrivals.
+  int lifts = 0;
+  double lift_max = 0;
   int budget_overruns = 0;         // promotions that did not fit and went ahead (nothing else live)
   long long budget_held = 0;       // patch-frames a patch carrying no body was held (not stepped)
   int budget_longest_hold = 0;     // frames in a row, the longest hold

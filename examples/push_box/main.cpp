@@ -3,8 +3,9 @@
 // A 40 kg box is pushed at 300 N across flat sand of 4 cm granules while a 30 kg ball is
 // dropped beside its path, through the public API only: Terrain::apply_force before every
 // step, one step of 1/60 s a frame. It prints the frames' wall times (median, 99th percentile,
-// longest), where the box went and how far it rose above its resting height (a patch
-// appearing under it must not throw it up), and the frame budget's report.
+// longest), where the box went, how far it rose above its resting height and its fastest
+// upward speed (a patch appearing under it, or one it reaches, must not throw it up), and the
+// frame budget's report.
 //
 //   push_box [frame_budget_ms | off]      (default: the library's, half of each step's dt)
 //
@@ -63,7 +64,7 @@ int main(int argc, char** argv) {
   }
   const double dt = 1.0 / 60.0;
   std::vector<double> ms;
-  double rest_y = 0, top_y = -1e9;
+  double rest_y = 0, top_y = -1e9, vy_max = 0, vy_max_x = 0;
   for (int f = 0; f < 360; ++f) {  // 6 s; the push starts after 0.5 s at rest
     if (f >= 30)
       if (sp::Status s = terrain->apply_force(*hb, {300.0f, 0.0f, 0.0f}); !s) {
@@ -79,14 +80,16 @@ int main(int argc, char** argv) {
     const auto st = terrain->body_state(*hb);
     if (f == 29) rest_y = st->position[1];
     if (f >= 30) top_y = std::max(top_y, st->position[1]);
+    if (f >= 30 && st->linear_velocity[1] > vy_max) vy_max = st->linear_velocity[1], vy_max_x = st->position[0];
   }
   const auto st = terrain->body_state(*hb);
   std::vector<double> s = ms;
   std::sort(s.begin(), s.end());
   std::printf("push_box: 360 frames of 1/60 s: median %.2f ms, 99th percentile %.2f ms, longest %.2f ms\n", s[s.size() / 2],
               s[s.size() * 99 / 100], s.back());
-  std::printf("box: x %.2f m, vx %.2f m/s at the end; rose at most %.3f m above its resting height\n", st->position[0],
-              st->linear_velocity[0], top_y - rest_y);
+  std::printf("box: x %.2f m, vx %.2f m/s at the end; rose at most %.3f m above its resting height; fastest upward "
+              "%.2f m/s (at x %.2f m)\n",
+              st->position[0], st->linear_velocity[0], top_y - rest_y, vy_max, vy_max_x);
   const std::string rep = terrain->report_json();
   const auto b = rep.find("\"budget\"");
   std::printf("report (budget): %s\n", b == std::string::npos ? "none" : rep.substr(b, 400).c_str());
