@@ -230,10 +230,14 @@ struct TerrainManager::Impl {
   // first, while they fit.
   bool wanted(const Slot& s) const;
   // Whether a body (world bounds lo..hi, velocity v) is over or heading for the rectangle r:
-  // its bounds, grown by lod.margin and swept along its horizontal velocity over lod.horizon.
-  bool heading_for(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, const Eigen::Vector3f& v, const PatchRequest& r) const;
-  // The coarsest particle scale the bodies over or heading for r allow: each body's smallest
-  // dimension over kBodyGranules granule diameters at scale 1 (budget.cpp); 0 when no body is.
+  // its bounds, grown by lod.margin (and `grow`, m) and swept along its horizontal velocity
+  // over lod.horizon.
+  bool heading_for(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, const Eigen::Vector3f& v, const PatchRequest& r,
+                   double grow = 0) const;
+  // The coarsest particle scale the bodies a request is for allow (those over or heading for
+  // it, within lod.apron: the request is their contact's footprint and apron): each body's
+  // smallest dimension over kBodyGranules granule diameters at scale 1 (budget.cpp); 0 when
+  // no body is.
   double body_scale_cap(const PatchRequest& r, std::string* by, double* size) const;
   std::vector<Slot*> stepping_order(const std::vector<Slot*>& awake, double dt);
   bool pinned() const { return def.budget_substep_ms > 0 && def.budget_sphere_ns > 0; }
