@@ -79,8 +79,9 @@ bool TerrainManager::Impl::wanted(const Slot& s) const {
 // The body's bounds grown by lod.margin, swept along its horizontal velocity over lod.horizon
 // (ahead of it only: a patch a body drove off is behind it, and no longer wanted by it).
 bool TerrainManager::Impl::heading_for(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, const Eigen::Vector3f& v,
-                                       const PatchRequest& r, double grow) const {
-  const double m = def.lod.margin + grow, dx = double(v.x()) * def.lod.horizon, dz = double(v.z()) * def.lod.horizon;
+                                       const PatchRequest& r, double grow, double horizon) const {
+  const double h = horizon >= 0 ? horizon : def.lod.horizon;
+  const double m = def.lod.margin + grow, dx = double(v.x()) * h, dz = double(v.z()) * h;
   const double x0 = lo.x() + std::min(0.0, dx) - m, x1 = hi.x() + std::max(0.0, dx) + m;
   const double z0 = lo.z() + std::min(0.0, dz) - m, z1 = hi.z() + std::max(0.0, dz) + m;
   return x0 < r.x1 && x1 > r.x0 && z0 < r.z1 && z1 > r.z0;
@@ -135,30 +136,47 @@ double TerrainManager::Impl::body_scale_cap(const PatchRequest& r, std::string* 
   return cap;
 }
 
-// Which awake patches step this frame. Wanted patches always step. The others (settling
-// after their body left) step, the longest held first, while the predicted DEM of everything
-// stepped so far fits 80 % of the budget (the share `choose` gives the DEM); one that does not
-// fit is held this frame: not stepped, its granules where they are, its time behind the
-// frame's (nothing outside the patch reads it). A patch is held at most kMaxHeldFrames in a
+// Which awake patches step this frame. A patch that carries a body, or that a body reaches
+// within two frames, always steps. The others (one a body is heading for, further ahead; then
+// those settling after their body left) step, the longest held first, while the predicted DEM
+// of everything stepped so far fits 80 % of the budget (the share `choose` gives the DEM); one
+// that does not fit is held this frame: not stepped, its granules where they are, its time
+// behind the frame's (nothing outside the patch reads it). A patch is held at most kMaxHeldFrames in a
 // row, so it still settles and sleeps, at a fraction of the rate. Without a budget every
 // awake patch steps, in slot order.
 std::vector<Slot*> TerrainManager::Impl::stepping_order(const std::vector<Slot*>& awake, double dt) {
   if (!budget_on()) return awake;
   constexpr int kMaxHeldFrames = 30;
-  std::vector<std::pair<Slot*, bool>> order;
-  for (Slot* s : awake) order.push_back({s, wanted(*s)});
+  // Tiers: 2, a patch that carries a body or that a body reaches within two frames (it must
+  // step); 1, one a body is heading for, further ahead (it may wait until the body comes:
+  // nothing is on it yet); 0, one no body wants.
+  auto tier = [&](const Slot& s) {
+    for (const Carried& c : s.carried)
+      if (c.enabled) return 2;
+    if (!wanted(s)) return 0;
+    const PatchRequest r = rect(s);
+    for (RigidBodyId b : world->bodies()) {
+      Eigen::Vector3d lo, hi;
+      world->bounds(b, &lo, &hi);
+      if (heading_for(lo, hi, world->state(b).linear_velocity, r, 0, 2 * dt)) return 2;
+    }
+    return 1;
+  };
+  std::vector<std::pair<Slot*, int>> order;
+  for (Slot* s : awake) order.push_back({s, tier(*s)});
   std::stable_sort(order.begin(), order.end(), [&](const auto& a, const auto& b) {
-    if (a.second != b.second) return a.second;
+    if (a.second != b.second) return a.second > b.second;
     return a.first->held > b.first->held;
   });
   const double avail = 0.8 * budget_ms(dt);
   double used = 0;
   std::vector<Slot*> step;
-  for (auto [s, want] : order) {
+  for (auto [s, t] : order) {
     const double ms = predict_ms(s->sim->particle_count(), dt, s->steps_per_contact);
-    if (!want && used + ms > avail && s->held < kMaxHeldFrames) {
+    if (t < 2 && used + ms > avail && s->held < kMaxHeldFrames) {
       ++s->held;
       ++budget_held;
+      budget_held_ahead += t == 1;
       budget_longest_hold = std::max(budget_longest_hold, s->held);
       continue;
     }
@@ -245,8 +263,8 @@ constexpr int kTradeApronRung = 4;
 // Then half the substeps (dt_sub <= t_c / N with N halved, at least kMinStepsPerContact).
 // Measured on scenes/vehicle_drive.json at scale 2 without a budget (docs/BENCHMARKS.md
 // "Wheels and the particle-scale cap"): N = 10 against 20 steps 0.44 times the sphere-steps
-// and the car still drives (10.7 m in 8 s against 12.9 m, deepest wheel sinkage 0.12 m
-// against 0.13 m).
+// and the car drives as far in three pairs of runs of four (10.7 / 12.9, 20.7 / 18.9,
+// 18.1 / 18.8 m in 8 s; 8.7 / 8.5 m in 4 s), deepest wheel sinkage 0.12-0.20 m either way.
 constexpr int kTradeSubstepsRung = 5;
 constexpr int kMinStepsPerContact = 10;
 }  // namespace
@@ -326,9 +344,8 @@ TerrainManager::Impl::BudgetChoice TerrainManager::Impl::choose(const PatchReque
     if (attempt(s, g.apron, int(&g - kLadder))) return c;
   }
   // The cap barred the coarser scales: at the coarsest scale the cap allows, the budget gives
-  // up the apron (the patch covers the bodies' predicted footprint and 4 r s only), then, for
-  // a patch asked for ahead of another, half of the DEM's substeps (N = steps_per_contact
-  // halved, not below kMinStepsPerContact).
+  // up the apron (the patch covers the bodies' predicted footprint and 4 r s only), then half
+  // of the DEM's substeps (N = steps_per_contact halved, not below kMinStepsPerContact).
   if (!c.cap_bound || coarsest <= 0) return c;
   // (the apron kept: two sphere diameters at that scale, 4 r s, the margin at which a body
   // nearing a patch's edge has a patch asked for beyond it (planning.cpp extend): less, and
@@ -340,12 +357,8 @@ TerrainManager::Impl::BudgetChoice TerrainManager::Impl::choose(const PatchReque
     apron = keep;
     if (attempt(coarsest, apron, kTradeApronRung)) return c;
   }
-  // (Only for a patch asked for ahead of another, which takes over a body already moving: the
-  // first patch under the vehicle of scenes/vehicle_drive.json at rest, at N = 10, lost 22-26 %
-  // of its soil under the spinning-up wheels and the car stayed where it was, twice in two runs;
-  // at N = 20 it drove off. Without a budget, at N = 10, it drove off in three runs of three.)
   const int n_half = std::max(kMinStepsPerContact, def.steps_per_contact / 2);
-  if (n_half < def.steps_per_contact && r.abuts >= 0) {
+  if (n_half < def.steps_per_contact) {
     c.traded.push_back("substeps");
     attempt(coarsest, apron, kTradeSubstepsRung, n_half);
   }

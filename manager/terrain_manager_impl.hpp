@@ -224,6 +224,7 @@ struct TerrainManager::Impl {
   long long budget_waits = 0;      // request-frames a request waited in the queue because it did not fit
   int budget_overruns = 0;         // promotions that did not fit and went ahead (nothing else live)
   long long budget_held = 0;       // patch-frames a patch carrying no body was held (not stepped)
+  long long budget_held_ahead = 0;  // of which a body was heading for the patch (further than two frames)
   int budget_longest_hold = 0;     // frames in a row, the longest hold
   // Which awake patches step this frame (budget.cpp): all of them without a budget; with one,
   // the wanted ones (a body on, over or heading for them), then the others, longest held
@@ -231,9 +232,9 @@ struct TerrainManager::Impl {
   bool wanted(const Slot& s) const;
   // Whether a body (world bounds lo..hi, velocity v) is over or heading for the rectangle r:
   // its bounds, grown by lod.margin (and `grow`, m) and swept along its horizontal velocity
-  // over lod.horizon.
+  // over lod.horizon (or `horizon` s when >= 0).
   bool heading_for(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, const Eigen::Vector3f& v, const PatchRequest& r,
-                   double grow = 0) const;
+                   double grow = 0, double horizon = -1) const;
   // The coarsest particle scale the bodies a request is for allow (those over or heading for
   // it, within lod.apron: the request is their contact's footprint and apron): each body's
   // smallest dimension over kBodyGranules granule diameters at scale 1 (budget.cpp); 0 when
