@@ -15,6 +15,9 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <string>
+
+#include "particles/granule.hpp"
 
 #include "manager/terrain_manager_impl.hpp"
 
@@ -33,14 +36,20 @@ static int slot_spheres(const Slot& s, int granules) {
   return std::max(s.sim->particle_count(), 4 * (granules + int(s.pending.size()) - int(s.uploaded)));
 }
 
-double TerrainManager::Impl::substeps(double dt) const {
+// (slot 0's substeps at its own N, scaled to N: n_sub = ceil(dt N / t_c))
+double TerrainManager::Impl::substeps(double dt, int steps_per_contact) const {
   if (slots.empty()) return 1;
-  auto n = slots.front().sim->substeps_for(dt);
-  return n ? double(*n) : 1.0;
+  const Slot& s = slots.front();
+  auto n = s.sim->substeps_for(dt);
+  const double base = n ? double(*n) : 1.0;
+  const int own = s.steps_per_contact > 0 ? s.steps_per_contact : def.steps_per_contact;
+  const int want = steps_per_contact > 0 ? steps_per_contact : def.steps_per_contact;
+  if (own == want || own <= 0) return base;
+  return std::max(1.0, std::ceil(base * want / own - 1e-9));
 }
 
-double TerrainManager::Impl::predict_ms(double spheres, double dt) const {
-  return load * substeps(dt) * (cost_a_ms + cost_b_ms * spheres);
+double TerrainManager::Impl::predict_ms(double spheres, double dt, int steps_per_contact) const {
+  return load * substeps(dt, steps_per_contact) * (cost_a_ms + cost_b_ms * spheres);
 }
 
 // (a patch the budget may hold, one no body wants, leaves its room to a new one)
@@ -48,14 +57,13 @@ double TerrainManager::Impl::live_cost_ms(double dt) const {
   double ms = 0;
   for (const Slot& s : slots)
     if (s.state == SlotState::Filling || (s.state == SlotState::Active && (!budget_on() || wanted(s))))
-      ms += predict_ms(slot_spheres(s, record(s).granules), dt);
+      ms += predict_ms(slot_spheres(s, record(s).granules), dt, s.steps_per_contact);
   return ms;
 }
 
 // Whether a patch is wanted this frame: it carries a body, or a body is over or heading for
-// its region (its bounds, grown by lod.margin and by how far it goes in lod.horizon at its
-// horizontal speed, overlap the region). A patch not wanted (its body left, or was removed)
-// may be held by the budget and does not count against a new patch's room.
+// its region (heading_for). A patch not wanted (its body left, or was removed) may be held by
+// the budget and does not count against a new patch's room.
 bool TerrainManager::Impl::wanted(const Slot& s) const {
   for (const Carried& c : s.carried)
     if (c.enabled) return true;
@@ -63,37 +71,112 @@ bool TerrainManager::Impl::wanted(const Slot& s) const {
   for (RigidBodyId b : world->bodies()) {
     Eigen::Vector3d lo, hi;
     world->bounds(b, &lo, &hi);
-    const Eigen::Vector3f v = world->state(b).linear_velocity;
-    const double reach = def.lod.margin + std::hypot(double(v.x()), double(v.z())) * def.lod.horizon;
-    if (lo.x() - reach < r.x1 && hi.x() + reach > r.x0 && lo.z() - reach < r.z1 && hi.z() + reach > r.z0) return true;
+    if (heading_for(lo, hi, world->state(b).linear_velocity, r)) return true;
   }
   return false;
 }
 
-// Which awake patches step this frame. Wanted patches always step. The others (settling
-// after their body left) step, the longest held first, while the predicted DEM of everything
-// stepped so far fits 80 % of the budget (the share `choose` gives the DEM); one that does not
-// fit is held this frame: not stepped, its granules where they are, its time behind the
-// frame's (nothing outside the patch reads it). A patch is held at most kMaxHeldFrames in a
+// The body's bounds grown by lod.margin, swept along its horizontal velocity over lod.horizon
+// (ahead of it only: a patch a body drove off is behind it, and no longer wanted by it).
+bool TerrainManager::Impl::heading_for(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, const Eigen::Vector3f& v,
+                                       const PatchRequest& r, double grow, double horizon) const {
+  const double h = horizon >= 0 ? horizon : def.lod.horizon;
+  const double m = def.lod.margin + grow, dx = double(v.x()) * h, dz = double(v.z()) * h;
+  const double x0 = lo.x() + std::min(0.0, dx) - m, x1 = hi.x() + std::max(0.0, dx) + m;
+  const double z0 = lo.z() + std::min(0.0, dz) - m, z1 = hi.z() + std::max(0.0, dz) + m;
+  return x0 < r.x1 && x1 > r.x0 && z0 < r.z1 && z1 > r.z0;
+}
+
+// m: a body's smallest dimension (sphere and capsule: the diameter; box: its thinnest side;
+// cylinder: the smaller of its diameter and length; mesh: the thinnest side of its vertices'
+// box in its own frame).
+static double smallest_dimension(const RigidShape& sh) {
+  switch (sh.kind) {
+    case RigidShapeKind::Sphere:
+    case RigidShapeKind::Capsule: return 2.0 * double(sh.radius);
+    case RigidShapeKind::Box: return 2.0 * double(sh.half_extents.minCoeff());
+    case RigidShapeKind::Cylinder: return std::min(2.0 * double(sh.radius), double(sh.height));
+    case RigidShapeKind::Mesh: {
+      if (sh.vertices.empty()) return 0;
+      Eigen::Vector3f lo = sh.vertices.front(), hi = lo;
+      for (const Eigen::Vector3f& p : sh.vertices) lo = lo.cwiseMin(p), hi = hi.cwiseMax(p);
+      return double((hi - lo).minCoeff());
+    }
+  }
+  return 0;
+}
+
+// The particle-scale cap (docs/manager.md "Frame budget"): a body carried by a patch whose
+// granules are as wide as the body sinks into them and stalls. Measured with the vehicle of
+// scenes/vehicle_drive.json (0.3 m wide wheels on r = 4 cm granules, no budget, 8 s,
+// docs/BENCHMARKS.md "Wheels and the particle-scale cap"): at scale 1, 1.5 and 2 (wheel width
+// 1.69, 1.12 and 0.84 granule diameters) it drives 21.6, 11.4 and 12.9 m and ends at 3.2,
+// 2.7 and 3.0 m/s; at scale 3 (0.56) its wheels sink 0.27 m at the start and it does not move.
+// So a body keeps at least kBodyGranules granule diameters (the granule's bounding diameter,
+// 2 (1 + sqrt(3/2)) r s = 4.45 r s) across its smallest dimension.
+constexpr double kBodyGranules = 0.8;
+
+double TerrainManager::Impl::body_scale_cap(const PatchRequest& r, std::string* by, double* size) const {
+  const GranuleShape g = make_granule_shape(def.material.radius, 1.0f, def.material.density);
+  const double diameter1 = 2.0 * double(g.centre_distance + g.radius);  // m, at scale 1
+  double cap = 0;
+  for (RigidBodyId b : world->bodies()) {
+    Eigen::Vector3d lo, hi;
+    world->bounds(b, &lo, &hi);
+    if (!heading_for(lo, hi, world->state(b).linear_velocity, r, def.lod.apron)) continue;
+    const double d = smallest_dimension(world->definition(b).shape);
+    if (!(d > 0)) continue;
+    const double c = d / (kBodyGranules * diameter1);
+    if (cap == 0 || c < cap) {
+      cap = c;
+      if (by) *by = world->definition(b).name;
+      if (size) *size = d;
+    }
+  }
+  return cap;
+}
+
+// Which awake patches step this frame. A patch that carries a body, or that a body reaches
+// within two frames, always steps. The others (one a body is heading for, further ahead; then
+// those settling after their body left) step, the longest held first, while the predicted DEM
+// of everything stepped so far fits 80 % of the budget (the share `choose` gives the DEM); one
+// that does not fit is held this frame: not stepped, its granules where they are, its time
+// behind the frame's (nothing outside the patch reads it). A patch is held at most kMaxHeldFrames in a
 // row, so it still settles and sleeps, at a fraction of the rate. Without a budget every
 // awake patch steps, in slot order.
 std::vector<Slot*> TerrainManager::Impl::stepping_order(const std::vector<Slot*>& awake, double dt) {
   if (!budget_on()) return awake;
   constexpr int kMaxHeldFrames = 30;
-  std::vector<std::pair<Slot*, bool>> order;
-  for (Slot* s : awake) order.push_back({s, wanted(*s)});
+  // Tiers: 2, a patch that carries a body or that a body reaches within two frames (it must
+  // step); 1, one a body is heading for, further ahead (it may wait until the body comes:
+  // nothing is on it yet); 0, one no body wants.
+  auto tier = [&](const Slot& s) {
+    for (const Carried& c : s.carried)
+      if (c.enabled) return 2;
+    if (!wanted(s)) return 0;
+    const PatchRequest r = rect(s);
+    for (RigidBodyId b : world->bodies()) {
+      Eigen::Vector3d lo, hi;
+      world->bounds(b, &lo, &hi);
+      if (heading_for(lo, hi, world->state(b).linear_velocity, r, 0, 2 * dt)) return 2;
+    }
+    return 1;
+  };
+  std::vector<std::pair<Slot*, int>> order;
+  for (Slot* s : awake) order.push_back({s, tier(*s)});
   std::stable_sort(order.begin(), order.end(), [&](const auto& a, const auto& b) {
-    if (a.second != b.second) return a.second;
+    if (a.second != b.second) return a.second > b.second;
     return a.first->held > b.first->held;
   });
   const double avail = 0.8 * budget_ms(dt);
   double used = 0;
   std::vector<Slot*> step;
-  for (auto [s, want] : order) {
-    const double ms = predict_ms(s->sim->particle_count(), dt);
-    if (!want && used + ms > avail && s->held < kMaxHeldFrames) {
+  for (auto [s, t] : order) {
+    const double ms = predict_ms(s->sim->particle_count(), dt, s->steps_per_contact);
+    if (t < 2 && used + ms > avail && s->held < kMaxHeldFrames) {
       ++s->held;
       ++budget_held;
+      budget_held_ahead += t == 1;
       budget_longest_hold = std::max(budget_longest_hold, s->held);
       continue;
     }
@@ -108,7 +191,7 @@ std::vector<Slot*> TerrainManager::Impl::stepping_order(const std::vector<Slot*>
 // and one slow frame, e.g. the machine busy elsewhere for a moment, does not throw it).
 void TerrainManager::Impl::observe_cost(const Slot& s, double wall_ms, double dt) {
   if (pinned()) return;
-  const double pred = predict_ms(s.sim->particle_count(), dt) / load;
+  const double pred = predict_ms(s.sim->particle_count(), dt, s.steps_per_contact) / load;
   if (!(pred > 0) || !(wall_ms > 0)) return;
   load += 0.2 * (std::clamp(wall_ms / pred, 0.1, 100.0) - load);
 }
@@ -174,6 +257,16 @@ struct Rung {
 };
 // Whole multiples, so a coarser rung's tiles are its base scale's (derive_tile_set).
 constexpr Rung kLadder[] = {{1, 1}, {1, 0.5}, {2, 0.5}, {3, 0.5}};
+// The rung the budget takes when a body's size barred the coarser scales: the coarsest scale
+// the cap allows, without the apron (body_scale_cap).
+constexpr int kTradeApronRung = 4;
+// Then half the substeps (dt_sub <= t_c / N with N halved, at least kMinStepsPerContact).
+// Measured on scenes/vehicle_drive.json at scale 2 without a budget (docs/BENCHMARKS.md
+// "Wheels and the particle-scale cap"): N = 10 against 20 steps 0.44 times the sphere-steps
+// and the car drives as far in three pairs of runs of four (10.7 / 12.9, 20.7 / 18.9,
+// 18.1 / 18.8 m in 8 s; 8.7 / 8.5 m in 4 s), deepest wheel sinkage 0.12-0.20 m either way.
+constexpr int kTradeSubstepsRung = 5;
+constexpr int kMinStepsPerContact = 10;
 }  // namespace
 
 std::vector<double> TerrainManager::Impl::all_scales() const {
@@ -216,23 +309,58 @@ TerrainManager::Impl::BudgetChoice TerrainManager::Impl::choose(const PatchReque
     return c;
   }
   c.fits = false;
+  // The bodies it is for cap the scale (never below the requested one: the cap stops the
+  // budget coarsening, it does not refine).
+  c.body_cap = body_scale_cap(r, &c.capped_by, &c.capped_size_m);
+  const double cap = c.body_cap > 0 ? std::max(c.body_cap, c.requested_scale) : std::numeric_limits<double>::infinity();
   // The rungs a request may take: those of the scales made at creation (a patch asked for
-  // ahead of a body starts from its own requested scale).
+  // ahead of a body starts from its own requested scale) that the cap allows.
   const std::vector<double> made = all_scales();
+  auto attempt = [&](double s, double apron, int rung, int steps_per_contact = 0) {
+    PatchRequest q = r;
+    const double trim = r.apron * (1.0 - apron);
+    // (a patch asked for ahead of another is trimmed across the way it extends only)
+    const bool along_x = r.abuts < 0 || r.abuts >= 2, along_z = r.abuts < 2;
+    if (trim > 0 && along_x && q.x1 - q.x0 > 2 * trim) q.x0 += trim, q.x1 -= trim;
+    if (trim > 0 && along_z && q.z1 - q.z0 > 2 * trim) q.z0 += trim, q.z1 -= trim;
+    const int n = predict_granules(q, s);
+    const double ms = predict_ms(4.0 * n, dt, steps_per_contact);
+    c.scale = s, c.req = q, c.granules = n, c.predicted_ms = ms, c.rung = rung;
+    c.req.particle_scale = s;
+    c.req.steps_per_contact = c.steps_per_contact = steps_per_contact;
+    c.fits = n <= def.granules_per_slot && ms <= c.available_ms;
+    return c.fits;
+  };
+  double coarsest = 0;  // the coarsest scale tried, and its apron
+  double coarsest_apron = 1;
   for (const Rung& g : kLadder) {
     const double s = c.requested_scale * g.scale;
     if (std::find(made.begin(), made.end(), s) == made.end()) continue;
-    PatchRequest q = r;
-    const double trim = r.apron * (1.0 - g.apron);
-    if (trim > 0 && q.x1 - q.x0 > 2 * trim && q.z1 - q.z0 > 2 * trim) q.x0 += trim, q.x1 -= trim, q.z0 += trim, q.z1 -= trim;
-    const int n = predict_granules(q, s);
-    const double ms = predict_ms(4.0 * n, dt);
-    c.scale = s, c.req = q, c.granules = n, c.predicted_ms = ms, c.rung = int(&g - kLadder);
-    c.req.particle_scale = s;
-    if (n <= def.granules_per_slot && ms <= c.available_ms) {
-      c.fits = true;
-      break;
+    if (s > cap * (1 + 1e-9)) {
+      c.cap_bound = true;
+      continue;
     }
+    coarsest = s, coarsest_apron = g.apron;
+    if (attempt(s, g.apron, int(&g - kLadder))) return c;
+  }
+  // The cap barred the coarser scales: at the coarsest scale the cap allows, the budget gives
+  // up the apron (the patch covers the bodies' predicted footprint and 4 r s only), then half
+  // of the DEM's substeps (N = steps_per_contact halved, not below kMinStepsPerContact).
+  if (!c.cap_bound || coarsest <= 0) return c;
+  // (the apron kept: two sphere diameters at that scale, 4 r s, the margin at which a body
+  // nearing a patch's edge has a patch asked for beyond it (planning.cpp extend): less, and
+  // the patch would at once ask for one beside it)
+  double apron = coarsest_apron;
+  const double keep = r.apron > 0 ? std::min(1.0, 4.0 * radius_world(coarsest) / r.apron) : 1.0;
+  if (r.apron > 0 && apron > keep) {
+    c.traded.push_back("apron");
+    apron = keep;
+    if (attempt(coarsest, apron, kTradeApronRung)) return c;
+  }
+  const int n_half = std::max(kMinStepsPerContact, def.steps_per_contact / 2);
+  if (n_half < def.steps_per_contact) {
+    c.traded.push_back("substeps");
+    attempt(coarsest, apron, kTradeSubstepsRung, n_half);
   }
   return c;
 }

@@ -40,7 +40,11 @@ Status TerrainManager::Impl::activate(double time, double dt) {
       continue;
     }
     const BudgetChoice c = choose(*it, dt, live_ms);
-    const bool others = std::any_of(slots.begin(), slots.end(), [](const Slot& s) { return s.live(); });
+    // (a live patch no body wants any more is being wound down: it does not make a request
+    // wait, as it does not take a new patch's room; budget.cpp wanted)
+    const bool others = std::any_of(slots.begin(), slots.end(), [&](const Slot& s) {
+      return s.state == SlotState::Filling || (s.live() && (!budget_on() || wanted(s)));
+    });
     if (!c.fits && others) {
       ++budget_waits;
       ++it;
@@ -52,20 +56,26 @@ Status TerrainManager::Impl::activate(double time, double dt) {
     }
     if (Status s = promote(*free, c.req, time); !s) return s;
     budget_overruns += !c.fits;
-    live_ms += predict_ms(4.0 * double(free->pending.size()), dt);
-    if (budget_on())
+    live_ms += predict_ms(4.0 * double(free->pending.size()), dt, free->steps_per_contact);
+    if (budget_on()) {
       budget_log.push_back({{"patch", free->patch},
                             {"time_s", time},
                             {"requested_scale", c.requested_scale},
                             {"particle_scale", free->scale},
                             {"apron_m", it->apron},
-                            {"apron_used_m", it->apron - (c.req.x0 - it->x0)},
+                            {"apron_used_m", it->apron - std::max(c.req.x0 - it->x0, c.req.z0 - it->z0)},
                             {"rung", c.rung},
                             {"granules", int(free->pending.size())},
                             {"granules_predicted", c.granules},
                             {"predicted_ms", c.predicted_ms},
                             {"available_ms", c.available_ms},
-                            {"fits", c.fits}});
+                            {"fits", c.fits},
+                            {"body_cap_scale", c.body_cap},
+                            {"cap_bound", c.cap_bound},
+                            {"traded", c.traded},
+                            {"steps_per_contact", free->steps_per_contact > 0 ? free->steps_per_contact : def.steps_per_contact}});
+      if (c.body_cap > 0) budget_log.back()["capped_by"] = {{"body", c.capped_by}, {"smallest_dimension_m", c.capped_size_m}};
+    }
     it = queue.erase(it);
   }
   peak_queue = std::max(peak_queue, int(queue.size()));
@@ -279,6 +289,9 @@ Status TerrainManager::Impl::promote(Slot& slot, const PatchRequest& req, double
 
   // The simulation: unit scale, patch-relative; the terrain around the region as a grid.
   SimulationDef sd = sim_def(s);
+  // (the frame budget may have lowered the DEM's N for this patch: budget.cpp)
+  if (req.steps_per_contact > 0) sd.accuracy_steps_per_contact = req.steps_per_contact;
+  slot.steps_per_contact = req.steps_per_contact;
   const float W = float((region.ni - 1) * double(sp) / s), D = float((region.nj - 1) * double(sp) / s);
   const float top = float((hi - floor_local) / s);
   sd.bounds_min = {0, 0, 0};

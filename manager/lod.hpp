@@ -47,6 +47,13 @@ struct PatchRequest {
   // m: the apron on every side of the contacts' footprint (LodDef::apron; 0 for requests made
   // with request_patch). The frame budget may trim it (TerrainManagerDef::frame_budget_ms).
   double apron = 0;
+  // The DEM's N (substeps at dt <= t_c / N) the patch runs at; 0: the manager's
+  // (TerrainDef.steps_per_contact). The frame budget may lower it (budget.cpp).
+  int steps_per_contact = 0;
+  // The side (0: x0, 1: x1, 2: z0, 3: z1) on which it abuts the live patch it was asked for
+  // ahead of (TerrainManager extend); -1: none. The budget trims its apron on the two sides
+  // across that one only, so it stays against the patch it abuts and reaches as far ahead.
+  int abuts = -1;
   double width() const { return x1 - x0; }
   double depth() const { return z1 - z0; }
   bool overlaps(const PatchRequest& o) const { return x0 < o.x1 && o.x0 < x1 && z0 < o.z1 && o.z0 < z1; }

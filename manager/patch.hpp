@@ -68,6 +68,7 @@ struct Slot {
   int fade = 0;              // frames simulated, up to fade_frames
   double asleep_for = 0;     // s asleep and untouched
   int held = 0;              // frames in a row the budget held it (not stepped; budget.cpp)
+  int steps_per_contact = 0;  // the DEM's N (dt_sub <= t_c / N) if the budget lowered it; 0: the manager's
   // An idle demotion in progress, one part a frame (demotion.cpp): 0 nothing done yet, 1 the
   // fill's surface rendered, 2 the surface now rendered too; the next part writes them.
   struct Demotion {

@@ -292,7 +292,9 @@ Result<bool> TerrainManager::Impl::extend(const PatchRequest& r, double time) {
     for (const PatchRequest& q : queue)
       if (q.overlaps(u)) return false;  // asked already
     u.time_to_contact = 0;
-    u.apron = 0;  // the budget may not trim it away from the patch it abuts
+    u.abuts = side ^ 1;  // (side 0, x0 of the patch, is its x1; and so on)
+    // The budget may trim its apron across the way it extends only (budget.cpp choose).
+    u.apron = budget_on() ? r.apron : 0;
     u.particle_scale = budget_on() ? 0.0 : s.scale;  // its scale, or the budget's choice again
     queue.insert(queue.begin(), u);
     events.push_back({PatchEventKind::Requested, -1, time, 0, 0});

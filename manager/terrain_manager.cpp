@@ -473,6 +473,7 @@ nlohmann::ordered_json TerrainManager::report() const {
     b["overruns"] = I.budget_overruns;
     b["waited_request_frames"] = I.budget_waits;
     b["held_patch_frames"] = I.budget_held;
+    b["held_ahead_patch_frames"] = I.budget_held_ahead;
     b["longest_hold_frames"] = I.budget_longest_hold;
     b["patches"] = I.budget_log;
     r["budget"] = b;

@@ -210,6 +210,15 @@ struct TerrainManager::Impl {
     int granules = 0;          // predicted
     int rung = 0;              // 0 = as requested
     double predicted_ms = 0, available_ms = 0, budget_ms = 0;
+    // The coarsest scale the bodies it is for allow (body_scale_cap; 0: no body), the body
+    // that set it and its smallest dimension (m); and what the budget gave up instead of a
+    // coarser scale the cap barred (e.g. "apron"), empty when it gave up nothing.
+    double body_cap = 0;
+    std::string capped_by;
+    double capped_size_m = 0;
+    bool cap_bound = false;    // the cap barred a rung the budget would have tried
+    std::vector<std::string> traded;
+    int steps_per_contact = 0;  // the DEM's N it runs at when it traded substeps (else 0)
   };
   std::vector<nlohmann::ordered_json> budget_log;  // one entry per promotion (the report's budget.patches)
   long long budget_waits = 0;      // request-frames a request waited in the queue because it did not fit
@@ -219,17 +228,30 @@ struct TerrainManager::Impl {
   double lift_max = 0;
   int budget_overruns = 0;         // promotions that did not fit and went ahead (nothing else live)
   long long budget_held = 0;       // patch-frames a patch carrying no body was held (not stepped)
+  long long budget_held_ahead = 0;  // of which a body was heading for the patch (further than two frames)
   int budget_longest_hold = 0;     // frames in a row, the longest hold
   // Which awake patches step this frame (budget.cpp): all of them without a budget; with one,
   // the wanted ones (a body on, over or heading for them), then the others, longest held
   // first, while they fit.
   bool wanted(const Slot& s) const;
+  // Whether a body (world bounds lo..hi, velocity v) is over or heading for the rectangle r:
+  // its bounds, grown by lod.margin (and `grow`, m) and swept along its horizontal velocity
+  // over lod.horizon (or `horizon` s when >= 0).
+  bool heading_for(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, const Eigen::Vector3f& v, const PatchRequest& r,
+                   double grow = 0, double horizon = -1) const;
+  // The coarsest particle scale the bodies a request is for allow (those over or heading for
+  // it, within lod.apron: the request is their contact's footprint and apron): each body's
+  // smallest dimension over kBodyGranules granule diameters at scale 1 (budget.cpp); 0 when
+  // no body is.
+  double body_scale_cap(const PatchRequest& r, std::string* by, double* size) const;
   std::vector<Slot*> stepping_order(const std::vector<Slot*>& awake, double dt);
   bool pinned() const { return def.budget_substep_ms > 0 && def.budget_sphere_ns > 0; }
   bool budget_on() const { return def.frame_budget_fraction > 0 || std::isfinite(def.frame_budget_ms); }
   double budget_ms(double dt) const;  // ms, infinity when off
-  double substeps(double dt) const;                  // DEM substeps of a frame of dt s
-  double predict_ms(double spheres, double dt) const;  // a patch's DEM ms per frame
+  // DEM substeps of a frame of dt s at N = steps_per_contact (0: the manager's N).
+  double substeps(double dt, int steps_per_contact = 0) const;
+  // A patch's DEM ms per frame at N = steps_per_contact (0: the manager's).
+  double predict_ms(double spheres, double dt, int steps_per_contact = 0) const;
   double live_cost_ms(double dt) const;  // predicted DEM ms of the awake and filling patches
   void observe_cost(const Slot& s, double wall_ms, double dt);
   Status calibrate();

@@ -33,11 +33,14 @@ struct Drop {
   ojson report;
   std::string error;
 };
-Drop drop(const TerrainManagerDef& def, int frames) {
+// (`radius`: the sphere's, m; it is named "sphere")
+Drop drop(const TerrainManagerDef& def, int frames, float radius = 0.1f) {
   Drop d;
   test::Rig rig(test::terrain_8m("flat"));
   if (!rig.ok()) return {0, {}, rig.error};
-  if (!rig.add_sphere(0.1f, 5.0f, {4.0, 1.0 + 0.1 + 0.3, 4.0}).ok()) return {0, {}, "add_sphere"};
+  RigidBodyDef body = test::sphere_body(radius, 5.0f, {4.0, 1.0 + radius + 0.3, 4.0});
+  body.name = "sphere";
+  if (!rig.core->add_body(body).ok()) return {0, {}, "add_body"};
   if (!rig.start(def).ok() || !rig.frames(frames).ok() || !rig.demote_all().ok()) return {0, {}, rig.error};
   d.hash = rig.core->state_hash();
   d.report = rig.manager->report();
@@ -98,9 +101,10 @@ TEST(Budget, ATightBudgetCoarsensTheNewPatchUntilItFits) {
 }
 
 // Nothing fits and nothing else is live: the patch still comes (at the coarsest rung) and the
-// report counts the overrun with the milliseconds it needed, never a silent stall.
+// report counts the overrun with the milliseconds it needed, never a silent stall. (A 0.2 m
+// sphere: 0.4 m across, it allows scale 3 of these 2.5 cm granules.)
 TEST(Budget, NothingFitsIsReportedWithTheCostItNeeded) {
-  const Drop on = drop(budget_def(0.001), 2);
+  const Drop on = drop(budget_def(0.001), 2, 0.2f);
   ASSERT_TRUE(on.error.empty()) << on.error;
   const auto& b = on.report["budget"];
   ASSERT_EQ(b["patches"].size(), 1u);
@@ -108,6 +112,66 @@ TEST(Budget, NothingFitsIsReportedWithTheCostItNeeded) {
   EXPECT_EQ(b["overruns"].get<int>(), 1);
   EXPECT_GT(b["patches"][0]["predicted_ms"].get<double>(), b["patches"][0]["available_ms"].get<double>());
   EXPECT_EQ(b["patches"][0]["rung"].get<int>(), 3) << "the coarsest rung";
+}
+
+// The particle-scale cap: a body of smallest dimension D never gets a patch whose granules
+// (bounding diameter 2 (1 + sqrt(3/2)) r s) are wider than D / 0.8, however tight the budget,
+// unless it asked for that scale itself; the report names the body and its size.
+TEST(Budget, ABodyCapsTheParticleScale) {
+  const double r = 0.025;                                   // m, the rig's granule radius
+  const double diameter1 = 2.0 * (1.0 + std::sqrt(1.5)) * r;  // m, a granule at scale 1
+  for (float radius : {0.05f, 0.1f, 0.2f}) {
+    const Drop on = drop(budget_def(0.001), 2, radius);  // nothing fits: the coarsest it may
+    ASSERT_TRUE(on.error.empty()) << on.error;
+    const auto& b = on.report["budget"];
+    ASSERT_EQ(b["patches"].size(), 1u) << b.dump(1);
+    const auto& p = b["patches"][0];
+    const double size = 2.0 * radius, s = p["particle_scale"].get<double>();
+    EXPECT_NEAR(p["capped_by"]["smallest_dimension_m"].get<double>(), size, 1e-6) << p.dump();
+    EXPECT_EQ(p["capped_by"]["body"].get<std::string>(), "sphere");
+    EXPECT_NEAR(p["body_cap_scale"].get<double>(), size / (0.8 * diameter1), 1e-4) << p.dump();
+    EXPECT_TRUE(s == 1.0 || diameter1 * s <= size / 0.8 + 1e-9)
+        << "a " << size << " m body on granules " << diameter1 * s << " m across (scale " << s << ")";
+    std::printf("sphere %.2f m across: scale %g (cap %.2f), rung %d, traded %s\n", size, s, p["body_cap_scale"].get<double>(),
+                p["rung"].get<int>(), p["traded"].dump().c_str());
+  }
+  // 0.1 m across: scale 1 only (cap 1.12); 0.2 m: scale 2 (cap 2.25); 0.4 m: scale 3, the
+  // coarsest rung, the cap not binding.
+  EXPECT_EQ(drop(budget_def(0.001), 2, 0.05f).report["budget"]["patches"][0]["particle_scale"].get<double>(), 1.0);
+  EXPECT_EQ(drop(budget_def(0.001), 2, 0.1f).report["budget"]["patches"][0]["particle_scale"].get<double>(), 2.0);
+  const ojson big = drop(budget_def(0.001), 2, 0.2f).report["budget"]["patches"][0];
+  EXPECT_EQ(big["particle_scale"].get<double>(), 3.0);
+  EXPECT_FALSE(big["cap_bound"].get<bool>());
+  EXPECT_TRUE(big["traded"].empty());
+}
+
+// When the cap bars the coarser scales, the budget trades the apron (down to 4 r s, the margin
+// at which a patch ahead would be asked for), then half the DEM's substeps (N 20 -> 10), and
+// says so: `traded`, the rung, the apron used and the N the patch runs at, which its DEM report
+// shows as half the substeps of the same patch without the trades.
+TEST(Budget, WhatTheCapBarsTheBudgetTradesAndReports) {
+  const Drop on = drop(budget_def(0.001), 2, 0.1f);
+  ASSERT_TRUE(on.error.empty()) << on.error;
+  const auto& p = on.report["budget"]["patches"][0];
+  EXPECT_TRUE(p["cap_bound"].get<bool>()) << p.dump();
+  EXPECT_EQ(p["particle_scale"].get<double>(), 2.0);
+  EXPECT_EQ(p["traded"], ojson::array({"apron", "substeps"})) << p.dump();
+  EXPECT_EQ(p["rung"].get<int>(), 5);
+  EXPECT_NEAR(p["apron_used_m"].get<double>(), 4.0 * 0.025 * 2.0, 1e-6) << "apron 0.6 m trimmed to 4 r s";
+  EXPECT_EQ(p["steps_per_contact"].get<int>(), 10);
+  EXPECT_FALSE(p["fits"].get<bool>());  // (nothing fits 1 µs: promoted anyway, counted)
+  // The same sphere with room for everything: N = 20, the whole apron, nothing traded.
+  const Drop wide = drop(budget_def(1e5), 2, 0.1f);
+  ASSERT_TRUE(wide.error.empty()) << wide.error;
+  const auto& q = wide.report["budget"]["patches"][0];
+  EXPECT_EQ(q["steps_per_contact"].get<int>(), 20);
+  EXPECT_TRUE(q["traded"].empty());
+  EXPECT_EQ(q["apron_used_m"].get<double>(), 0.6);
+  const double sub_traded = on.report["dem"]["patches"][0]["substeps_per_frame"].get<double>();
+  const double sub_full = wide.report["dem"]["patches"][0]["substeps_per_frame"].get<double>();
+  EXPECT_NEAR(sub_traded, 0.5 * sub_full, 1.0) << "half the substeps (rounded up)";
+  std::printf("traded %s: substeps per frame %.0f against %.0f, apron %.2f m of 0.6 m\n", p["traded"].dump().c_str(),
+              sub_traded, sub_full, p["apron_used_m"].get<double>());
 }
 
 // A patch no body wants any more (its sphere was removed while the bed still moved) is held
