@@ -36,6 +36,7 @@ Status TerrainManager::Impl::step_patches(double time, double dt) {
       s.asleep_for = 0;
       s.demotion = {};  // a demotion begun while it slept starts again
       events.push_back({PatchEventKind::Woke, s.patch, time, 0, record(s).granules});
+      ++work.wakes;
     }
     const auto t_step = manager_detail::Clock::now();
     // The DEM names its own definition; say which knob of the terrain's trades it.

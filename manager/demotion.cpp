@@ -127,9 +127,11 @@ Status TerrainManager::Impl::demote(Slot& slot, double time, bool gl_ok, bool st
     if (!rec.fill_spheres.empty()) {
       auto was = render_surface(slot, box, filled, gl_ok, &w.on_gl);
       if (!was) return was.errors();
+      ++work.depth_renders;
       w.was = std::move(*was);
     }
     w.stage = 1;
+    ++work.demotion_parts;
     w.ms += ms_since(t0);
     if (staged) return Ok{};
   }
@@ -137,8 +139,10 @@ Status TerrainManager::Impl::demote(Slot& slot, double time, bool gl_ok, bool st
     const auto t1 = Clock::now();
     auto img = render_surface(slot, box, xyzr, gl_ok, &w.on_gl);
     if (!img) return img.errors();
+    ++work.depth_renders;
     w.now = std::move(*img);
     w.stage = 2;
+    ++work.demotion_parts;
     w.ms += ms_since(t1);
     if (staged) return Ok{};
   }
@@ -162,6 +166,8 @@ Status TerrainManager::Impl::demote(Slot& slot, double time, bool gl_ok, bool st
   for (const Carried& c : slot.carried)
     if (c.enabled && world->alive(c.body)) world->set_terrain_collision(c.body, true);
   events.push_back({PatchEventKind::Demoted, slot.patch, time, w.ms + ms_since(t2), rec.granules});
+  ++work.demotion_parts;
+  ++work.demotions;
   slot.state = SlotState::Free;
   rec.granules = 0;
   slot.carried.clear();

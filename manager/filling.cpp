@@ -344,6 +344,8 @@ Status TerrainManager::Impl::promote(Slot& slot, const PatchRequest& req, double
   rec.ledger.packing_fraction = tile.packing_fraction;
   rec.fill_ms = ms_since(t0);
   events.push_back({PatchEventKind::Promoted, slot.patch, time, rec.fill_ms, int(slot.pending.size())});
+  ++work.promotions;
+  work.granules_filled += int(slot.pending.size());
   return Ok{};
 }
 
@@ -403,6 +405,7 @@ Status TerrainManager::Impl::upload(Slot& slot, std::size_t budget, double time)
     auto id = slot.sim->add_granule(g.position, g.orientation);
     if (!id) return id.errors();
     ++rec.granules;
+    ++work.granules_uploaded;
   }
   rec.fill_ms += ms_since(t0);
   if (slot.uploaded == slot.pending.size()) {
@@ -410,6 +413,7 @@ Status TerrainManager::Impl::upload(Slot& slot, std::size_t budget, double time)
     slot.pending.shrink_to_fit();
     slot.state = SlotState::Active;
     events.push_back({PatchEventKind::Ready, slot.patch, time, rec.fill_ms, rec.granules});
+    ++work.ready;
   }
   return Ok{};
 }

@@ -161,6 +161,7 @@ Status TerrainManager::before_bodies(double time, double dt, Profile& profile) {
   I.current();
   I.now = time;
   I.soil.clear();
+  I.work = {};
   for (auto it = I.set_down_until.begin(); it != I.set_down_until.end();)
     it = it->second <= time ? I.set_down_until.erase(it) : std::next(it);
   {
@@ -290,6 +291,8 @@ std::uint64_t TerrainManager::state_hash() const {
 }
 
 const std::vector<PatchEvent>& TerrainManager::events() const { return impl_->events; }
+
+const TerrainManager::FrameWork& TerrainManager::last_frame_work() const { return impl_->work; }
 
 std::vector<TerrainManager::PatchInfo> TerrainManager::patches() const {
   std::vector<PatchInfo> out;

@@ -224,6 +224,23 @@ class TerrainManager {
   };
   std::vector<PatchInfo> patches() const;
   const std::vector<PatchEvent>& events() const;
+  // The work of the last frame (before_bodies + after_bodies), counted, not timed: what
+  // the per-frame caps bound (docs/manager.md "No frame does a whole patch's work").
+  struct FrameWork {
+    int promotions = 0;         // patches promoted (slot reset, fill cut from the tile)
+    int fill_rows = 0;          // rows of tile copies cut into a patch's fill
+    int granules_filled = 0;    // granules cut from a tile into a patch's fill (pending)
+    int granules_uploaded = 0;  // granules added to a slot's DEM
+    int ready = 0;              // patches whose upload completed
+    int demotion_parts = 0;     // parts of a demotion run (render of the fill, render now, write)
+    int depth_renders = 0;      // depth renders (of the two renders a demotion makes)
+    int demotions = 0;          // patches demoted (slot freed)
+    int wakes = 0;              // patches that woke
+    int patches_stepped = 0;    // DEM step calls
+    std::int64_t substeps = 0;      // DEM substeps, all patches
+    std::int64_t sphere_steps = 0;  // spheres × substeps, all patches
+  };
+  const FrameWork& last_frame_work() const;
   // Sphere centres and radii of every live patch (x, y, z, r; m, world relative to the
   // heightfield origin) with each patch's fade-in factor, for rendering.
   void particles(std::vector<float>& xyzr) const;

@@ -79,6 +79,7 @@ struct TerrainManager::Impl {
   std::vector<nlohmann::ordered_json> ledgers;  // closed ledgers (demoted patches)
   std::vector<GridRegion> dirty;                // written by demotions, not yet taken
   std::vector<DemCost> earlier_costs;           // DEM costs of demoted patches whose slot took another
+  TerrainManager::FrameWork work;               // this frame's work (reset by before_bodies)
 
   // The demotion's GL depth render (create(): when use_gl and a context could be made; else
   // null, gl_note says why, and demotions render on the CPU).
@@ -150,7 +151,11 @@ struct TerrainManager::Impl {
     int spheres = 4 * record(s).granules;
     for (const Carried& k : s.carried)
       if (k.enabled) spheres += s.sim->body_particle_count(k.shell);
-    c.add(wall_ms, stats ? *stats : s.sim->last_step(), spheres);
+    const StepStats& st = stats ? *stats : s.sim->last_step();
+    c.add(wall_ms, st, spheres);
+    ++work.patches_stepped;
+    work.substeps += st.substeps;
+    work.sphere_steps += std::int64_t(spheres) * st.substeps;
   }
   float radius_world(double s) const { return float(def.material.radius * s); }
   float radius_world(const Slot& slot) const { return radius_world(slot.scale); }

@@ -25,6 +25,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <array>
 #include <cstdint>
 #include <limits>
 #include <memory>
@@ -243,6 +244,16 @@ class World {
     double budget_ms = 0;      // the frame budget (infinity: none)
   };
   const FrameRecord& last_frame() const { return last_frame_; }
+  // The longest frames of the run (kWorstFrames, longest first): when, their wall ms, each
+  // stage's ms and the manager's counted work in them (the report's frames.worst).
+  static constexpr std::size_t kWorstFrames = 5;
+  struct WorstFrame {
+    double t = 0;          // s, simulated time of the frame's start
+    double total_ms = 0;   // wall, the step
+    std::array<double, int(Stage::Count)> stage_ms{};  // wall, per stage
+    TerrainManager::FrameWork work;
+  };
+  const std::vector<WorstFrame>& worst_frames() const { return worst_; }
   // The report's median is over the last kFrameWindow steps (memory stays bounded in a game
   // that runs for hours); the maxima and counts are over every step.
   static constexpr std::size_t kFrameWindow = 1 << 16;
@@ -318,6 +329,7 @@ class World {
   // Elevation tiles as they were before a demotion first wrote them (tile index -> samples).
   std::unordered_map<std::size_t, std::vector<float>> original_tiles_;
   std::vector<double> frame_ms_;       // ring of the last kFrameWindow steps' wall ms
+  std::vector<WorstFrame> worst_;      // the longest frames, longest first
   FrameRecord last_frame_;
   double frame_max_ms_ = 0, conversion_max_ms_ = 0;
   double frame_max_at_ = 0;            // s, simulated time of the longest frame's start
