@@ -21,6 +21,7 @@ Status TerrainManager::Impl::step_patches(double time, double dt) {
   std::vector<Slot*> awake;
   for (auto& s : slots) {
     if (s.state != SlotState::Active && s.state != SlotState::Asleep) continue;
+    if (s.demotion.releasing) continue;  // held while it is demoted (activate)
     if (Status st = couple_before(s, dt); !st) return st;
     if (s.sim->asleep()) {
       hold_resting_bodies(s);
@@ -171,7 +172,7 @@ void TerrainManager::Impl::choose_carriers() {
     double best_area = -1, prev_area = -1;
     for (int k = 0; k < int(slots.size()); ++k) {
       const Slot& sl = slots[std::size_t(k)];
-      if (sl.state != SlotState::Active && sl.state != SlotState::Asleep) continue;
+      if ((sl.state != SlotState::Active && sl.state != SlotState::Asleep) || sl.demotion.releasing) continue;
       bool inside = false;
       if (!engages(sl, lo, hi, &inside)) continue;
       const PatchRequest r = rect(sl);

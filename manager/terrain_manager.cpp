@@ -144,6 +144,7 @@ Result<std::unique_ptr<TerrainManager>> TerrainManager::create(const TerrainMana
   I.records.resize(I.slots.size());
   // The demotion's depth render on GL, decided now (without a context it renders on the CPU).
   if (Status st = I.make_depth_renderer(); !st) return st.errors();
+  if (Status st = I.warm_slots(); !st) return st.errors();
   // With a budget, the DEM's rate on this machine before any patch has run.
   if (I.budget_on()) {
     I.current();

@@ -227,8 +227,10 @@ class TerrainManager {
   // The work of the last frame (before_bodies + after_bodies), counted, not timed: what
   // the per-frame caps bound (docs/manager.md "No frame does a whole patch's work").
   struct FrameWork {
-    int promotions = 0;         // patches promoted (slot reset, fill cut from the tile)
-    int fill_rows = 0;          // rows of tile copies cut into a patch's fill
+    int conversion_parts = 0;   // parts of promotions and demotions run (slot reset, fill cut,
+                                // upload chunk, demotion part): at most 1 but for urgent_fills
+    int urgent_fills = 0;       // patches finished at once because a body would reach them within two frames
+    int promotions = 0;         // fills cut from a tile (a promotion's second part)
     int granules_filled = 0;    // granules cut from a tile into a patch's fill (pending)
     int granules_uploaded = 0;  // granules added to a slot's DEM
     int ready = 0;              // patches whose upload completed

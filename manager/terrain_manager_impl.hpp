@@ -234,6 +234,7 @@ struct TerrainManager::Impl {
   double live_cost_ms(double dt) const;  // predicted DEM ms of the awake and filling patches
   void observe_cost(const Slot& s, double wall_ms, double dt);
   Status calibrate();
+  Status warm_slots();  // every slot run once at start-up (budget.cpp)
   // The scales tiles are made for: scales(), and with a budget each one's coarser rungs.
   std::vector<double> all_scales() const;
   int predict_granules(const PatchRequest& r, double s) const;
@@ -286,6 +287,7 @@ struct TerrainManager::Impl {
   bool overlaps_patch(const PatchRequest& r) const;
   Result<bool> extend(const PatchRequest& r, double time);
   Result<bool> release_idle(double time);
+  bool wanted_for_release(const Slot& s) const;
 
   // ---- filling (filling.cpp): Stage::Activation ----
   // Serves the queue while slots are free, then uploads a chunk of every filling patch.
@@ -295,7 +297,15 @@ struct TerrainManager::Impl {
   int tile_layers(const GranuleTileDef& td, double fill_depth) const;
   Result<const GranuleTile*> tile_for(TileSet& set, double fill_depth);
   SimulationDef sim_def(double scale) const;
+  // A promotion's first part (the slot reset for the request's region), then its cut: at
+  // most about `units` units of the fill's cut (FillCut::step) a call, the fill's render
+  // baseline and ledger in the call that finishes it.
   Status promote(Slot& slot, const PatchRequest& req, double time);
+  Status cut(Slot& slot, double time, std::size_t units);
+  // Units of a fill's cut per frame (FillCut: a tile granule made a candidate, or a
+  // candidate cut): about 0.2 ms on one core (docs/manager.md "No frame does a whole patch's work").
+  static constexpr std::size_t kCutUnitsPerFrame = 4096;
+  static constexpr std::size_t kWhole = std::size_t(-1);
   Status clear_bodies(Slot& slot, const ParticleScale& sc, const GranuleShape& shape, double s);
   Status upload(Slot& slot, std::size_t budget, double time);
 

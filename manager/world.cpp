@@ -268,8 +268,7 @@ Status World::step(double dt, int substeps) {
   const auto f0 = Clock::now();
   std::array<double, int(Stage::Count)> stage0{};
   for (int k = 0; k < int(Stage::Count); ++k) stage0[k] = profile_.timer(Stage(k)).total_ms;
-  const std::size_t events_before = manager_ ? manager_->events().size() : 0;
-  bool conversion = filling_ > 0;
+  bool conversion = false;
 
   if (!entries_.empty()) {
     auto timer = profile_.time(Stage::Spawn);
@@ -322,14 +321,9 @@ Status World::step(double dt, int substeps) {
       m = std::max(m, v);
     }
     peak_granules_ = std::max(peak_granules_, manager_->granules());
-    const auto& ev = manager_->events();
-    for (std::size_t k = events_before; k < ev.size(); ++k) {
-      const PatchEventKind kind = ev[k].kind;
-      filling_ += kind == PatchEventKind::Promoted;
-      filling_ -= kind == PatchEventKind::Ready;
-      conversion = conversion || kind == PatchEventKind::Promoted || kind == PatchEventKind::Ready ||
-                   kind == PatchEventKind::Demoted;
-    }
+    // A conversion frame: one in which a part of a promotion or a demotion ran (a slot
+    // reset, a fill cut, an upload, a demotion part).
+    conversion = manager_->last_frame_work().conversion_parts > 0;
   }
   ++steps_at_dt_;
   ++steps_;
@@ -434,8 +428,9 @@ nlohmann::ordered_json World::report() const {
     worst.push_back({{"t", w.t},
                      {"total_ms", w.total_ms},
                      {"stages", st},
-                     {"work", {{"promotions", k.promotions},
-                               {"fill_rows", k.fill_rows},
+                     {"work", {{"conversion_parts", k.conversion_parts},
+                               {"urgent_fills", k.urgent_fills},
+                               {"promotions", k.promotions},
                                {"granules_filled", k.granules_filled},
                                {"granules_uploaded", k.granules_uploaded},
                                {"ready", k.ready},

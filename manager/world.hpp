@@ -239,7 +239,7 @@ class World {
   // ---- per-frame measurements ----
   struct FrameRecord {
     double wall_ms = 0;    // the step, all stages (a caller's outputs are not in it)
-    bool conversion = false;  // a promotion, an upload or a demotion ran in it
+    bool conversion = false;  // a part of a promotion or a demotion ran in it (TerrainManager::FrameWork)
     bool patch_awake = false;  // a patch was simulating (filling, or ready and not asleep)
     double budget_ms = 0;      // the frame budget (infinity: none)
   };
@@ -339,7 +339,6 @@ class World {
   double budget_ms_ = std::numeric_limits<double>::infinity();  // of the last frame
   long long over_budget_ = 0;          // frames longer than their budget
   double max_over_budget_ = 0;         // the longest frame / its budget
-  int filling_ = 0;                    // patches promoted and not yet ready
   int peak_granules_ = 0;
   double time_base_ = 0, dt_ = 0;      // s
   long long steps_at_dt_ = 0, steps_ = 0;
