@@ -45,7 +45,6 @@ Status TerrainManager::Impl::activate(double time, double dt) {
   int used = 0;
   for (auto& s : slots) used += s.state != SlotState::Free;
   peak_slots = std::max(peak_slots, used);
-  peak_queue = std::max(peak_queue, int(queue.size()));
   if (work.conversion_parts > 0) return Ok{};
   // A promotion under way: its next part (the one promoted first, when two are).
   Slot* filling = nullptr;
@@ -116,7 +115,6 @@ Status TerrainManager::Impl::activate(double time, double dt) {
     queue.erase(it);
     break;
   }
-  peak_queue = std::max(peak_queue, int(queue.size()));
   used = 0;
   for (auto& s : slots) used += s.state != SlotState::Free;
   peak_slots = std::max(peak_slots, used);

@@ -144,6 +144,7 @@ Result<std::unique_ptr<TerrainManager>> TerrainManager::create(const TerrainMana
   I.records.resize(I.slots.size());
   // The demotion's depth render on GL, decided now (without a context it renders on the CPU).
   if (Status st = I.make_depth_renderer(); !st) return st.errors();
+  I.current();  // (the GL backend's slots run in its context)
   if (Status st = I.warm_slots(); !st) return st.errors();
   // With a budget, the DEM's rate on this machine before any patch has run.
   if (I.budget_on()) {
@@ -171,7 +172,9 @@ Status TerrainManager::before_bodies(double time, double dt, Profile& profile) {
   }
   {
     auto timer = profile.time(Stage::Activation);
-    if (Status st = I.activate(time, dt); !st) return st;
+    const Status st = I.activate(time, dt);
+    I.peak_queue = std::max(I.peak_queue, int(I.queue.size()));  // requests left waiting in a frame
+    if (!st) return st;
   }
   {
     auto timer = profile.time(Stage::Dem);
