@@ -186,8 +186,9 @@ Status TerrainManager::Impl::warm_slots() {
   const std::vector<PlacedGranule> fill = fill_from_tile(tile, side, side, [&](float, float) { return top; });
   for (Slot& slot : slots) {
     if (Status st = slot.sim->reset(sd); !st) return st;
-    for (const PlacedGranule& g : fill)
-      if (auto id = slot.sim->add_granule(g.position, g.orientation); !id) return id.errors();
+    const std::size_t n = std::min(fill.size(), std::size_t(def.granules_per_slot));
+    for (std::size_t k = 0; k < n; ++k)
+      if (auto id = slot.sim->add_granule(fill[k].position, fill[k].orientation); !id) return id.errors();
     double dt = 1.0 / 60.0;
     for (int k = 0; k < 12 && !slot.sim->substeps_for(dt); ++k) dt *= 0.5;
     for (int f = 0; f < 2; ++f)

@@ -24,24 +24,29 @@ using manager_detail::v3;
 // idle demotions take a frame in which no part ran. Only a patch a body would reach within
 // two frames is finished at once (every part it has left, in this frame).
 Status TerrainManager::Impl::activate(double time, double dt) {
-  // Patches a body is about to reach: everything they have left, now.
-  for (auto& s : slots) {
-    if (s.state != SlotState::Filling) continue;
-    bool due = false;
-    for (RigidBodyId b : world->bodies()) {
-      Eigen::Vector3d lo, hi;
-      world->bounds(b, &lo, &hi);
-      bool inside = false;
-      const Eigen::Vector3d v = world->state(b).linear_velocity.cast<double>();
-      const Eigen::Vector3d ahead = 2.0 * dt * v;
-      due = due || engages(s, lo + ahead.cwiseMin(0.0), hi + ahead.cwiseMax(0.0), &inside);
+  // Patches a body is about to reach: everything they have left, now (and again after the
+  // queue is served: a patch promoted for a body that close is finished in the same frame).
+  auto finish_due = [&]() -> Status {
+    for (auto& s : slots) {
+      if (s.state != SlotState::Filling) continue;
+      bool due = false;
+      for (RigidBodyId b : world->bodies()) {
+        Eigen::Vector3d lo, hi;
+        world->bounds(b, &lo, &hi);
+        bool inside = false;
+        const Eigen::Vector3d v = world->state(b).linear_velocity.cast<double>();
+        const Eigen::Vector3d ahead = 2.0 * dt * v;
+        due = due || engages(s, lo + ahead.cwiseMin(0.0), hi + ahead.cwiseMax(0.0), &inside);
+      }
+      if (!due) continue;
+      ++work.urgent_fills;
+      if (!s.cut)
+        if (Status st = cut(s, time, kWhole); !st) return st;
+      if (Status st = upload(s, s.pending.size(), time); !st) return st;
     }
-    if (!due) continue;
-    ++work.urgent_fills;
-    if (!s.cut)
-      if (Status st = cut(s, time, kWhole); !st) return st;
-    if (Status st = upload(s, s.pending.size(), time); !st) return st;
-  }
+    return Ok{};
+  };
+  if (Status st = finish_due(); !st) return st;
   int used = 0;
   for (auto& s : slots) used += s.state != SlotState::Free;
   peak_slots = std::max(peak_slots, used);
@@ -113,6 +118,7 @@ Status TerrainManager::Impl::activate(double time, double dt) {
                             {"fits", c.fits}});
     }
     queue.erase(it);
+    if (Status st = finish_due(); !st) return st;
     break;
   }
   used = 0;

@@ -142,6 +142,9 @@ Result<std::unique_ptr<TerrainManager>> TerrainManager::create(const TerrainMana
     }
   }
   I.records.resize(I.slots.size());
+  // The fills' spheres (the demotion's render baseline) at full capacity too, so the pool's
+  // memory is fixed from start-up whichever frame a fill is cut in (pool_bytes).
+  for (PatchRecord& r : I.records) r.fill_spheres.reserve(std::size_t(16) * std::size_t(def.granules_per_slot));
   // The demotion's depth render on GL, decided now (without a context it renders on the CPU).
   if (Status st = I.make_depth_renderer(); !st) return st.errors();
   I.current();  // (the GL backend's slots run in its context)

@@ -201,7 +201,8 @@ class TerrainManager {
   // slots × (max_particles × per-particle bytes + max_bodies × per-body bytes), the per-item
   // bytes summed over particles/fields.hpp's field lists (4-byte components); with
   // max_particles = 4 granules_per_slot + shell_particles_per_slot and max_bodies =
-  // granules_per_slot + 64. An estimate of the state arrays only: the neighbour grid, contact
+  // granules_per_slot + 64, plus the fills' spheres (16 floats a granule of capacity, reserved
+  // at start-up). An estimate of the state arrays only: the neighbour grid, contact
   // history and backend scratch buffers are not counted.
   std::int64_t pool_bytes() const;
   std::uint64_t state_hash() const;            // over every patch's DEM state
