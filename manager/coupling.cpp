@@ -91,6 +91,7 @@ Status TerrainManager::Impl::step_patches(double time, double dt) {
   std::vector<Slot*> awake;
   for (auto& s : slots) {
     if (s.state != SlotState::Active && s.state != SlotState::Asleep) continue;
+    if (s.demotion.releasing) continue;  // held while it is demoted (activate)
     if (Status st = couple_before(s, dt); !st) return st;
     if (s.sim->asleep()) {
       hold_resting_bodies(s);
@@ -106,6 +107,7 @@ Status TerrainManager::Impl::step_patches(double time, double dt) {
       s.asleep_for = 0;
       s.demotion = {};  // a demotion begun while it slept starts again
       events.push_back({PatchEventKind::Woke, s.patch, time, 0, record(s).granules});
+      ++work.wakes;
     }
     const auto t_step = manager_detail::Clock::now();
     // The DEM names its own definition; say which knob of the terrain's trades it.
@@ -240,7 +242,7 @@ void TerrainManager::Impl::choose_carriers() {
     double best_area = -1, prev_area = -1;
     for (int k = 0; k < int(slots.size()); ++k) {
       const Slot& sl = slots[std::size_t(k)];
-      if (sl.state != SlotState::Active && sl.state != SlotState::Asleep) continue;
+      if ((sl.state != SlotState::Active && sl.state != SlotState::Asleep) || sl.demotion.releasing) continue;
       bool inside = false;
       if (!engages(sl, lo, hi, &inside)) continue;
       const PatchRequest r = rect(sl);

@@ -62,10 +62,14 @@ std::vector<float> floor_under_body(const Slot& slot, const Carried& c, const st
 // fill's surface, the surface now, the heights written), and doing it all in one frame was
 // the longest frame of a run. A patch asleep does not move, so its parts may come in any
 // frames; one that wakes before the last part starts again (couple: step_patches).
+// Only in a frame in which no other conversion part ran (activate: promotions and releases
+// go first).
 Status TerrainManager::Impl::demote_idle(double time) {
+  if (work.conversion_parts > 0) return Ok{};
   Slot* next = nullptr;
   for (auto& s : slots)
-    if (s.state == SlotState::Asleep && s.asleep_for >= def.idle_timeout && (!next || s.demotion.stage > next->demotion.stage))
+    if (s.state == SlotState::Asleep && !s.demotion.releasing && s.asleep_for >= def.idle_timeout &&
+        (!next || s.demotion.stage > next->demotion.stage))
       next = &s;
   if (next) return demote(*next, time, true, /*staged=*/true);
   return Ok{};
@@ -74,6 +78,8 @@ Status TerrainManager::Impl::demote_idle(double time) {
 Status TerrainManager::Impl::demote_every(double time) {
   for (auto& s : slots) {
     if (s.state == SlotState::Filling) {
+      if (!s.cut)
+        if (Status st = cut(s, time, kWhole); !st) return st;
       if (Status st = upload(s, s.pending.size(), time); !st) return st;
     }
     if (s.state != SlotState::Free)
@@ -127,9 +133,12 @@ Status TerrainManager::Impl::demote(Slot& slot, double time, bool gl_ok, bool st
     if (!rec.fill_spheres.empty()) {
       auto was = render_surface(slot, box, filled, gl_ok, &w.on_gl);
       if (!was) return was.errors();
+      ++work.depth_renders;
       w.was = std::move(*was);
     }
     w.stage = 1;
+    ++work.demotion_parts;
+    ++work.conversion_parts;
     w.ms += ms_since(t0);
     if (staged) return Ok{};
   }
@@ -137,8 +146,11 @@ Status TerrainManager::Impl::demote(Slot& slot, double time, bool gl_ok, bool st
     const auto t1 = Clock::now();
     auto img = render_surface(slot, box, xyzr, gl_ok, &w.on_gl);
     if (!img) return img.errors();
+    ++work.depth_renders;
     w.now = std::move(*img);
     w.stage = 2;
+    ++work.demotion_parts;
+    ++work.conversion_parts;
     w.ms += ms_since(t1);
     if (staged) return Ok{};
   }
@@ -175,6 +187,9 @@ Status TerrainManager::Impl::demote(Slot& slot, double time, bool gl_ok, bool st
   for (const Carried& c : slot.carried)
     if (c.enabled && world->alive(c.body)) world->set_terrain_collision(c.body, true);
   events.push_back({PatchEventKind::Demoted, slot.patch, time, w.ms + ms_since(t2), rec.granules});
+  ++work.demotion_parts;
+  ++work.conversion_parts;
+  ++work.demotions;
   slot.state = SlotState::Free;
   rec.granules = 0;
   slot.carried.clear();

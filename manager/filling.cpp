@@ -17,24 +17,72 @@ using manager_detail::Clock;
 using manager_detail::ms_since;
 using manager_detail::v3;
 
+// One conversion part a frame (docs/manager.md "No frame does a whole patch's work"): a
+// promotion is its slot's reset, then the fill's cut, then uploads of at most
+// fill_granules_per_frame granules, each part in its own frame; a patch released for a
+// request is demoted one part a frame while it is held (not stepped); the demotion stage's
+// idle demotions take a frame in which no part ran. Only a patch a body would reach within
+// two frames is finished at once (every part it has left, in this frame).
 Status TerrainManager::Impl::activate(double time, double dt) {
-  // Serve the queue while slots are free, in its order, at the scale and extent the frame
-  // budget allows (budget.cpp); a request that does not fit waits while other patches live.
-  double live_ms = live_cost_ms(dt);
-  bool released_one = false;
+  // Patches a body is about to reach: everything they have left, now (and again after the
+  // queue is served: a patch promoted for a body that close is finished in the same frame).
+  auto finish_due = [&]() -> Status {
+    for (auto& s : slots) {
+      if (s.state != SlotState::Filling) continue;
+      bool due = false;
+      for (RigidBodyId b : world->bodies()) {
+        Eigen::Vector3d lo, hi;
+        world->bounds(b, &lo, &hi);
+        bool inside = false;
+        const Eigen::Vector3d v = world->state(b).linear_velocity.cast<double>();
+        const Eigen::Vector3d ahead = 2.0 * dt * v;
+        due = due || engages(s, lo + ahead.cwiseMin(0.0), hi + ahead.cwiseMax(0.0), &inside);
+      }
+      if (!due) continue;
+      ++work.urgent_fills;
+      if (!s.cut)
+        if (Status st = cut(s, time, kWhole); !st) return st;
+      if (Status st = upload(s, s.pending.size(), time); !st) return st;
+    }
+    return Ok{};
+  };
+  if (Status st = finish_due(); !st) return st;
+  int used = 0;
+  for (auto& s : slots) used += s.state != SlotState::Free;
+  peak_slots = std::max(peak_slots, used);
+  if (work.conversion_parts > 0) return Ok{};
+  // A promotion under way: its next part (the one promoted first, when two are).
+  Slot* filling = nullptr;
+  for (auto& s : slots)
+    if (s.state == SlotState::Filling && (!filling || s.patch < filling->patch)) filling = &s;
+  if (filling) {
+    if (!filling->cut) return cut(*filling, time, kCutUnitsPerFrame);
+    return upload(*filling, std::size_t(def.fill_granules_per_frame), time);
+  }
+  // A release under way: its next part, or none if a body came back to it.
+  for (auto& s : slots) {
+    if (!s.demotion.releasing) continue;
+    if (wanted_for_release(s)) {
+      s.demotion = {};
+      break;
+    }
+    if (Status st = demote(s, time, false, /*staged=*/true); !st) return st;
+    released += s.state == SlotState::Free;
+    return Ok{};
+  }
+  // Serve the queue: the first request that may start takes a free slot, at the scale and
+  // extent the frame budget allows (budget.cpp); a request that does not fit waits while other
+  // patches live.
+  const double live_ms = live_cost_ms(dt);
   for (auto it = queue.begin(); it != queue.end();) {
     auto free = std::find_if(slots.begin(), slots.end(), [](const Slot& s) { return s.state == SlotState::Free; });
     if (free == slots.end()) {
-      // A patch no body is over gives its slot to the request: demoted now, the request
-      // promoted next frame (one conversion a frame).
-      if (!released_one) {
-        auto r = release_idle(time);
-        if (!r) return r.errors();
-        released_one = *r;
-      }
+      // A patch no body is over gives its slot to the request: demoted one part a frame,
+      // the request promoted in the frame after the last part.
+      auto r = release_idle(time);
+      if (!r) return r.errors();
       break;
     }
-    if (released_one) break;
     if (overlaps_patch(*it) || !has_soil(*it)) {
       it = queue.erase(it);
       continue;
@@ -55,9 +103,11 @@ Status TerrainManager::Impl::activate(double time, double dt) {
       continue;
     }
     if (Status s = promote(*free, c.req, time); !s) return s;
+    free->predicted_granules = c.granules;
+    free->budget_entry = -1;
     budget_overruns += !c.fits;
-    live_ms += predict_ms(4.0 * double(free->pending.size()), dt, free->steps_per_contact);
     if (budget_on()) {
+      free->budget_entry = int(budget_log.size());
       budget_log.push_back({{"patch", free->patch},
                             {"time_s", time},
                             {"requested_scale", c.requested_scale},
@@ -65,7 +115,7 @@ Status TerrainManager::Impl::activate(double time, double dt) {
                             {"apron_m", it->apron},
                             {"apron_used_m", it->apron - std::max(c.req.x0 - it->x0, c.req.z0 - it->z0)},
                             {"rung", c.rung},
-                            {"granules", int(free->pending.size())},
+                            {"granules", c.granules},
                             {"granules_predicted", c.granules},
                             {"predicted_ms", c.predicted_ms},
                             {"available_ms", c.available_ms},
@@ -76,26 +126,12 @@ Status TerrainManager::Impl::activate(double time, double dt) {
                             {"steps_per_contact", free->steps_per_contact > 0 ? free->steps_per_contact : def.steps_per_contact}});
       if (c.body_cap > 0) budget_log.back()["capped_by"] = {{"body", c.capped_by}, {"smallest_dimension_m", c.capped_size_m}};
     }
-    it = queue.erase(it);
+    queue.erase(it);
+    if (Status st = finish_due(); !st) return st;
+    break;
   }
-  peak_queue = std::max(peak_queue, int(queue.size()));
-  int used = 0;
-  for (auto& s : slots) {
-    used += s.state != SlotState::Free;
-    if (s.state != SlotState::Filling) continue;
-    // Never let a body land on a patch that is not ready: upload the rest now if a contact
-    // is due within two frames.
-    std::size_t budget = std::size_t(def.fill_granules_per_frame);
-    for (RigidBodyId b : world->bodies()) {
-      Eigen::Vector3d lo, hi;
-      world->bounds(b, &lo, &hi);
-      bool inside = false;
-      const Eigen::Vector3d v = world->state(b).linear_velocity.cast<double>();
-      const Eigen::Vector3d ahead = 2.0 * dt * v;
-      if (engages(s, lo + ahead.cwiseMin(0.0), hi + ahead.cwiseMax(0.0), &inside)) budget = s.pending.size();
-    }
-    if (Status st = upload(s, budget, time); !st) return st;
-  }
+  used = 0;
+  for (auto& s : slots) used += s.state != SlotState::Free;
   peak_slots = std::max(peak_slots, used);
   return Ok{};
 }
@@ -315,16 +351,67 @@ Status TerrainManager::Impl::promote(Slot& slot, const PatchRequest& req, double
   tg.fill_max_x = W;
   tg.fill_max_z = D;
   if (Status st = slot.sim->reset(sd); !st) return st.errors();
+  slot.pending.clear();
+  slot.uploaded = 0;
+  slot.cut = false;
+  slot.cutter.reset();
+  rec.granules = 0;
+  rec.fill_spheres.clear();
+  slot.fade = 0;
+  slot.asleep_for = 0;
+  slot.held = 0;
+  slot.demotion = {};
+  slot.carried.clear();
+  slot.state = SlotState::Filling;
+  rec.fill_ms = ms_since(t0);
+  ++work.conversion_parts;
+  return Ok{};
+}
 
-  // Granules from the pre-settled tile, cut to the surface.
-  auto surface = [&](float x, float z) {
-    const double xl = region.i0 * double(sp) + x * s, zl = region.j0 * double(sp) + z * s;
-    return float((hf->sample(float(xl), float(zl)) - floor_local) / s);
-  };
-  auto tile_r = tile_for(tset, top);
-  if (!tile_r) return tile_r.errors();
-  const GranuleTile& tile = **tile_r;
-  slot.pending = fill_from_tile(tile, W, D, surface);
+// The promotion's second part: the fill cut from the pre-settled tile to the surface (the
+// heights read by the first part), the bodies over it cleared, the render baseline and the
+// ledger. The patch is then uploaded in chunks (upload).
+Status TerrainManager::Impl::cut(Slot& slot, double time, std::size_t units) {
+  const auto t0 = Clock::now();
+  PatchRecord& rec = record(slot);
+  const double s = slot.scale;
+  const GridRegion region = slot.region;
+  const float sp = hf->spacing();
+  const double floor_local = slot.floor_local;
+  auto sc = ParticleScale::create(s, {slot.origin.x(), slot.origin.y(), slot.origin.z()});
+  if (!sc) return sc.errors();
+  const PatchRequest req = rect(slot);
+  ++work.conversion_parts;
+  if (!slot.cutter) {
+    // Granules from the pre-settled tile, cut to the surface (the heightfield the frames of
+    // the cut read is the one the slot's reset read: no demotion writes it meanwhile, as no
+    // other conversion part runs).
+    const float W = float((region.ni - 1) * double(sp) / s), D = float((region.nj - 1) * double(sp) / s);
+    const float top = float((slot.top_local - floor_local) / s);
+    auto tile_r = tile_for(set_for(s), top);
+    if (!tile_r) return tile_r.errors();
+    const GranuleTile& tile = **tile_r;
+    const Heightfield* h = hf;
+    auto surface = [h, region, sp, s, floor_local](float x, float z) {
+      const double xl = region.i0 * double(sp) + x * s, zl = region.j0 * double(sp) + z * s;
+      return float((h->sample(float(xl), float(zl)) - floor_local) / s);
+    };
+    slot.cutter = std::make_unique<FillCut>(tile, W, D, surface);
+    slot.cut_shape = tile.shape;
+    slot.cut_rebound = tile.rebound;
+    slot.cut_packing = tile.packing_fraction;
+  }
+  const bool finished = slot.cutter->step(units);
+  if (!finished) {
+    rec.fill_ms += ms_since(t0);
+    return Ok{};
+  }
+  slot.pending = slot.cutter->take();
+  slot.cutter.reset();
+  struct {
+    const GranuleShape& shape;
+    float rebound, packing_fraction;
+  } tile{slot.cut_shape, slot.cut_rebound, slot.cut_packing};
   if (Status st = clear_bodies(slot, *sc, tile.shape, s); !st) return st.errors();
   if (int(slot.pending.size()) > def.granules_per_slot) {
     return Error{"", "simulation.pool.granules_per_slot", std::to_string(def.granules_per_slot),
@@ -342,21 +429,18 @@ Status TerrainManager::Impl::promote(Slot& slot, const PatchRequest& req, double
       rec.fill_spheres.insert(rec.fill_spheres.end(), {float(w[0] - hf->origin_x()), float(w[1] - hf->origin_y()),
                                                        float(w[2] - hf->origin_z()), radius_world(s)});
     }
-  slot.uploaded = 0;
-  rec.granules = 0;
-  slot.fade = 0;
-  slot.asleep_for = 0;
-  slot.held = 0;
-  slot.demotion = {};
-  slot.carried.clear();
-  slot.state = SlotState::Filling;
+  slot.cut = true;
   // Ledger: volume between the floor and the surface over the region.
   rec.ledger = Ledger{};
   rec.ledger.before = soil_volume(*hf, region, floor_local);
   rec.ledger.active = double(slot.pending.size()) * granule_volume(s) / tile.packing_fraction;
   rec.ledger.packing_fraction = tile.packing_fraction;
-  rec.fill_ms = ms_since(t0);
+  rec.fill_ms += ms_since(t0);
   events.push_back({PatchEventKind::Promoted, slot.patch, time, rec.fill_ms, int(slot.pending.size())});
+  ++work.promotions;
+  work.granules_filled += int(slot.pending.size());
+  if (slot.budget_entry >= 0 && slot.budget_entry < int(budget_log.size()))
+    budget_log[std::size_t(slot.budget_entry)]["granules"] = int(slot.pending.size());
   return Ok{};
 }
 
@@ -416,13 +500,16 @@ Status TerrainManager::Impl::upload(Slot& slot, std::size_t budget, double time)
     auto id = slot.sim->add_granule(g.position, g.orientation);
     if (!id) return id.errors();
     ++rec.granules;
+    ++work.granules_uploaded;
   }
   rec.fill_ms += ms_since(t0);
+  ++work.conversion_parts;
   if (slot.uploaded == slot.pending.size()) {
     slot.pending.clear();
     slot.pending.shrink_to_fit();
     slot.state = SlotState::Active;
     events.push_back({PatchEventKind::Ready, slot.patch, time, rec.fill_ms, rec.granules});
+    ++work.ready;
   }
   return Ok{};
 }

@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <map>
 #include <mutex>
 #include <numbers>
@@ -84,49 +85,93 @@ float mean_top_height(const std::vector<PlacedGranule>& granules, const GranuleS
   return float(sum / double(top.size()));
 }
 
-std::vector<PlacedGranule> fill_from_tile(const GranuleTile& tile, float width, float depth,
-                                          const std::function<float(float, float)>& surface) {
-  const float r = tile.shape.radius, P = tile.period_xz, Py = tile.period_y;
-  const float bound = tile.shape.centre_distance + r;
+// The cut's state between steps: the tile (a copy: the set's tiles may grow meanwhile), the
+// candidates made so far and the granules kept so far.
+struct FillCut::State {
+  GranuleTile tile;
+  float width = 0, depth = 0;
+  std::function<float(float, float)> surface;
+  float r = 0, P = 0, Py = 0, bound = 0;
+  int cx = 0, cz = 0, cy = 0;
+  int next_copy = 0;                  // 1. the next tile copy to make candidates from
+  std::vector<PlacedGranule> cand;
+  std::vector<int> cand_copy;         // which copy of the tile a candidate comes from
+  std::vector<std::size_t> order;     // 2. candidates lowest first (empty until sorted)
+  bool sorted = false;
+  std::size_t next = 0;               // 3. the next candidate (in `order`) to cut
+  SphereGrid grid{1.0f};
+  std::vector<PlacedGranule> out;
+};
+
+FillCut::FillCut(const GranuleTile& tile, float width, float depth, std::function<float(float, float)> surface)
+    : s_(std::make_unique<State>()) {
+  State& s = *s_;
+  s.tile = tile;
+  s.width = width, s.depth = depth;
+  s.surface = std::move(surface);
+  s.r = tile.shape.radius, s.P = tile.period_xz, s.Py = tile.period_y;
+  s.bound = tile.shape.centre_distance + s.r;
   // 1. Candidates: tile copies whose centres lie in the patch and at most one bounding radius
   //    above the surface, lowest first.
   float top = 0;
-  const float probe = std::max(r, 0.25f * P);
+  const float probe = std::max(s.r, 0.25f * s.P);
   for (float z = 0; z <= depth + probe; z += probe)
-    for (float x = 0; x <= width + probe; x += probe) top = std::max(top, surface(std::min(x, width), std::min(z, depth)));
-  const int cx = int(std::ceil(width / P)), cz = int(std::ceil(depth / P)), cy = int(std::ceil(top / Py)) + 1;
-  std::vector<PlacedGranule> cand;
-  std::vector<int> cand_copy;  // which copy of the tile a candidate comes from
+    for (float x = 0; x <= width + probe; x += probe) top = std::max(top, s.surface(std::min(x, width), std::min(z, depth)));
+  s.cx = int(std::ceil(width / s.P)), s.cz = int(std::ceil(depth / s.P)), s.cy = int(std::ceil(top / s.Py)) + 1;
+  s.grid = SphereGrid(2.0f * s.r);
+}
+
+FillCut::~FillCut() = default;
+FillCut::FillCut(FillCut&&) noexcept = default;
+FillCut& FillCut::operator=(FillCut&&) noexcept = default;
+
+bool FillCut::done() const { return s_->sorted && s_->next >= s_->order.size(); }
+
+std::size_t FillCut::granules() const { return s_->out.size(); }
+
+bool FillCut::step(std::size_t work) {
+  State& s = *s_;
+  const GranuleTile& tile = s.tile;
+  const float P = s.P, Py = s.Py, r = s.r;
+  std::size_t done_work = 0;
   // Odd copies are mirrored (x -> P - x and/or z -> P - z), so across every seam a granule
   // faces the mirror image of itself: where it touched the settling box's wall, it now
   // touches its image (granule_tile.hpp).
   const Eigen::Matrix3f S = (Eigen::Matrix3f() << 1, 0, 0, 0, 0, 1, 0, 1, 0).finished();  // y<->z: a symmetry of the tetrahedron
-  for (int b = 0; b < cy; ++b)
-    for (int c = 0; c < cz; ++c)
-      for (int a = 0; a < cx; ++a) {
-        const bool mx = a % 2 == 1, mz = c % 2 == 1;
-        const Eigen::Matrix3f M = Eigen::Vector3f(mx ? -1.0f : 1.0f, 1.0f, mz ? -1.0f : 1.0f).asDiagonal();
-        for (const auto& g : tile.granules) {
-          const Vec3 p{a * P + (mx ? P - g.position.x : g.position.x), g.position.y + b * Py,
-                       c * P + (mz ? P - g.position.z : g.position.z)};
-          if (p.x < 0 || p.x >= width || p.z < 0 || p.z >= depth) continue;
-          if (p.y > surface(p.x, p.z) + bound) continue;
-          Quat q = g.orientation;
-          if (mx || mz) {
-            const Eigen::Matrix3f R = Eigen::Quaternionf(q.w, q.x, q.y, q.z).toRotationMatrix();
-            // One mirror flips handedness: M R S is a rotation again because S maps the
-            // tetrahedron onto itself with det S = -1. Two mirrors are a rotation already.
-            const Eigen::Quaternionf rq(mx != mz ? Eigen::Matrix3f(M * R * S) : Eigen::Matrix3f(M * R));
-            q = {rq.x(), rq.y(), rq.z(), rq.w()};
-          }
-          cand.push_back({p, q});
-          cand_copy.push_back((b * cz + c) * cx + a);
-        }
+  const int copies = s.cx * s.cz * s.cy;
+  while (s.next_copy < copies && done_work < work) {
+    const int k = s.next_copy++;
+    const int a = k % s.cx, c = (k / s.cx) % s.cz, b = k / (s.cx * s.cz);
+    const bool mx = a % 2 == 1, mz = c % 2 == 1;
+    const Eigen::Matrix3f M = Eigen::Vector3f(mx ? -1.0f : 1.0f, 1.0f, mz ? -1.0f : 1.0f).asDiagonal();
+    for (const auto& g : tile.granules) {
+      const Vec3 p{a * P + (mx ? P - g.position.x : g.position.x), g.position.y + b * Py,
+                   c * P + (mz ? P - g.position.z : g.position.z)};
+      if (p.x < 0 || p.x >= s.width || p.z < 0 || p.z >= s.depth) continue;
+      if (p.y > s.surface(p.x, p.z) + s.bound) continue;
+      Quat q = g.orientation;
+      if (mx || mz) {
+        const Eigen::Matrix3f R = Eigen::Quaternionf(q.w, q.x, q.y, q.z).toRotationMatrix();
+        // One mirror flips handedness: M R S is a rotation again because S maps the
+        // tetrahedron onto itself with det S = -1. Two mirrors are a rotation already.
+        const Eigen::Quaternionf rq(mx != mz ? Eigen::Matrix3f(M * R * S) : Eigen::Matrix3f(M * R));
+        q = {rq.x(), rq.y(), rq.z(), rq.w()};
       }
-  std::vector<std::size_t> order(cand.size());
-  for (std::size_t k = 0; k < order.size(); ++k) order[k] = k;
-  std::stable_sort(order.begin(), order.end(),
-                   [&](std::size_t u, std::size_t v) { return cand[u].position.y < cand[v].position.y; });
+      s.cand.push_back({p, q});
+      s.cand_copy.push_back(k);  // (b cz + c) cx + a
+    }
+    done_work += tile.granules.size();
+  }
+  if (s.next_copy < copies) return false;
+  if (!s.sorted) {
+    if (done_work >= work) return false;
+    s.order.resize(s.cand.size());
+    for (std::size_t k = 0; k < s.order.size(); ++k) s.order[k] = k;
+    std::stable_sort(s.order.begin(), s.order.end(),
+                     [&](std::size_t u, std::size_t v) { return s.cand[u].position.y < s.cand[v].position.y; });
+    s.sorted = true;
+    done_work += s.cand.size();
+  }
 
   // 2. The cut: a granule is kept when its centre lies below surface − surface_offset
   //    (calibrated when the tile is made so the kept bed renders back at the surface) and it
@@ -134,28 +179,42 @@ std::vector<PlacedGranule> fill_from_tile(const GranuleTile& tile, float width, 
   // Granules of one copy keep the contacts they had in the settled block (in equilibrium);
   // across a seam, overlaps are those of the wall contacts doubled (a few % of r); a larger
   // one (> 10% of r) is left out.
-  SphereGrid grid(2.0f * r);
   const float min_dist = 1.8f * r;
-  std::vector<PlacedGranule> out;
-  for (std::size_t idx : order) {
-    const PlacedGranule& g = cand[idx];
-    const int copy = cand_copy[idx];
-    if (g.position.y > surface(g.position.x, g.position.z) - tile.surface_offset) continue;
+  while (s.next < s.order.size() && done_work < work) {
+    const std::size_t idx = s.order[s.next++];
+    ++done_work;
+    const PlacedGranule& g = s.cand[idx];
+    const int copy = s.cand_copy[idx];
+    if (g.position.y > s.surface(g.position.x, g.position.z) - tile.surface_offset) continue;
     const auto sph = spheres(g, tile.shape);
     bool clash = false;
     // Inside the patch with at most 10% of r overlap against the floor and the patch's
     // sides (the soil around it holds the granules there).
     // The bottom copies keep their floor contacts as settled (in equilibrium with the weight
     // above them: leaving those granules out would let the whole bed sink by a layer).
-    const bool bottom = copy < cx * cz;
+    const bool bottom = copy < s.cx * s.cz;
     for (const Vec3& sp : sph)
-      clash = clash || (!bottom && sp.y < 0.9f * r) || sp.x < 0.9f * r || sp.x > width - 0.9f * r ||
-              sp.z < 0.9f * r || sp.z > depth - 0.9f * r || grid.near(sp, min_dist, copy);
+      clash = clash || (!bottom && sp.y < 0.9f * r) || sp.x < 0.9f * r || sp.x > s.width - 0.9f * r ||
+              sp.z < 0.9f * r || sp.z > s.depth - 0.9f * r || s.grid.near(sp, min_dist, copy);
     if (clash) continue;
-    for (const Vec3& sp : sph) grid.insert(sp, copy);
-    out.push_back(g);
+    for (const Vec3& sp : sph) s.grid.insert(sp, copy);
+    s.out.push_back(g);
   }
+  return done();
+}
+
+std::vector<PlacedGranule> FillCut::take() {
+  std::vector<PlacedGranule> out;
+  out.swap(s_->out);
   return out;
+}
+
+std::vector<PlacedGranule> fill_from_tile(const GranuleTile& tile, float width, float depth,
+                                          const std::function<float(float, float)>& surface) {
+  FillCut cut(tile, width, depth, surface);
+  while (!cut.step(std::numeric_limits<std::size_t>::max())) {
+  }
+  return cut.take();
 }
 
 Result<GranuleTile> make_granule_tile(const GranuleTileDef& def) {

@@ -21,6 +21,7 @@
 
 #include <cstdint>
 #include <functional>
+#include <memory>
 #include <vector>
 
 #include "common/error.hpp"
@@ -86,6 +87,28 @@ std::uint64_t granule_tile_def_hash(const GranuleTileDef& def);
 // the tile; no two granules overlap (spheres closer than 1.8 r are rejected).
 std::vector<PlacedGranule> fill_from_tile(const GranuleTile& tile, float width, float depth,
                                           const std::function<float(float x, float z)>& surface);
+
+// The same fill cut in steps, for a promotion spread over frames (docs/manager.md "No frame
+// does a whole patch's work"): step(work) goes on for at most about `work` units (a unit is
+// one granule of a tile copy made a candidate, or one candidate cut; the sort of the
+// candidates counts one unit each and is done whole) and returns whether the cut is done;
+// take() then gives the granules fill_from_tile gives, in its order. `surface` is called
+// during the steps (what it reads must not change between them).
+class FillCut {
+ public:
+  FillCut(const GranuleTile& tile, float width, float depth, std::function<float(float x, float z)> surface);
+  ~FillCut();
+  FillCut(FillCut&&) noexcept;
+  FillCut& operator=(FillCut&&) noexcept;
+  bool step(std::size_t work);
+  bool done() const;
+  std::size_t granules() const;  // kept so far
+  std::vector<PlacedGranule> take();
+
+ private:
+  struct State;
+  std::unique_ptr<State> s_;
+};
 
 // Mean height of the top of the spheres over [x0, x1] × [z0, z1], sampled on a grid of
 // `step` m (what a top-down depth render averages to); `floor` where no sphere is. With

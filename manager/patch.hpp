@@ -63,6 +63,15 @@ struct Slot {
   double floor_local = 0;    // m, floor height relative to the heightfield origin
   double top_local = 0;      // m, highest surface sample of the region at promotion
   double scale = 1;          // world size / simulated size of this patch, fixed while it lives
+  // A promotion in progress (filling.cpp), one part a frame: the slot reset (`cut` false),
+  // the fill cut from the tile into `pending` (`cut` true), then its uploads.
+  bool cut = false;
+  std::unique_ptr<FillCut> cutter;  // the cut under way (null before its first part and after its last)
+  GranuleShape cut_shape;           // of the tile it cuts from
+  float cut_rebound = 0;            // m (sim units): that tile's GranuleTile::rebound
+  float cut_packing = 0;            // that tile's packing fraction
+  int predicted_granules = 0;  // the budget's prediction, until the fill is cut
+  int budget_entry = -1;       // its entry in the budget's log (-1: none)
   std::vector<PlacedGranule> pending;  // granules still to upload
   std::size_t uploaded = 0;
   int fade = 0;              // frames simulated, up to fade_frames
@@ -73,6 +82,7 @@ struct Slot {
   // fill's surface rendered, 2 the surface now rendered too; the next part writes them.
   struct Demotion {
     int stage = 0;
+    bool releasing = false;  // released for a request (planning.cpp release_idle): held, not stepped
     HeightImage was, now;
     bool on_gl = false;
     double ms = 0;  // wall, the parts so far

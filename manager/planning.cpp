@@ -304,24 +304,36 @@ Result<bool> TerrainManager::Impl::extend(const PatchRequest& r, double time) {
   return false;
 }
 
-// A ready patch no body is over any more (its bodies moved on to a patch ahead, or away) is
-// demoted to free its slot for a request waiting for one. Returns whether it freed one.
+// Whether a body is over a patch, or near it (within half lod.apron of its region, below
+// engage_height over its surface), or it carries one: such a patch is not released.
+bool TerrainManager::Impl::wanted_for_release(const Slot& s) const {
+  for (const Carried& c : s.carried)
+    if (c.enabled && world->alive(c.body)) return true;
+  const PatchRequest a = rect(s);
+  const double pad = double(def.lod.apron) * 0.5;
+  for (RigidBodyId b : world->bodies()) {
+    Eigen::Vector3d lo, hi;
+    world->bounds(b, &lo, &hi);
+    if (lo.x() < a.x1 + pad && hi.x() > a.x0 - pad && lo.z() < a.z1 + pad && hi.z() > a.z0 - pad &&
+        lo.y() < hf->origin_y() + s.top_local + engage_height)
+      return true;
+  }
+  return false;
+}
+
+// A ready patch no body is over any more (its bodies moved on to a patch ahead, or away)
+// starts its demotion to free its slot for a request waiting for one: it is held (not
+// stepped) and demoted one part a frame (activate), the first part now. Returns whether one
+// started (or one is under way already).
 Result<bool> TerrainManager::Impl::release_idle(double time) {
+  for (Slot& s : slots)
+    if (s.demotion.releasing) return true;
   for (Slot& s : slots) {
     if (!s.ready() || s.carried.empty()) continue;  // a patch no body has reached yet is kept
-    bool used = false;
-    for (const Carried& c : s.carried) used = used || (c.enabled && world->alive(c.body));
-    const PatchRequest a = rect(s);
-    const double pad = double(def.lod.apron) * 0.5;
-    for (RigidBodyId b : world->bodies()) {
-      Eigen::Vector3d lo, hi;
-      world->bounds(b, &lo, &hi);
-      used = used || (lo.x() < a.x1 + pad && hi.x() > a.x0 - pad && lo.z() < a.z1 + pad && hi.z() > a.z0 - pad &&
-                      lo.y() < hf->origin_y() + s.top_local + engage_height);
-    }
-    if (used) continue;
-    if (Status st = demote(s, time, false); !st) return st.errors();
-    ++released;
+    if (wanted_for_release(s)) continue;
+    s.demotion.releasing = true;
+    if (Status st = demote(s, time, false, /*staged=*/true); !st) return st.errors();
+    released += s.state == SlotState::Free;
     return true;
   }
   return false;

@@ -142,8 +142,13 @@ Result<std::unique_ptr<TerrainManager>> TerrainManager::create(const TerrainMana
     }
   }
   I.records.resize(I.slots.size());
+  // The fills' spheres (the demotion's render baseline) at full capacity too, so the pool's
+  // memory is fixed from start-up whichever frame a fill is cut in (pool_bytes).
+  for (PatchRecord& r : I.records) r.fill_spheres.reserve(std::size_t(16) * std::size_t(def.granules_per_slot));
   // The demotion's depth render on GL, decided now (without a context it renders on the CPU).
   if (Status st = I.make_depth_renderer(); !st) return st.errors();
+  I.current();  // (the GL backend's slots run in its context)
+  if (Status st = I.warm_slots(); !st) return st.errors();
   // With a budget, the DEM's rate on this machine before any patch has run.
   if (I.budget_on()) {
     I.current();
@@ -161,6 +166,7 @@ Status TerrainManager::before_bodies(double time, double dt, Profile& profile) {
   I.current();
   I.now = time;
   I.soil.clear();
+  I.work = {};
   for (auto it = I.set_down_until.begin(); it != I.set_down_until.end();)
     it = it->second <= time ? I.set_down_until.erase(it) : std::next(it);
   {
@@ -169,7 +175,9 @@ Status TerrainManager::before_bodies(double time, double dt, Profile& profile) {
   }
   {
     auto timer = profile.time(Stage::Activation);
-    if (Status st = I.activate(time, dt); !st) return st;
+    const Status st = I.activate(time, dt);
+    I.peak_queue = std::max(I.peak_queue, int(I.queue.size()));  // requests left waiting in a frame
+    if (!st) return st;
   }
   {
     auto timer = profile.time(Stage::Dem);
@@ -290,6 +298,8 @@ std::uint64_t TerrainManager::state_hash() const {
 }
 
 const std::vector<PatchEvent>& TerrainManager::events() const { return impl_->events; }
+
+const TerrainManager::FrameWork& TerrainManager::last_frame_work() const { return impl_->work; }
 
 std::vector<TerrainManager::PatchInfo> TerrainManager::patches() const {
   std::vector<PatchInfo> out;

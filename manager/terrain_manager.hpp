@@ -201,7 +201,8 @@ class TerrainManager {
   // slots × (max_particles × per-particle bytes + max_bodies × per-body bytes), the per-item
   // bytes summed over particles/fields.hpp's field lists (4-byte components); with
   // max_particles = 4 granules_per_slot + shell_particles_per_slot and max_bodies =
-  // granules_per_slot + 64. An estimate of the state arrays only: the neighbour grid, contact
+  // granules_per_slot + 64, plus the fills' spheres (16 floats a granule of capacity, reserved
+  // at start-up). An estimate of the state arrays only: the neighbour grid, contact
   // history and backend scratch buffers are not counted.
   std::int64_t pool_bytes() const;
   std::uint64_t state_hash() const;            // over every patch's DEM state
@@ -224,6 +225,25 @@ class TerrainManager {
   };
   std::vector<PatchInfo> patches() const;
   const std::vector<PatchEvent>& events() const;
+  // The work of the last frame (before_bodies + after_bodies), counted, not timed: what
+  // the per-frame caps bound (docs/manager.md "No frame does a whole patch's work").
+  struct FrameWork {
+    int conversion_parts = 0;   // parts of promotions and demotions run (slot reset, fill cut,
+                                // upload chunk, demotion part): at most 1 but for urgent_fills
+    int urgent_fills = 0;       // patches finished at once because a body would reach them within two frames
+    int promotions = 0;         // fills cut from a tile (a promotion's second part)
+    int granules_filled = 0;    // granules cut from a tile into a patch's fill (pending)
+    int granules_uploaded = 0;  // granules added to a slot's DEM
+    int ready = 0;              // patches whose upload completed
+    int demotion_parts = 0;     // parts of a demotion run (render of the fill, render now, write)
+    int depth_renders = 0;      // depth renders (of the two renders a demotion makes)
+    int demotions = 0;          // patches demoted (slot freed)
+    int wakes = 0;              // patches that woke
+    int patches_stepped = 0;    // DEM step calls
+    std::int64_t substeps = 0;      // DEM substeps, all patches
+    std::int64_t sphere_steps = 0;  // spheres × substeps, all patches
+  };
+  const FrameWork& last_frame_work() const;
   // Sphere centres and radii of every live patch (x, y, z, r; m, world relative to the
   // heightfield origin) with each patch's fade-in factor, for rendering.
   void particles(std::vector<float>& xyzr) const;

@@ -79,6 +79,7 @@ struct TerrainManager::Impl {
   std::vector<nlohmann::ordered_json> ledgers;  // closed ledgers (demoted patches)
   std::vector<GridRegion> dirty;                // written by demotions, not yet taken
   std::vector<DemCost> earlier_costs;           // DEM costs of demoted patches whose slot took another
+  TerrainManager::FrameWork work;               // this frame's work (reset by before_bodies)
 
   // The demotion's GL depth render (create(): when use_gl and a context could be made; else
   // null, gl_note says why, and demotions render on the CPU).
@@ -150,7 +151,11 @@ struct TerrainManager::Impl {
     int spheres = 4 * record(s).granules;
     for (const Carried& k : s.carried)
       if (k.enabled) spheres += s.sim->body_particle_count(k.shell);
-    c.add(wall_ms, stats ? *stats : s.sim->last_step(), spheres);
+    const StepStats& st = stats ? *stats : s.sim->last_step();
+    c.add(wall_ms, st, spheres);
+    ++work.patches_stepped;
+    work.substeps += st.substeps;
+    work.sphere_steps += std::int64_t(spheres) * st.substeps;
   }
   float radius_world(double s) const { return float(def.material.radius * s); }
   float radius_world(const Slot& slot) const { return radius_world(slot.scale); }
@@ -255,6 +260,7 @@ struct TerrainManager::Impl {
   double live_cost_ms(double dt) const;  // predicted DEM ms of the awake and filling patches
   void observe_cost(const Slot& s, double wall_ms, double dt);
   Status calibrate();
+  Status warm_slots();  // every slot run once at start-up (budget.cpp)
   // The scales tiles are made for: scales(), and with a budget each one's coarser rungs.
   std::vector<double> all_scales() const;
   int predict_granules(const PatchRequest& r, double s) const;
@@ -307,6 +313,7 @@ struct TerrainManager::Impl {
   bool overlaps_patch(const PatchRequest& r) const;
   Result<bool> extend(const PatchRequest& r, double time);
   Result<bool> release_idle(double time);
+  bool wanted_for_release(const Slot& s) const;
 
   // ---- filling (filling.cpp): Stage::Activation ----
   // Serves the queue while slots are free, then uploads a chunk of every filling patch.
@@ -316,7 +323,15 @@ struct TerrainManager::Impl {
   int tile_layers(const GranuleTileDef& td, double fill_depth) const;
   Result<const GranuleTile*> tile_for(TileSet& set, double fill_depth);
   SimulationDef sim_def(double scale) const;
+  // A promotion's first part (the slot reset for the request's region), then its cut: at
+  // most about `units` units of the fill's cut (FillCut::step) a call, the fill's render
+  // baseline and ledger in the call that finishes it.
   Status promote(Slot& slot, const PatchRequest& req, double time);
+  Status cut(Slot& slot, double time, std::size_t units);
+  // Units of a fill's cut per frame (FillCut: a tile granule made a candidate, or a
+  // candidate cut): about 0.2 ms on one core (docs/manager.md "No frame does a whole patch's work").
+  static constexpr std::size_t kCutUnitsPerFrame = 4096;
+  static constexpr std::size_t kWhole = std::size_t(-1);
   Status clear_bodies(Slot& slot, const ParticleScale& sc, const GranuleShape& shape, double s);
   Status upload(Slot& slot, std::size_t budget, double time);
 

@@ -266,8 +266,9 @@ Status World::step(double dt, int substeps) {
   }
   const double t = time();  // s, at the start of this frame
   const auto f0 = Clock::now();
-  const std::size_t events_before = manager_ ? manager_->events().size() : 0;
-  bool conversion = filling_ > 0;
+  std::array<double, int(Stage::Count)> stage0{};
+  for (int k = 0; k < int(Stage::Count); ++k) stage0[k] = profile_.timer(Stage(k)).total_ms;
+  bool conversion = false;
 
   if (!entries_.empty()) {
     auto timer = profile_.time(Stage::Spawn);
@@ -320,14 +321,9 @@ Status World::step(double dt, int substeps) {
       m = std::max(m, v);
     }
     peak_granules_ = std::max(peak_granules_, manager_->granules());
-    const auto& ev = manager_->events();
-    for (std::size_t k = events_before; k < ev.size(); ++k) {
-      const PatchEventKind kind = ev[k].kind;
-      filling_ += kind == PatchEventKind::Promoted;
-      filling_ -= kind == PatchEventKind::Ready;
-      conversion = conversion || kind == PatchEventKind::Promoted || kind == PatchEventKind::Ready ||
-                   kind == PatchEventKind::Demoted;
-    }
+    // A conversion frame: one in which a part of a promotion or a demotion ran (a slot
+    // reset, a fill cut, an upload, a demotion part).
+    conversion = manager_->last_frame_work().conversion_parts > 0;
   }
   ++steps_at_dt_;
   ++steps_;
@@ -347,6 +343,16 @@ Status World::step(double dt, int substeps) {
     max_over_budget_ = std::max(max_over_budget_, last_frame_.wall_ms / budget);
   }
   if (last_frame_.wall_ms > frame_max_ms_) frame_max_ms_ = last_frame_.wall_ms, frame_max_at_ = t;
+  if (worst_.size() < kWorstFrames || last_frame_.wall_ms > worst_.back().total_ms) {
+    WorstFrame w;
+    w.t = t;
+    w.total_ms = last_frame_.wall_ms;
+    for (int k = 0; k < int(Stage::Count); ++k) w.stage_ms[k] = profile_.timer(Stage(k)).total_ms - stage0[k];
+    if (manager_) w.work = manager_->last_frame_work();
+    auto at = std::find_if(worst_.begin(), worst_.end(), [&](const WorstFrame& o) { return o.total_ms < w.total_ms; });
+    worst_.insert(at, w);
+    if (worst_.size() > kWorstFrames) worst_.pop_back();
+  }
   if (conversion) conversion_max_ms_ = std::max(conversion_max_ms_, last_frame_.wall_ms), ++conversion_frames_;
   return Ok{};
 }
@@ -412,6 +418,31 @@ nlohmann::ordered_json World::report() const {
   else r["frames"]["budget_ms"] = "off";
   r["frames"]["over_budget"] = over_budget_;
   r["frames"]["max_over_budget"] = max_over_budget_;
+  // The longest frames: each stage's ms and the work counted in them.
+  ojson worst = ojson::array();
+  for (const WorstFrame& w : worst_) {
+    ojson st = ojson::object();
+    for (int k = 0; k < int(Stage::Count); ++k)
+      if (Stage(k) != Stage::Outputs) st[kStageNames[k]] = w.stage_ms[k];
+    const TerrainManager::FrameWork& k = w.work;
+    worst.push_back({{"t", w.t},
+                     {"total_ms", w.total_ms},
+                     {"stages", st},
+                     {"work", {{"conversion_parts", k.conversion_parts},
+                               {"urgent_fills", k.urgent_fills},
+                               {"promotions", k.promotions},
+                               {"granules_filled", k.granules_filled},
+                               {"granules_uploaded", k.granules_uploaded},
+                               {"ready", k.ready},
+                               {"demotion_parts", k.demotion_parts},
+                               {"depth_renders", k.depth_renders},
+                               {"demotions", k.demotions},
+                               {"wakes", k.wakes},
+                               {"patches_stepped", k.patches_stepped},
+                               {"substeps", k.substeps},
+                               {"sphere_steps", k.sphere_steps}}}});
+  }
+  r["frames"]["worst"] = worst;
 
   ojson bodies = ojson::array();
   int live = 0, spawned = 0, resting = 0;

@@ -25,6 +25,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <array>
 #include <cstdint>
 #include <limits>
 #include <memory>
@@ -238,11 +239,21 @@ class World {
   // ---- per-frame measurements ----
   struct FrameRecord {
     double wall_ms = 0;    // the step, all stages (a caller's outputs are not in it)
-    bool conversion = false;  // a promotion, an upload or a demotion ran in it
+    bool conversion = false;  // a part of a promotion or a demotion ran in it (TerrainManager::FrameWork)
     bool patch_awake = false;  // a patch was simulating (filling, or ready and not asleep)
     double budget_ms = 0;      // the frame budget (infinity: none)
   };
   const FrameRecord& last_frame() const { return last_frame_; }
+  // The longest frames of the run (kWorstFrames, longest first): when, their wall ms, each
+  // stage's ms and the manager's counted work in them (the report's frames.worst).
+  static constexpr std::size_t kWorstFrames = 5;
+  struct WorstFrame {
+    double t = 0;          // s, simulated time of the frame's start
+    double total_ms = 0;   // wall, the step
+    std::array<double, int(Stage::Count)> stage_ms{};  // wall, per stage
+    TerrainManager::FrameWork work;
+  };
+  const std::vector<WorstFrame>& worst_frames() const { return worst_; }
   // The report's median is over the last kFrameWindow steps (memory stays bounded in a game
   // that runs for hours); the maxima and counts are over every step.
   static constexpr std::size_t kFrameWindow = 1 << 16;
@@ -318,6 +329,7 @@ class World {
   // Elevation tiles as they were before a demotion first wrote them (tile index -> samples).
   std::unordered_map<std::size_t, std::vector<float>> original_tiles_;
   std::vector<double> frame_ms_;       // ring of the last kFrameWindow steps' wall ms
+  std::vector<WorstFrame> worst_;      // the longest frames, longest first
   FrameRecord last_frame_;
   double frame_max_ms_ = 0, conversion_max_ms_ = 0;
   double frame_max_at_ = 0;            // s, simulated time of the longest frame's start
@@ -327,7 +339,6 @@ class World {
   double budget_ms_ = std::numeric_limits<double>::infinity();  // of the last frame
   long long over_budget_ = 0;          // frames longer than their budget
   double max_over_budget_ = 0;         // the longest frame / its budget
-  int filling_ = 0;                    // patches promoted and not yet ready
   int peak_granules_ = 0;
   double time_base_ = 0, dt_ = 0;      // s
   long long steps_at_dt_ = 0, steps_ = 0;

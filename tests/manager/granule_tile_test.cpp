@@ -84,3 +84,35 @@ TEST(GranuleTile, SlopedFillFollowsTheSurface) {
   EXPECT_NEAR(left, surf(0.275f * W, 0), 0.2f * d);
   EXPECT_NEAR(right, surf(0.725f * W, 0), 0.2f * d);
 }
+
+// A fill cut in steps (FillCut, what a promotion spreads over frames) gives the granules the
+// whole cut gives, in its order, whatever the step size; each step does at most its units
+// (and the sort of the candidates, whole, once); the cut takes many small steps.
+TEST(GranuleTile, FillCutInStepsEqualsTheWholeCut) {
+  const GranuleTile& t = tile();
+  const float W = 3.0f * t.period_xz, D = 2.0f * t.period_xz, H = 0.6f * t.period_y;
+  auto surf = [&](float x, float z) { return H + 0.1f * t.period_y * std::sin(x / W * 6.0f) * std::cos(z / D * 4.0f); };
+  const std::vector<PlacedGranule> whole = fill_from_tile(t, W, D, surf);
+  ASSERT_GT(whole.size(), 100u);
+  for (std::size_t units : {std::size_t(1), std::size_t(97), std::size_t(4096)}) {
+    FillCut cut(t, W, D, surf);
+    int steps = 0;
+    while (!cut.step(units)) {
+      ++steps;
+      ASSERT_LT(steps, 10000000) << "the cut never finishes with " << units << " units a step";
+    }
+    EXPECT_TRUE(cut.done());
+    const std::vector<PlacedGranule> got = cut.take();
+    ASSERT_EQ(got.size(), whole.size()) << units << " units a step";
+    for (std::size_t k = 0; k < got.size(); ++k) {
+      EXPECT_EQ(got[k].position.x, whole[k].position.x);
+      EXPECT_EQ(got[k].position.y, whole[k].position.y);
+      EXPECT_EQ(got[k].position.z, whole[k].position.z);
+      EXPECT_EQ(got[k].orientation.w, whole[k].orientation.w);
+    }
+    // A copy's candidates are made together (tile.granules() units), the sort is one step.
+    const std::size_t per_copy = t.granules.size();
+    if (units >= per_copy) EXPECT_GE(steps, int(whole.size() / units)) << "the cut was spread over steps";
+    if (units == 97) EXPECT_GT(steps, 10);
+  }
+}

@@ -163,7 +163,9 @@ TEST(TerrainManager, StepsPerContactReachesEverySlot) {
   TerrainManager& m = *rig.manager;
   m.request_patch(1.0, 1.0, 2.0, 2.0, 0.0);
   m.request_patch(5.0, 5.0, 6.0, 6.0, 0.0);
-  ASSERT_TRUE(m.before_bodies(0, 1.0 / 60, rig.profile()).ok());
+  // One conversion part a frame: the second request takes its slot after the first's parts.
+  for (int f = 0; f < 30 && m.active_patches() < 2; ++f)
+    ASSERT_TRUE(m.before_bodies(f / 60.0, 1.0 / 60, rig.profile()).ok());
   const auto live = m.patches();
   ASSERT_EQ(live.size(), 2u);
   for (const auto& p : live) EXPECT_EQ(p.steps_per_contact, 10);
@@ -258,7 +260,9 @@ TEST(TerrainManager, TooSmallSlotNamesTheCapacity) {
   def.granules_per_slot = 100;
   ASSERT_TRUE(rig.start(def).ok()) << rig.error;
   rig.manager->request_patch(1.0, 1.0, 4.0, 4.0, 0.0);
-  auto st = rig.manager->before_bodies(0, 1.0 / 60, rig.profile());
+  // (refused when its fill is cut: the promotion's parts after the slot's reset)
+  Status st = Ok{};
+  for (int f = 0; f < 30 && st.ok(); ++f) st = rig.manager->before_bodies(f / 60.0, 1.0 / 60, rig.profile());
   ASSERT_FALSE(st.ok());
   EXPECT_NE(st.message().find("granules_per_slot"), std::string::npos) << st.message();
 }
@@ -601,6 +605,10 @@ TEST(TerrainManager, BodyDrivenAcrossPatchEdgeStaysOnParticles) {
       off_particles += world.terrain_collision(*id);
     }
     ASSERT_TRUE(rig.frame().ok()) << rig.error;
+    // The patch behind is released one part a frame, the one ahead promoted a part a frame.
+    const TerrainManager::FrameWork& w = rig.manager->last_frame_work();
+    if (w.urgent_fills == 0) EXPECT_LE(w.conversion_parts, 1) << "at t = " << rig.t();
+    EXPECT_LE(w.demotion_parts, 1) << "at t = " << rig.t();
   }
   const BodyState st = world.state(*id);
   EXPECT_GT(st.position.x(), 3.0 + 0.8) << "the sphere was driven past the first patch's edge";
@@ -619,4 +627,58 @@ TEST(TerrainManager, BodyDrivenAcrossPatchEdgeStaysOnParticles) {
   EXPECT_LT(std::abs(rep["ledger"]["total"]["error_pct"].get<double>()), 5.0) << rep["ledger"].dump(2);
   std::printf("driven: x %.2f m, %d extensions, %d of %d frames off particles, ledger %.2f %%\n", st.position.x(),
               rep["pool"]["extensions"].get<int>(), off_particles, driven, rep["ledger"]["total"]["error_pct"].get<double>());
+}
+
+// No frame does a whole patch's work (docs/manager.md "No frame does a whole patch's work"):
+// two spheres dropped side by side ask for two patches in the same frame; each is promoted
+// over several frames (its slot's reset, its fill cut 4096 units a frame, uploads of
+// fill_granules_per_frame, 64 here), one part a frame for both, and both are ready before the spheres
+// land (no part forced). Asleep and idle, they are demoted one part a frame, three each.
+TEST(TerrainManager, NoFrameDoesMoreThanOneConversionPart) {
+  test::Rig rig(test::terrain_8m("flat"));
+  ASSERT_TRUE(rig.ok()) << rig.error;
+  // 1.5 m above the sand: about 26 frames before a shell engages, 0.5 m above the surface.
+  auto a = rig.add_sphere(0.1f, 5.0f, {2.5, 2.6, 4.0});
+  auto b = rig.add_sphere(0.1f, 5.0f, {5.5, 2.6, 4.0});
+  ASSERT_TRUE(a.ok() && b.ok());
+  auto def = test::sphere_patch_def();
+  def.slots = 2;
+  def.fill_granules_per_frame = 64;
+  def.idle_timeout = 0.25;
+  ASSERT_TRUE(rig.start(def).ok()) << rig.error;
+  TerrainManager& m = *rig.manager;
+  int part_frames = 0, promotion_frames = 0, demotion_frames = 0, promotions = 0, demotions = 0, urgent = 0;
+  int most_uploaded = 0, frames_to_ready = -1;
+  for (int f = 0; f < 360 && demotions < 2; ++f) {
+    ASSERT_TRUE(rig.frame().ok()) << rig.error;
+    const TerrainManager::FrameWork& w = m.last_frame_work();
+    EXPECT_LE(w.conversion_parts, 1) << "frame " << f;
+    EXPECT_LE(w.granules_uploaded, def.fill_granules_per_frame) << "frame " << f;
+    EXPECT_LE(w.demotion_parts, 1) << "frame " << f;
+    EXPECT_LE(w.depth_renders, 1) << "frame " << f;
+    part_frames += w.conversion_parts > 0;
+    promotion_frames += w.conversion_parts > 0 && w.demotion_parts == 0;
+    demotion_frames += w.demotion_parts > 0;
+    promotions += w.promotions;
+    demotions += w.demotions;
+    urgent += w.urgent_fills;
+    most_uploaded = std::max(most_uploaded, w.granules_uploaded);
+    if (frames_to_ready < 0 && m.ready_patches() == 2) frames_to_ready = f + 1;
+  }
+  EXPECT_EQ(promotions, 2);
+  EXPECT_EQ(demotions, 2) << "both idle patches demoted";
+  EXPECT_EQ(urgent, 0) << "both patches were ready before the spheres reached them";
+  EXPECT_EQ(demotion_frames, 6) << "three parts for each demotion, each in its own frame";
+  // Each promotion: a reset, at least one part of the cut, and its uploads (at most 64 a frame).
+  int granules = 0, uploads = 0;
+  for (const PatchEvent& e : m.events())
+    if (e.kind == PatchEventKind::Ready) {
+      granules += e.granules;
+      uploads += (e.granules + def.fill_granules_per_frame - 1) / def.fill_granules_per_frame;
+    }
+  EXPECT_GE(promotion_frames, 2 * 2 + uploads) << granules << " granules";
+  EXPECT_EQ(most_uploaded, def.fill_granules_per_frame);
+  EXPECT_GT(frames_to_ready, 0);
+  std::printf("two patches: %d granules, ready after %d frames, %d frames with a promotion part, %d with a demotion part\n",
+              granules, frames_to_ready, promotion_frames, demotion_frames);
 }
