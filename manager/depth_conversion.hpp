@@ -106,7 +106,7 @@ struct RenderBaseline {
 // can come and go over the same place without roughening it; where granules moved (a
 // crater, a rim) the rendered surface is taken as Leach takes it.
 // What write_to_heightfield wrote at each of its steps (region values, ni × nj, i fastest; m,
-// heightfield-local), for the ledger's terms (demotion.cpp close_ledger): the hat means of the
+// heightfield-local), for the ledger's terms (demotion_ledger.cpp close_ledger): the hat means of the
 // image, of the baseline's image (empty without one), and the values after the Gaussian /
 // baseline blend (before the border band) and the blend's weights w (empty without a baseline).
 struct WriteStages {

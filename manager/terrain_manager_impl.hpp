@@ -5,7 +5,8 @@
 //                        planning geometry (planning.hpp: region, floor, soil volume)
 //   filling.cpp          activation: tiles, promotion (heightfield -> granules), uploads
 //   coupling.cpp         dem and sleep: carriers, shells, forces to and from Bullet
-//   demotion.cpp         demotion: depth render, heightfield write, bodies set down, ledger
+//   demotion.cpp         demotion: depth render, heightfield write, bodies set down
+//   demotion_ledger.cpp  demotion: the volume ledger (mass conservation, the closed ledger)
 //   budget.cpp           the frame budget: what patches cost, the scale and extent of a new one
 // Each stage function runs inside its Profile timer (manager/profile.hpp), opened by the
 // sequencer.
@@ -383,6 +384,7 @@ struct TerrainManager::Impl {
     std::vector<float> set_down;   // after set_bodies_down
     std::vector<float> conserved;  // after conserve_volume: what the demotion leaves
   };
+  // The volume ledger (demotion_ledger.cpp).
   double ring_change(const Slot& slot, const PatchRecord& rec, const DemotionSteps& steps, const std::vector<float>& ring_h) const;
   long long spheres_above(const Slot& slot, const PatchRecord& rec, const std::vector<float>& xyzr, const RenderBox& box) const;
   static long long spheres_outside(const std::vector<float>& xyzr, const RenderBox& box);

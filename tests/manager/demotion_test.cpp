@@ -1,4 +1,4 @@
-// The demotion's volume ledger (manager/demotion.cpp conserve_volume, close_ledger): a patch's
+// The demotion's volume ledger (manager/demotion_ledger.cpp conserve_volume, close_ledger): a patch's
 // soil comes back as the volume it took, less the granules that left it, at the fill's packing
 // (docs/manager.md "The ledger").
 #include <gtest/gtest.h>

@@ -162,7 +162,7 @@ TEST(Dig, BucketDigsCarriesAndDepositsInOnePatch) {
   EXPECT_GT(t["rendered_pct"].get<double>(), 0.0);
   EXPECT_LT(t["rise_at_packing_pct"].get<double>(), 0.0);
   EXPECT_NEAR(above_spheres / above_all, tile_bulk, 0.15 * tile_bulk);
-  // The report's ledger makes the same split (demotion.cpp close_ledger).
+  // The report's ledger makes the same split (demotion_ledger.cpp close_ledger).
   EXPECT_NEAR(l["risen_solid_fraction"].get<double>(), above_spheres / above_all, 0.02);
   EXPECT_LT(std::abs(l["error_less_dilation_pct"].get<double>()), 1.0);
 }
