@@ -1,5 +1,5 @@
 // The terrain manager's planning geometry (internal to manager/, used by planning.cpp,
-// filling.cpp and demotion.cpp; tests/manager/planning_test.cpp): where a patch goes on the
+// budget.cpp and filling.cpp; tests/manager/planning_test.cpp): where a patch goes on the
 // heightfield, how deep, and the soil volume its ledger counts. Pure functions of the
 // heightfield, no manager state.
 #pragma once
