@@ -46,7 +46,7 @@ long long TerrainManager::Impl::spheres_outside(const std::vector<float>& xyzr, 
 // Granule spheres inside the render box whose centres lie above the old surface (the apron's
 // heights at promotion, bilinear). `xyzr`: heightfield-local, m.
 long long TerrainManager::Impl::spheres_above(const Slot& slot, const PatchRecord& rec, const std::vector<float>& xyzr,
-                                              const RenderBox& box) const {
+                                              const RenderBox& box, const std::vector<char>* columns) const {
   const GridRegion& a = slot.apron;
   const double sp = hf->spacing();
   auto old_height = [&](double x, double z) {
@@ -61,6 +61,11 @@ long long TerrainManager::Impl::spheres_above(const Slot& slot, const PatchRecor
   for (std::size_t k = 0; k + 3 < xyzr.size(); k += 4) {
     const float x = xyzr[k], y = xyzr[k + 1], z = xyzr[k + 2];
     if (x < box.x0 || x > box.x1 || z < box.z0 || z > box.z1) continue;
+    if (columns) {  // only in the columns marked (the apron sample nearest the sphere)
+      const int i = int(std::lround(std::clamp(x / sp - a.i0, 0.0, double(a.ni - 1))));
+      const int j = int(std::lround(std::clamp(z / sp - a.j0, 0.0, double(a.nj - 1))));
+      if (!(*columns)[std::size_t(j) * a.ni + i]) continue;
+    }
     n += y > old_height(x, z);
   }
   return n;
@@ -127,17 +132,23 @@ void TerrainManager::Impl::conserve_volume(const Slot& slot, PatchRecord& rec, c
   // what the granules that came above it fill at φ (a loose pile, a rim, scattered granules render
   // higher than that). The moved ground's rise is scaled down to it, never up (granules above
   // the old surface may rest on a body, where no height can take them).
-  double risen = 0, adjustable = 0;  // m³
+  // Counted in the columns of the moved ground that rose: a trench dug elsewhere in the patch
+  // takes its spheres from columns that fell, which must not cancel a pile's.
+  std::vector<char> rose(n, 0);
+  double risen = 0, adjustable = 0;  // m³, in those columns
   for (std::size_t k = 0; k < n; ++k) {
     const double rise = std::max(0.0, double(h[k]) - rec.before_heights[k]);
+    rose[k] = m[k] > 0 && rise > 0;
+    if (!rose[k]) continue;
     risen += rise;
     adjustable += m[k] * rise;
   }
   risen *= sp * sp;
   adjustable *= sp * sp;
-  // (spheres above it now less those above it at the fill: the fill's top spheres reach above
-  // the surface it was cut to, and undisturbed ground comes back at its old height)
-  const long long gained = spheres_above(slot, rec, granule_xyzr, box) - spheres_above(slot, rec, rec.fill_spheres, box);
+  // (spheres above it now less those above it at the fill, in those columns: the fill's top
+  // spheres reach above the surface it was cut to, and undisturbed ground comes back at its
+  // old height)
+  const long long gained = spheres_above(slot, rec, granule_xyzr, box, &rose) - spheres_above(slot, rec, rec.fill_spheres, box, &rose);
   const double at_packing = pf > 0 ? double(std::max(0LL, gained)) * 4.0 / 3.0 * std::numbers::pi * rw * rw * rw / pf : risen;
   const double cut = adjustable > 0 ? std::clamp((risen - at_packing) / adjustable, 0.0, 1.0) : 0.0;  // share of the moved rise taken off
   rec.ledger.rise_cut = 0;

@@ -386,7 +386,9 @@ struct TerrainManager::Impl {
   };
   // The volume ledger (demotion_ledger.cpp).
   double ring_change(const Slot& slot, const PatchRecord& rec, const DemotionSteps& steps, const std::vector<float>& ring_h) const;
-  long long spheres_above(const Slot& slot, const PatchRecord& rec, const std::vector<float>& xyzr, const RenderBox& box) const;
+  // (columns: count only spheres whose nearest apron sample is marked; null: all)
+  long long spheres_above(const Slot& slot, const PatchRecord& rec, const std::vector<float>& xyzr, const RenderBox& box,
+                          const std::vector<char>* columns = nullptr) const;
   static long long spheres_outside(const std::vector<float>& xyzr, const RenderBox& box);
   void conserve_volume(const Slot& slot, PatchRecord& rec, const DemotionSteps& steps, const std::vector<float>& granule_xyzr,
                        const RenderBox& box);
