@@ -47,18 +47,18 @@ void parse_terrain(Ctx& c, const json& j, TerrainDef& t) {
         ProceduralKind pk = ProceduralKind::Flat;
         s.enumeration("kind", pk, kProceduralKinds);
         t.procedural = to_string(pk);
-        number_f("height", t.base_height, closed(-1e5, 1e5, "m"));
-        number_f("slope_x", t.slope_x, closed(-100.0, 100.0, "m/m"));
-        number_f("slope_z", t.slope_z, closed(-100.0, 100.0, "m/m"));
-        number_f("amplitude", t.amplitude, closed(0.0, 1e5, "m"));
-        number_f("wavelength", t.wavelength, positive(1e7, "m"));
+        number_f("height", t.base_height, range_of(knobs::kBaseHeight));
+        number_f("slope_x", t.slope_x, range_of(knobs::kSlopeX));
+        number_f("slope_z", t.slope_z, range_of(knobs::kSlopeZ));
+        number_f("amplitude", t.amplitude, range_of(knobs::kAmplitude));
+        number_f("wavelength", t.wavelength, range_of(knobs::kWavelength));
         if (const json* v = s.get("seed")) {
           if (auto x = read_integer(c, *v, s.at("seed"), 0, 4294967295.0)) t.noise_seed = static_cast<std::uint32_t>(*x);
         }
-        s.integer("octaves", t.octaves, 1, 16);
+        s.knob("octaves", t.octaves, knobs::kOctaves);
         t.samples_x = t.samples_z = 129;
-        s.integer("samples_x", t.samples_x, 2, 65536);
-        s.integer("samples_z", t.samples_z, 2, 65536);
+        s.knob("samples_x", t.samples_x, knobs::kSamplesX);
+        s.knob("samples_z", t.samples_z, knobs::kSamplesZ);
         if (auto e = limits::check_grid_size(c.file, s.at("samples_x") + " × samples_z", t.samples_x, t.samples_z))
           c.errors.push_back(*e);
       } else {
@@ -67,7 +67,8 @@ void parse_terrain(Ctx& c, const json& j, TerrainDef& t) {
         const bool raw = kind == TerrainSourceKind::RawF32;
         bool dims = true;
         if (raw) {
-          dims = s.integer_req("samples_x", t.samples_x, 2, 65536) & s.integer_req("samples_z", t.samples_z, 2, 65536);
+          dims = s.integer_req("samples_x", t.samples_x, knobs::kSamplesX.lo, knobs::kSamplesX.hi) &
+                 s.integer_req("samples_z", t.samples_z, knobs::kSamplesZ.lo, knobs::kSamplesZ.hi);
           if (dims) {
             if (auto e = limits::check_grid_size(c.file, s.at("samples_x") + " × samples_z", t.samples_x, t.samples_z)) {
               c.errors.push_back(*e);
@@ -91,7 +92,7 @@ void parse_terrain(Ctx& c, const json& j, TerrainDef& t) {
   if (!o.both("spacing", "size")) {
     // An esri_ascii grid has its own cellsize: a spacing given overrides it.
     t.spacing_overrides_file = kind == TerrainSourceKind::EsriAscii && o.has("spacing");
-    o.number("spacing", t.spacing, closed(1e-4, 1e4, "m"));
+    o.knob("spacing", t.spacing, knobs::kSpacing);
     if (const json* v = o.get("size")) {
       if (auto sz = read_numbers<2>(c, *v, o.at("size"), positive(1e7, "m"))) t.size = *sz;
     }
@@ -104,8 +105,8 @@ void parse_terrain(Ctx& c, const json& j, TerrainDef& t) {
               "spacing would be " + fmt_num(sp[0]) + " m in x and " + fmt_num(sp[1]) + " m in z");
     }
   }
-  o.number("vertical_scale", t.vertical_scale, positive(1e5, "m"));
-  o.number("vertical_offset", t.vertical_offset, closed(-1e6, 1e6, "m"));
+  o.knob("vertical_scale", t.vertical_scale, knobs::kVerticalScale);
+  o.knob("vertical_offset", t.vertical_offset, knobs::kVerticalOffset);
   o.vec3("origin", t.origin, kWorldCoord);
   std::optional<double> soil;
   if (!o.both("soil_depth", "bedrock_height")) {
