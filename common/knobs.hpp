@@ -6,8 +6,8 @@
 // the numbers; tests/common/knobs_test.cpp checks that every copy agrees, and that the field
 // tables in docs/scene-format.md and docs/api.md are the ones `knob_table_markdown` prints).
 //
-// A setting only one door has is listed with the reason in `one_door`. The limits of shapes,
-// cameras and outputs (kLimits) are a second table of the same form, printed after the first.
+// A setting only one door has is listed with the reason in `one_door`. The limits of the
+// terrain's source, shapes, cameras and outputs (kLimits) are a second table of the same form, printed after the first.
 #pragma once
 
 #include <array>
@@ -76,11 +76,24 @@ inline constexpr std::array<const Knob*, 25> kAll = {
     &kSoilDepth, &kSleepSpeed, &kSleepTime, &kIdleTimeout, &kThreads, &kLodHorizon, &kLodMargin,
     &kLodApron, &kBodyFriction, &kBodyRestitution, &kBodyRollingFriction};
 
-// ---- limits: the ranges of shapes, cameras and outputs ----
+// ---- limits: the ranges of the terrain's source, shapes, cameras and outputs ----
 // The same form as the knobs, for fields that are sizes and times rather than tuning: the
 // parser, the API's validation (manager/definitions.cpp) and the docs read these numbers. A
 // NaN default: none (the field is required, or absent means unused).
 inline constexpr double kNoDefault = std::numeric_limits<double>::quiet_NaN();
+// The terrain's source: a generator's parameters (heightfield/procedural.hpp), the grid and the
+// heights' scale. The sample counts are also capped together (limits::check_grid_size).
+inline constexpr Knob kBaseHeight{"terrain.source.height", "TerrainDef.base_height", 0, -1e5, 1e5, false, false, false, "m", "procedural: the surface's height at the origin (every kind)"};
+inline constexpr Knob kSlopeX{"terrain.source.slope_x", "TerrainDef.slope_x", 0, -100, 100, false, false, false, "m/m", "plane: dh/dx"};
+inline constexpr Knob kSlopeZ{"terrain.source.slope_z", "TerrainDef.slope_z", 0, -100, 100, false, false, false, "m/m", "plane: dh/dz"};
+inline constexpr Knob kAmplitude{"terrain.source.amplitude", "TerrainDef.amplitude", 1, 0, 1e5, false, false, false, "m", "hills, noise: height amplitude"};
+inline constexpr Knob kWavelength{"terrain.source.wavelength", "TerrainDef.wavelength", 32, 0, 1e7, true, false, false, "m", "hills, noise: horizontal wavelength"};
+inline constexpr Knob kOctaves{"terrain.source.octaves", "TerrainDef.octaves", 4, 1, 16, false, false, true, "", "noise: octaves summed"};
+inline constexpr Knob kSamplesX{"terrain.source.samples_x", "TerrainDef.samples_x", kNoDefault, 2, 1048577, false, false, true, "", "grid samples along x (raw_f32, procedural, an array); a scene's procedural source: 129 when absent"};
+inline constexpr Knob kSamplesZ{"terrain.source.samples_z", "TerrainDef.samples_z", kNoDefault, 2, 1048577, false, false, true, "", "grid samples along z, as samples_x"};
+inline constexpr Knob kSpacing{"terrain.spacing", "TerrainDef.spacing", 1, 1e-4, 1e4, false, false, false, "m", "between samples in x and z (esri_ascii: overrides the file's cellsize when given)"};
+inline constexpr Knob kVerticalScale{"terrain.vertical_scale", "TerrainDef.vertical_scale", 1, 0, 1e5, true, false, false, "m", "height per unit of a sample's value"};
+inline constexpr Knob kVerticalOffset{"terrain.vertical_offset", "TerrainDef.vertical_offset", 0, -1e6, 1e6, false, false, false, "m", "added to every sample's height"};
 // Shapes: Bullet keeps sizes as float; below 1e-6 m a shape is a point to it.
 inline constexpr Knob kShapeRadius{"bodies[].shape.radius", "BodyDef.shape.radius", 0.5, 1e-6, 1e4, false, false, false, "m", "radius of a sphere, cylinder or capsule"};
 inline constexpr Knob kShapeHalfExtent{"bodies[].shape.half_extents", "BodyDef.shape.half_extents", 0.5, 1e-6, 1e4, false, false, false, "m", "each half extent of a box"};
@@ -98,8 +111,9 @@ inline constexpr Knob kEveryKFrames{"outputs.frames[].every_k_frames", "", kNoDe
 inline constexpr Knob kVideoFps{"", "", 30, 0, 1e6, true, false, false, "1/s", "video frames per simulated second; also at most 1 / simulation.dt",
                                 "`sandpatch run --video-fps` (a command-line option)"};
 
-inline constexpr std::array<const Knob*, 12> kLimits = {
-    &kShapeRadius, &kShapeHalfExtent, &kCylinderHeight, &kCapsuleHeight, &kMeshScale, &kCameraFov,
+inline constexpr std::array<const Knob*, 23> kLimits = {
+    &kBaseHeight, &kSlopeX, &kSlopeZ, &kAmplitude, &kWavelength, &kOctaves, &kSamplesX, &kSamplesZ,
+    &kSpacing, &kVerticalScale, &kVerticalOffset, &kShapeRadius, &kShapeHalfExtent, &kCylinderHeight, &kCapsuleHeight, &kMeshScale, &kCameraFov,
     &kCameraWidth, &kCameraHeight, &kCameraKeyTime, &kOutputTime, &kEveryKFrames, &kVideoFps};
 
 // Every other setting: not a number with a range, or in one door only (then `note` says why).
@@ -109,13 +123,11 @@ struct Field {
   const char* api;    // "" = scene files only
   const char* note;
 };
-inline constexpr std::array<Field, 36> kOtherFields = {{
-    {"terrain.source", "TerrainDef.file + file_type, TerrainDef.procedural (+ samples_x/z, base_height, slope_x/z, amplitude, wavelength, noise_seed, octaves)", "a heightmap file or a generator; the scene's source.type is file_type (the library may leave it to the extension)"},
+inline constexpr std::array<Field, 34> kOtherFields = {{
+    {"terrain.source", "TerrainDef.file + file_type, TerrainDef.procedural (+ noise_seed)", "a heightmap file or a generator (its numbers are limits above); the scene's source.type is file_type (the library may leave it to the extension)"},
     {"", "TerrainDef.heights", "an array from the game; scene files name a heightmap file instead"},
-    {"terrain.spacing", "TerrainDef.spacing", "with an esri_ascii source, a spacing given overrides the file's cellsize (TerrainDef.spacing_overrides_file)"},
+    {"", "TerrainDef.spacing_overrides_file", "with an esri_ascii source, a scene's terrain.spacing given overrides the file's cellsize"},
     {"terrain.size", "", "the library gives spacing and the sample count"},
-    {"terrain.vertical_scale", "TerrainDef.vertical_scale", ""},
-    {"terrain.vertical_offset", "TerrainDef.vertical_offset", ""},
     {"terrain.origin", "TerrainDef.origin", ""},
     {"terrain.bedrock_height", "", "a flat bedrock; the library's bedrock is surface − soil_depth"},
     {"terrain.material", "", "a scene names one of its materials; a TerrainDef has one material"},
@@ -174,7 +186,7 @@ inline std::string knob_table_markdown() {
     return r;
   };
   std::string t = rows(kAll);
-  t += "\nThe limits of shapes, cameras and outputs:\n\n" + rows(kLimits);
+  t += "\nThe limits of the terrain's source, shapes, cameras and outputs:\n\n" + rows(kLimits);
   t += "\nThe other settings, and those only one door has:\n\n| scene file | library | note |\n|---|---|---|\n";
   auto plain = [](const char* field) { return *field ? std::string("`") + field + "`" : std::string("—"); };
   for (const Field& f : kOtherFields) t += "| " + plain(f.scene) + " | " + plain(f.api) + " | " + f.note + " |\n";

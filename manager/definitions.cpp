@@ -80,8 +80,8 @@ std::vector<Error> validate(const api::TerrainDef& d) {
   const std::string ext = file_format(d);
   const bool need_grid = !d.heights.empty() || !d.procedural.empty() || (!d.file.empty() && ext == ".raw");
   if (need_grid) {
-    c.integer("samples_x", d.samples_x, 2, 1048577);
-    c.integer("samples_z", d.samples_z, 2, 1048577);
+    c.knob(knobs::kSamplesX, d.samples_x);
+    c.knob(knobs::kSamplesZ, d.samples_z);
     if (auto e = limits::check_grid_size("", "TerrainDef.samples_x × samples_z", d.samples_x, d.samples_z))
       c.errs.push_back({e->file, e->field, e->value, e->allowed, e->detail});
   }
@@ -103,18 +103,16 @@ std::vector<Error> validate(const api::TerrainDef& d) {
   if (!d.procedural.empty()) {
     if (d.procedural != "flat" && d.procedural != "plane" && d.procedural != "hills" && d.procedural != "noise")
       c.add("procedural", "\"" + d.procedural + "\"", "must be one of flat, plane, hills, noise");
-    c.closed("base_height", d.base_height, -1e5, 1e5, "m");
-    c.closed("slope_x", d.slope_x, -1e3, 1e3);
-    c.closed("slope_z", d.slope_z, -1e3, 1e3);
-    c.closed("amplitude", d.amplitude, 0.0, 1e5, "m");
-    c.positive("wavelength", d.wavelength, 1e7, "m");
-    c.integer("octaves", d.octaves, 1, 16);
+    c.knob(knobs::kBaseHeight, d.base_height);
+    c.knob(knobs::kSlopeX, d.slope_x);
+    c.knob(knobs::kSlopeZ, d.slope_z);
+    c.knob(knobs::kAmplitude, d.amplitude);
+    c.knob(knobs::kWavelength, d.wavelength);
+    c.knob(knobs::kOctaves, d.octaves);
   }
-  {
-    c.closed("vertical_scale", d.vertical_scale, -1e6, 1e6, "m");
-    c.closed("vertical_offset", d.vertical_offset, -1e6, 1e6, "m");
-  }
-  c.positive("spacing", d.spacing, 1e4, "m");
+  c.knob(knobs::kVerticalScale, d.vertical_scale);
+  c.knob(knobs::kVerticalOffset, d.vertical_offset);
+  c.knob(knobs::kSpacing, d.spacing);
   c.finite("origin", d.origin, "m");
   c.knob(knobs::kSoilDepth, d.soil_depth);
   c.knob(knobs::kGranuleRadius, d.material.granule_radius);

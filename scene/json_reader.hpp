@@ -282,6 +282,9 @@ struct Range {
 inline Range closed(double lo, double hi, const char* unit) { return {lo, hi, false, false, unit}; }
 inline Range positive(double hi, const char* unit) { return {0.0, hi, true, false, unit}; }
 
+// World coordinates (positions, the terrain's origin).
+inline const Range kWorldCoord = closed(-1e9, 1e9, "m");
+
 // The range of a knob or limit of the table (common/knobs.hpp).
 inline Range range_of(const knobs::Knob& k) { return {k.lo, k.hi, k.lo_open, k.hi_open, k.unit}; }
 

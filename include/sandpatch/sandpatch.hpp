@@ -132,8 +132,8 @@ struct TerrainDef {
   // -- heights from an array: samples_x * samples_z floats, row-major with x fastest
   //    (sample (i, j) = heights[j * samples_x + i]), m relative to origin[1]
   std::vector<float> heights;
-  int samples_x = 0;                           // >= 2 (array, raw file, procedural)
-  int samples_z = 0;                           // >= 2
+  int samples_x = 0;                           // [2, 1048577] (array, raw file, procedural)
+  int samples_z = 0;                           // [2, 1048577]; samples_x · samples_z <= 268435456
   // -- or from a heightmap file: .png (16-bit greyscale), .raw (little-endian float32, needs
   //    samples_x / samples_z), .asc (ESRI ASCII grid; its cellsize is the spacing unless
   //    spacing_overrides_file). height = vertical_offset + vertical_scale * value for every
@@ -141,19 +141,19 @@ struct TerrainDef {
   std::string file;
   std::string file_type;                       // "" = from the extension; or "png16" | "raw_f32" | "esri_ascii"
                                                //   (scene files' terrain.source.type: any extension)
-  double vertical_scale = 1.0;                 // m per unit (finite)
-  double vertical_offset = 0.0;                // m (finite)
+  double vertical_scale = 1.0;                 // m per unit, (0, 1e5]
+  double vertical_offset = 0.0;                // m, [-1e6, 1e6]
   bool spacing_overrides_file = false;         // .asc: use `spacing` instead of the file's cellsize
   // -- or generated: "flat" | "plane" | "hills" | "noise" (docs/heightfield.md)
   std::string procedural;
   float base_height = 0.0f;                    // m (every kind)
-  float slope_x = 0.0f, slope_z = 0.0f;        // plane: dh/dx, dh/dz
+  float slope_x = 0.0f, slope_z = 0.0f;        // plane: dh/dx, dh/dz, each [-100, 100]
   float amplitude = 1.0f;                      // m, hills / noise (>= 0)
   float wavelength = 32.0f;                    // m, hills / noise (> 0)
   std::uint32_t noise_seed = 1;                // noise
   int octaves = 4;                             // noise, [1, 16]
 
-  double spacing = 1.0;                        // m between samples in x and z, (0, 1e4]
+  double spacing = 1.0;                        // m between samples in x and z, [1e-4, 1e4]
   Vec3 origin = {0.0, 0.0, 0.0};               // m, world position of sample (0, 0) at height 0
   double soil_depth = 2.0;                     // m, bedrock = surface − soil_depth, (0, 1e4]
 

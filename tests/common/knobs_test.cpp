@@ -294,6 +294,7 @@ TEST(Knobs, EverySceneFieldHasALibraryFieldOrAReason) {
       seen.insert(p);
       bool ok = false;
       for (const knobs::Knob* k : knobs::kAll) ok = ok || p == k->scene;
+      for (const knobs::Knob* k : knobs::kLimits) ok = ok || p == k->scene;
       for (const knobs::Field& o : knobs::kOtherFields) ok = ok || (*o.scene && covers(o.scene, p));
       for (const char* r : knobs::kRunSections) ok = ok || covers(r, p);
       EXPECT_TRUE(ok) << f << ": scene field " << p << " is in no table of common/knobs.hpp";
@@ -350,8 +351,9 @@ struct LimitCase {
   const knobs::Knob* knob;
   std::function<json(double)> scene;                 // a scene with the value at the limit's field
   std::string scene_field;                           // the field its error names
-  std::function<void(api::BodyDef&, double)> set_api;  // nullptr: a scene-only limit
+  std::function<void(api::BodyDef&, double)> set_api;  // nullptr: a scene-only limit or a terrain one
   std::string api_field;
+  std::function<void(api::TerrainDef&, double)> set_terrain = nullptr;  // a limit of TerrainDef
 };
 
 std::vector<LimitCase> limit_cases() {
@@ -367,7 +369,45 @@ std::vector<LimitCase> limit_cases() {
       return j;
     };
   };
+  // The terrain's source: the scene's terrain section, the library's TerrainDef.
+  auto source = [](const char* key) {
+    return [key](double v) {
+      json j = limits_scene({{"type", "sphere"}, {"radius", 0.2}});
+      j["terrain"]["source"][key] = v;
+      return j;
+    };
+  };
+  auto terrain = [](const char* key) {
+    return [key](double v) {
+      json j = limits_scene({{"type", "sphere"}, {"radius", 0.2}});
+      j["terrain"][key] = v;
+      return j;
+    };
+  };
+  using T = api::TerrainDef&;
   return {
+      {&knobs::kBaseHeight, source("height"), "terrain.source.height", nullptr, "TerrainDef.base_height",
+       [](T t, double v) { t.base_height = float(v); }},
+      {&knobs::kSlopeX, source("slope_x"), "terrain.source.slope_x", nullptr, "TerrainDef.slope_x",
+       [](T t, double v) { t.slope_x = float(v); }},
+      {&knobs::kSlopeZ, source("slope_z"), "terrain.source.slope_z", nullptr, "TerrainDef.slope_z",
+       [](T t, double v) { t.slope_z = float(v); }},
+      {&knobs::kAmplitude, source("amplitude"), "terrain.source.amplitude", nullptr, "TerrainDef.amplitude",
+       [](T t, double v) { t.amplitude = float(v); }},
+      {&knobs::kWavelength, source("wavelength"), "terrain.source.wavelength", nullptr, "TerrainDef.wavelength",
+       [](T t, double v) { t.wavelength = float(v); }},
+      {&knobs::kOctaves, source("octaves"), "terrain.source.octaves", nullptr, "TerrainDef.octaves",
+       [](T t, double v) { t.octaves = int(v); }},
+      {&knobs::kSamplesX, source("samples_x"), "terrain.source.samples_x", nullptr, "TerrainDef.samples_x",
+       [](T t, double v) { t.samples_x = int(v); }},
+      {&knobs::kSamplesZ, source("samples_z"), "terrain.source.samples_z", nullptr, "TerrainDef.samples_z",
+       [](T t, double v) { t.samples_z = int(v); }},
+      {&knobs::kSpacing, terrain("spacing"), "terrain.spacing", nullptr, "TerrainDef.spacing",
+       [](T t, double v) { t.spacing = v; }},
+      {&knobs::kVerticalScale, terrain("vertical_scale"), "terrain.vertical_scale", nullptr, "TerrainDef.vertical_scale",
+       [](T t, double v) { t.vertical_scale = v; }},
+      {&knobs::kVerticalOffset, terrain("vertical_offset"), "terrain.vertical_offset", nullptr, "TerrainDef.vertical_offset",
+       [](T t, double v) { t.vertical_offset = v; }},
       {&knobs::kShapeRadius, [=](double v) { return with(sphere, "radius", v); }, "bodies[0].shape.radius",
        [](api::BodyDef& b, double v) { b.shape.radius = v; }, "BodyDef.shape.radius"},
       {&knobs::kShapeHalfExtent,
@@ -441,7 +481,9 @@ TEST(Knobs, EveryLimitHasACase) {
     EXPECT_EQ(cs[i].knob, knobs::kLimits[i]) << "limit_cases() in the order of kLimits";
     EXPECT_EQ(cs[i].scene_field.substr(0, cs[i].scene_field.find('[')),
               std::string(cs[i].knob->scene).substr(0, std::string(cs[i].knob->scene).find('[')));
-    EXPECT_EQ(cs[i].set_api != nullptr, *cs[i].knob->api != '\0') << cs[i].knob->scene;
+    EXPECT_EQ(cs[i].set_api != nullptr || cs[i].set_terrain != nullptr, *cs[i].knob->api != '\0') << cs[i].knob->scene;
+    EXPECT_FALSE(cs[i].set_api && cs[i].set_terrain) << cs[i].knob->scene << ": a BodyDef or a TerrainDef field, not both";
+    if (*cs[i].knob->api) EXPECT_EQ(cs[i].api_field.substr(0, cs[i].api_field.find('[')), cs[i].knob->api);
     EXPECT_TRUE(*cs[i].knob->api || *cs[i].knob->one_door) << cs[i].knob->scene << ": no API field and no reason";
   }
   for (const knobs::Knob* k : knobs::kLimits)
@@ -462,6 +504,21 @@ TEST(Knobs, BothDoorsRefuseTheSameLimits) {
       EXPECT_NE(scene.message().find(c.scene_field), std::string::npos) << scene.message();
       const std::string range = format_number(c.knob->lo) + ", " + format_number(c.knob->hi);
       EXPECT_NE(scene.message().find(range), std::string::npos) << scene.message();
+      if (c.set_terrain) {
+        // The library's TerrainDef: a small generated grid, the value in its field.
+        api::TerrainDef t;
+        t.procedural = "flat";
+        t.samples_x = t.samples_z = 9;
+        t.granular_patches = false;
+        c.set_terrain(t, inside);
+        auto ok = api::Terrain::create(t);
+        EXPECT_TRUE(ok.ok()) << "TerrainDef refused " << inside << ": " << ok.message();
+        c.set_terrain(t, v);
+        auto bad = api::Terrain::create(t);
+        ASSERT_FALSE(bad.ok()) << "TerrainDef accepted " << v;
+        EXPECT_NE(bad.message().find(c.api_field + " = "), std::string::npos) << bad.message();
+        EXPECT_NE(bad.message().find(knobs::describe_range(*c.knob)), std::string::npos) << bad.message();
+      }
       if (!c.set_api) continue;
       api::TerrainDef t;
       t.procedural = "flat";
@@ -482,8 +539,20 @@ TEST(Knobs, BothDoorsRefuseTheSameLimits) {
   }
 }
 
-// The defaults of the table are those of the public ShapeDef, the scene's cameras and the run.
+// The defaults of the table are those of the public TerrainDef and ShapeDef, the scene's
+// cameras and the run.
 TEST(Knobs, LimitDefaultsAgree) {
+  const api::TerrainDef t;  // scene files' terrain is the library's (scene.hpp TerrainDef)
+  EXPECT_EQ(t.base_height, knobs::kBaseHeight.def);
+  EXPECT_EQ(t.slope_x, knobs::kSlopeX.def);
+  EXPECT_EQ(t.slope_z, knobs::kSlopeZ.def);
+  EXPECT_EQ(t.amplitude, knobs::kAmplitude.def);
+  EXPECT_EQ(t.wavelength, knobs::kWavelength.def);
+  EXPECT_EQ(t.octaves, knobs::kOctaves.def);
+  EXPECT_EQ(t.spacing, knobs::kSpacing.def);
+  EXPECT_EQ(t.vertical_scale, knobs::kVerticalScale.def);
+  EXPECT_EQ(t.vertical_offset, knobs::kVerticalOffset.def);
+  EXPECT_TRUE(std::isnan(knobs::kSamplesX.def) && std::isnan(knobs::kSamplesZ.def)) << "the library has no default sample count";
   const api::ShapeDef a;  // scene files' shapes are the library's
   EXPECT_EQ(a.radius, knobs::kShapeRadius.def);
   EXPECT_EQ(a.half_extents[0], knobs::kShapeHalfExtent.def);

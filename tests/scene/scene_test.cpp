@@ -741,6 +741,19 @@ TEST(SceneReliability, GridsArePassedTheMemoryCap) {
   EXPECT_TRUE(parse_scene(at_cap, "cap.json", "").ok()) << all(parse_scene(at_cap, "cap.json", ""));
 }
 
+// One side may be long while the product fits: samples per side are [2, 1048577]
+// (knobs::kSamplesX, as the library's TerrainDef), the product is capped apart.
+TEST(SceneReliability, LongNarrowGridsAreTakenUpToThePerSideLimit) {
+  const auto grid = [](double nx) {
+    return parse(scene_with({{"terrain", {{"source", {{"samples_x", nx}, {"samples_z", 2}}}}}}));
+  };
+  const auto r = grid(1048577);  // 2 097 154 samples, far under the cap
+  ASSERT_TRUE(r.ok()) << all(r);
+  EXPECT_EQ((*r).terrain.samples_x, 1048577);
+  const auto over = grid(1048578);
+  EXPECT_TRUE(has_error(over, "terrain.source.samples_x", "1048578", "[2, 1048577]")) << all(over);
+}
+
 TEST(SceneReliability, PoolIsCapped) {
   const auto r = broken("pool_too_large.json");
   EXPECT_TRUE(has_error(r, "simulation.pool.slots", "1024 × granules_per_slot 16777216", "4194304 granules")) << all(r);
