@@ -157,7 +157,7 @@ inline constexpr std::array<Field, 34> kOtherFields = {{
     {"simulation.preset", "", "a named set of knobs; a game sets the knobs themselves"},
     {"simulation.frame_budget_ms", "TerrainDef.frame_budget_ms", "ms > 0, or \"off\" (+infinity in the library); absent: half of each frame's dt"},
     {"simulation.scale_by_distance", "", "bands around a scene camera; a game sets particle_scale"},
-    {"", "TerrainDef.gl_depth_render", "a scene run renders the demotion's depth on GL when a context can be made, else on the CPU"},
+    {"", "TerrainDef.gl_depth_render", "a scene run renders the demotion's depth on GL on a GPU or with the GL backend, else on the CPU"},
 }};
 // Scene-file sections that describe a run, not the terrain (what it writes, what it is called).
 inline constexpr std::array<const char*, 5> kRunSections = {"name", "description", "version", "cameras", "outputs"};

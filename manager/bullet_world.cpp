@@ -405,17 +405,37 @@ void BulletWorld::step_frame(float dt, int substeps) {
 }
 
 void BulletWorld::terrain_changed() {
-  for (auto& t : impl_->tiles) {
-    const float lo = impl_->terrain->tile_min_height(t.tx, t.tz), hi = impl_->terrain->tile_max_height(t.tx, t.tz);
+  terrain_changed(GridRegion{0, 0, impl_->terrain->samples_x(), impl_->terrain->samples_z()});
+}
+
+void BulletWorld::terrain_changed(const GridRegion& changed) {
+  auto& m = *impl_;
+  for (auto& t : m.tiles) {
+    if (intersect(changed, m.terrain->tile_region(t.tx, t.tz)).empty()) continue;
+    const float lo = m.terrain->tile_min_height(t.tx, t.tz), hi = m.terrain->tile_max_height(t.tx, t.tz);
     if (lo < t.min_h || hi > t.max_h) {
-      impl_->world->removeCollisionObject(t.object.get());
-      impl_->build_tile(t);
-      impl_->world->addCollisionObject(t.object.get(), Impl::kGroupTerrain, Impl::kGroupBody);
+      m.world->removeCollisionObject(t.object.get());
+      m.build_tile(t, /*keep_edges=*/true);
+      m.world->addCollisionObject(t.object.get(), Impl::kGroupTerrain, Impl::kGroupBody);
     }
+    m.refresh_edges(t, changed);
   }
 }
 
 int BulletWorld::terrain_tile_count() const { return int(impl_->tiles.size()); }
+
+std::vector<BulletWorld::EdgeInfo> BulletWorld::tile_edge_info(int tile) const {
+  std::vector<EdgeInfo> out;
+  if (tile < 0 || tile >= int(impl_->tiles.size()) || !impl_->tiles[std::size_t(tile)].edges) return out;
+  const btTriangleInfoMap& m = *impl_->tiles[std::size_t(tile)].edges;
+  out.reserve(std::size_t(m.size()));
+  for (int k = 0; k < m.size(); ++k) {
+    const btTriangleInfo& t = *m.getAtIndex(k);
+    out.push_back({m.getKeyAtIndex(k).getUid1(), t.m_flags, {t.m_edgeV0V1Angle, t.m_edgeV1V2Angle, t.m_edgeV2V0Angle}});
+  }
+  std::sort(out.begin(), out.end(), [](const EdgeInfo& a, const EdgeInfo& b) { return a.key < b.key; });
+  return out;
+}
 
 BulletWorld::Stats BulletWorld::stats() const {
   const auto& m = *impl_;
@@ -424,6 +444,7 @@ BulletWorld::Stats BulletWorld::stats() const {
   s.edge_maps = 0;
   for (const auto& t : m.tiles) s.edge_maps += t.edges != nullptr;
   s.edge_maps_built = m.edge_maps_built;
+  s.edge_maps_refreshed = m.edge_maps_refreshed;
   // btCollisionWorld::updateAabbs visits an object when forceUpdateAllAabbs is on or the object is active.
   s.aabb_updates_per_step = 0;
   const btCollisionObjectArray& objects = m.world->getCollisionObjectArray();

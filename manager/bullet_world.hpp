@@ -20,6 +20,7 @@
 
 #include "common/error.hpp"
 #include "common/knobs.hpp"
+#include "heightfield/heightfield.hpp"
 
 class btRigidBody;
 
@@ -176,11 +177,22 @@ class BulletWorld {
   // 1 / substeps of the impulse. step_frame(dt, 1) is step(dt).
   void step_frame(float dt, int substeps);
 
-  // Re-reads the heights of every tile (after the heightfield was edited): updates the
-  // vertical bounds of the tile shapes that changed.
+  // After the heightfield was edited: re-reads the heights of the tiles that hold a changed
+  // sample, updates their vertical bounds where the heights left them, and renews their
+  // internal-edge info around the change (not the whole tile's). No argument: every sample.
   void terrain_changed();
+  void terrain_changed(const GridRegion& changed);  // samples
 
   int terrain_tile_count() const;
+
+  // A tile's internal-edge info as Bullet holds it (tests and diagnostics): one entry per
+  // triangle that has one, sorted by key; empty while the tile has none.
+  struct EdgeInfo {
+    int key = 0;           // Bullet's (part, triangle) hash
+    int flags = 0;         // TRI_INFO_* bits
+    float angles[3] = {};  // rad, edges v0v1, v1v2, v2v0
+  };
+  std::vector<EdgeInfo> tile_edge_info(int tile) const;
 
   // What a step costs Bullet, as counts (tests and `bench lod`): none of them grows with the
   // terrain's size while nothing touches the terrain.
@@ -192,6 +204,7 @@ class BulletWorld {
     int pairs = 0;                  // overlapping pairs in the broadphase
     int edge_maps = 0;              // tiles with internal-edge info now (built when a body first comes near)
     int edge_maps_built = 0;        // internal-edge infos built over the world's life (rebuilds included)
+    int edge_maps_refreshed = 0;    // partial renewals after terrain_changed (around the change only)
   };
   Stats stats() const;
 

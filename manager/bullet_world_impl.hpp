@@ -44,6 +44,7 @@ struct BulletWorld::Impl {
   };
   std::vector<Tile> tiles;
   int edge_maps_built = 0;  // tiles whose internal-edge info was built, over the world's life
+  int edge_maps_refreshed = 0;  // partial renewals of a tile's internal-edge info (refresh_edges)
 
   // Collision groups: terrain tiles vs bodies, so a body can stop colliding with the terrain.
   static constexpr int kGroupBody = 1, kGroupTerrain = 2;
@@ -169,7 +170,9 @@ struct BulletWorld::Impl {
     b.rb->setGravity(b.game_gravity);
   }
 
-  void build_tile(Tile& t) {
+  // `keep_edges`: the tile's internal-edge info outlives the shape (the grid and its triangle
+  // indices do not change, only the vertical range); refresh_edges then renews what moved.
+  void build_tile(Tile& t, bool keep_edges = false) {
     const Heightfield& hf = *terrain;
     const int w = hf.tile_samples_x(t.tx), l = hf.tile_samples_z(t.tz);
     t.min_h = hf.tile_min_height(t.tx, t.tz);
@@ -180,7 +183,8 @@ struct BulletWorld::Impl {
                                                           PHY_FLOAT, false);
     const float sp = hf.spacing();
     t.shape->setLocalScaling(btVector3(sp, 1.0f, sp));
-    t.edges.reset();  // rebuilt on demand for the new shape (ensure_edges)
+    if (keep_edges && t.edges) t.shape->setTriangleInfoMap(t.edges.get());
+    else t.edges.reset();  // rebuilt on demand for the new shape (ensure_edges)
     // Bullet centres the shape on its bounding box; place it so sample (i,j) sits at local
     // (i*spacing, h, j*spacing) relative to the terrain origin.
     const GridRegion r = hf.tile_region(t.tx, t.tz);
@@ -236,8 +240,56 @@ struct BulletWorld::Impl {
   static constexpr std::size_t kEagerEdgeTiles = 64;  // at most about 1 s at start-up
   void build_edges(Tile& t) {
     t.edges = std::make_unique<btTriangleInfoMap>();
+    t.shape->setTriangleInfoMap(nullptr);  // btGenerateInternalEdgeInfo skips a shape that has one
     btGenerateInternalEdgeInfo(t.shape.get(), t.edges.get());  // also hands the map to the shape
     ++edge_maps_built;
+  }
+
+  // The key of a triangle's entry in a btTriangleInfoMap: Bullet's internal-edge utility
+  // hashes (part, index) as part << (31 - MAX_NUM_PARTS_IN_BITS) | index, and a heightfield
+  // names the two triangles of cell (x, z) part 2x and 2x + 1, index z.
+  static int edge_key(int part, int index) { return (part << (31 - MAX_NUM_PARTS_IN_BITS)) | index; }
+
+  // After the heights of `changed` (samples, whole terrain) were written: the internal-edge
+  // info of the tile's triangles that touch a changed sample, or share an edge with one that
+  // does, computed again on a sub-heightfield of those cells and one more cell around (so
+  // every renewed triangle sees all its neighbours) and copied into the tile's map. Its cost
+  // follows the changed area, not the tile's (a whole 128 × 128-cell map is about 15 ms;
+  // rebuilt at every demotion that left the tile's height range, it was the longest frame of
+  // a car driving across patches).
+  void refresh_edges(Tile& t, const GridRegion& changed) {
+    const Heightfield& hf = *terrain;
+    const GridRegion tr = hf.tile_region(t.tx, t.tz);
+    const GridRegion c = intersect(changed, tr);
+    if (c.empty() || !t.edges) return;
+    const int w = tr.ni, l = tr.nj;
+    // Cells (named by their lowest sample) to renew, in tile samples.
+    const int x0 = std::max(0, c.i0 - tr.i0 - 2), x1 = std::min(w - 2, c.i0 - tr.i0 + c.ni);
+    const int z0 = std::max(0, c.j0 - tr.j0 - 2), z1 = std::min(l - 2, c.j0 - tr.j0 + c.nj);
+    // The sub-heightfield's samples: those cells and one cell more on each side.
+    const int s0 = std::max(0, x0 - 1), s1 = std::min(w - 1, x1 + 2);
+    const int r0 = std::max(0, z0 - 1), r1 = std::min(l - 1, z1 + 2);
+    if (s0 == 0 && r0 == 0 && s1 == w - 1 && r1 == l - 1) {
+      build_edges(t);  // the whole tile
+      return;
+    }
+    const int sw = s1 - s0 + 1, sl = r1 - r0 + 1;
+    const float* data = hf.tile_data(t.tx, t.tz);
+    std::vector<float> h(std::size_t(sw) * sl);
+    for (int j = 0; j < sl; ++j)
+      for (int i = 0; i < sw; ++i) h[std::size_t(j) * sw + i] = data[std::size_t(r0 + j) * w + (s0 + i)];
+    btHeightfieldTerrainShape sub(sw, sl, h.data(), 1.0f, t.min_h, t.max_h, 1, PHY_FLOAT, false);
+    sub.setLocalScaling(t.shape->getLocalScaling());
+    btTriangleInfoMap fresh;
+    btGenerateInternalEdgeInfo(&sub, &fresh);
+    for (int z = z0; z <= z1; ++z)
+      for (int x = x0; x <= x1; ++x)
+        for (int k = 0; k < 2; ++k) {
+          const int key = edge_key(2 * x + k, z);
+          if (const btTriangleInfo* info = fresh.find(edge_key(2 * (x - s0) + k, z - r0))) t.edges->insert(key, *info);
+          else t.edges->remove(key);
+        }
+    ++edge_maps_refreshed;
   }
 
   // Before a step: every tile a body may touch during it has its internal-edge info. The

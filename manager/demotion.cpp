@@ -180,7 +180,7 @@ Status TerrainManager::Impl::demote(Slot& slot, double time, bool gl_ok, bool st
   set_bodies_down(slot, time);
   read_ring(steps.set_down);
   conserve_volume(slot, rec, steps, xyzr, box);
-  world->terrain_changed();
+  world->terrain_changed(d);
   read_ring(steps.conserved);
   dirty.push_back(d);
   close_ledger(slot, rec, w.on_gl, xyzr, steps, box);

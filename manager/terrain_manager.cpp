@@ -32,6 +32,15 @@ Status TerrainManager::Impl::make_depth_renderer() {
   if (!def.use_gl) return Ok{};
   if (!gl) gl = gl::Context::create_or_explain(gl_note);
   if (!gl) return Ok{};  // demotions render on the CPU; the report says why (depth_render_note)
+  // On a software renderer (llvmpipe) the CPU ray cast of the same contract is several times
+  // faster than rasterising the spheres, and the CPU backend's particles are on the CPU
+  // already: there, only the GL backend renders on GL (docs/manager.md "Demotion").
+  if (gl->info().software && def.backend != "gl") {
+    gl_note = "depth render on the CPU: the GL context is software (" + gl->info().gl_renderer +
+              "), where the CPU ray cast is faster";
+    gl.reset();  // nothing else on the CPU backend uses it
+    return Ok{};
+  }
   if (Status st = gl->make_current(); !st) return st;
   auto dr = ParticleDepthRenderer::create({def.depth_resolution});
   if (dr) depth = std::move(*dr);

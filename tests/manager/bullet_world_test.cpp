@@ -180,6 +180,41 @@ TEST(BulletWorld, SeesHeightfieldEditsWithoutCopy) {
   EXPECT_NEAR((*w)->state(*id).position.y(), 1.5, 0.02);
 }
 
+// After a demotion writes a crater (inside the tile's height range) or a mound (above it), the
+// tile's internal-edge info is renewed around the change only, and it is what a full build on
+// the new heights gives: the same triangles, the same flags, angles within 1e-5 rad (the
+// sub-heightfield's vertices are the same points, shifted). No whole map is built again.
+TEST(BulletWorld, TerrainChangeRenewsEdgeInfoAroundTheChangeOnly) {
+  for (const float dh : {-0.3f, 2.0f}) {
+    Heightfield hf = flat(41, 0.5f, 40);  // one tile of 40 cells
+    for (int j = 0; j < 41; ++j)
+      for (int i = 0; i < 41; ++i) hf.set_height(i, j, 0.05f * std::sin(0.7f * i) * std::cos(0.5f * j));
+    auto w = BulletWorld::create(hf, {0, -9.81f, 0});
+    ASSERT_TRUE(w.ok());
+    ASSERT_EQ((*w)->stats().edge_maps_built, 1);  // small terrains build it at once
+    const GridRegion r{12, 17, 6, 5};
+    for (int j = r.j0; j < r.j0 + r.nj; ++j)
+      for (int i = r.i0; i < r.i0 + r.ni; ++i) hf.set_height(i, j, hf.height(i, j) + dh * (1.0f + 0.1f * float(i - j)));
+    (*w)->terrain_changed(r);
+    EXPECT_EQ((*w)->stats().edge_maps_built, 1) << "dh " << dh;
+    EXPECT_EQ((*w)->stats().edge_maps_refreshed, 1) << "dh " << dh;
+    const auto renewed = (*w)->tile_edge_info(0);
+    auto fresh_world = BulletWorld::create(hf, {0, -9.81f, 0});
+    ASSERT_TRUE(fresh_world.ok());
+    const auto full = (*fresh_world)->tile_edge_info(0);
+    ASSERT_EQ(renewed.size(), full.size()) << "dh " << dh;
+    int differ = 0;
+    for (std::size_t k = 0; k < full.size(); ++k) {
+      const bool same = renewed[k].key == full[k].key && renewed[k].flags == full[k].flags &&
+                        std::abs(renewed[k].angles[0] - full[k].angles[0]) < 1e-5f &&
+                        std::abs(renewed[k].angles[1] - full[k].angles[1]) < 1e-5f &&
+                        std::abs(renewed[k].angles[2] - full[k].angles[2]) < 1e-5f;
+      differ += !same;
+    }
+    EXPECT_EQ(differ, 0) << "dh " << dh << ": entries differing from a full build";
+  }
+}
+
 // An idle tile costs a step nothing, counted rather than timed (BulletWorld::stats): the same
 // ball dropped on the shared edge of two tiles of a 4-tile and a 1024-tile terrain (same
 // 16-cell tiles, same local ground) gives Bullet the same work, whatever the tile count:
