@@ -78,8 +78,8 @@ void write_grid_dispatch(bool resort) {
   const uint per_sphere = (u_np + uint(SP_WG) - 1u) / uint(SP_WG);
   const uint per_cell = (u_cells + uint(SP_WG) - 1u) / uint(SP_WG);
   // order of kGridCount.. in particles/gpu/gl_impl.hpp
-  uint groups[SP_GRID_KERNELS] = uint[SP_GRID_KERNELS](per_sphere, (u_cells + 1023u) / 1024u, 1u, per_cell,
-                                                       per_sphere, per_cell, per_sphere, per_sphere);
+  uint groups[SP_GRID_KERNELS] = uint[SP_GRID_KERNELS](per_sphere, (u_cells + 1023u) / 1024u, 1u, per_sphere,
+                                                       per_cell, per_sphere, max(per_sphere, per_cell));
   for (int k = 0; k < SP_GRID_KERNELS; ++k) {
     G.status.grid_dispatch[3 * k] = resort ? groups[k] : 0u;
     G.status.grid_dispatch[3 * k + 1] = 1u;
@@ -90,6 +90,11 @@ void write_grid_dispatch(bool resort) {
 void request_resort() {
   if (atomicOr(G.status.resort, 1u) == 0u) write_grid_dispatch(true);
 }
+
+// Start of cell c's range in the sorted order (c <= u_cells; u_cells: the end) while a re-sort
+// runs, between scan_top.comp and grid_copyback.comp: the start within its block of 1024
+// cells plus the block's offset. Before and after, cell_start holds the final starts.
+uint cell_begin(uint c) { return c < u_cells ? G.cell_start[c] + G.block_sum[c / 1024u] : G.cell_start[u_cells]; }
 
 // v rotated by the unit quaternion q = (x, y, z, w): v + 2w (u x v) + 2 u x (u x v).
 vec3 quat_rotate(vec4 q, vec3 v) {

@@ -5,7 +5,7 @@ layout(local_size_x = SP_WG) in;
 void main() {
   uint c = gl_GlobalInvocationID.x;
   if (c >= u_cells) return;
-  uint a = G.cell_start[c], b = G.cell_start[c + 1u];
+  uint a = cell_begin(c), b = cell_begin(c + 1u);
   for (uint i = a + 1u; i < b; ++i) {
     int v = S.order[i];
     uint j = i;
