@@ -38,13 +38,13 @@ constexpr int kScanBlock = 1024;  // cells per workgroup of scan_blocks.comp
 // with the arguments of DemStatus::grid_dispatch[3 (k - kGridCount) ..] (shaders/dem/common.glsl
 // write_grid_dispatch), the contact and the body stage.
 enum Kernel {
-  kGridDecide, kGridCount, kScanBlocks, kScanTop, kGridScatter, kGridCellSort, kGridGather, kGridCopyBack,
+  kGridDecide, kGridCount, kScanBlocks, kScanTop, kGridScatter, kGridGather, kGridCopyBack,
   kForce, kBodies, kKinematicTouch, kKernelCount
 };
 inline constexpr const char* kKernelFile[kKernelCount] = {
-    "dem/grid_decide.comp",   "dem/grid_count.comp",    "dem/scan_blocks.comp",   "dem/scan_top.comp",
-    "dem/grid_scatter.comp",  "dem/grid_cellsort.comp", "dem/grid_gather.comp",
-    "dem/grid_copyback.comp", "dem/force.comp",         "dem/bodies.comp",        "dem/kinematic_touch.comp"};
+    "dem/grid_decide.comp",  "dem/grid_count.comp",    "dem/scan_blocks.comp", "dem/scan_top.comp",
+    "dem/grid_scatter.comp", "dem/grid_gather.comp",   "dem/grid_copyback.comp", "dem/force.comp",
+    "dem/bodies.comp",       "dem/kinematic_touch.comp"};
 
 // CPU staging of bodies/particles added since the last upload (generated SoA, as dem.cpp).
 struct ParticleStage {

@@ -21,7 +21,7 @@ namespace sandpatch::gpu {
 // storage buffers (bind_all) and the copy and indirect targets (bind_substep_targets), set the
 // frame's uniforms (u_dt, u_first_law, u_pred: the same for every substep of a frame) and ran
 // grid_decide.comp, which wrote the grid kernels' arguments from the re-sort flag. Per
-// substep: 1 buffer copy, 9 dispatches (7 of them indirect), 9 program switches, 9 barriers and
+// substep: 1 buffer copy, 8 dispatches (6 of them indirect), 8 program switches, 8 barriers and
 // 2 storage-buffer bindings; no uniform.
 void GlSimulation::Impl::substep() {
   // The grid kernels' arguments into args_buf. Read in place, from the grid block that the

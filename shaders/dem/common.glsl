@@ -79,7 +79,7 @@ void write_grid_dispatch(bool resort) {
   const uint per_cell = (u_cells + uint(SP_WG) - 1u) / uint(SP_WG);
   // order of kGridCount.. in particles/gpu/gl_impl.hpp
   uint groups[SP_GRID_KERNELS] = uint[SP_GRID_KERNELS](per_sphere, (u_cells + 1023u) / 1024u, 1u, per_sphere,
-                                                       per_cell, per_sphere, max(per_sphere, per_cell));
+                                                       per_sphere, max(per_sphere, per_cell));
   for (int k = 0; k < SP_GRID_KERNELS; ++k) {
     G.status.grid_dispatch[3 * k] = resort ? groups[k] : 0u;
     G.status.grid_dispatch[3 * k + 1] = 1u;
