@@ -42,7 +42,7 @@ inline float clamp(float v, float lo, float hi) { return std::clamp(v, lo, hi); 
 
 // The std430 layout of the status block (all members 4-byte scalars: offsets 4 apart, no
 // padding), as the GL backend reads it back and dispatches from it.
-static_assert(sizeof(DemStatus) == 32 * 4, "DemStatus: 8 status words + 8 x 3 dispatch arguments (128 bytes)");
+static_assert(sizeof(DemStatus) == 26 * 4, "DemStatus: 8 status words + 6 x 3 dispatch arguments (104 bytes)");
 static_assert(offsetof(DemStatus, max_granule_speed) == 0 && offsetof(DemStatus, nonfinite_bodies) == 4 &&
               offsetof(DemStatus, max_partners) == 8 && offsetof(DemStatus, contacts) == 12 &&
               offsetof(DemStatus, plane_contacts) == 16 && offsetof(DemStatus, resort) == 20 &&

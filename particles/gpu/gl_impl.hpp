@@ -33,17 +33,18 @@ enum Binding : GLuint { kBindP = 0, kBindPn = 1, kBindB = 2, kBindG = 3, kBindSI
 constexpr int kWallSlots = physics::kPlaneSlots;  // per sphere: floor, walls x0, x1, z0, z1, terrain
 constexpr int kScanBlock = 1024;  // cells per workgroup of scan_blocks.comp
 
-// The kernels, in the order of a substep (rebuild is bodies.comp in mode 1). The grid
-// kernels kGridCount..kGridCopyBack run by glDispatchComputeIndirect with the arguments
-// grid_decide.comp wrote (DemStatus::grid_dispatch[3 (k - kGridCount) ..]).
+// The kernels, in the order of a frame (rebuild is bodies.comp in mode 1): grid_decide.comp
+// once, then per substep the grid kernels kGridCount..kGridCopyBack by glDispatchComputeIndirect
+// with the arguments of DemStatus::grid_dispatch[3 (k - kGridCount) ..] (shaders/dem/common.glsl
+// write_grid_dispatch), the contact and the body stage.
 enum Kernel {
-  kGridDecide, kGridCount, kScanBlocks, kScanTop, kScanAdd, kGridScatter, kGridCellSort, kGridGather, kGridCopyBack,
+  kGridDecide, kGridCount, kScanBlocks, kScanTop, kGridScatter, kGridGather, kGridCopyBack,
   kForce, kBodies, kKinematicTouch, kKernelCount
 };
 inline constexpr const char* kKernelFile[kKernelCount] = {
-    "dem/grid_decide.comp",   "dem/grid_count.comp",    "dem/scan_blocks.comp", "dem/scan_top.comp",
-    "dem/scan_add.comp",      "dem/grid_scatter.comp",  "dem/grid_cellsort.comp", "dem/grid_gather.comp",
-    "dem/grid_copyback.comp", "dem/force.comp",         "dem/bodies.comp",        "dem/kinematic_touch.comp"};
+    "dem/grid_decide.comp",  "dem/grid_count.comp",    "dem/scan_blocks.comp", "dem/scan_top.comp",
+    "dem/grid_scatter.comp", "dem/grid_gather.comp",   "dem/grid_copyback.comp", "dem/force.comp",
+    "dem/bodies.comp",       "dem/kinematic_touch.comp"};
 
 // CPU staging of bodies/particles added since the last upload (generated SoA, as dem.cpp).
 struct ParticleStage {
@@ -124,8 +125,8 @@ struct GlSimulation::Impl {
   enum Buf { kP0, kP1, kB, kG, kS0, kS1, kW, kSort, kBufCount };
   GLuint buf[kBufCount] = {};
   std::size_t buf_bytes[kBufCount] = {};
-  // The grid kernels' dispatch-indirect arguments, copied from the status block after
-  // grid_decide.comp: a buffer of its own that no shader binds (substep()).
+  // The grid kernels' dispatch-indirect arguments, copied from the status block at the start
+  // of every substep: a buffer of its own that no shader binds (substep()).
   GLuint args_buf = 0;
   gl::Program prog[kKernelCount];
   int cur_p = 0;  // P is buffer kP0 + cur_p, the grid's scratch copy the other (cur_p stays 0:
@@ -210,23 +211,35 @@ struct GlSimulation::Impl {
     }
   }
 
-  void dispatch(Kernel k, int items, int per_group) {
+  // Kernel k over `items` invocations, then glMemoryBarrier(after): by default the storage
+  // barrier (the next kernel reads what this one wrote); substep() names what each orders.
+  void dispatch(Kernel k, int items, int per_group, GLbitfield after = GL_SHADER_STORAGE_BARRIER_BIT) {
     if (items <= 0) return;
     begin_query(k);
     glUseProgram(prog[k].id());
     glDispatchCompute(GLuint((items + per_group - 1) / per_group), 1, 1);
     end_query();
-    glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
+    glMemoryBarrier(after);
   }
 
-  // A grid kernel with the arguments grid_decide.comp wrote (0 workgroups: no re-sort), from
-  // args_buf bound as GL_DISPATCH_INDIRECT_BUFFER.
+  // A grid kernel with the arguments in args_buf (bound as GL_DISPATCH_INDIRECT_BUFFER by
+  // bind_substep_targets; 0 workgroups: no re-sort), then the storage barrier: each grid
+  // stage reads what the one before wrote, and the contact stage the grid.
   void dispatch_indirect(Kernel k) {
     begin_query(k);
     glUseProgram(prog[k].id());
     glDispatchComputeIndirect(GLintptr(12 * std::size_t(k - kGridCount)));  // args_buf
     end_query();
     glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
+  }
+
+  // The buffer targets every substep's argument copy and indirect dispatches use, bound once
+  // per frame (step): the status block as the copy's source, args_buf as its destination and
+  // as the indirect-dispatch buffer. write() and read() rebind the copy targets.
+  void bind_substep_targets() {
+    glBindBuffer(GL_COPY_READ_BUFFER, buf[kG]);
+    glBindBuffer(GL_COPY_WRITE_BUFFER, args_buf);
+    glBindBuffer(GL_DISPATCH_INDIRECT_BUFFER, args_buf);
   }
 
   // GlOptions::profile: a GL_TIME_ELAPSED query around one dispatch, read at the end of the

@@ -17,28 +17,33 @@
 
 namespace sandpatch::gpu {
 
-// One substep. The caller (step) bound the buffers and set the substep's uniforms (u_dt,
-// u_first_law, u_pred: the same for every substep of a frame).
+// One substep: its whole command sequence, recorded here only. The caller (step) bound the
+// storage buffers (bind_all) and the copy and indirect targets (bind_substep_targets), set the
+// frame's uniforms (u_dt, u_first_law, u_pred: the same for every substep of a frame) and ran
+// grid_decide.comp, which wrote the grid kernels' arguments from the re-sort flag. Per
+// substep: 1 buffer copy, 8 dispatches (6 of them indirect), 8 program switches, 8 barriers and
+// 2 storage-buffer bindings; no uniform.
 void GlSimulation::Impl::substep() {
-  // grid: decided on the GPU, then the counting sort by indirect dispatches
-  dispatch(kGridDecide, 1, 1);
-  // The arguments are copied into a small buffer of their own and read from there. Read in
-  // place, from the grid block that the grid kernels write, every indirect dispatch after a
-  // kernel that wrote the block cost on NVIDIA's driver about as much as the force kernel
-  // (docs/BENCHMARKS.md "GL backend on a GPU").
-  glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
-  glBindBuffer(GL_COPY_READ_BUFFER, buf[kG]);
-  glBindBuffer(GL_COPY_WRITE_BUFFER, args_buf);
+  // The grid kernels' arguments into args_buf. Read in place, from the grid block that the
+  // grid kernels write, every indirect dispatch after a kernel that wrote the block cost on
+  // NVIDIA's driver about as much as the force kernel (docs/BENCHMARKS.md "GL backend on a
+  // GPU"). The barrier before (the body stage's of the last substep, or grid_decide's) has
+  // GL_BUFFER_UPDATE_BARRIER_BIT: the copy sees the arguments the shaders wrote. The indirect
+  // dispatches read args_buf after the copy in command order: a GL write, no barrier needed.
   glCopyBufferSubData(GL_COPY_READ_BUFFER, GL_COPY_WRITE_BUFFER, GLintptr(offsetof(physics::DemStatus, grid_dispatch)), 0,
                       GLsizeiptr(12 * physics::kGridKernels));
-  glBindBuffer(GL_DISPATCH_INDIRECT_BUFFER, args_buf);
+  // the counting sort (0 workgroups each when no re-sort is needed); a storage barrier after
+  // each: every stage reads what the one before wrote, the contact stage the cells and order
   for (int k = kGridCount; k <= kGridCopyBack; ++k) dispatch_indirect(Kernel(k));
-  glBindBuffer(GL_DISPATCH_INDIRECT_BUFFER, 0);
-  dispatch(kForce, np_gpu, wg);
+  // contacts; storage barrier: the body stage reads the spheres' forces
+  dispatch(kForce, np_gpu, wg, GL_SHADER_STORAGE_BARRIER_BIT);
   cur_s = 1 - cur_s;  // the springs written become the ones read next substep
   glBindBufferBase(GL_SHADER_STORAGE_BUFFER, kBindSIn, buf[kS0 + cur_s]);
   glBindBufferBase(GL_SHADER_STORAGE_BUFFER, kBindSOut, buf[kS0 + 1 - cur_s]);
-  dispatch(kBodies, nb_gpu, wg);
+  // bodies; storage barrier: the next substep's kernels read the spheres and the re-sort flag;
+  // buffer-update barrier: its argument copy (and step's status writes and read-back) see the
+  // arguments request_resort wrote and the counters
+  dispatch(kBodies, nb_gpu, wg, GL_SHADER_STORAGE_BARRIER_BIT | GL_BUFFER_UPDATE_BARRIER_BIT);
 }
 
 void GlSimulation::Impl::resolve_queries() {
@@ -414,16 +419,24 @@ Status GlSimulation::step(double dt_frame) {
   glProgramUniform1i(s.prog[kForce].id(), s.u[kForce].first_law, s.guard->contact_timing_on(dt) ? 1 : 0);
   glProgramUniform1f(s.prog[kBodies].id(), s.u[kBodies].dt, dt);
   glProgramUniform1f(s.prog[kBodies].id(), s.u[kBodies].pred, float(s.guard->velocity_predictor_gain(dt)));
+  // the grid kernels' arguments from the re-sort flag (which an upload or a moved body may have
+  // raised); storage barrier: the grid kernels write the same words after it; buffer-update
+  // barrier: the first substep's copy reads them
+  s.dispatch(kGridDecide, 1, 1, GL_SHADER_STORAGE_BARRIER_BIT | GL_BUFFER_UPDATE_BARRIER_BIT);
+  s.bind_substep_targets();
   for (int k = 0; k < *ns; ++k) {
     if (k + 1 == *ns) {  // the counters describe the last substep, as on the CPU
-      glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
+      // (no barrier of its own: the one after the last body stage, or grid_decide's, has
+      // GL_BUFFER_UPDATE_BARRIER_BIT, so these writes follow the shaders' writes)
       constexpr std::size_t first = offsetof(physics::DemStatus, max_partners);
       s.write(Impl::kG, first, offsetof(physics::DemStatus, resort) - first, &status.max_partners);
       s.write(Impl::kG, offsetof(physics::DemStatus, max_granule_speed), 4, &status.max_granule_speed);
+      glBindBuffer(GL_COPY_WRITE_BUFFER, s.args_buf);  // write() bound the status block there
     }
     s.substep();
     s.time += dt;
   }
+  glBindBuffer(GL_DISPATCH_INDIRECT_BUFFER, 0);
   glUseProgram(0);
   s.read(Impl::kG, 0, offsetof(physics::DemStatus, grid_dispatch), &status);
   if (s.opt.profile) s.resolve_queries();

@@ -55,7 +55,7 @@ void main() {
     B.pos[b].xyz = xk;
     B.quat[b] = q;
     rebuild(b, xk, q, v, w, invm);
-    atomicOr(G.status.resort, 1u);  // moved: re-sort when awake
+    request_resort();  // moved: re-sort when awake (common.glsl)
     return;
   }
   vec3 F = vec3(0.0), T = vec3(0.0);
@@ -93,5 +93,5 @@ void main() {
   if (isnan(chk) || isinf(chk)) atomicAdd(G.status.nonfinite_bodies, 1u);
   B.pos[b].xyz = xn;
   B.quat[b] = q;
-  if (rebuild(b, xn, q, v + u_pred * (v - v_old), w, invm) > u_resort_d2) atomicOr(G.status.resort, 1u);
+  if (rebuild(b, xn, q, v + u_pred * (v - v_old), w, invm) > u_resort_d2) request_resort();  // common.glsl
 }

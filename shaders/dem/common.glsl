@@ -67,6 +67,35 @@ ivec3 cell3(vec3 x) {
 }
 uint cell_index(ivec3 c) { return uint((c.z * u_grid.y + c.y) * u_grid.x + c.x); }
 
+// ---- re-sort requests and the grid kernels' dispatch-indirect arguments ----
+// Invariant inside a frame's substeps: status.resort != 0 exactly when status.grid_dispatch
+// holds the grid kernels' workgroup counts (else their x counts are 0). grid_decide.comp
+// establishes it once per frame (the host may have raised the flag: an upload, a body moved);
+// request_resort keeps it when a kernel raises the flag; grid_copyback.comp, the last grid
+// kernel, lowers both. The host copies the arguments to their own buffer before the grid
+// kernels of every substep (particles/gpu/gl_simulation.cpp substep()).
+void write_grid_dispatch(bool resort) {
+  const uint per_sphere = (u_np + uint(SP_WG) - 1u) / uint(SP_WG);
+  const uint per_cell = (u_cells + uint(SP_WG) - 1u) / uint(SP_WG);
+  // order of kGridCount.. in particles/gpu/gl_impl.hpp
+  uint groups[SP_GRID_KERNELS] = uint[SP_GRID_KERNELS](per_sphere, (u_cells + 1023u) / 1024u, 1u, per_sphere,
+                                                       per_sphere, max(per_sphere, per_cell));
+  for (int k = 0; k < SP_GRID_KERNELS; ++k) {
+    G.status.grid_dispatch[3 * k] = resort ? groups[k] : 0u;
+    G.status.grid_dispatch[3 * k + 1] = 1u;
+    G.status.grid_dispatch[3 * k + 2] = 1u;
+  }
+}
+// Raises the re-sort flag; the one invocation that raises it first writes the arguments.
+void request_resort() {
+  if (atomicOr(G.status.resort, 1u) == 0u) write_grid_dispatch(true);
+}
+
+// Start of cell c's range in the sorted order (c <= u_cells; u_cells: the end) while a re-sort
+// runs, between scan_top.comp and grid_copyback.comp: the start within its block of 1024
+// cells plus the block's offset. Before and after, cell_start holds the final starts.
+uint cell_begin(uint c) { return c < u_cells ? G.cell_start[c] + G.block_sum[c / 1024u] : G.cell_start[u_cells]; }
+
 // v rotated by the unit quaternion q = (x, y, z, w): v + 2w (u x v) + 2 u x (u x v).
 vec3 quat_rotate(vec4 q, vec3 v) {
   vec3 t = 2.0 * cross(q.xyz, v);

@@ -8,5 +8,5 @@ void main() {
   if (s >= u_np) return;
   uint c = S.cell_of[s];
   uint k = atomicAdd(G.cell_count[c], 1u);
-  S.order[G.cell_start[c] + k] = P.id[s];
+  S.order[cell_begin(c) + k] = P.id[s];
 }

@@ -46,7 +46,7 @@ float terrain_sample(int k);  // heights[k], m (common.glsl: the Sort block's te
 // Written by the kernels, read back once per frame by GlSimulation::step
 // (particles/gpu/gl_simulation.cpp).
 // C++ checks its size and offsets with static_asserts (particles/dem_physics.hpp).
-#define SP_GRID_KERNELS 8  // grid kernels run by indirect dispatch (particles/gpu/gl_impl.hpp: kGridCount..)
+#define SP_GRID_KERNELS 6  // grid kernels run by indirect dispatch (particles/gpu/gl_impl.hpp: kGridCount..)
 struct DemStatus {
   uint max_granule_speed;  // float bits of max |v| + |w| (d + r) over granules (m/s; >= 0 orders like its bits)
   uint nonfinite_bodies;   // bodies whose state became non-finite

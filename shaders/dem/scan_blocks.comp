@@ -1,5 +1,7 @@
 // Grid stage 2a: exclusive prefix sum of the cell counts within blocks of 1024 cells
-// (256 invocations x 4 cells); each block's total goes to block_sum.
+// (256 invocations x 4 cells); each block's total goes to block_sum. The counts are reset as
+// they are read: the scatter uses them as fill counters. cell_start holds the start within
+// the block until grid_copyback.comp adds the block's offset (common.glsl cell_begin).
 layout(local_size_x = 256) in;
 shared uint partial[256];
 
@@ -10,6 +12,7 @@ void main() {
   uint sum = 0u;
   for (uint k = 0u; k < 4u; ++k) {
     v[k] = base + k < u_cells ? G.cell_count[base + k] : 0u;
+    if (base + k < u_cells) G.cell_count[base + k] = 0u;
     sum += v[k];
   }
   partial[t] = sum;

@@ -1,4 +1,5 @@
-// Grid stage 2b (one workgroup of 256): exclusive prefix sum of the block totals, in place.
+// Grid stage 2b (one workgroup of 256): exclusive prefix sum of the block totals, in place
+// (each block's offset: common.glsl cell_begin).
 // Invocation t owns a contiguous run of ceil(blocks / 256) blocks: it sums them, the 256
 // sums are scanned in shared memory, then it writes its blocks' offsets. cell_start[cells]
 // = total.
