@@ -71,7 +71,7 @@ ParticleRenderer::~ParticleRenderer() { glDeleteVertexArrays(1, &vao_); }
 std::int64_t ParticleRenderer::draw(const std::vector<ParticleSource>& sources, const Eigen::Matrix4f& view,
                                     const Eigen::Matrix4f& proj, int viewport_height, const TerrainRenderer& terrain,
                                     const Eigen::Vector3d& world_origin, float normal_bend, float color_variation,
-                                    const ShadowMap* shadow, float gain, const BedDepth* bed) {
+                                    const ShadowMap* shadow, float gain, const BedDepth* bed, bool terrain_shadow) {
   const unsigned p = program_.id();
   auto loc = [p](const char* name) { return glGetUniformLocation(p, name); };
   glUseProgram(p);
@@ -106,6 +106,7 @@ std::int64_t ParticleRenderer::draw(const std::vector<ParticleSource>& sources, 
   glBindTexture(GL_TEXTURE_2D_ARRAY, terrain.normals_texture());
   glUniform1i(loc("u_normals"), 1);
   glActiveTexture(GL_TEXTURE0);
+  terrain.bind_terrain_shadow(p, 3, terrain_shadow ? terrain.terrain_shadow_steps() : 0);  // u_elevation on unit 3
   glUniform1f(loc("u_normal_bend"), normal_bend);
   glUniform1f(loc("u_color_variation"), color_variation);
   bind_shadow(p, shadow ? *shadow : ShadowMap{});

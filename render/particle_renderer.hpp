@@ -82,11 +82,14 @@ class ParticleRenderer {
   // [0, 1]: lighting normal = normalize(mix(sphere normal, terrain normal, normal_bend)).
   // color_variation: each granule's albedo times 1 + v u, u in [-1, 1] hashed from the
   // granule's index (one granule's four spheres share it).
+  // terrain_shadow: each particle receives the terrain's shadow (the march of
+  // TerrainRenderer::terrain_shadow_steps from its centre); off for a depth-only pass.
   // Returns the number of particles drawn.
   std::int64_t draw(const std::vector<ParticleSource>& sources, const Eigen::Matrix4f& view,
                     const Eigen::Matrix4f& proj, int viewport_height, const TerrainRenderer& terrain,
                     const Eigen::Vector3d& world_origin, float normal_bend = 0.5f, float color_variation = 0.0f,
-                    const ShadowMap* shadow = nullptr, float gain = 1.0f, const BedDepth* bed = nullptr);
+                    const ShadowMap* shadow = nullptr, float gain = 1.0f, const BedDepth* bed = nullptr,
+                    bool terrain_shadow = false);
 
  private:
   ParticleRenderer() = default;

@@ -12,6 +12,7 @@ in float v_radius;
 in vec4 v_weights;
 in vec3 v_ground_normal;
 in float v_tint;
+in float v_terrain_vis;
 
 uniform mat4 u_proj;
 uniform mat4 u_view_inv;   // eye -> local
@@ -75,5 +76,6 @@ void main() {
   // ball; u_gain brings the bed's mean brightness back to the terrain's.
   float occ = u_gain * mix(0.9, mix(0.8, 1.0, clamp(0.5 + 0.5 * dot(n_sphere, n_bed), 0.0, 1.0)), detail);
   float tint = mix(1.0, v_tint, 0.5 + 0.5 * detail);
-  o_color = vec4(sp_shade_gain(tint * sp_blend_materials(v_weights, p.xz), n, sp_sun_visibility(p), occ), u_fade);
+  float vis = min(sp_sun_visibility(p), v_terrain_vis);  // the bodies' shadows and the terrain's
+  o_color = vec4(sp_shade_gain(tint * sp_blend_materials(v_weights, p.xz), n, vis, occ), u_fade);
 }
