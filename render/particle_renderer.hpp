@@ -38,6 +38,12 @@ struct ParticleSource {
   Eigen::Vector3d origin{0, 0, 0};  // world position (m) of the patch frame's origin
   float scale = 1.0f;          // particle scale: drawn centre = origin + scale p, radius = scale r (> 0)
   float fade = 1.0f;           // fade-in factor in [0, 1] (1 = opaque)
+  // How many times coarser the granules are than the sand they stand for (the patch's particle
+  // scale, Leach §4.3), >= 1. Shading only: a granule's own roundness, occlusion and tint show
+  // as they would on a granule this many times smaller on screen, and the bed's normal is taken
+  // over (1 + shading_scale) / 2 times the usual span, so a coarse patch reads as sand rather
+  // than as a heap of pebbles (docs/rendering.md "Particles"). 1 = as drawn.
+  float shading_scale = 1.0f;
   // The patch's footprint on the ground, world (x0, z0, x1, z1) in m, or empty (x1 <= x0, the
   // default). When set, the second terrain pass (Leach & Marais §5.1) leaves the terrain out
   // of it: there the granules are the surface, so a crater or heap carved into the bed shows
