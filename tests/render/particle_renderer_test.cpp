@@ -228,11 +228,19 @@ TEST(ParticleRenderer, BadSourceIsRefused) {
   bad.buffer = 7;
   bad.stride = 8;
   bad.fade = 2;
+  bad.shading_scale = 0.5f;
   auto st = s.renderer->set_particles({ParticleSource{}, bad});
   ASSERT_FALSE(st.ok());
   EXPECT_NE(st.message().find("particles[0].buffer"), std::string::npos) << st.message();
   EXPECT_NE(st.message().find("particles[1].stride = 8"), std::string::npos) << st.message();
   EXPECT_NE(st.message().find("particles[1].fade"), std::string::npos) << st.message();
+  EXPECT_NE(st.message().find("particles[1].shading_scale = 0.5"), std::string::npos) << st.message();
+  bad = ParticleSource{};
+  bad.buffer = 7;
+  bad.shading_scale = std::nanf("");
+  st = s.renderer->set_particles({bad});
+  ASSERT_FALSE(st.ok());
+  EXPECT_NE(st.message().find("particles[0].shading_scale = nan"), std::string::npos) << st.message();
 }
 
 namespace {

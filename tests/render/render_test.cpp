@@ -454,6 +454,11 @@ TEST(SceneRenderer, TerrainShadowFallsOnBodiesAndGranules) {
     EXPECT_TRUE(id_img.ok() && img.ok());
     if (!id_img.ok() || !img.ok()) return s;
     EXPECT_TRUE(save_png(output_path(png), *img).ok());
+    CameraView close = cam;  // for the eye (docs/rendering.md): 3 m from the plate
+    close.position = {19.2, 1.8, 16.6};
+    close.target = {17.2, 0.0, 15.2};
+    auto near_img = rr.render(close);
+    EXPECT_TRUE(near_img.ok() && save_png(output_path(std::string("close_") + png), *near_img).ok());
     // The plate: points of its top face whose pixel the ID render gives to it.
     double sum = 0;
     int n = 0;
