@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cerrno>
+#include <cmath>
 #include <csignal>
 #include <cstdio>
 #include <cstdlib>
@@ -190,6 +191,12 @@ Eigen::Vector4d footprint(const TerrainManager::PatchInfo& p, const Heightfield&
 // The band over which the terrain fades into a patch: six granule diameters (m).
 float footprint_band(const TerrainManager::PatchInfo& p) { return float(12.0 * p.granule_radius_world); }
 
+// How many times coarser than the sand they stand for the granules are drawn: the particle
+// scale (render::ParticleSource::shading_scale), in its [1, 64].
+float shading_scale(const TerrainManager::PatchInfo& p) {
+  return std::isfinite(p.particle_scale) ? float(std::clamp(p.particle_scale, 1.0, 64.0)) : 1.0f;
+}
+
 }  // namespace
 
 // CPU backend: the granule spheres copied into one buffer, one source per patch so each fades
@@ -221,6 +228,7 @@ Status FrameWriter::set_particles_cpu(std::unique_ptr<render::ParticleBuffer>& b
     if (g < patches.size()) {
       src.footprint = footprint(patches[g], hf_);
       src.footprint_band = footprint_band(patches[g]);
+      src.shading_scale = shading_scale(patches[g]);
     }
     first += count;
     if (count > 0) sources.push_back(src);
@@ -247,6 +255,7 @@ Status FrameWriter::set_particles_gpu() {
       if (p.origin == g.origin) {
         src.footprint = footprint(p, hf_);
         src.footprint_band = footprint_band(p);
+        src.shading_scale = shading_scale(p);
       }
     if (src.count > 0) sources.push_back(src);
   }

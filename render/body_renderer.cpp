@@ -38,7 +38,8 @@ BodyRenderer::~BodyRenderer() {
 
 std::size_t BodyRenderer::draw(const std::vector<BodyInstance>& bodies, const Eigen::Matrix4f& view_proj,
                                const Eigen::Vector3f& eye, const Eigen::Vector3f& sun_direction,
-                               const Eigen::Vector3d& world_origin, bool flat_ids, const ShadowMap* shadow) {
+                               const Eigen::Vector3d& world_origin, bool flat_ids, const ShadowMap* shadow,
+                               const TerrainRenderer* terrain) {
   data_.clear();
   std::size_t triangles = 0;
   for (std::size_t k = 0; k < bodies.size(); ++k) {
@@ -67,6 +68,11 @@ std::size_t BodyRenderer::draw(const std::vector<BodyInstance>& bodies, const Ei
   glUniform3f(glGetUniformLocation(p, "u_sun_dir"), sun.x(), sun.y(), sun.z());
   glUniform1i(glGetUniformLocation(p, "u_flat"), flat_ids ? 1 : 0);
   bind_shadow(p, shadow && !flat_ids ? *shadow : ShadowMap{});
+  if (terrain && !flat_ids) {
+    terrain->bind_terrain_shadow(p, 3, terrain->terrain_shadow_steps());
+  } else {
+    glUniform1i(glGetUniformLocation(p, "u_terrain_shadow_steps"), 0);
+  }
   glBindBuffer(GL_ARRAY_BUFFER, vbo_);
   glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(data_.size() * sizeof(float)), data_.data(), GL_STREAM_DRAW);
   glBindVertexArray(vao_);

@@ -14,7 +14,8 @@
 
 namespace sandpatch::render {
 
-struct ShadowMap;  // render/terrain_renderer.hpp
+struct ShadowMap;       // render/terrain_renderer.hpp
+class TerrainRenderer;
 
 class BodyRenderer {
  public:
@@ -26,11 +27,12 @@ class BodyRenderer {
   // Draws the bodies (validated by the caller) into the bound framebuffer. view_proj: local ->
   // clip; eye: local m; world_origin: the heightfield's origin (world m). With flat_ids, body k
   // is drawn unlit in body_id_color(k). With a shadow map the bodies receive the shadows of
-  // the bodies (themselves included) in it; none while that map is being drawn. Returns the
-  // number of triangles drawn.
+  // the bodies (themselves included) in it; none while that map is being drawn. With a
+  // terrain they receive the terrain's shadow (its march, TerrainRenderer::terrain_shadow_steps;
+  // none in ID renders). Returns the number of triangles drawn.
   std::size_t draw(const std::vector<BodyInstance>& bodies, const Eigen::Matrix4f& view_proj, const Eigen::Vector3f& eye,
                    const Eigen::Vector3f& sun_direction, const Eigen::Vector3d& world_origin, bool flat_ids,
-                   const ShadowMap* shadow = nullptr);
+                   const ShadowMap* shadow = nullptr, const TerrainRenderer* terrain = nullptr);
 
  private:
   BodyRenderer() = default;

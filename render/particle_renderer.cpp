@@ -27,6 +27,8 @@ Status validate(const ParticleSource& s, int index) {
     es.push_back(Error{"", f + "radius", std::to_string(s.radius), "must be > 0 and finite (m)"});
   if (!(s.scale > 0 && std::isfinite(s.scale))) es.push_back(Error{"", f + "scale", std::to_string(s.scale), "must be > 0 and finite"});
   if (!(s.fade >= 0 && s.fade <= 1)) es.push_back(Error{"", f + "fade", std::to_string(s.fade), "must be in [0, 1]"});
+  if (!(s.shading_scale >= 1 && s.shading_scale <= 64))
+    es.push_back(Error{"", f + "shading_scale", std::to_string(s.shading_scale), "must be in [1, 64]"});
   if (!s.origin.allFinite()) es.push_back(Error{"", f + "origin", "non-finite", "must be finite (m)"});
   if (!s.footprint.allFinite()) es.push_back(Error{"", f + "footprint", "non-finite", "must be finite (m) or empty"});
   if (!(s.footprint_band >= 0 && std::isfinite(s.footprint_band)))
@@ -71,7 +73,7 @@ ParticleRenderer::~ParticleRenderer() { glDeleteVertexArrays(1, &vao_); }
 std::int64_t ParticleRenderer::draw(const std::vector<ParticleSource>& sources, const Eigen::Matrix4f& view,
                                     const Eigen::Matrix4f& proj, int viewport_height, const TerrainRenderer& terrain,
                                     const Eigen::Vector3d& world_origin, float normal_bend, float color_variation,
-                                    const ShadowMap* shadow, float gain, const BedDepth* bed) {
+                                    const ShadowMap* shadow, float gain, const BedDepth* bed, bool terrain_shadow) {
   const unsigned p = program_.id();
   auto loc = [p](const char* name) { return glGetUniformLocation(p, name); };
   glUseProgram(p);
@@ -106,6 +108,7 @@ std::int64_t ParticleRenderer::draw(const std::vector<ParticleSource>& sources, 
   glBindTexture(GL_TEXTURE_2D_ARRAY, terrain.normals_texture());
   glUniform1i(loc("u_normals"), 1);
   glActiveTexture(GL_TEXTURE0);
+  terrain.bind_terrain_shadow(p, 3, terrain_shadow ? terrain.terrain_shadow_steps() : 0);  // u_elevation on unit 3
   glUniform1f(loc("u_normal_bend"), normal_bend);
   glUniform1f(loc("u_color_variation"), color_variation);
   bind_shadow(p, shadow ? *shadow : ShadowMap{});
@@ -122,7 +125,7 @@ std::int64_t ParticleRenderer::draw(const std::vector<ParticleSource>& sources, 
   glUniform2f(loc("u_viewport"), bed ? float(bed->width) : 1.0f, bed ? float(bed->height) : 1.0f);
   glUniform1f(loc("u_bed_scale"), bed ? bed->scale : 4.0f);
   const GLint l_origin = loc("u_patch_origin"), l_scale = loc("u_scale"), l_fade = loc("u_fade"),
-              l_first = loc("u_first_index");
+              l_first = loc("u_first_index"), l_shading = loc("u_shading_scale");
 
   glBindVertexArray(vao_);
   std::int64_t drawn = 0;
@@ -133,6 +136,7 @@ std::int64_t ParticleRenderer::draw(const std::vector<ParticleSource>& sources, 
     glUniform3f(l_origin, float(o.x()), float(o.y()), float(o.z()));
     glUniform1f(l_scale, s.scale);
     glUniform1f(l_fade, s.fade);
+    glUniform1f(l_shading, s.shading_scale);
     glUniform1i(l_first, int(s.first & 0x7fffffff));
     glBindBuffer(GL_ARRAY_BUFFER, s.buffer);
     const std::uintptr_t base = std::uintptr_t(s.first) * std::uintptr_t(s.stride);

@@ -38,6 +38,12 @@ struct ParticleSource {
   Eigen::Vector3d origin{0, 0, 0};  // world position (m) of the patch frame's origin
   float scale = 1.0f;          // particle scale: drawn centre = origin + scale p, radius = scale r (> 0)
   float fade = 1.0f;           // fade-in factor in [0, 1] (1 = opaque)
+  // How many times coarser the granules are than the sand they stand for (the patch's particle
+  // scale, Leach §4.3), >= 1. Shading only: a granule's own roundness, occlusion and tint show
+  // as they would on a granule this many times smaller on screen, and the bed's normal is taken
+  // over (1 + shading_scale) / 2 times the usual span, so a coarse patch reads as sand rather
+  // than as a heap of pebbles (docs/rendering.md "Particles"). 1 = as drawn.
+  float shading_scale = 1.0f;
   // The patch's footprint on the ground, world (x0, z0, x1, z1) in m, or empty (x1 <= x0, the
   // default). When set, the second terrain pass (Leach & Marais §5.1) leaves the terrain out
   // of it: there the granules are the surface, so a crater or heap carved into the bed shows
@@ -82,11 +88,14 @@ class ParticleRenderer {
   // [0, 1]: lighting normal = normalize(mix(sphere normal, terrain normal, normal_bend)).
   // color_variation: each granule's albedo times 1 + v u, u in [-1, 1] hashed from the
   // granule's index (one granule's four spheres share it).
+  // terrain_shadow: each particle receives the terrain's shadow (the march of
+  // TerrainRenderer::terrain_shadow_steps from its centre); off for a depth-only pass.
   // Returns the number of particles drawn.
   std::int64_t draw(const std::vector<ParticleSource>& sources, const Eigen::Matrix4f& view,
                     const Eigen::Matrix4f& proj, int viewport_height, const TerrainRenderer& terrain,
                     const Eigen::Vector3d& world_origin, float normal_bend = 0.5f, float color_variation = 0.0f,
-                    const ShadowMap* shadow = nullptr, float gain = 1.0f, const BedDepth* bed = nullptr);
+                    const ShadowMap* shadow = nullptr, float gain = 1.0f, const BedDepth* bed = nullptr,
+                    bool terrain_shadow = false);
 
  private:
   ParticleRenderer() = default;

@@ -314,7 +314,7 @@ Result<Image> SceneRenderer::render(const CameraView& cam, const FrameFlags& fla
     const BedDepth bed{bed_tex_, cam.width, cam.height, def_.particle_bed_scale};
     st.particles = particle_renderer_->draw(particles_, view, proj, cam.height, *terrain_, origin,
                                             def_.particle_normal_bend, def_.particle_color_variation, &shadow,
-                                            def_.particle_gain, &bed);
+                                            def_.particle_gain, &bed, /*terrain_shadow=*/true);
     std::vector<Eigen::Vector4f> cuts;
     std::vector<float> bands;
     for (const ParticleSource& s : particles_)
@@ -328,7 +328,8 @@ Result<Image> SceneRenderer::render(const CameraView& cam, const FrameFlags& fla
   }
   // Bodies last: depth-tested against the terrain and the granules in front of them.
   if (flags.bodies && !bodies_.empty()) {
-    st.body_triangles = std::int64_t(body_renderer_->draw(bodies_, view_proj, m.eye, terrain_->sun_direction(), origin, flags.body_ids, &shadow));
+    st.body_triangles = std::int64_t(body_renderer_->draw(bodies_, view_proj, m.eye, terrain_->sun_direction(), origin, flags.body_ids, &shadow,
+                                                                     terrain_.get()));
     st.bodies = int(bodies_.size());
   }
 

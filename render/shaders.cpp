@@ -8,13 +8,44 @@ namespace sandpatch::render {
 
 namespace {
 
-// `src` with common.glsl inserted after its first line (the #version line).
+// `s` (whose first line is line `first_line` of its file) with each line `#include "NAME"`
+// replaced by shaders/render/NAME (source string 2 in the GLSL compiler's messages), or by an
+// #error naming it when there is no such file. One level: an included file's own #include lines
+// are left to fail in the compiler.
+std::string expand_includes(const std::string& s, int first_line) {
+  std::string out;
+  int line = first_line - 1;
+  for (std::size_t a = 0; a < s.size();) {
+    std::size_t b = s.find('\n', a);
+    if (b == std::string::npos) b = s.size();
+    const std::string l = s.substr(a, b - a);
+    ++line;
+    const std::string key = "#include \"";
+    if (l.rfind(key, 0) == 0 && l.find('"', key.size()) != std::string::npos) {
+      const std::string name = l.substr(key.size(), l.find('"', key.size()) - key.size());
+      const std::string_view text = shaders::source("render/" + name);
+      if (text.empty()) {
+        out += "#error no shader render/" + name + " to include\n";
+      } else {
+        out += "#line 1 2\n" + std::string(text) + "\n#line " + std::to_string(line + 1) + " 0\n";
+      }
+    } else {
+      out += l + "\n";
+    }
+    a = b + 1;
+  }
+  return out;
+}
+
+// `src` with common.glsl inserted after its first line (the #version line) and its #include
+// lines expanded.
 std::string with_common(std::string_view name) {
   std::string s(shaders::source(name));
   const auto eol = s.find('\n');
   const std::string head = eol == std::string::npos ? s : s.substr(0, eol + 1);
   const std::string tail = eol == std::string::npos ? "" : s.substr(eol + 1);
-  return head + "#line 1 1\n" + std::string(shaders::source("render/common.glsl")) + "\n#line 2 0\n" + tail;
+  return head + "#line 1 1\n" + std::string(shaders::source("render/common.glsl")) + "\n#line 2 0\n" +
+         expand_includes(tail, 2);
 }
 
 }  // namespace

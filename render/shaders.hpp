@@ -1,6 +1,8 @@
 // The render/ GLSL programs, built from the sources embedded at build time
 // (shaders/render/*, embedded by the shaders/ library). shaders/render/common.glsl is inserted after
-// each stage's #version line. Needs a current GL context.
+// each stage's #version line, and a line `#include "NAME"` is replaced by shaders/render/NAME
+// (terrain_shadow.glsl: the terrain's shadow march, in the terrain, particle and body shaders).
+// Needs a current GL context.
 #pragma once
 
 #include "common/error.hpp"

@@ -237,20 +237,12 @@ void TerrainRenderer::draw_selection(const std::vector<Eigen::Vector4f>& cuts, c
     glActiveTexture(GLenum(GL_TEXTURE0 + k));
     glBindTexture(GL_TEXTURE_2D_ARRAY, tex_[k]);
   }
-  glUniform1i(loc(p, "u_elevation"), 0);
+  bind_terrain_shadow(p, 0, shadow_steps_);  // u_elevation on unit 0, u_T, u_n, u_w, u_viewer, ...
   glUniform1i(loc(p, "u_normals"), 1);
   glUniform1i(loc(p, "u_materials"), 2);
   glUniformMatrix4fv(loc(p, "u_view_proj"), 1, GL_FALSE, view_proj_.data());
-  glUniform1i(loc(p, "u_T"), T_);
-  glUniform1i(loc(p, "u_n"), def_.n);
-  glUniform1f(loc(p, "u_w"), float(transition_width(def_)));
-  glUniform2f(loc(p, "u_viewer"), viewer_.x(), viewer_.z());
   glUniform2f(loc(p, "u_extent"), hf_->extent_x(), hf_->extent_z());
-  glUniform1f(loc(p, "u_base_spacing"), def_.base_spacing);
-  glUniform1i(loc(p, "u_levels"), def_.levels);
   glUniform3f(loc(p, "u_sun_dir"), sun_.x(), sun_.y(), sun_.z());
-  glUniform1i(loc(p, "u_terrain_shadow_steps"), shadow_steps_);
-  if (shadow_steps_ > 0) glUniform1f(loc(p, "u_max_height"), hf_->max_height());  // cached per tile
   bind_shadow(p, shadow_);
   const int n_cuts = std::min(int(cuts.size()), kMaxCuts);
   glUniform1i(loc(p, "u_cut_count"), n_cuts);
@@ -281,6 +273,21 @@ void TerrainRenderer::draw_selection(const std::vector<Eigen::Vector4f>& cuts, c
   glActiveTexture(GL_TEXTURE0);
   glDisable(GL_BLEND);
   for (int k = 0; k < 4; ++k) glDisable(GLenum(GL_CLIP_DISTANCE0 + k));
+}
+
+void TerrainRenderer::bind_terrain_shadow(unsigned p, int unit, int steps) const {
+  glActiveTexture(GLenum(GL_TEXTURE0 + unit));
+  glBindTexture(GL_TEXTURE_2D_ARRAY, tex_[0]);
+  glActiveTexture(GL_TEXTURE0);
+  glUniform1i(loc(p, "u_elevation"), unit);
+  glUniform1i(loc(p, "u_T"), T_);
+  glUniform1i(loc(p, "u_n"), def_.n);
+  glUniform1f(loc(p, "u_w"), float(transition_width(def_)));
+  glUniform2f(loc(p, "u_viewer"), viewer_.x(), viewer_.z());
+  glUniform1f(loc(p, "u_base_spacing"), def_.base_spacing);
+  glUniform1i(loc(p, "u_levels"), def_.levels);
+  glUniform1i(loc(p, "u_terrain_shadow_steps"), steps);
+  if (steps > 0) glUniform1f(loc(p, "u_max_height"), hf_->max_height());  // cached per tile
 }
 
 std::vector<float> TerrainRenderer::read_texture(int which, int level) const {

@@ -84,6 +84,11 @@ class TerrainRenderer {
   // The terrain's shadow on itself: steps of the march toward the sun through the clipmap's
   // heights (terrain.frag), 0 = none.
   void set_terrain_shadow_steps(int steps) { shadow_steps_ = steps; }
+  int terrain_shadow_steps() const { return shadow_steps_; }
+  // Sets the uniforms of shaders/render/terrain_shadow.glsl on `program` (current) and binds the
+  // elevation texture to texture unit `unit`, so that shader's points receive the terrain's
+  // shadow as the terrain does (the same march, the same drawn surface); steps 0 = none.
+  void bind_terrain_shadow(unsigned program, int unit, int steps) const;
   // The bodies' shadows on the terrain from now on (off: ShadowMap{}).
   void set_shadow(const ShadowMap& s) { shadow_ = s; }
   const Eigen::Vector3f& sun_direction() const { return sun_; }

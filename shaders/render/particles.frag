@@ -12,6 +12,7 @@ in float v_radius;
 in vec4 v_weights;
 in vec3 v_ground_normal;
 in float v_tint;
+in float v_terrain_vis;
 
 uniform mat4 u_proj;
 uniform mat4 u_view_inv;   // eye -> local
@@ -23,6 +24,7 @@ uniform sampler2D u_bed_depth;  // depth of the granules' pre-pass (window depth
 uniform mat4 u_proj_inv;        // clip -> eye
 uniform vec2 u_viewport;        // pixels
 uniform float u_bed_scale;      // granule radii between the samples and the pixel
+uniform float u_shading_scale;  // >= 1: how many times coarser than the sand they stand for the granules are
 
 // Eye position of the pre-pass surface under window position px (w = 0: no granule there).
 vec4 bed_eye(vec2 px) {
@@ -51,22 +53,38 @@ void main() {
   vec3 n_sphere = normalize(mat3(u_view_inv) * n_eye);
   vec3 n_bed = normalize(v_ground_normal);
   if (u_bed_on) {
-    float l_px = max(u_bed_scale * v_radius * u_proj[1][1] * 0.5 * u_viewport.y / max(-v_center_eye.z, 1e-4), 1.5);
-    vec4 l = bed_eye(gl_FragCoord.xy - vec2(l_px, 0.0)), r = bed_eye(gl_FragCoord.xy + vec2(l_px, 0.0));
-    vec4 b = bed_eye(gl_FragCoord.xy - vec2(0.0, l_px)), t = bed_eye(gl_FragCoord.xy + vec2(0.0, l_px));
-    if (l.w * r.w * b.w * t.w > 0.0) {
+    // The bed's normal from the pre-pass, (1 + s) / 2 times further out at particle scale s: a
+    // coarse patch's bed is as smooth as the sand it stands for, over as many granules. Two
+    // estimates, each the cross product of the differences across two perpendicular pairs of
+    // samples (along the image's axes, and along its diagonals), averaged. A sample across a
+    // silhouette (a granule in front of or behind this pixel's bed point, or a gap) would tilt
+    // an estimate wildly and leave a dark or bright speck at the patch's edge: an estimate counts
+    // only when its four samples lie within kSteep times their distance across the image from
+    // this pixel's bed point in depth (a slope of 72 degrees to the image plane). With neither,
+    // the terrain's normal.
+    float l_px = max(u_bed_scale * 0.5 * (1.0 + u_shading_scale) * v_radius * u_proj[1][1] * 0.5 * u_viewport.y /
+                     max(-v_center_eye.z, 1e-4), 1.5);
+    vec4 c = bed_eye(gl_FragCoord.xy);
+    const float kSteep = 3.0;
+    vec3 sum = vec3(0.0);
+    for (int k = 0; k < 2 && c.w > 0.0; ++k) {
+      vec2 u = (k == 0 ? vec2(1.0, 0.0) : vec2(0.70710678, 0.70710678)) * l_px;
+      vec2 v = vec2(-u.y, u.x);
+      vec4 l = bed_eye(gl_FragCoord.xy - u), r = bed_eye(gl_FragCoord.xy + u);
+      vec4 b = bed_eye(gl_FragCoord.xy - v), t = bed_eye(gl_FragCoord.xy + v);
+      bool ok = l.w * r.w * b.w * t.w > 0.0 && abs(l.z - c.z) <= kSteep * length(l.xy - c.xy) &&
+                abs(r.z - c.z) <= kSteep * length(r.xy - c.xy) && abs(b.z - c.z) <= kSteep * length(b.xy - c.xy) &&
+                abs(t.z - c.z) <= kSteep * length(t.xy - c.xy);
       vec3 ne = cross(r.xyz - l.xyz, t.xyz - b.xyz);
-      if (dot(ne, ne) > 1e-20) {
-        ne = normalize(ne);
-        if (ne.z < 0.0) ne = -ne;  // toward the eye
-        n_bed = normalize(mat3(u_view_inv) * ne);
-      }
+      if (!ok || dot(ne, ne) <= 1e-20) continue;
+      ne = normalize(ne);
+      sum += ne.z < 0.0 ? -ne : ne;  // toward the eye
     }
+    if (dot(sum, sum) > 1e-12) n_bed = normalize(mat3(u_view_inv) * normalize(sum));
   }
-  // Granules a few pixels across cannot show their roundness, only noise: below 6 px in
-  // radius the sphere's own shading (normal, occlusion, half the tint) fades toward the bed's,
-  // so a distant patch reads as a sand surface, not as stipple (at 1.5 px none is left).
-  float r_px = v_radius * u_proj[1][1] * 0.5 * u_viewport.y / max(-v_center_eye.z, 1e-4);
+  // At particle scale s a granule stands for sand s times finer: its own shading is that of a
+  // granule s times smaller on screen (a coarse patch does not turn into a heap of pebbles).
+  float r_px = v_radius * u_proj[1][1] * 0.5 * u_viewport.y / max(-v_center_eye.z, 1e-4) / max(u_shading_scale, 1.0);
   float detail = smoothstep(1.5, 6.0, r_px);
   vec3 n = normalize(mix(n_sphere, n_bed, mix(1.0, u_normal_bend, detail)));
   vec3 p = (u_view_inv * vec4(p_eye, 1.0)).xyz;
@@ -75,5 +93,6 @@ void main() {
   // ball; u_gain brings the bed's mean brightness back to the terrain's.
   float occ = u_gain * mix(0.9, mix(0.8, 1.0, clamp(0.5 + 0.5 * dot(n_sphere, n_bed), 0.0, 1.0)), detail);
   float tint = mix(1.0, v_tint, 0.5 + 0.5 * detail);
-  o_color = vec4(sp_shade_gain(tint * sp_blend_materials(v_weights, p.xz), n, sp_sun_visibility(p), occ), u_fade);
+  float vis = min(sp_sun_visibility(p), v_terrain_vis);  // the bodies' shadows and the terrain's
+  o_color = vec4(sp_shade_gain(tint * sp_blend_materials(v_weights, p.xz), n, vis, occ), u_fade);
 }

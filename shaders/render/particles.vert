@@ -2,7 +2,7 @@
 // Particle splats (Leach & Marais §4.2): one point per particle read straight from the
 // simulation's buffer (position, optional radius), sized to the sphere's projected diameter.
 // The particle's material weights come from the terrain's clipmap textures under it, so a
-// patch looks like the heightfield it came from.
+// patch looks like the heightfield it came from; the terrain's shadow is marched from its centre.
 
 layout(location = 0) in vec3 a_position;  // m, patch frame, unit particle scale
 layout(location = 1) in float a_radius;   // m, unit scale (constant attribute when not in the buffer)
@@ -12,11 +12,8 @@ uniform mat4 u_proj;              // eye -> clip
 uniform float u_viewport_h;       // pixels
 uniform vec3 u_patch_origin;      // local m
 uniform float u_scale;            // particle scale (Leach §4.3)
-uniform int u_T;
-uniform int u_n;
+#include "terrain_shadow.glsl"
 uniform int u_first_level;        // finest active clipmap level
-uniform int u_levels;
-uniform float u_base_spacing;     // m
 uniform ivec2 u_level_origin[24]; // O_l per level
 uniform sampler2DArray u_materials;
 uniform sampler2DArray u_normals;  // terrain normals (RGBA16F)
@@ -28,6 +25,7 @@ out float v_radius;
 out vec4 v_weights;
 out vec3 v_ground_normal;   // terrain normal under the particle
 out float v_tint;           // albedo factor of this granule
+out float v_terrain_vis;    // the sun's visibility over the terrain at the granule's centre (1 lit)
 
 void main() {
   vec3 c = u_patch_origin + u_scale * a_position;
@@ -40,6 +38,9 @@ void main() {
   float d = max(-e.z, 1e-6);
   float rp = u_proj[1][1] * r / sqrt(max(d * d - r * r, 1e-12)) * 0.5 * u_viewport_h;
   gl_PointSize = max(2.0 * rp, 1.0);
+  // The terrain's shadow, marched once per sphere from its centre (a granule is a few
+  // pixels to a few tens across: one value for it, not one per fragment).
+  v_terrain_vis = terrain_sun_visibility(c);
   // One factor per granule (its four spheres are consecutive), from an integer hash.
   int granule = (u_first_index + gl_VertexID) >> 2;
   v_tint = 1.0 + u_color_variation * (2.0 * sp_hash01(ivec2(granule, 7919)) - 1.0);

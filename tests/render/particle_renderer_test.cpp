@@ -7,6 +7,9 @@
 
 #include <GL/glcorearb.h>
 
+#include <algorithm>
+#include <cmath>
+
 #include "render/camera.hpp"
 #include "render_test_util.hpp"
 
@@ -225,11 +228,19 @@ TEST(ParticleRenderer, BadSourceIsRefused) {
   bad.buffer = 7;
   bad.stride = 8;
   bad.fade = 2;
+  bad.shading_scale = 0.5f;
   auto st = s.renderer->set_particles({ParticleSource{}, bad});
   ASSERT_FALSE(st.ok());
   EXPECT_NE(st.message().find("particles[0].buffer"), std::string::npos) << st.message();
   EXPECT_NE(st.message().find("particles[1].stride = 8"), std::string::npos) << st.message();
   EXPECT_NE(st.message().find("particles[1].fade"), std::string::npos) << st.message();
+  EXPECT_NE(st.message().find("particles[1].shading_scale = 0.5"), std::string::npos) << st.message();
+  bad = ParticleSource{};
+  bad.buffer = 7;
+  bad.shading_scale = std::nanf("");
+  st = s.renderer->set_particles({bad});
+  ASSERT_FALSE(st.ok());
+  EXPECT_NE(st.message().find("particles[0].shading_scale = nan"), std::string::npos) << st.message();
 }
 
 namespace {
@@ -379,4 +390,88 @@ TEST(ParticleRenderer, CraterInAPatchShowsWithItsFootprintCutOut) {
               "(unfiltered %.1f, %.1f)\n", masked(mask), change[1], change[0], raw[1], raw[0]);
   EXPECT_GT(change[1], 8.0) << "the crater reads as a crater";
   EXPECT_GT(change[1], 2.0 * change[0]) << "the cut is what shows it";
+}
+
+namespace {
+
+// Pixels whose luma differs by more than `threshold` from the median of their 3 x 3
+// neighbourhood (themselves included), within the mask: a speck, a lone pixel or a line one
+// pixel wide (a median keeps edges and areas; an edge pixel is its neighbourhood's majority).
+int count_specks(const Image& img, const std::vector<std::uint8_t>& mask, double threshold) {
+  int n = 0;
+  for (int y = 1; y + 1 < img.height; ++y)
+    for (int x = 1; x + 1 < img.width; ++x) {
+      if (!mask[std::size_t(y) * img.width + x]) continue;
+      double v[9];
+      int k = 0;
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) v[k++] = luma(img.pixel(x + dx, y + dy));
+      std::nth_element(v, v + 4, v + 9);
+      n += std::fabs(luma(img.pixel(x, y)) - v[4]) > threshold;
+    }
+  return n;
+}
+
+}  // namespace
+
+// Where a coarse patch meets the terrain: a bed of r = 0.12 m granules (a patch of the default
+// scene's 4 cm sand at particle scale 3), two layers, its top column by column up to half a
+// radius above or below the ground (a worked bed), a 4 m footprint with the scene runner's band
+// (six diameters), and granules thrown out onto the ground around it; seen from 10 m like
+// CraterInAPatchShowsWithItsFootprintCutOut. Specks (count_specks, luma more than 40 from its
+// 3 x 3 median) over the pixels of the ground within 0.6 m of the footprint's edge: few (the
+// bed's normal taken across a silhouette no longer tilts a pixel wildly, and a granule of a
+// coarse patch is shaded as the finer sand it stands for, not as a ball with a hard outline).
+TEST(ParticleRenderer, FewSpecksWhereACoarsePatchMeetsTheTerrain) {
+  Scene s = make_scene();
+  if (!s.renderer) GTEST_SKIP() << "no GL context";
+  s.hf = terrain(129, 0.5f, plane(0, 0));
+  auto rr = SceneRenderer::create(*s.ctx, s.hf);
+  ASSERT_TRUE(rr.ok()) << rr.message();
+  s.renderer = std::move(rr.value());
+  s.cam.position = {38, 4, 40};
+  s.cam.target = {32, 0, 32};
+  s.cam.fov_deg = 45;
+  s.cam.width = 320;
+  s.cam.height = 240;
+  const float r = 0.12f, w = 4.0f, cx = 32, cz = 32;
+  std::uint32_t seed = 12345;
+  auto rnd = [&seed] {  // uniform in [0, 1)
+    seed = seed * 1664525u + 1013904223u;
+    return float(seed >> 8) / 16777216.0f;
+  };
+  std::vector<Eigen::Vector4f> p;
+  for (float z = cz - 0.5f * w + r; z < cz + 0.5f * w; z += 2 * r)
+    for (float x = cx - 0.5f * w + r; x < cx + 0.5f * w; x += 2 * r) {
+      const float top = -0.5f * r + r * (rnd() - 0.5f);
+      for (int k = 0; k < 2; ++k) p.emplace_back(x, top - 2 * r * float(k), z, r);
+    }
+  for (int k = 0; k < 60; ++k) {  // thrown out: on the ground within 1 m outside the footprint
+    const float a = 6.2831853f * rnd(), d = 0.5f * w + 0.2f + 0.8f * rnd();
+    const float x = cx + d * std::cos(a), z = cz + d * std::sin(a);
+    if (std::max(std::fabs(x - cx), std::fabs(z - cz)) > 0.5f * w + r) p.emplace_back(x, r, z, r);
+  }
+  ParticleBuffer buf(p);
+  ParticleSource src = buf.source({0, 0, 0});
+  src.footprint = {cx - 0.5 * w, cz - 0.5 * w, cx + 0.5 * w, cz + 0.5 * w};
+  src.footprint_band = 12 * r;
+  src.shading_scale = 3;
+  ASSERT_TRUE(s.renderer->set_particles({src}).ok());
+  auto img = s.renderer->render(s.cam);
+  ASSERT_TRUE(img.ok()) << img.message();
+  ASSERT_TRUE(save_png(output_path("patch_edge.actual.png"), *img).ok());
+  std::vector<std::uint8_t> edge(std::size_t(s.cam.width) * s.cam.height, 0);
+  for (double z = cz - 0.5 * w - 0.6; z <= cz + 0.5 * w + 0.6; z += 0.01)
+    for (double x = cx - 0.5 * w - 0.6; x <= cx + 0.5 * w + 0.6; x += 0.01) {
+      const double out = std::max(std::fabs(x - cx), std::fabs(z - cz)) - 0.5 * w;  // m outside the footprint
+      if (std::fabs(out) > 0.6) continue;
+      auto q = s.renderer->project(s.cam, {x, 0.0, z});
+      if (!q) continue;
+      const int px = int(q->pixel.x()), py = int(q->pixel.y());
+      if (px >= 0 && px < s.cam.width && py >= 0 && py < s.cam.height) edge[std::size_t(py) * s.cam.width + px] = 1;
+    }
+  ASSERT_GT(masked(edge), 5000);
+  const int specks = count_specks(*img, edge, 40.0);
+  std::printf("patch edge: %d pixels, %d specks (%.2f %%)\n", masked(edge), specks, 100.0 * specks / masked(edge));
+  EXPECT_LT(specks, masked(edge) / 200) << "fewer than 0.5 % of the edge's pixels";
 }

@@ -401,3 +401,107 @@ TEST(SceneRenderer, TerrainShadowsItselfBehindAWall) {
   ASSERT_FALSE(r.ok());
   EXPECT_NE(r.message().find("terrain_shadow_steps"), std::string::npos) << r.message();
 }
+
+// The terrain's shadow falls on what stands in it: the wall of TerrainShadowsItselfBehindAWall,
+// a grey plate (a box 0.6 m square, 0.1 m thick) and a layer of granules (r = 4 cm) on the
+// ground in its shadow. The plate's top and the granules (their lighting normal is the bed's,
+// up: a granule 1 px in radius shows no sphere shading) face up like the ground, so in the
+// shadow they keep the ambient share of the light, 0.3 / (0.3 + 1.2 sin 25°) = 0.372 of their
+// luma on the same ground without the wall (the granules' gain 1.12 x 0.9 scales both). With
+// terrain_shadow_steps = 0 the wall changes neither (ratio 1).
+TEST(SceneRenderer, TerrainShadowFallsOnBodiesAndGranules) {
+  auto ctx = make_context();
+  if (!ctx) GTEST_SKIP() << "no GL context";
+  Heightfield open = terrain(257, 0.125f, plane(0, 0));
+  Heightfield walled = terrain(257, 0.125f, plane(0, 0));
+  for (int j = 64; j <= 192; ++j)  // z in [8, 24] m
+    for (int i = 128; i <= 132; ++i) walled.set_height(i, j, 1.0f);  // x in [16, 16.5] m
+  CameraView cam;
+  cam.position = {24, 7, 16};
+  cam.target = {17.5, 0, 16};
+  cam.fov_deg = 50;
+  cam.width = 320;
+  cam.height = 240;
+  BodyInstance plate;
+  plate.kind = BodyShapeKind::Box;
+  plate.half_extents = {0.3f, 0.05f, 0.3f};
+  plate.position = {17.2, 0.05, 16.0};
+  plate.albedo = {0.5f, 0.5f, 0.5f};
+  const float r = 0.04f;
+  std::vector<Eigen::Vector4f> granules;
+  for (float x = 16.75f; x <= 17.65f; x += 2 * r)
+    for (float z = 14.0f; z <= 14.8f; z += 2 * r) granules.push_back({x, r, z, r});
+  const double kAmbientOnly = 0.3 / (0.3 + 1.2 * 0.38 / std::sqrt(0.6 * 0.6 + 0.38 * 0.38 + 0.55 * 0.55));
+  struct Seen {
+    double plate = 0, granules = 0;
+  };
+  auto look = [&](const Heightfield& hf, int steps, const char* png) {
+    Seen s;
+    RendererDef def;
+    def.ao_strength = 0;
+    def.terrain_shadow_steps = steps;
+    auto r0 = SceneRenderer::create(*ctx, hf, def);
+    EXPECT_TRUE(r0.ok()) << r0.message();
+    if (!r0.ok()) return s;
+    SceneRenderer& rr = **r0;
+    ParticleBuffer buf(granules);
+    EXPECT_TRUE(rr.set_particles({buf.source({0, 0, 0})}).ok());
+    EXPECT_TRUE(rr.set_bodies({plate}).ok());
+    FrameFlags ids;
+    ids.body_ids = true;
+    auto id_img = rr.render(cam, ids);
+    auto img = rr.render(cam);
+    EXPECT_TRUE(id_img.ok() && img.ok());
+    if (!id_img.ok() || !img.ok()) return s;
+    EXPECT_TRUE(save_png(output_path(png), *img).ok());
+    CameraView close = cam;  // for the eye (docs/rendering.md): 3 m from the plate
+    close.position = {19.2, 1.8, 16.6};
+    close.target = {17.2, 0.0, 15.2};
+    auto near_img = rr.render(close);
+    EXPECT_TRUE(near_img.ok() && save_png(output_path(std::string("close_") + png), *near_img).ok());
+    // The plate: points of its top face whose pixel the ID render gives to it.
+    double sum = 0;
+    int n = 0;
+    for (double z = 15.8; z <= 16.2; z += 0.02)
+      for (double x = 17.0; x <= 17.4; x += 0.02) {
+        auto p = rr.project(cam, {x, 0.1, z});
+        if (!p) continue;
+        const int px = int(p->pixel.x()), py = int(p->pixel.y());
+        if (px < 0 || px >= img->width || py < 0 || py >= img->height) continue;
+        const std::uint8_t* id = id_img->pixel(px, py);
+        if (id[0] != 255 || id[1] != 0 || id[2] != 0) continue;
+        const std::uint8_t* q = img->pixel(px, py);
+        sum += 0.2126 * q[0] + 0.7152 * q[1] + 0.0722 * q[2];
+        ++n;
+      }
+    EXPECT_GT(n, 100);
+    s.plate = sum / std::max(n, 1);
+    // The granules: the pixel of each inner granule's top.
+    sum = 0;
+    n = 0;
+    for (const Eigen::Vector4f& g : granules) {
+      if (g.x() < 16.85f || g.x() > 17.55f || g.z() < 14.1f || g.z() > 14.7f) continue;
+      auto p = rr.project(cam, {g.x(), g.y() + g.w(), g.z()});
+      if (!p) continue;
+      const int px = int(p->pixel.x()), py = int(p->pixel.y());
+      if (px < 0 || px >= img->width || py < 0 || py >= img->height) continue;
+      const std::uint8_t* q = img->pixel(px, py);
+      sum += 0.2126 * q[0] + 0.7152 * q[1] + 0.0722 * q[2];
+      ++n;
+    }
+    EXPECT_GT(n, 50);
+    s.granules = sum / std::max(n, 1);
+    return s;
+  };
+  const Seen lit = look(open, 32, "terrain_shadow_open.actual.png");
+  const Seen shade = look(walled, 32, "terrain_shadow_bodies.actual.png");
+  const Seen off = look(walled, 0, "terrain_shadow_off.actual.png");
+  std::printf("plate luma: open %.1f, behind the wall %.1f (ratio %.3f), march off %.1f (ratio %.3f); granules: open %.1f, "
+              "behind the wall %.1f (ratio %.3f), march off %.1f (ratio %.3f); ambient only %.3f\n",
+              lit.plate, shade.plate, shade.plate / lit.plate, off.plate, off.plate / lit.plate, lit.granules,
+              shade.granules, shade.granules / lit.granules, off.granules, off.granules / lit.granules, kAmbientOnly);
+  EXPECT_NEAR(shade.plate / lit.plate, kAmbientOnly, 0.05);
+  EXPECT_NEAR(shade.granules / lit.granules, kAmbientOnly, 0.05);
+  EXPECT_NEAR(off.plate / lit.plate, 1.0, 0.03);
+  EXPECT_NEAR(off.granules / lit.granules, 1.0, 0.03);
+}

@@ -109,3 +109,86 @@ TEST(SceneFrames, DefaultSceneShowsBothBodiesWhereTheReportSaysTheyAre) {
               images.renderer()->renderer_string().c_str(), all, (long long)st.particles, st.bodies, int(st.shadows), no_bodies);
   EXPECT_GT(st.particles, 0) << "a patch is live at 0.6 s";
 }
+
+// What a user sees of a coarse patch: the default scene with a frame budget no rung fits
+// (0.01 ms: its patch takes the coarsest scale, 3; granules 12 cm in radius), at 2 s, 640 x 360.
+// Regions, from the ground's points projected: the footprint more than 0.5 m inside its edge,
+// the band within 0.5 m of the edge, the ring 0.5 to 1.5 m outside. Metrics (Rec. 709 luma
+// 0..255): the mean local contrast |luma - its 5 x 5 mean| per region, the specks (luma more
+// than 40 from its 3 x 3 median) per region, and the distance between the mean colours (sRGB
+// bytes) of the footprint (inside and band) and of the ring. docs/BENCHMARKS.md "What a user
+// sees" has the numbers before and after; the bounds here sit between them.
+TEST(SceneFrames, CoarsePatchReadsAsSandWithoutSpecks) {
+  auto scene = load_default_scene();
+  ASSERT_TRUE(scene.ok()) << scene.message();
+  SceneDef s = scene.value();
+  s.terrain.frame_budget_ms = 0.01;
+  auto w = make_world(s, 2, "cpu");
+  ASSERT_TRUE(w.ok()) << w.message();
+  World& world = *w.value();
+  ASSERT_TRUE(step_to(world, 2.0, s.simulation.dt).ok());
+  const auto patches = world.manager()->patches();
+  ASSERT_EQ(patches.size(), 1u);
+  const auto& p = patches.front();
+  ASSERT_TRUE(p.ready);
+  ASSERT_EQ(p.particle_scale, 3.0);
+  FrameWriter images(world);
+  const render::CameraView cam = camera_at(s.cameras.front(), world.time());
+  auto img = images.render(cam);
+  ASSERT_TRUE(img.ok()) << img.message();
+  if (images.unavailable()) GTEST_SKIP() << "no GL context: " << images.why();
+  ASSERT_TRUE(render::save_png(output_path("coarse_patch.actual.png"), *img).ok());
+  const Heightfield& hf = world.heightfield();
+  const double h = hf.spacing();
+  const double x0 = hf.origin_x() + h * p.region.i0, z0 = hf.origin_z() + h * p.region.j0;
+  const double x1 = hf.origin_x() + h * (p.region.i0 + p.region.ni - 1), z1 = hf.origin_z() + h * (p.region.j0 + p.region.nj - 1);
+  const int W = cam.width, H = cam.height;
+  std::vector<int> region(std::size_t(W) * H, 0);  // 1 inside, 2 ring, 3 band
+  for (double x = x0 - 1.5; x <= x1 + 1.5; x += 0.01)
+    for (double z = z0 - 1.5; z <= z1 + 1.5; z += 0.01) {
+      const double out = std::max(std::max(x0 - x, x - x1), std::max(z0 - z, z - z1));  // m outside the footprint
+      const double y = hf.sample(float(x - hf.origin_x()), float(z - hf.origin_z())) + hf.origin_y();
+      auto q = images.renderer()->project(cam, {x, y, z});
+      if (!q) continue;
+      const int px = int(q->pixel.x()), py = int(q->pixel.y());
+      if (px < 0 || py < 0 || px >= W || py >= H) continue;
+      int& r = region[std::size_t(py) * W + px];
+      if (std::fabs(out) < 0.5) r = 3;
+      else if (out < 0) r = r == 3 ? 3 : 1;
+      else if (r == 0) r = 2;
+    }
+  double sum[4][3] = {}, contrast[4] = {};
+  int n[4] = {}, specks[4] = {};
+  for (int y = 2; y < H - 2; ++y)
+    for (int x = 2; x < W - 2; ++x) {
+      const int k = region[std::size_t(y) * W + x];
+      if (!k) continue;
+      const std::uint8_t* c = img->pixel(x, y);
+      for (int i = 0; i < 3; ++i) sum[k][i] += c[i];
+      ++n[k];
+      double m = 0, v[9];
+      for (int j = -2; j <= 2; ++j)
+        for (int i = -2; i <= 2; ++i) m += luma(img->pixel(x + i, y + j));
+      contrast[k] += std::fabs(luma(c) - m / 25);
+      int q = 0;
+      for (int j = -1; j <= 1; ++j)
+        for (int i = -1; i <= 1; ++i) v[q++] = luma(img->pixel(x + i, y + j));
+      std::nth_element(v, v + 4, v + 9);
+      specks[k] += std::fabs(luma(c) - v[4]) > 40;
+    }
+  ASSERT_GT(n[1], 2000);
+  ASSERT_GT(n[2], 5000);
+  ASSERT_GT(n[3], 5000);
+  double d2 = 0;
+  for (int i = 0; i < 3; ++i) {
+    const double patch = (sum[1][i] + sum[3][i]) / (n[1] + n[3]), ring = sum[2][i] / n[2];
+    d2 += (patch - ring) * (patch - ring);
+  }
+  std::printf("coarse patch at 2 s (%d granules, scale %.0f): local contrast inside %.2f, band %.2f, ring %.2f; specks "
+              "inside %d, band %d, ring %d (pixels %d, %d, %d); mean colour footprint vs ring %.1f\n",
+              p.granules, p.particle_scale, contrast[1] / n[1], contrast[3] / n[3], contrast[2] / n[2], specks[1], specks[3],
+              specks[2], n[1], n[3], n[2], std::sqrt(d2));
+  EXPECT_LT(contrast[1] / n[1], 9.0) << "granules shaded as the sand they stand for (15.2 as balls)";
+  EXPECT_LT(specks[1] + specks[3], 60) << "154 before";
+  EXPECT_LT(std::sqrt(d2), 8.0);
+}
