@@ -446,15 +446,29 @@ static Status refuse_static(const core::World& w, core::RigidBodyId id, const st
   return Error{"", call + ".body", "'" + w.bullet().definition(id).name + "' (static)", "must not be a static body: it never moves", ""};
 }
 
-Status Terrain::set_body_transform(BodyHandle h, const Vec3& position, const Quat& orientation) {
-  if (Status s = impl_->check(h); !s) return s;
-  if (Status s = refuse_static(*impl_->world, impl_->id(h), "set_body_transform"); !s) return s;
-  Checker c{"set_body_transform.", "", {}};
+// Only a kinematic body follows targets and keyframes: set_kinematic_target and set_keyframes
+// refuse the others.
+static Status require_kinematic(const core::World& w, core::RigidBodyId id, const std::string& call) {
+  if (w.bullet().motion(id) == core::RigidMotion::Kinematic) return Ok{};
+  return Error{"", call + ".body", "'" + w.bullet().definition(id).name + "' (" + core::to_string(w.bullet().motion(id)) + ")",
+               "must be a kinematic body (BodyDef.motion)", ""};
+}
+
+// A pose given to `call`: a finite position (m) and a finite, non-zero quaternion [w, x, y, z].
+static Status check_pose(const std::string& call, const Vec3& position, const Quat& orientation) {
+  Checker c{call + ".", "", {}};
   c.finite("position", position, "m");
   c.finite("orientation", orientation, "");
   if (c.errs.empty() && !eq_norm_positive(orientation))
     c.add("orientation", "[0, 0, 0, 0]", "must be a non-zero quaternion [w, x, y, z]");
   if (!c.errs.empty()) return c.errs;
+  return Ok{};
+}
+
+Status Terrain::set_body_transform(BodyHandle h, const Vec3& position, const Quat& orientation) {
+  if (Status s = impl_->check(h); !s) return s;
+  if (Status s = refuse_static(*impl_->world, impl_->id(h), "set_body_transform"); !s) return s;
+  if (Status s = check_pose("set_body_transform", position, orientation); !s) return s;
   core::BodyState st = impl_->bullet().state(impl_->id(h));
   st.position = {position[0], position[1], position[2]};
   st.orientation = eq(orientation);
@@ -497,15 +511,8 @@ static std::optional<Error> below_bedrock(const Terrain& t, const core::World& w
 Status Terrain::set_kinematic_target(BodyHandle h, const Vec3& position, const Quat& orientation) {
   Impl& I = *impl_;
   if (Status s = I.check(h); !s) return s;
-  Checker c{"set_kinematic_target.", "", {}};
-  c.finite("position", position, "m");
-  c.finite("orientation", orientation, "");
-  if (c.errs.empty() && !eq_norm_positive(orientation))
-    c.add("orientation", "[0, 0, 0, 0]", "must be a non-zero quaternion [w, x, y, z]");
-  if (!c.errs.empty()) return c.errs;
-  if (I.world->bullet().motion(I.id(h)) != core::RigidMotion::Kinematic)
-    return Error{"", "set_kinematic_target.body", "'" + I.world->bullet().definition(I.id(h)).name + "' (" +
-                 core::to_string(I.world->bullet().motion(I.id(h))) + ")", "must be a kinematic body (BodyDef.motion)", ""};
+  if (Status s = check_pose("set_kinematic_target", position, orientation); !s) return s;
+  if (Status s = require_kinematic(*I.world, I.id(h), "set_kinematic_target"); !s) return s;
   if (auto e = below_bedrock(*this, *I.world, I.def.soil_depth, I.id(h), "set_kinematic_target.position", position, eq(orientation)))
     return *e;
   if (core::Status s = I.world->set_kinematic_target(I.id(h), evd(position), eq(orientation)); !s)
@@ -516,9 +523,7 @@ Status Terrain::set_kinematic_target(BodyHandle h, const Vec3& position, const Q
 Status Terrain::set_keyframes(BodyHandle h, const std::vector<Keyframe>& keys) {
   Impl& I = *impl_;
   if (Status s = I.check(h); !s) return s;
-  if (I.world->bullet().motion(I.id(h)) != core::RigidMotion::Kinematic)
-    return Error{"", "set_keyframes.body", "'" + I.world->bullet().definition(I.id(h)).name + "' (" +
-                 core::to_string(I.world->bullet().motion(I.id(h))) + ")", "must be a kinematic body (BodyDef.motion)", ""};
+  if (Status s = require_kinematic(*I.world, I.id(h), "set_keyframes"); !s) return s;
   std::vector<core::World::Keyframe> ks;
   for (const Keyframe& k : keys) {
     core::World::Keyframe w;
@@ -551,12 +556,19 @@ std::vector<BodyHandle> Terrain::bodies() const {
 // ---- driving bodies (World::apply_force, apply_torque, apply_impulse) ----
 
 
+// apply_force and apply_impulse: the World call `apply` on body h with vector v (N or N s) at
+// world_point (null: the centre of mass); errors under `call`.
+using ApplyAt = core::Status (core::World::*)(core::RigidBodyId, const Eigen::Vector3f&, const Eigen::Vector3d*);
+static Status apply_at(core::World& w, core::RigidBodyId id, ApplyAt apply, const Vec3f& v, const Vec3* world_point,
+                       const std::string& call) {
+  const Eigen::Vector3d p = world_point ? evd(*world_point) : Eigen::Vector3d::Zero();
+  if (core::Status s = (w.*apply)(id, ev(v), world_point ? &p : nullptr); !s) return convert(s.errors(), call + ".");
+  return Ok{};
+}
+
 Status Terrain::apply_force(BodyHandle h, const Vec3f& force, const Vec3* world_point) {
   if (Status s = impl_->check(h); !s) return s;
-  const Eigen::Vector3d p = world_point ? evd(*world_point) : Eigen::Vector3d::Zero();
-  if (core::Status s = impl_->world->apply_force(impl_->id(h), ev(force), world_point ? &p : nullptr); !s)
-    return convert(s.errors(), "apply_force.");
-  return Ok{};
+  return apply_at(*impl_->world, impl_->id(h), &core::World::apply_force, force, world_point, "apply_force");
 }
 
 Status Terrain::apply_torque(BodyHandle h, const Vec3f& torque) {
@@ -567,10 +579,7 @@ Status Terrain::apply_torque(BodyHandle h, const Vec3f& torque) {
 
 Status Terrain::apply_impulse(BodyHandle h, const Vec3f& impulse, const Vec3* world_point) {
   if (Status s = impl_->check(h); !s) return s;
-  const Eigen::Vector3d p = world_point ? evd(*world_point) : Eigen::Vector3d::Zero();
-  if (core::Status s = impl_->world->apply_impulse(impl_->id(h), ev(impulse), world_point ? &p : nullptr); !s)
-    return convert(s.errors(), "apply_impulse.");
-  return Ok{};
+  return apply_at(*impl_->world, impl_->id(h), &core::World::apply_impulse, impulse, world_point, "apply_impulse");
 }
 
 Result<BodyForces> Terrain::granular_force(BodyHandle h) const {

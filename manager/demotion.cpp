@@ -128,30 +128,28 @@ Status TerrainManager::Impl::demote(Slot& slot, double time, bool gl_ok, bool st
   box.floor = float(slot.floor_local);
   box.top = top;
   box.probe = probe;
-  // Part 1: the surface of the fill (the baseline below), 2: the surface now.
-  if (w.stage == 0) {
-    if (!rec.fill_spheres.empty()) {
-      auto was = render_surface(slot, box, filled, gl_ok, &w.on_gl);
-      if (!was) return was.errors();
+  // Parts 1 and 2, one render each: the surface of `spheres` (none: no render) into `into`,
+  // one demotion part of the frame, its time (ms) counted from `start`.
+  auto render_part = [&](const std::vector<float>* spheres, HeightImage& into, Clock::time_point start) -> Status {
+    if (spheres) {
+      auto img = render_surface(slot, box, *spheres, gl_ok, &w.on_gl);
+      if (!img) return img.errors();
       ++work.depth_renders;
-      w.was = std::move(*was);
+      into = std::move(*img);
     }
-    w.stage = 1;
+    ++w.stage;
     ++work.demotion_parts;
     ++work.conversion_parts;
-    w.ms += ms_since(t0);
+    w.ms += ms_since(start);
+    return Ok{};
+  };
+  // Part 1: the surface of the fill (the baseline below), 2: the surface now.
+  if (w.stage == 0) {
+    if (Status st = render_part(rec.fill_spheres.empty() ? nullptr : &filled, w.was, t0); !st) return st;
     if (staged) return Ok{};
   }
   if (w.stage == 1) {
-    const auto t1 = Clock::now();
-    auto img = render_surface(slot, box, xyzr, gl_ok, &w.on_gl);
-    if (!img) return img.errors();
-    ++work.depth_renders;
-    w.now = std::move(*img);
-    w.stage = 2;
-    ++work.demotion_parts;
-    ++work.conversion_parts;
-    w.ms += ms_since(t1);
+    if (Status st = render_part(&xyzr, w.now, Clock::now()); !st) return st;
     if (staged) return Ok{};
   }
   // Part 3: the heights written. Where the surface did not move, the heights of before the

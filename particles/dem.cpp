@@ -172,23 +172,7 @@ Result<Simulation> Simulation::make(const SimulationDef& d, Impl* reuse) {
   return Simulation(std::move(im));
 }
 
-Result<BodyId> Simulation::add_granule(Vec3 x, Quat q, Vec3 v, Vec3 w) {
-  Impl& s = *impl_;
-  if (s.nb + 1 > s.def.max_bodies)
-    return Error{"", "SimulationDef.max_bodies", format_number(s.def.max_bodies), "is full: raise max_bodies",
-                 "add_granule needs 1 more body"};
-  if (s.np + 4 > s.def.max_particles)
-    return Error{"", "SimulationDef.max_particles", format_number(s.def.max_particles), "is full: raise max_particles",
-                 "add_granule needs 4 more particles"};
-  if (!std::isfinite(x.x + x.y + x.z + q.x + q.y + q.z + q.w + v.x + v.y + v.z + w.x + w.y + w.z))
-    return Error{"", "add_granule", "non-finite", "position, orientation and velocities must be finite", ""};
-  const GranuleShape& g = s.shape;
-  float r = g.radius;
-  float inv_i = 1.0f / g.inertia;
-  int i = s.push_body(kBodyGranule | kBodyDynamic, x, q, v, w, g.mass, 1.0f / g.mass, {inv_i, inv_i, inv_i},
-                      g.offsets.data(), &r, 4, true);
-  return BodyId{i};
-}
+Result<BodyId> Simulation::add_granule(Vec3 x, Quat q, Vec3 v, Vec3 w) { return push_granule(*impl_, x, q, v, w); }
 
 Result<ShellPlan> plan_shell(const ShellDef& sh, int bodies_used, int max_bodies, int particles_used,
                              int max_particles) {
@@ -238,14 +222,10 @@ Result<BodyId> Simulation::add_shell(const ShellDef& sh) {
   auto plan = plan_shell(sh, s.nb, s.def.max_bodies, s.np, s.def.max_particles);
   if (!plan) return plan.errors();
   const int count = plan->count;
-  const bool one = plan->one_radius;
-  const float rmax = plan->max_radius, arm = plan->arm, invm = plan->inv_mass;
-  const std::uint32_t flags = plan->flags;
-  const Vec3 iI = plan->inv_inertia;
   // overlap guard: the body's weight shared by all its spheres (the most favourable case)
   if (sh.motion == MotionType::Dynamic && s.def.max_overlap_fraction > 0) {
     float rmin = std::numeric_limits<float>::infinity();
-    for (int k = 0; k < count; ++k) rmin = std::min(rmin, one ? sh.radii[0] : sh.radii[k]);
+    for (int k = 0; k < count; ++k) rmin = std::min(rmin, plan->one_radius ? sh.radii[0] : sh.radii[k]);
     const double r = std::min(double(rmin), double(s.def.particle_radius));
     const double g = length(s.gravity), kn = s.def.material.normal_stiffness, f = s.def.max_overlap_fraction;
     const double overlap = double(sh.mass) * g / (count * kn);
@@ -261,15 +241,13 @@ Result<BodyId> Simulation::add_shell(const ShellDef& sh) {
   // a new dynamic body may shorten the contact time (the guard uses the lightest body)
   if (sh.motion == MotionType::Dynamic) {
     double imin = std::min({sh.inertia.x, sh.inertia.y, sh.inertia.z});
-    s.min_point_mass = std::min(s.min_point_mass, point_effective_mass(sh.mass, imin, arm));
+    s.min_point_mass = std::min(s.min_point_mass, point_effective_mass(sh.mass, imin, plan->arm));
   }
-  if (rmax > s.r_max) {  // bigger spheres: bigger (fewer) grid cells
-    s.r_max = rmax;
+  if (plan->max_radius > s.r_max) {  // bigger spheres: bigger (fewer) grid cells
+    s.r_max = plan->max_radius;
     s.size_grid();
   }
-  int i = s.push_body(flags, sh.position, sh.orientation, sh.velocity, sh.angular_velocity,
-                      sh.motion == MotionType::Dynamic ? sh.mass : 0.0f, invm, iI, sh.offsets.data(),
-                      sh.radii.data(), count, one);
+  const int i = push_shell(s, sh, *plan);
   s.b.group[i] = sh.group;
   return BodyId{i};
 }
@@ -311,15 +289,9 @@ Status Simulation::step(double dt_frame) {
   s.stats.substeps = *ns;
   s.stats.substep_dt = dt_frame / *ns;
   if (s.asleep) {
-    if (!s.kinematic_touch(dt_frame)) {
-      s.move_kinematic(dt_frame);
-      s.time += dt_frame;
-      s.stats.slept = true;
-      s.stats.substeps = 0;
-      return Ok{};
-    }
-    s.asleep = false;
-    s.below_time = 0;
+    const bool touched = s.kinematic_touch(dt_frame);
+    if (!touched) s.move_kinematic(dt_frame);
+    if (asleep_frame(s, dt_frame, touched)) return Ok{};
   }
   const float dt = float(dt_frame / *ns);
   for (int k = 0; k < *ns; ++k)
@@ -334,10 +306,7 @@ double Simulation::max_substep_dt() const { return impl_->max_dt(); }
 double Simulation::velocity_predictor_gain(double dt) const { return impl_->predictor_gain(dt); }
 bool Simulation::contact_timing_on(double dt) const { return impl_->timing_on(dt); }
 bool Simulation::asleep() const { return impl_->asleep; }
-void Simulation::wake() {
-  impl_->asleep = false;
-  impl_->below_time = 0;
-}
+void Simulation::wake() { wake_up(*impl_); }
 int Simulation::body_count() const { return impl_->nb; }
 int Simulation::particle_count() const { return impl_->np; }
 int Simulation::body_particle_count(BodyId b) const {
@@ -500,8 +469,7 @@ Status Simulation::reset(const SimulationDef& d) {
 
 Status Simulation::set_body_state(BodyId id, Vec3 x, Quat q, Vec3 v, Vec3 w) {
   Impl& s = *impl_;
-  if (id.index < 0 || id.index >= s.nb)
-    return Error{"", "set_body_state.body", std::to_string(id.index), "must be a body of this simulation", ""};
+  if (Status st = check_body_index(id.index, s.nb, "set_body_state"); !st) return st;
   if (s.b.flags[id.index] & kBodyParked)
     return Error{"", "set_body_state.body", std::to_string(id.index), "is disabled; enable it first", ""};
   st3(s.b.pos, id.index, x);
@@ -521,8 +489,7 @@ Status Simulation::set_body_state(BodyId id, Vec3 x, Quat q, Vec3 v, Vec3 w) {
 
 Status Simulation::set_body_enabled(BodyId id, bool enabled) {
   Impl& s = *impl_;
-  if (id.index < 0 || id.index >= s.nb)
-    return Error{"", "set_body_enabled.body", std::to_string(id.index), "must be a body of this simulation", ""};
+  if (Status st = check_body_index(id.index, s.nb, "set_body_enabled"); !st) return st;
   std::uint32_t& f = s.b.flags[id.index];
   const bool parked = f & kBodyParked;
   if (enabled == !parked) return Ok{};

@@ -6,6 +6,7 @@
 
 #include <algorithm>
 
+#include "particles/dem_control.hpp"
 #include "particles/granule.hpp"
 
 namespace sandpatch {
@@ -288,17 +289,7 @@ int Simulation::Impl::push_body(std::uint32_t flags, Vec3 x, Quat q, Vec3 v, Vec
     guard_arm[i] = arm;
     guard_rmin[i] = rmin;
   }
-  st3(b.pos, i, x);
-  stq(b.quat, i, normalized(q));
-  st3(b.vel, i, v);
-  st3(b.omega, i, w);
-  b.mass[4 * i] = mass;
-  b.mass[4 * i + 1] = invm;
-  st3(b.inv_inertia, i, inv_inertia);
-  b.flags[i] = flags;
-  b.first[i] = np;
-  b.count[i] = count;
-  b.group[i] = 0;  // add_shell sets a shell's
+  write_body_record(b, std::size_t(i), flags, x, q, v, w, mass, invm, inv_inertia, np, count);  // dem_control.hpp
   for (int k = 0; k < count; ++k) {
     int s = np++;
     p.id[s] = s;
@@ -312,8 +303,7 @@ int Simulation::Impl::push_body(std::uint32_t flags, Vec3 x, Quat q, Vec3 v, Vec
   }
   rebuild_body(i);
   need_sort = true;
-  asleep = false;
-  below_time = 0;
+  wake_up(*this);
   return i;
 }
 

@@ -66,8 +66,50 @@ void Simulation::Impl::contacts(float dt) {
     _mm_storeu_ps(aj, _mm_sub_ps(_mm_loadu_ps(aj), f4));
     _mm_storeu_ps(aj + 4, _mm_add_ps(_mm_loadu_ps(aj + 4), c4));
   };
+  // Sphere i as its pairs read it: centre (m), radius (m), velocity (m/s), its body's
+  // inverse mass (1/kg) and r_i w_i (m/s).
+  struct Own {
+    Vec3 p;
+    float r;
+    Vec3 u;
+    float invm;
+    Vec3 rw;
+  };
+  // A touching pair of the walk: list entry e (its spring xe), partner j of radius rj (m),
+  // d = p_i - p_j (m), d2 = |d|^2 (m^2) and rs = r_i + r_j (m).
+  struct Touch {
+    int e, j;
+    float dx, dy, dz, rj, rs, d2;
+    float* xe;
+  };
 #pragma omp parallel num_threads(threads) if (n > 4096)
   {
+  // The walk both passes make over slab c: every list entry of its spheres. A pair apart
+  // (|d| >= r_i + r_j, or the same centre) has its spring forgotten (part); a touching one is
+  // counted in `touching` and handed to pair(i, sphere i, touch).
+  auto walk_slab = [&](int c, std::int64_t& touching, auto&& pair) __attribute__((always_inline)) {
+    for (int i = CS[c], i1 = CS[c + 1]; i < i1; ++i) {
+      const int e0 = NS[i], e1 = NS[i + 1];
+      if (e0 == e1) continue;
+      const float ri = P[4 * i + 3];
+      const Own o{{P[4 * i], P[4 * i + 1], P[4 * i + 2]}, ri, {V[4 * i], V[4 * i + 1], V[4 * i + 2]}, V[4 * i + 3],
+                  ri * Vec3{W[4 * i], W[4 * i + 1], W[4 * i + 2]}};
+      for (int e = e0; e < e1; ++e) {
+        const int j = NB[e];
+        const float dx = o.p.x - P[4 * j], dy = o.p.y - P[4 * j + 1], dz = o.p.z - P[4 * j + 2];
+        const float rj = P[4 * j + 3];
+        const float rs = ri + rj;
+        const float d2 = dx * dx + dy * dy + dz * dz;
+        float* xe = XI + 3 * std::size_t(e);
+        if (d2 >= rs * rs || d2 <= 0.0f) {
+          part(e, xe);
+          continue;
+        }
+        ++touching;
+        pair(i, o, Touch{e, j, dx, dy, dz, rj, rs, d2, xe});
+      }
+    }
+  };
   if (simd_pairs && !ledger) {
   // pair pass, AVX2: the same walk; touching pairs are collected per thread into batches of
   // 8 and evaluated by the kernel (same results, contact_simd.hpp), then added to the sums in
@@ -101,42 +143,23 @@ void Simulation::Impl::contacts(float dt) {
 #pragma omp for schedule(dynamic, 1) reduction(+ : npairs)
   for (int c = parity; c < nchunks; c += 2) {
     bt.count = 0;
-    for (int i = CS[c], i1 = CS[c + 1]; i < i1; ++i) {
-      const int e0 = NS[i], e1 = NS[i + 1];
-      if (e0 == e1) continue;
-      const Vec3 pi{P[4 * i], P[4 * i + 1], P[4 * i + 2]};
-      const float ri = P[4 * i + 3];
-      const Vec3 ui{V[4 * i], V[4 * i + 1], V[4 * i + 2]};
-      const float invm_i = V[4 * i + 3];
-      const Vec3 rwi = ri * Vec3{W[4 * i], W[4 * i + 1], W[4 * i + 2]};
-      for (int e = e0; e < e1; ++e) {
-        const int j = NB[e];
-        const float dx = pi.x - P[4 * j], dy = pi.y - P[4 * j + 1], dz = pi.z - P[4 * j + 2];
-        const float rj = P[4 * j + 3];
-        const float rs = ri + rj;
-        const float d2 = dx * dx + dy * dy + dz * dz;
-        float* xe = XI + 3 * std::size_t(e);
-        if (d2 >= rs * rs || d2 <= 0.0f) {
-          part(e, xe);
-          continue;
-        }
-        ++npairs;
-        const int k = bt.count++;
-        const Vec3 du = ui - Vec3{V[4 * j], V[4 * j + 1], V[4 * j + 2]};
-        const Vec3 rw = rwi + rj * Vec3{W[4 * j], W[4 * j + 1], W[4 * j + 2]};
-        bt.dx[k] = dx, bt.dy[k] = dy, bt.dz[k] = dz, bt.d2[k] = d2, bt.rs[k] = rs;
-        bt.dux[k] = du.x, bt.duy[k] = du.y, bt.duz[k] = du.z;
-        bt.rwx[k] = rw.x, bt.rwy[k] = rw.y, bt.rwz[k] = rw.z;
-        bt.invm[k] = invm_i + V[4 * j + 3];
-        bt.newc[k] = first_law && TCH[e] == 0 ? 1.0f : 0.0f;  // first substep (ContactParams::new_contact)
-        TCH[e] = 1;
-        bt.xix[k] = xe[0], bt.xiy[k] = xe[1], bt.xiz[k] = xe[2];
-        bt.dmax[k] = DM[e];
-        bt.entry[k] = e;
-        bi[k] = i, bj[k] = j;
-        if (bt.count == simd::kPairLanes) flush();
-      }
-    }
+    walk_slab(c, npairs, [&](int i, const Own& o, const Touch& t) __attribute__((always_inline)) {
+      const int k = bt.count++;
+      const int j = t.j, e = t.e;
+      const Vec3 du = o.u - Vec3{V[4 * j], V[4 * j + 1], V[4 * j + 2]};
+      const Vec3 rw = o.rw + t.rj * Vec3{W[4 * j], W[4 * j + 1], W[4 * j + 2]};
+      bt.dx[k] = t.dx, bt.dy[k] = t.dy, bt.dz[k] = t.dz, bt.d2[k] = t.d2, bt.rs[k] = t.rs;
+      bt.dux[k] = du.x, bt.duy[k] = du.y, bt.duz[k] = du.z;
+      bt.rwx[k] = rw.x, bt.rwy[k] = rw.y, bt.rwz[k] = rw.z;
+      bt.invm[k] = o.invm + V[4 * j + 3];
+      bt.newc[k] = first_law && TCH[e] == 0 ? 1.0f : 0.0f;  // first substep (ContactParams::new_contact)
+      TCH[e] = 1;
+      bt.xix[k] = t.xe[0], bt.xiy[k] = t.xe[1], bt.xiz[k] = t.xe[2];
+      bt.dmax[k] = DM[e];
+      bt.entry[k] = e;
+      bi[k] = i, bj[k] = j;
+      if (bt.count == simd::kPairLanes) flush();
+    });
     if (bt.count > 0) flush();
   }
   }
@@ -145,41 +168,25 @@ void Simulation::Impl::contacts(float dt) {
   for (int parity = 0; parity < 2; ++parity) {
 #pragma omp for schedule(dynamic, 1) reduction(+ : npairs, led_n, led_f, led_u)
   for (int c = parity; c < nchunks; c += 2) {
-  for (int i = CS[c], i1 = CS[c + 1]; i < i1; ++i) {
-    const int e0 = NS[i], e1 = NS[i + 1];
-    if (e0 == e1) continue;
-    const Vec3 pi{P[4 * i], P[4 * i + 1], P[4 * i + 2]};
-    const float ri = P[4 * i + 3];
-    const Vec3 ui{V[4 * i], V[4 * i + 1], V[4 * i + 2]};
-    const float invm_i = V[4 * i + 3];
-    const Vec3 rwi = ri * Vec3{W[4 * i], W[4 * i + 1], W[4 * i + 2]};
-    float last_invm_j = -1.0f, last_cn = 0.0f;
-    for (int e = e0; e < e1; ++e) {
-      const int j = NB[e];
-      const float dx = pi.x - P[4 * j], dy = pi.y - P[4 * j + 1], dz = pi.z - P[4 * j + 2];
-      const float rj = P[4 * j + 3];
-      const float rs = ri + rj;
-      const float d2 = dx * dx + dy * dy + dz * dz;
-      float* xe = XI + 3 * std::size_t(e);
-      if (d2 >= rs * rs || d2 <= 0.0f) {
-        part(e, xe);
-        continue;
-      }
-      ++npairs;
-      const float inv = 1.0f / std::sqrt(d2);
-      const float dist = d2 * inv;
-      const Vec3 nrm{dx * inv, dy * inv, dz * inv};
+    // c_n = 2 zeta sqrt(k_n m_eff); granule beds repeat the same mass pair, so the last value
+    // is reused while the pair's inverse masses are the same
+    float last_invm_i = -1.0f, last_invm_j = -1.0f, last_cn = 0.0f;
+    walk_slab(c, npairs, [&](int i, const Own& o, const Touch& t) __attribute__((always_inline)) {
+      const int j = t.j, e = t.e;
+      float* xe = t.xe;
+      const float inv = 1.0f / std::sqrt(t.d2);
+      const float dist = t.d2 * inv;
+      const Vec3 nrm{t.dx * inv, t.dy * inv, t.dz * inv};
       const Vec3 uj{V[4 * j], V[4 * j + 1], V[4 * j + 2]};
-      const Vec3 rwj = rj * Vec3{W[4 * j], W[4 * j + 1], W[4 * j + 2]};
+      const Vec3 rwj = t.rj * Vec3{W[4 * j], W[4 * j + 1], W[4 * j + 2]};
       // contact-point velocity (physics_common.glsl); the spheres' velocities are the
       // bodies' predicted to this substep's time (`bodies`)
-      const Vec3 v = physics::pair_contact_velocity(ui, uj, nrm, rwi + rwj);
-      // c_n = 2 zeta sqrt(k_n m_eff); granule beds repeat the same mass pair, so the
-      // last value is reused when the partner's inverse mass is the same
+      const Vec3 v = physics::pair_contact_velocity(o.u, uj, nrm, o.rw + rwj);
       const float invm_j = V[4 * j + 3];
-      if (invm_j != last_invm_j) {
+      if (invm_j != last_invm_j || o.invm != last_invm_i) {
+        last_invm_i = o.invm;
         last_invm_j = invm_j;
-        last_cn = cn0 / std::sqrt(invm_i + invm_j);
+        last_cn = cn0 / std::sqrt(o.invm + invm_j);
       }
       const float cn = last_cn;
       Vec3 xi{xe[0], xe[1], xe[2]};  // zero for a new contact; carried over on rebuilds
@@ -187,14 +194,13 @@ void Simulation::Impl::contacts(float dt) {
       TCH[e] = 1;
       const float xi2_old = dot(xi, xi);
       const float dm_old = DM[e];
-      ContactForce cf = contact_force_h(cp, kn2, nrm, rs - dist, v, xi, DM[e]);
-      if (led) ledger_terms(kn, kn2, kt, rs - dist, dm_old, DM[e], nrm, v, dt, xi2_old, cf.f, cf.ft, xi, led_n, led_f, led_u);
+      ContactForce cf = contact_force_h(cp, kn2, nrm, t.rs - dist, v, xi, DM[e]);
+      if (led) ledger_terms(kn, kn2, kt, t.rs - dist, dm_old, DM[e], nrm, v, dt, xi2_old, cf.f, cf.ft, xi, led_n, led_f, led_u);
       xe[0] = xi.x;
       xe[1] = xi.y;
       xe[2] = xi.z;
       add_pair(i, j, from_vec3(cf.f), from_vec3(cross(nrm, cf.ft)));
-    }
-  }
+    });
   }
   }
   }  // scalar pair pass

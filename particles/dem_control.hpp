@@ -1,20 +1,23 @@
 // Host-side rules both DEM backends apply identically (particles/dem.cpp, the CPU reference;
-// particles/gpu/gl_simulation.cpp, the GL backend): parking a disabled body and the sleep
-// timer. The physics they share with the GL kernels is shaders/dem/physics_common.glsl
+// particles/gpu/gl_simulation.cpp, the GL backend): adding a granule or a shell (the checks
+// and the record pushed), parking a disabled body, the sleep timer and an asleep frame. The physics they share with the GL kernels is shaders/dem/physics_common.glsl
 // (particles/dem_physics.hpp).
 //
 // Not shared, and why:
 //   push_body   the CPU writes the body and its spheres in place into its sorted arrays (with
 //               the overlap guard's per-body values); the GL stages them for a later upload.
-//               Both write the same record: the fields of particles/fields.hpp.
+//               The body's record (the fields of particles/fields.hpp) is one function here,
+//               write_body_record; the spheres' placement is each backend's.
 //   integration the body stage is written twice: dem_bodies.cpp (SSE registers for granules,
 //               Vec3/Quat for shells) and shaders/dem/bodies.comp (vec3/vec4 quaternions), with
 //               the same formulas in the same order; the quaternion types differ between the
 //               two (Quat vs vec4), so it is outside physics_common.glsl's common subset.
 #pragma once
 
+#include <cmath>
 #include <cstdint>
 #include <string>
+#include <vector>
 
 #include "particles/dem.hpp"
 #include "particles/fields.hpp"
@@ -48,11 +51,100 @@ inline void update_sleep(const SimulationDef& d, float vmax, double dt_frame, do
   }
 }
 
+// The body record (particles/fields.hpp, SANDPATCH_BODY_FIELDS) of slot i of either backend's
+// body arrays (`B`: the CPU's BodyArrays, the GL's BodyStage), as push_body writes it: state
+// x (m), q (normalised here), v (m/s), w (rad/s); mass (kg) and invm (1/kg), inv_inertia
+// (1/(kg m^2), body frame); flags (BodyFlags); the ids of its spheres first .. first + count - 1;
+// group 0 (add_shell sets a shell's). The w of the vec4 fields and the forces are left as they are.
+template <class B>
+void write_body_record(B& b, std::size_t i, std::uint32_t flags, Vec3 x, Quat q, Vec3 v, Vec3 w, float mass, float invm,
+                       Vec3 inv_inertia, int first, int count) {
+  auto put = [i](std::vector<float>& a, Vec3 u) {
+    a[4 * i] = u.x;
+    a[4 * i + 1] = u.y;
+    a[4 * i + 2] = u.z;
+  };
+  put(b.pos, x);
+  const Quat qn = normalized(q);
+  b.quat[4 * i] = qn.x;
+  b.quat[4 * i + 1] = qn.y;
+  b.quat[4 * i + 2] = qn.z;
+  b.quat[4 * i + 3] = qn.w;
+  put(b.vel, v);
+  put(b.omega, w);
+  b.mass[4 * i] = mass;
+  b.mass[4 * i + 1] = invm;
+  put(b.inv_inertia, inv_inertia);
+  b.flags[i] = flags;
+  b.first[i] = first;
+  b.count[i] = count;
+  b.group[i] = 0;
+}
+
+// wake() of either backend (`Impl`: its state): awake, with its sleep timer reset.
+template <class Impl>
+void wake_up(Impl& s) {
+  s.asleep = false;
+  s.below_time = 0;
+}
+
+// A frame that finds the simulation asleep. Untouched by a moving kinematic shell (the
+// caller has moved the kinematic shells), only the clock advances and the step reports slept
+// with no substeps: returns true, the frame is done. Touched, it wakes with its sleep timer
+// reset and returns false: the frame is stepped. `Impl` is either backend's state.
+template <class Impl>
+bool asleep_frame(Impl& s, double dt_frame, bool touched) {
+  if (!touched) {
+    s.time += dt_frame;
+    s.stats.slept = true;
+    s.stats.substeps = 0;
+    return true;
+  }
+  wake_up(s);
+  return false;
+}
+
+// add_granule of either backend (`Impl`: its nb bodies and np spheres of def's capacities,
+// its GranuleShape and push_body): a dynamic body of the shape's 4 spheres at position x,
+// orientation q, velocity v (m/s) and angular velocity w (rad/s). Errors name the capacity
+// to raise, or the non-finite input.
+template <class Impl>
+Result<BodyId> push_granule(Impl& s, Vec3 x, Quat q, Vec3 v, Vec3 w) {
+  if (s.nb + 1 > s.def.max_bodies)
+    return Error{"", "SimulationDef.max_bodies", format_number(s.def.max_bodies), "is full: raise max_bodies",
+                 "add_granule needs 1 more body"};
+  if (s.np + 4 > s.def.max_particles)
+    return Error{"", "SimulationDef.max_particles", format_number(s.def.max_particles), "is full: raise max_particles",
+                 "add_granule needs 4 more particles"};
+  if (!std::isfinite(x.x + x.y + x.z + q.x + q.y + q.z + q.w + v.x + v.y + v.z + w.x + w.y + w.z))
+    return Error{"", "add_granule", "non-finite", "position, orientation and velocities must be finite", ""};
+  const GranuleShape& g = s.shape;
+  float r = g.radius;
+  float inv_i = 1.0f / g.inertia;
+  return BodyId{s.push_body(kBodyGranule | kBodyDynamic, x, q, v, w, g.mass, 1.0f / g.mass, {inv_i, inv_i, inv_i},
+                            g.offsets.data(), &r, 4, true)};
+}
+
+// The body of shell `sh` as planned by plan_shell (checked, capacity included), pushed by
+// either backend's push_body; returns its index.
+template <class Impl>
+int push_shell(Impl& s, const ShellDef& sh, const ShellPlan& p) {
+  return s.push_body(p.flags, sh.position, sh.orientation, sh.velocity, sh.angular_velocity,
+                     sh.motion == MotionType::Dynamic ? sh.mass : 0.0f, p.inv_mass, p.inv_inertia, sh.offsets.data(),
+                     sh.radii.data(), p.count, p.one_radius);
+}
+
+// Whether `index` names one of the simulation's `bodies` bodies; the error names `call`.body.
+inline Status check_body_index(int index, int bodies, const std::string& call) {
+  if (index < 0 || index >= bodies)
+    return Error{"", call + ".body", std::to_string(index), "must be a body of this simulation", ""};
+  return Ok{};
+}
+
 // Whether body `index` (of `bodies`, with `flags`) may take collision group `group`
 // (set_body_group): a shell of this simulation, a group >= 0 (0: none).
 inline Status check_body_group(int index, int bodies, std::uint32_t flags, std::int32_t group) {
-  if (index < 0 || index >= bodies)
-    return Error{"", "set_body_group.body", std::to_string(index), "must be a body of this simulation", ""};
+  if (Status st = check_body_index(index, bodies, "set_body_group"); !st) return st;
   if (group < 0)
     return Error{"", "set_body_group.group", std::to_string(group), "must be >= 0 (0: no collision group)", ""};
   if (flags & kBodyGranule)

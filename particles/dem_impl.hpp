@@ -9,7 +9,8 @@
 //   dem_boundaries.cpp  boundary planes and terrain (shaders/dem/physics_common.glsl)
 //   dem_guard.cpp       step-size and overlap guards, contact timing (velocity predictor)
 // The physics shared with the GL kernels is particles/dem_physics.hpp; the host-side rules
-// shared with the GL backend (parking, sleep timer) are particles/dem_control.hpp.
+// shared with the GL backend (adding bodies, the body record, parking, sleep) are
+// particles/dem_control.hpp.
 #pragma once
 
 #include <xmmintrin.h>

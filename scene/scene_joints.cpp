@@ -26,6 +26,18 @@ constexpr double kMaxSpeed = 1e4;        // rad/s or m/s: velocity targets, serv
 constexpr double kMaxForce = 1e9;        // N m or N: a motor's most
 constexpr double kMaxSpring = 1e12;      // N/m or N m/rad, N s/m or N m s/rad
 
+// The phases at `key` of `o` (a joint's motor, a vehicle's throttle or steering): an array
+// of at most kMaxMotorPhases elements, each given to `each(element, its path)`.
+template <class F>
+void for_each_phase(Ctx& c, Obj& o, const char* key, F&& each) {
+  const json* pj = o.get(key);
+  if (!pj) return;
+  if (pj->is_array() && pj->size() > std::size_t(kMaxMotorPhases))
+    c.error(o.at(key), std::to_string(pj->size()) + " phases", "at most " + std::to_string(kMaxMotorPhases) + " phases");
+  else
+    for_each_element(c, *pj, o.at(key), each);
+}
+
 // One motor phase of a joint of type `type` (docs/scene-format.md "joints").
 MotorPhaseDef parse_phase(Ctx& c, const json& j, const std::string& path, JointType type) {
   MotorPhaseDef m;
@@ -92,13 +104,7 @@ JointDef parse_joint(Ctx& c, const json& j, const std::string& path) {
     sp.number("damping", d.spring_damping, closed(0.0, kMaxSpring, hinge ? "N m s/rad" : "N s/m"));
     sp.finish();
   }
-  if (const json* mj = o.get("motor")) {
-    if (mj->is_array() && mj->size() > std::size_t(kMaxMotorPhases))
-      c.error(o.at("motor"), std::to_string(mj->size()) + " phases", "at most " + std::to_string(kMaxMotorPhases) + " phases");
-    else
-      for_each_element(c, *mj, o.at("motor"),
-                       [&](const json& e, const std::string& p) { d.motor.push_back(parse_phase(c, e, p, d.type)); });
-  }
+  for_each_phase(c, o, "motor", [&](const json& e, const std::string& p) { d.motor.push_back(parse_phase(c, e, p, d.type)); });
   o.finish();
   return d;
 }
@@ -177,33 +183,23 @@ VehicleSceneDef parse_vehicle(Ctx& c, const json& j, const std::string& path) {
                             {"suspension_travel", &v.suspension_travel}})
     o.number(key, *field, any);
   o.enumeration("drive", v.drive, kDriveWheels);
-  if (const json* tj = o.get("throttle")) {
-    if (tj->is_array() && tj->size() > std::size_t(kMaxMotorPhases))
-      c.error(o.at("throttle"), std::to_string(tj->size()) + " phases", "at most " + std::to_string(kMaxMotorPhases) + " phases");
-    else
-      for_each_element(c, *tj, o.at("throttle"), [&](const json& e, const std::string& pp) {
-        ThrottlePhaseDef t;
-        Obj po(c, e, pp);
-        read_span(c, po, t.from, t.until);
-        po.number_req("wheel_speed", t.wheel_speed, closed(-1e4, 1e4, "rad/s"));
-        po.number_req("max_torque", t.max_torque, closed(0.0, 1e9, "N m"));
-        po.finish();
-        s.throttle.push_back(t);
-      });
-  }
-  if (const json* sj = o.get("steering")) {
-    if (sj->is_array() && sj->size() > std::size_t(kMaxMotorPhases))
-      c.error(o.at("steering"), std::to_string(sj->size()) + " phases", "at most " + std::to_string(kMaxMotorPhases) + " phases");
-    else
-      for_each_element(c, *sj, o.at("steering"), [&](const json& e, const std::string& pp) {
-        SteeringPhaseDef t;
-        Obj po(c, e, pp);
-        read_span(c, po, t.from, t.until);
-        po.number_req("angle", t.angle, closed(-1.2, 1.2, "rad"));
-        po.finish();
-        s.steering.push_back(t);
-      });
-  }
+  for_each_phase(c, o, "throttle", [&](const json& e, const std::string& pp) {
+    ThrottlePhaseDef t;
+    Obj po(c, e, pp);
+    read_span(c, po, t.from, t.until);
+    po.number_req("wheel_speed", t.wheel_speed, closed(-1e4, 1e4, "rad/s"));
+    po.number_req("max_torque", t.max_torque, closed(0.0, 1e9, "N m"));
+    po.finish();
+    s.throttle.push_back(t);
+  });
+  for_each_phase(c, o, "steering", [&](const json& e, const std::string& pp) {
+    SteeringPhaseDef t;
+    Obj po(c, e, pp);
+    read_span(c, po, t.from, t.until);
+    po.number_req("angle", t.angle, closed(-1.2, 1.2, "rad"));
+    po.finish();
+    s.steering.push_back(t);
+  });
   o.finish();
   if (o.valid()) {
     for (Error& e : check_vehicle(v, path + ".")) c.error(e.field, e.value, e.allowed, e.detail);

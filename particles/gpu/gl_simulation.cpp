@@ -212,32 +212,13 @@ Status GlSimulation::reset(const SimulationDef& def, const char* capacity_prefix
   return impl_->configure(def, capacity_prefix);
 }
 
-Result<BodyId> GlSimulation::add_granule(Vec3 x, Quat q, Vec3 v, Vec3 w) {
-  Impl& s = *impl_;
-  if (s.nb + 1 > s.def.max_bodies)
-    return Error{"", "SimulationDef.max_bodies", format_number(s.def.max_bodies), "is full: raise max_bodies",
-                 "add_granule needs 1 more body"};
-  if (s.np + 4 > s.def.max_particles)
-    return Error{"", "SimulationDef.max_particles", format_number(s.def.max_particles), "is full: raise max_particles",
-                 "add_granule needs 4 more particles"};
-  if (!std::isfinite(x.x + x.y + x.z + q.x + q.y + q.z + q.w + v.x + v.y + v.z + w.x + w.y + w.z))
-    return Error{"", "add_granule", "non-finite", "position, orientation and velocities must be finite", ""};
-  const GranuleShape& g = s.shape;
-  float r = g.radius;
-  float inv_i = 1.0f / g.inertia;
-  return BodyId{s.push_body(kBodyGranule | kBodyDynamic, x, q, v, w, g.mass, 1.0f / g.mass, {inv_i, inv_i, inv_i},
-                            g.offsets.data(), &r, 4, true)};
-}
+Result<BodyId> GlSimulation::add_granule(Vec3 x, Quat q, Vec3 v, Vec3 w) { return push_granule(*impl_, x, q, v, w); }
 
 Result<BodyId> GlSimulation::add_shell(const ShellDef& sh) {
   Impl& s = *impl_;
   auto plan = plan_shell(sh, s.nb, s.def.max_bodies, s.np, s.def.max_particles);
   if (!plan) return plan.errors();
-  const int count = plan->count;
-  const bool one = plan->one_radius;
-  const float rmax = plan->max_radius, arm = plan->arm, invm = plan->inv_mass;
-  const std::uint32_t flags = plan->flags;
-  const Vec3 iI = plan->inv_inertia;
+  const float arm = plan->arm;
   if (sh.motion == MotionType::Dynamic) {
     // the guard: keep the lightest point mass in the capacity-1 CPU simulation
     const float imin = std::min({sh.inertia.x, sh.inertia.y, sh.inertia.z});
@@ -256,14 +237,12 @@ Result<BodyId> GlSimulation::add_shell(const ShellDef& sh) {
       s.guard_point_mass = pm;
     }
   }
-  if (rmax > s.r_max) {  // bigger cells: fewer of them, the buffers still fit
-    s.r_max = rmax;
+  if (plan->max_radius > s.r_max) {  // bigger cells: fewer of them, the buffers still fit
+    s.r_max = plan->max_radius;
     s.size_grid();
     s.set_static_uniforms();
   }
-  const int i = s.push_body(flags, sh.position, sh.orientation, sh.velocity, sh.angular_velocity,
-                            sh.motion == MotionType::Dynamic ? sh.mass : 0.0f, invm, iI, sh.offsets.data(),
-                            sh.radii.data(), count, one);
+  const int i = push_shell(s, sh, *plan);
   s.bst.group[std::size_t(i - s.nb_gpu)] = sh.group;
   s.host_group[std::size_t(i)] = sh.group;
   if (sh.motion == MotionType::Kinematic) s.has_moving_kinematic = true;
@@ -288,8 +267,7 @@ Status GlSimulation::set_kinematic_velocity(BodyId id, Vec3 v, Vec3 w) {
 
 Status GlSimulation::set_body_state(BodyId id, Vec3 x, Quat q, Vec3 v, Vec3 w) {
   Impl& s = *impl_;
-  if (id.index < 0 || id.index >= s.nb)
-    return Error{"", "set_body_state.body", std::to_string(id.index), "must be a body of this simulation", ""};
+  if (Status st = check_body_index(id.index, s.nb, "set_body_state"); !st) return st;
   if (s.body_flags(id.index) & kBodyParked)
     return Error{"", "set_body_state.body", std::to_string(id.index), "is disabled; enable it first", ""};
   const Quat qn = normalized(q);
@@ -305,8 +283,7 @@ Status GlSimulation::set_body_state(BodyId id, Vec3 x, Quat q, Vec3 v, Vec3 w) {
 
 Status GlSimulation::set_body_enabled(BodyId id, bool enabled) {
   Impl& s = *impl_;
-  if (id.index < 0 || id.index >= s.nb)
-    return Error{"", "set_body_enabled.body", std::to_string(id.index), "must be a body of this simulation", ""};
+  if (Status st = check_body_index(id.index, s.nb, "set_body_enabled"); !st) return st;
   std::uint32_t f = s.body_flags(id.index);
   const bool parked = f & kBodyParked;
   if (enabled == !parked) return Ok{};
@@ -394,14 +371,7 @@ Status GlSimulation::step(double dt_frame) {
       }
       glUseProgram(0);
     }
-    if (!touch) {
-      s.time += dt_frame;
-      s.stats.slept = true;
-      s.stats.substeps = 0;
-      return Ok{};
-    }
-    s.asleep = false;
-    s.below_time = 0;
+    if (asleep_frame(s, dt_frame, touch)) return Ok{};
   }
   if (s.np_gpu == 0) {
     s.time += dt_frame;
@@ -460,10 +430,7 @@ Status GlSimulation::step(double dt_frame) {
 }
 
 bool GlSimulation::asleep() const { return impl_->asleep; }
-void GlSimulation::wake() {
-  impl_->asleep = false;
-  impl_->below_time = 0;
-}
+void GlSimulation::wake() { wake_up(*impl_); }
 int GlSimulation::body_count() const { return impl_->nb; }
 int GlSimulation::particle_count() const { return impl_->np; }
 int GlSimulation::body_particle_count(BodyId b) const {

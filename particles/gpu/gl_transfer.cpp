@@ -5,6 +5,7 @@
 #include <cstring>
 #include <limits>
 
+#include "particles/dem_control.hpp"
 #include "particles/gpu/gl_impl.hpp"
 
 namespace sandpatch::gpu {
@@ -95,23 +96,10 @@ int GlSimulation::Impl::push_body(std::uint32_t flags, Vec3 x, Quat q, Vec3 v, V
   const int i = nb++;
   const std::size_t bi = std::size_t(i - nb_gpu);
   bst.push_zero();
-  put3(bst.pos, bi, x);
-  Quat qn = normalized(q);
-  bst.quat[4 * bi] = qn.x;
-  bst.quat[4 * bi + 1] = qn.y;
-  bst.quat[4 * bi + 2] = qn.z;
-  bst.quat[4 * bi + 3] = qn.w;
-  put3(bst.vel, bi, v);
-  put3(bst.omega, bi, w);
-  bst.mass[4 * bi] = mass;
-  bst.mass[4 * bi + 1] = invm;
-  put3(bst.inv_inertia, bi, inv_inertia);
-  bst.flags[bi] = flags;
+  write_body_record(bst, bi, flags, x, q, v, w, mass, invm, inv_inertia, np, count);  // dem_control.hpp
   host_flags.push_back(flags);
   host_count.push_back(count);
   host_group.push_back(0);  // add_shell sets a shell's
-  bst.first[bi] = np;
-  bst.count[bi] = count;
   for (int k = 0; k < count; ++k) {
     const int s = np++;
     const std::size_t si = std::size_t(s - np_gpu);
@@ -121,8 +109,7 @@ int GlSimulation::Impl::push_body(std::uint32_t flags, Vec3 x, Quat q, Vec3 v, V
     put3(pst.offset, si, offsets[k]);
     pst.pos[4 * si + 3] = one_radius ? radii[0] : radii[k];
   }
-  asleep = false;
-  below_time = 0;
+  wake_up(*this);
   return i;
 }
 
