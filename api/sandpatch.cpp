@@ -613,6 +613,14 @@ Status Terrain::step(double dt, int substeps) {
   return Ok{};
 }
 
+Status Terrain::prepare(double dt) {
+  Checker c{"prepare.", "", {}};
+  c.number("dt", dt, 0.0, 0.1, true, false, "s");
+  if (!c.errs.empty()) return c.errs;
+  if (core::Status s = impl_->world->prepare(dt); !s) return convert(s.errors(), "");
+  return Ok{};
+}
+
 double Terrain::time() const { return impl_->world->time(); }
 
 Status Terrain::request_patch(double x0, double z0, double x1, double z1) {

@@ -177,6 +177,9 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
     const fs::path p = !opt.csv.empty() ? fs::path(opt.csv) : out_dir / scene.outputs.csv;
     if (Status s = csv.open(p); !s) return fail(ExitCode::BadInput, "outputs", s.message());
   }
+  // Start-up's last part: the patches bodies need at once are made before the first frame
+  // (World::prepare; report.json `prepare_ms`), as a game would while loading.
+  if (Status s = world.prepare(dt); !s) return fail(ExitCode::RuntimeFailure, "prepare", s.message());
   const auto t_start = Clock::now();
   if (Status s = write_outputs(0, 0.0); !s) return fail(ExitCode::RuntimeFailure, "outputs", s.message());
   for (long long frame = 0; frame < frames; ++frame) {

@@ -195,6 +195,26 @@ Status TerrainManager::before_bodies(double time, double dt, Profile& profile) {
   return Ok{};
 }
 
+Status TerrainManager::prepare(double time, double dt, Profile& profile) {
+  Impl& I = *impl_;
+  I.current();
+  I.now = time;
+  // Each round: a request planned now and promoted; a patch a body engages (activate's
+  // finish_due) is finished in the same round. At most one round a slot.
+  for (std::size_t round = 0; round < I.slots.size(); ++round) {
+    I.work = {};
+    {
+      auto timer = profile.time(Stage::Lod);
+      if (Status st = I.plan(time); !st) return st;
+    }
+    auto timer = profile.time(Stage::Activation);
+    if (Status st = I.activate(time, dt); !st) return st;
+    if (I.work.urgent_fills == 0) break;
+  }
+  I.work = {};
+  return Ok{};
+}
+
 Status TerrainManager::after_bodies(double time, double dt, Profile& profile) {
   Impl& I = *impl_;
   I.current();

@@ -159,6 +159,10 @@ class TerrainManager {
   Status before_bodies(double time, double dt, Profile& profile);
   // After the Bullet step: sleep, demotion.
   Status after_bodies(double time, double dt, Profile& profile);
+  // Before the first frame (start-up, e.g. while a game loads a level): the lod and activation
+  // stages at `time`, repeated while a body needs a patch at once, so the patches bodies rest
+  // on or are about to meet are ready and the first frames do not promote them. Optional.
+  Status prepare(double time, double dt, Profile& profile);
   // Requests a patch over the world rectangle [x0, x1] × [z0, z1] now, whether or not a body
   // is coming (e.g. a digging tool about to act); it is queued like a predicted contact.
   void request_patch(double x0, double z0, double x1, double z1, double time);

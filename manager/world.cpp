@@ -254,6 +254,39 @@ Status World::check_bodies(const char* stage) {
   return Ok{};
 }
 
+// The spawn stage: bodies scheduled for `t` (s) or before enter the Bullet world.
+Status World::spawn_due(double t) {
+  if (entries_.empty()) return Ok{};
+  auto timer = profile_.time(Stage::Spawn);
+  for (auto it = pending_.begin(); it != pending_.end();) {
+    Entry& e = entries_[it->first];
+    if (e.spawn_time > t + 1e-9) {
+      ++it;
+      continue;
+    }
+    auto id = bullet_->add_body(it->second);
+    if (!id) return fail("spawn", id.errors());
+    e.id = *id;
+    enter_kinematic(it->first, it->second);
+    it = pending_.erase(it);
+  }
+  return Ok{};
+}
+
+Status World::prepare(double dt) {
+  if (!(dt > 0) || !std::isfinite(dt)) return Error{"", "prepare", "dt = " + format_number(dt), "dt must be finite and > 0 (s)"};
+  if (prepared_ || steps_ > 0) return Ok{};
+  prepared_ = true;
+  const auto t0 = Clock::now();
+  const double t = time();
+  if (Status s = spawn_due(t); !s) return s;
+  make_due_joints();
+  if (manager_)
+    if (Status s = manager_->prepare(t, dt, profile_); !s) return fail("activation", s);
+  prepare_ms_ = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+  return Ok{};
+}
+
 Status World::step(double dt, int substeps) {
   if (!(dt > 0) || !std::isfinite(dt) || substeps < 1)
     return Error{"", "step", "dt = " + format_number(dt) + ", substeps = " + std::to_string(substeps),
@@ -270,21 +303,7 @@ Status World::step(double dt, int substeps) {
   for (int k = 0; k < int(Stage::Count); ++k) stage0[k] = profile_.timer(Stage(k)).total_ms;
   bool conversion = false;
 
-  if (!entries_.empty()) {
-    auto timer = profile_.time(Stage::Spawn);
-    for (auto it = pending_.begin(); it != pending_.end();) {
-      Entry& e = entries_[it->first];
-      if (e.spawn_time > t + 1e-9) {
-        ++it;
-        continue;
-      }
-      auto id = bullet_->add_body(it->second);
-      if (!id) return fail("spawn", id.errors());
-      e.id = *id;
-      enter_kinematic(it->first, it->second);
-      it = pending_.erase(it);
-    }
-  }
+  if (Status s = spawn_due(t); !s) return s;
   make_due_joints();
   drive_motors(t);
   drive_kinematic(t, dt);  // before the lod stage: contact prediction sees the prescribed velocities
@@ -395,6 +414,7 @@ nlohmann::ordered_json World::report() const {
   ojson r;
   r["simulated_s"] = time();
   r["steps"] = steps_;
+  r["prepare_ms"] = prepare_ms_;  // start-up before the first frame (prepare), not a frame; its lod and activation time are in `stages`
   r["stages"] = profile_.to_json();
 
   // Frame times (the step only) and stutter: the longest frame in which a patch was

@@ -229,6 +229,12 @@ class World {
   // One frame of dt seconds (dt > 0, substeps >= 1): the stages above. On an error the frame
   // is abandoned and failed_stage() names where.
   Status step(double dt, int substeps = 1);
+  // Start-up before the first step (optional; e.g. while a level loads): bodies due now enter,
+  // and the patches that bodies rest on or meet within the first frames are promoted whole
+  // now (TerrainManager::prepare) instead of in the first frames. Its wall time is
+  // prepare_ms(); it is not a frame. Once, before step(): later calls do nothing.
+  Status prepare(double dt);
+  double prepare_ms() const { return prepare_ms_; }
   // Every live patch back into heightfield now (the final terrain of a run, a save).
   Status demote_all();
   const char* failed_stage() const { return failed_stage_; }
@@ -288,6 +294,7 @@ class World {
   void accumulate(RigidBodyId id, const Eigen::Vector3f& force, const Eigen::Vector3f& torque);
   void apply_scene_loads(double t);
 
+  Status spawn_due(double t);
   Status fail(const char* stage, Status s);
   std::size_t entry_of(RigidBodyId id) const;  // entries_.size() when none
   Status check_dynamic(RigidBodyId id) const;
@@ -337,6 +344,8 @@ class World {
   std::vector<double> awake_ms_;       // ring of the last kFrameWindow steps with a patch awake
   long long awake_frames_ = 0;
   double budget_ms_ = std::numeric_limits<double>::infinity();  // of the last frame
+  double prepare_ms_ = 0;  // ms, the wall time of prepare()
+  bool prepared_ = false;
   long long over_budget_ = 0;          // frames longer than their budget
   double max_over_budget_ = 0;         // the longest frame / its budget
   int peak_granules_ = 0;

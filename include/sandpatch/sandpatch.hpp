@@ -568,6 +568,10 @@ class SANDPATCH_API Terrain {
   // rules); the DEM substeps itself below its critical step. A non-finite body state is an
   // error naming the body.
   Status step(double dt, int substeps = 1);
+  // Optional, once, before the first step() (e.g. while the level loads), with the dt the
+  // steps will use: the patches that bodies rest on or meet within the first frames are
+  // promoted whole now, so the first frames do not pay for them. Later calls do nothing.
+  Status prepare(double dt);
   double time() const;                         // s, simulated so far
   // Asks for a patch over the world rectangle [x0, x1] × [z0, z1] now (e.g. a digging tool).
   Status request_patch(double x0, double z0, double x1, double z1);

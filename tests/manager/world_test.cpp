@@ -72,6 +72,40 @@ TEST(World, NonFiniteBodyStopsTheStepNamingItAndTheStage) {
   EXPECT_NE(s.message().find("bodies stage"), std::string::npos) << s.message();
 }
 
+// A ball resting on the sand at the start: prepare() makes its patch whole before the first
+// frame, so frame 0 does no conversion work (without it, frame 0 fills the patch at once),
+// the ball does not move during prepare(), and a later prepare() does nothing.
+TEST(World, PrepareMakesThePatchesNeededAtOnceBeforeTheFirstFrame) {
+  for (const bool prepare : {false, true}) {
+    SCOPED_TRACE(prepare ? "prepare" : "no prepare");
+    auto w = flat_world(true);
+    auto id = w->add_body(test::sphere_body(0.1f, 1.0f, {4.0, 1.1, 4.0}));  // resting on y = 1 m
+    ASSERT_TRUE(id.ok());
+    const Eigen::Vector3f before = w->bullet().state(*id).position;
+    if (prepare) {
+      ASSERT_TRUE(w->prepare(1.0 / 60.0).ok());
+      EXPECT_GT(w->manager()->granules(), 0) << "the ball's patch is made before the first frame";
+      EXPECT_EQ((w->bullet().state(*id).position - before).norm(), 0.0f);
+      EXPECT_GT(w->prepare_ms(), 0.0);
+      const int granules = w->manager()->granules();
+      ASSERT_TRUE(w->prepare(1.0 / 60.0).ok());  // once only
+      EXPECT_EQ(w->manager()->granules(), granules);
+    }
+    ASSERT_TRUE(w->step(1.0 / 60.0).ok());
+    const auto& work = w->manager()->last_frame_work();
+    if (prepare) {
+      EXPECT_EQ(work.conversion_parts, 0);
+      EXPECT_EQ(work.urgent_fills, 0);
+    } else {
+      EXPECT_GT(work.urgent_fills, 0) << "without prepare() the first frame fills the ball's patch";
+    }
+    EXPECT_GT(work.patches_stepped, 0);
+  }
+  auto w = flat_world(true);
+  EXPECT_FALSE(w->prepare(0.0).ok());
+  EXPECT_FALSE(w->prepare(std::numeric_limits<double>::quiet_NaN()).ok());
+}
+
 // With patches a removed body is gone at once to callers and leaves the Bullet world in the
 // next step; the report and the hash no longer see it.
 TEST(World, RemovedBodyLeavesAfterTheNextStep) {
@@ -134,6 +168,7 @@ TEST(World, ApiAndSceneRunGiveTheSameHash) {
   b.mass = 5.0;
   b.position = {2.0, 1.3, 2.0};
   ASSERT_TRUE(terrain->add_body(b).ok());
+  ASSERT_TRUE(terrain->prepare(scene->simulation.dt).ok());  // as `sandpatch run` does before its first frame
   for (int k = 0; k < 30; ++k) ASSERT_TRUE(terrain->step(scene->simulation.dt).ok());
   ASSERT_TRUE(terrain->demote_all().ok());
   char hex[17];
