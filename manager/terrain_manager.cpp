@@ -210,10 +210,13 @@ bool TerrainManager::soil_force(RigidBodyId body, Eigen::Vector3f* force, Eigen:
 
 double TerrainManager::budget_ms(double dt) const { return impl_->budget_ms(dt); }
 
-void TerrainManager::set_planned_path(RigidBodyId body, std::vector<PathPose> path) {
+void TerrainManager::set_planned_path(RigidBodyId body, std::vector<PathPose> path, bool extrapolated) {
   const std::int64_t key = manager_detail::body_key(body);
-  if (path.empty()) impl_->paths.erase(key);
+  const bool has = !path.empty();
+  if (!has) impl_->paths.erase(key);
   else impl_->paths[key] = std::move(path);
+  if (extrapolated && has) impl_->extrapolated.insert(key);
+  else impl_->extrapolated.erase(key);
 }
 
 void TerrainManager::set_camera(const Eigen::Vector3d& position) { impl_->camera = position; }
@@ -494,6 +497,7 @@ nlohmann::ordered_json TerrainManager::report() const {
     ojson pp = ojson::array();
     for (const auto& [key, l] : I.path_log)
       pp.push_back({{"body", l.name},
+                    {"path", l.extrapolated ? "extrapolated" : "keyframes"},
                     {"asked_frames", l.asked_frames},
                     {"too_big_frames", l.too_big_frames},
                     {"last_request_m", {l.last.x0, l.last.z0, l.last.x1, l.last.z1}},

@@ -167,11 +167,13 @@ class TerrainManager {
   // over the stretch of the path that works the ground, instead of predicting the body's
   // contacts ballistically, so the granules it carries never cross a patch's edge
   // (docs/manager.md "Tools on a planned path"). An empty path forgets the body's.
+  // `extrapolated`: the path is a game-driven tool's motion held for lod.horizon, handed
+  // over again every frame (World look_ahead), not keyframes known ahead.
   struct PathPose {
     double t = 0;
     Eigen::Vector3d lo = Eigen::Vector3d::Zero(), hi = Eigen::Vector3d::Zero();
   };
-  void set_planned_path(RigidBodyId body, std::vector<PathPose> path);
+  void set_planned_path(RigidBodyId body, std::vector<PathPose> path, bool extrapolated = false);
   // Moves the camera the scale bands are measured from (m, world); patches already live keep
   // their scale.
   void set_camera(const Eigen::Vector3d& position);

@@ -284,8 +284,13 @@ struct TerrainManager::Impl {
   // Planned paths (body_key -> bounds over time) and what planning made of them (the report's
   // planned_paths).
   std::unordered_map<std::int64_t, std::vector<TerrainManager::PathPose>> paths;
+  // Bodies whose path is extrapolated from the game's motion, frame by frame (World
+  // look_ahead), not keyframed: a stretch too big for a slot in one frame is followed
+  // ballistically in that frame only (a keyframed path's is for the rest of the path).
+  std::unordered_set<std::int64_t> extrapolated;
   struct PathLog {
     std::string name;
+    bool extrapolated = false;    // the path is the game's motion held for lod.horizon
     long long asked_frames = 0;   // frames its stretch was not covered by a live patch (asked for)
     long long too_big_frames = 0;  // frames its stretch needed more granules than a slot holds
     PatchRequest last;            // the last stretch asked for (m, world, apron included)

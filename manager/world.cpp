@@ -43,6 +43,7 @@ Status World::enable_patches(const TerrainManagerDef& def) {
   if (!m) return m.errors();
   manager_ = std::move(*m);
   follow_apron_ = def.lod.apron;
+  look_ahead_s_ = def.lod.horizon;
   return Ok{};
 }
 
