@@ -32,6 +32,7 @@
 #include <nlohmann/json.hpp>
 #include <string>
 #include <map>
+#include <set>
 #include <unordered_map>
 #include <vector>
 
@@ -350,6 +351,7 @@ class World {
   double follow_apron_ = 0;            // m, the manager's lod.apron
   double look_ahead_s_ = 0;            // s, the manager's lod.horizon: how far a game-driven tool's motion is extrapolated
   std::map<std::string, double> too_fast_;
+  std::set<std::pair<int, int>> over_follow_;  // bodies (index, generation) over that speed in the last frame
 };
 
 }  // namespace sandpatch

@@ -280,7 +280,8 @@ TEST(ApiKinematic, PlatePressIsTheSameWhateverTheThreads) {
 
 // A tool driven into a patch faster than its granules can be stopped within 2 granule radii
 // (2 r sqrt(k_n / m_pt) = 19.3 m/s for these 5 cm granules) is reported in the report's
-// tools_too_fast with its speed and the limit, not silently let through.
+// tools_too_fast and by an event (EventKind::TooFastForGranules) with its speed and the limit,
+// not silently let through.
 TEST(ApiKinematic, ToolTooFastForThePatchIsReported) {
   auto t = sp::Terrain::create(sand_def());
   auto h = t->add_body(box("rammer", sp::BodyMotion::Kinematic, {0.25, 0.05, 0.25}, {2, 1.2, 2}));
@@ -291,6 +292,16 @@ TEST(ApiKinematic, ToolTooFastForThePatchIsReported) {
   ASSERT_NE(at, std::string::npos) << r;
   EXPECT_NE(r.find("\"rammer\"", at), std::string::npos);
   EXPECT_NE(r.find("\"limit_m_s\"", at), std::string::npos);
+  // and an event, once as it went over, with its speed and the limit
+  int n = 0;
+  for (const sp::Event& e : t->poll_events()) {
+    if (e.kind != sp::EventKind::TooFastForGranules) continue;
+    ++n;
+    EXPECT_EQ(e.body, "rammer");
+    EXPECT_NEAR(e.value, 25.0, 1e-3);
+    EXPECT_NEAR(e.limit, 19.3, 0.1);
+  }
+  EXPECT_EQ(n, 1);
 }
 
 // Bad input is refused naming the field: keyframes with NaN or infinite values, times not
@@ -391,4 +402,26 @@ TEST(ApiKinematic, AGameDrivenToolHasItsPatchReadyBeforeItMeetsTheSand) {
   EXPECT_LT(r.ready_step, r.contact_step);
   EXPECT_EQ(r.promoted_by_contact, 1);
   EXPECT_TRUE(r.carried_at_contact);
+}
+
+// A game-driven tool faster than the patches can follow (more than lod_apron in one step:
+// 0.3 m × 60 = 18 m/s here) is reported, naming it, with its speed and the speed that can be
+// followed: an event (EventKind::TooFastToFollow, once as it goes over) and the report's
+// warnings; the same tool at 15 m/s is not.
+TEST(ApiKinematic, AGameDrivenToolTooFastToFollowIsReported) {
+  const DriveResult fast = drive_into_sand({1.0, 1.35, 2.0}, {20.0f, -0.5f, 0.0f}, 30);
+  int n = 0;
+  for (const sp::Event& e : fast.events) {
+    if (e.kind != sp::EventKind::TooFastToFollow) continue;
+    ++n;
+    EXPECT_EQ(e.body, "bucket");
+    EXPECT_NEAR(e.value, std::hypot(20.0, 0.5), 1e-3);  // m/s
+    EXPECT_NEAR(e.limit, 0.3 * 60.0, 1e-9);              // m/s: lod_apron / dt
+    EXPECT_STREQ(sp::to_string(e.kind), "too_fast_to_follow");
+  }
+  EXPECT_EQ(n, 1);
+  EXPECT_NE(fast.report.find("bodies.bucket: reached 20.0"), std::string::npos) << fast.report.substr(fast.report.find("\"warnings\""), 400);
+  const DriveResult ok = drive_into_sand({1.0, 1.35, 2.0}, {15.0f, -0.5f, 0.0f}, 30);
+  for (const sp::Event& e : ok.events) EXPECT_NE(e.kind, sp::EventKind::TooFastToFollow);
+  EXPECT_EQ(ok.report.find("bodies.bucket: reached"), std::string::npos);
 }
