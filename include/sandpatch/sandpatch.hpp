@@ -175,7 +175,8 @@ struct TerrainDef {
   bool gl_depth_render = false;                // demotion renders on GL (true) or ray casts on the CPU (false)
   int threads = 0;                             // DEM threads, 0 = OpenMP default, [0, 1024]
   // -- contact prediction (docs/manager.md "The frame", lod): a patch is requested when a
-  //    body's ballistic path reaches the terrain within lod_horizon
+  //    body's path reaches the terrain within lod_horizon (its ballistic path; a kinematic
+  //    body's keyframes, or the motion the game gives it held for twice lod_horizon)
   double lod_horizon = 0.5;                    // s, how far ahead, (0, 10]
   double lod_margin = 0.05;                    // m, clearance that already counts as contact, [0, 100]
   double lod_apron = 1.0;                      // m, added around the contact footprint on every side, [0, 1000]
