@@ -73,6 +73,9 @@ EventKind kind_of(core::PatchEventKind k) {
     case core::PatchEventKind::Asleep: return EventKind::Asleep;
     case core::PatchEventKind::Woke: return EventKind::Woke;
     case core::PatchEventKind::Demoted: return EventKind::Demoted;
+    case core::PatchEventKind::TooFastToFollow: return EventKind::TooFastToFollow;
+    case core::PatchEventKind::TooFastForGranules: return EventKind::TooFastForGranules;
+    case core::PatchEventKind::SoilDropped: return EventKind::SoilDropped;
   }
   return EventKind::Requested;
 }
@@ -105,6 +108,9 @@ const char* to_string(EventKind k) {
     case EventKind::Asleep: return "asleep";
     case EventKind::Woke: return "woke";
     case EventKind::Demoted: return "demoted";
+    case EventKind::TooFastToFollow: return "too_fast_to_follow";
+    case EventKind::TooFastForGranules: return "too_fast_for_granules";
+    case EventKind::SoilDropped: return "soil_dropped";
   }
   return "unknown";
 }
@@ -661,7 +667,7 @@ std::vector<Event> Terrain::poll_events() {
   const auto& es = I.manager()->events();
   for (; I.events_read < es.size(); ++I.events_read) {
     const core::PatchEvent& e = es[I.events_read];
-    out.push_back({kind_of(e.kind), e.patch, e.time, e.wall_ms, e.granules});
+    out.push_back({kind_of(e.kind), e.patch, e.time, e.wall_ms, e.granules, e.body, e.value, e.limit, e.volume});
   }
   return out;
 }

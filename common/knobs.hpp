@@ -60,7 +60,7 @@ inline constexpr Knob kSleepSpeed{"simulation.sleep.speed_threshold", "TerrainDe
 inline constexpr Knob kSleepTime{"simulation.sleep.hold_time", "TerrainDef.sleep_time", 0.5, 0, 1e4, false, false, false, "s", "... for this long"};
 inline constexpr Knob kIdleTimeout{"simulation.idle_timeout", "TerrainDef.idle_timeout", 120, 0, 1e6, false, false, false, "s", "asleep and untouched this long, a patch turns back into heightfield"};
 inline constexpr Knob kThreads{"simulation.threads", "TerrainDef.threads", 0, 0, 1024, false, false, true, "", "DEM threads, 0 = all hardware threads"};
-inline constexpr Knob kLodHorizon{"simulation.lod.horizon", "TerrainDef.lod_horizon", 0.5, 0, 10, true, false, false, "s", "how far ahead a body's ballistic path is checked for contact"};
+inline constexpr Knob kLodHorizon{"simulation.lod.horizon", "TerrainDef.lod_horizon", 0.5, 0, 10, true, false, false, "s", "how far ahead a body's path (ballistic, keyframed, or a game-driven tool's motion held) is checked for contact"};
 inline constexpr Knob kLodMargin{"simulation.lod.margin", "TerrainDef.lod_margin", 0.05, 0, 100, false, false, false, "m", "clearance that already counts as contact"};
 inline constexpr Knob kLodApron{"simulation.lod.apron", "TerrainDef.lod_apron", 1.0, 0, 1000, false, false, false, "m", "added around a contact's footprint on every side of a patch"};
 

@@ -195,12 +195,13 @@ void TerrainManager::Impl::update_sleep(double time, double dt) {
 // Whether a body's bounds reach into a slot's region (and down to its granules).
 // `inside`: the footprint lies within the patch's DEM terrain, the filled region and the
 // apron around it, where the simulation's terrain grid is solid up to the surface.
-bool TerrainManager::Impl::engages(const Slot& s, const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, bool* inside) const {
+bool TerrainManager::Impl::engages(const Slot& s, const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, bool* inside,
+                                   double above) const {
   const double sp = hf->spacing();
   const double x0 = hf->origin_x() + s.region.i0 * sp, x1 = x0 + (s.region.ni - 1) * sp;
   const double z0 = hf->origin_z() + s.region.j0 * sp, z1 = z0 + (s.region.nj - 1) * sp;
   const double surface_top = hf->origin_y() + s.top_local;
-  const bool overlap = lo.x() < x1 && hi.x() > x0 && lo.z() < z1 && hi.z() > z0 && lo.y() < surface_top + 0.5 * engage_height;
+  const bool overlap = lo.x() < x1 && hi.x() > x0 && lo.z() < z1 && hi.z() > z0 && lo.y() < surface_top + above;
   // Within the filled region the granules carry the body; a body across the region's edge
   // rests partly on the terrain grid outside it. Both are in the DEM, so a body anywhere over
   // the DEM's terrain (region + apron) is carried by the DEM alone: with the heightfield too,
@@ -231,6 +232,31 @@ bool TerrainManager::Impl::engages(const Slot& s, const Eigen::Vector3d& lo, con
   return overlap;
 }
 
+double TerrainManager::Impl::engage_limit(const Slot& s, RigidBodyId b) const {
+  for (const Carried& c : s.carried)
+    if (c.body.index == b.index && c.body.generation == b.generation) return c.enabled && c.prescribed ? carry_height : 0.5 * engage_height;
+  return 0.5 * engage_height;
+}
+
+int TerrainManager::Impl::granules_within(const Slot& s, const Eigen::Vector3d& lo, const Eigen::Vector3d& hi) const {
+  const std::size_t per = s.sim->granule_shape().offsets.size();
+  const std::size_t n = std::size_t(records[std::size_t(&s - slots.data())].granules);
+  if (per == 0 || n == 0) return 0;
+  const std::vector<Vec3> p = s.sim->particle_positions();  // sim units; the granules' spheres first
+  const double r = radius_world(s);
+  int count = 0;
+  for (std::size_t g = 0; g < n && (g + 1) * per <= p.size(); ++g) {
+    Vec3 c{0, 0, 0};
+    for (std::size_t k = 0; k < per; ++k) c = c + p[g * per + k];
+    const auto w = s.sim->def().scale.position_to_world(c * (1.0f / float(per)));  // m, world
+    bool in = true;
+    // (above its lowest point: the granules under a plate or a blade's edge are not in it)
+    for (int a = 0; a < 3; ++a) in = in && w[std::size_t(a)] >= (a == 1 ? lo[a] : lo[a] - r) && w[std::size_t(a)] <= hi[a] + r;
+    count += in;
+  }
+  return count;
+}
+
 // The carrier of every body (see Impl::carrier).
 void TerrainManager::Impl::choose_carriers() {
   std::unordered_map<std::int64_t, int> next;
@@ -244,7 +270,7 @@ void TerrainManager::Impl::choose_carriers() {
       const Slot& sl = slots[std::size_t(k)];
       if ((sl.state != SlotState::Active && sl.state != SlotState::Asleep) || sl.demotion.releasing) continue;
       bool inside = false;
-      if (!engages(sl, lo, hi, &inside)) continue;
+      if (!engages(sl, lo, hi, &inside, engage_limit(sl, b))) continue;
       const PatchRequest r = rect(sl);
       const double area = std::max(0.0, std::min(hi.x(), r.x1) - std::max(lo.x(), r.x0)) *
                           std::max(0.0, std::min(hi.z(), r.z1) - std::max(lo.z(), r.z0));
@@ -308,7 +334,7 @@ Status TerrainManager::Impl::couple_before(Slot& slot, double dt) {
     Eigen::Vector3d lo, hi;
     world->bounds(b, &lo, &hi);
     bool inside = false;
-    const bool touch = engages(slot, lo, hi, &inside) && carries(self, b);
+    const bool touch = engages(slot, lo, hi, &inside, engage_limit(slot, b)) && carries(self, b);
     auto it = std::find_if(slot.carried.begin(), slot.carried.end(),
                            [&](const Carried& c) { return c.body.index == b.index && c.body.generation == b.generation; });
     if (!touch && it == slot.carried.end()) continue;
@@ -372,6 +398,21 @@ Status TerrainManager::Impl::couple_before(Slot& slot, double dt) {
       if (Status e = slot.sim->set_body_group(c.shell, g); !e) return e.errors();  // a joint added or removed
     const bool reenabled = touch && !c.enabled;  // parked until now: its state must be set
     if (touch != c.enabled) {
+      // A tool let go of with granules in it (lifted above carry_height, or out over the
+      // patch's side): they fall. Reported with its height and what it held.
+      if (!touch && c.prescribed) {
+        if (const int held = granules_within(slot, lo, hi); held > 0) {
+          SoilDrop d;
+          d.name = world->definition(b).name;
+          d.time = now;
+          d.patch = slot.patch;
+          d.height = lo.y() - (hf->origin_y() + slot.top_local);
+          d.granules = held;
+          d.volume = held * granule_volume(s) / (slot.cut_packing > 0 ? double(slot.cut_packing) : 0.6);
+          soil_drops.push_back(d);
+          events.push_back({PatchEventKind::SoilDropped, slot.patch, now, 0, held, d.name, d.height, carry_height, d.volume});
+        }
+      }
       if (Status e = slot.sim->set_body_enabled(c.shell, touch); !e) return e.errors();
       c.enabled = touch;
     }
@@ -404,6 +445,9 @@ Status TerrainManager::Impl::couple_before(Slot& slot, double dt) {
           f.name = world->definition(b).name;
           if (speed > f.speed) f.speed = speed, f.limit = limit;
           ++f.frames;
+          if (f.last < 0 || now - f.last > 1.5 * dt)  // it goes over (again)
+            events.push_back({PatchEventKind::TooFastForGranules, slot.patch, now, 0, 0, f.name, speed, limit, 0});
+          f.last = now;
         }
       }
       // The shell starts the frame at Bullet's pose with the prescribed velocities, and the

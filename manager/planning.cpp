@@ -100,11 +100,15 @@ Status TerrainManager::Impl::plan(double time) {
 // contact ahead (the tool carrying, or past its path) nothing is asked for: the patch it is in
 // covers the stretch. A stretch more than a slot holds is not asked for: the body is then
 // predicted ballistically like any other (patches ahead of it) for the rest of its path, and
-// the report's planned_paths says so.
+// the report's planned_paths says so. A game-driven tool's path (its motion held for
+// lod.horizon, World look_ahead) is planned for by the same rules, frame by frame: a stretch
+// too big in one frame is followed ballistically in that frame only.
 bool TerrainManager::Impl::plan_path(RigidBodyId b, double time, std::vector<PatchRequest>& out) {
   const auto it = paths.find(body_key(b));
   if (it == paths.end() || it->second.empty()) return false;
-  if (const auto l = path_log.find(body_key(b)); l != path_log.end() && l->second.too_big_frames > 0) return false;
+  const bool extrapolated_path = extrapolated.count(body_key(b)) > 0;
+  if (const auto l = path_log.find(body_key(b)); l != path_log.end() && l->second.too_big_frames > 0 && !extrapolated_path)
+    return false;
   const std::vector<TerrainManager::PathPose>& path = it->second;
   // the sample the body is at (the last at or before now), then the later ones
   std::size_t first = std::size_t(std::upper_bound(path.begin(), path.end(), time + 1e-9,
@@ -126,7 +130,9 @@ bool TerrainManager::Impl::plan_path(RigidBodyId b, double time, std::vector<Pat
   }
   if (k0 == path.size()) return true;
   std::size_t s = k0, e = k0;
-  while (s > first && in_reach(path[s - 1])) --s;
+  // (An extrapolated path's stretch starts at its contact: what lies before it is the game's
+  // tool on its way there, in the air, and no patch is needed under it.)
+  while (!extrapolated_path && s > first && in_reach(path[s - 1])) --s;
   while (e + 1 < path.size() && in_reach(path[e + 1])) ++e;
   Eigen::Vector3d lo = path[s].lo, hi = path[s].hi;
   for (std::size_t k = s; k <= e; ++k) lo = lo.cwiseMin(path[k].lo), hi = hi.cwiseMax(path[k].hi);
@@ -141,6 +147,7 @@ bool TerrainManager::Impl::plan_path(RigidBodyId b, double time, std::vector<Pat
   if (r.x1 - r.x0 < 1e-6 || r.z1 - r.z0 < 1e-6 || covered(r)) return true;
   PathLog& log = path_log[body_key(b)];
   log.name = world->definition(b).name;
+  log.extrapolated = extrapolated_path;
   log.last = r;
   log.from = path[s].t, log.to = path[e].t;
   // (its region as if no patch were live: predict_granules would move it clear of the live

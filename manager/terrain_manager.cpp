@@ -24,6 +24,9 @@ const char* to_string(PatchEventKind k) {
     case PatchEventKind::Asleep: return "asleep";
     case PatchEventKind::Woke: return "woke";
     case PatchEventKind::Demoted: return "demoted";
+    case PatchEventKind::TooFastToFollow: return "too_fast_to_follow";
+    case PatchEventKind::TooFastForGranules: return "too_fast_for_granules";
+    case PatchEventKind::SoilDropped: return "soil_dropped";
   }
   return "?";
 }
@@ -239,11 +242,16 @@ bool TerrainManager::soil_force(RigidBodyId body, Eigen::Vector3f* force, Eigen:
 
 double TerrainManager::budget_ms(double dt) const { return impl_->budget_ms(dt); }
 
-void TerrainManager::set_planned_path(RigidBodyId body, std::vector<PathPose> path) {
+void TerrainManager::set_planned_path(RigidBodyId body, std::vector<PathPose> path, bool extrapolated) {
   const std::int64_t key = manager_detail::body_key(body);
-  if (path.empty()) impl_->paths.erase(key);
+  const bool has = !path.empty();
+  if (!has) impl_->paths.erase(key);
   else impl_->paths[key] = std::move(path);
+  if (extrapolated && has) impl_->extrapolated.insert(key);
+  else impl_->extrapolated.erase(key);
 }
+
+void TerrainManager::add_event(PatchEvent e) { impl_->events.push_back(std::move(e)); }
 
 void TerrainManager::set_camera(const Eigen::Vector3d& position) { impl_->camera = position; }
 
@@ -523,6 +531,7 @@ nlohmann::ordered_json TerrainManager::report() const {
     ojson pp = ojson::array();
     for (const auto& [key, l] : I.path_log)
       pp.push_back({{"body", l.name},
+                    {"path", l.extrapolated ? "extrapolated" : "keyframes"},
                     {"asked_frames", l.asked_frames},
                     {"too_big_frames", l.too_big_frames},
                     {"last_request_m", {l.last.x0, l.last.z0, l.last.x1, l.last.z1}},
@@ -530,6 +539,19 @@ nlohmann::ordered_json TerrainManager::report() const {
                     {"granules_predicted", l.granules},
                     {"granules_per_slot", I.def.granules_per_slot}});
     r["planned_paths"] = pp;
+  }
+  // Tools let go of with granules in them (coupling.cpp couple_before).
+  if (!I.soil_drops.empty()) {
+    ojson sd = ojson::array();
+    for (const auto& d : I.soil_drops)
+      sd.push_back({{"body", d.name},
+                    {"time_s", d.time},
+                    {"patch", d.patch},
+                    {"height_m", d.height},
+                    {"limit_m", Impl::carry_height},
+                    {"granules", d.granules},
+                    {"volume_m3", d.volume}});
+    r["soil_dropped"] = sd;
   }
   // Bodies set on a patch's ground as they arrived on it (coupling.cpp couple_before).
   if (I.lifts > 0) r["arrivals"] = {{"lifted", I.lifts}, {"largest_lift_m", I.lift_max}};

@@ -128,7 +128,18 @@ struct TerrainManagerDef {
   std::uint64_t seed = 1;
 };
 
-enum class PatchEventKind { Requested, Promoted, Ready, Asleep, Woke, Demoted };
+// The patches' events, and three warnings about a body (docs/api.md "Events"):
+//   TooFastToFollow     a body crossed more than lod.apron in one frame (World::step): value its
+//                       speed, limit lod.apron / dt (m/s); once each time it goes over
+//   TooFastForGranules  a kinematic or static body moved into a patch faster than its granules
+//                       can be stopped (coupling.cpp): value its speed, limit 2 r sqrt(k_n / m_pt)
+//                       (m/s); once each time it goes over
+//   SoilDropped         a tool a patch carried left it with granules in it (lifted above
+//                       carry_height, or out over the patch's side): value the height (m) of its
+//                       lowest point above the patch's highest surface point, limit carry_height
+//                       (m), granules the granules it held, volume their bulk volume (m³) at the
+//                       bed's packing
+enum class PatchEventKind { Requested, Promoted, Ready, Asleep, Woke, Demoted, TooFastToFollow, TooFastForGranules, SoilDropped };
 const char* to_string(PatchEventKind k);
 
 struct PatchEvent {
@@ -137,6 +148,9 @@ struct PatchEvent {
   double time = 0;        // s, simulated
   double wall_ms = 0;     // conversion cost (promotion: fill; demotion: render + write)
   int granules = 0;
+  std::string body;       // the body a warning is about (its name, or "body N")
+  double value = 0, limit = 0;  // a warning's measure and its limit (above)
+  double volume = 0;      // m³ (SoilDropped)
 };
 
 // A body's particle shell at particle scale `scale` (sim units): its surface sampled every
@@ -171,11 +185,15 @@ class TerrainManager {
   // over the stretch of the path that works the ground, instead of predicting the body's
   // contacts ballistically, so the granules it carries never cross a patch's edge
   // (docs/manager.md "Tools on a planned path"). An empty path forgets the body's.
+  // `extrapolated`: the path is a game-driven tool's motion held for lod.horizon, handed
+  // over again every frame (World look_ahead), not keyframes known ahead.
   struct PathPose {
     double t = 0;
     Eigen::Vector3d lo = Eigen::Vector3d::Zero(), hi = Eigen::Vector3d::Zero();
   };
-  void set_planned_path(RigidBodyId body, std::vector<PathPose> path);
+  void set_planned_path(RigidBodyId body, std::vector<PathPose> path, bool extrapolated = false);
+  // Appends an event (World's warnings about bodies, TooFastToFollow) to events().
+  void add_event(PatchEvent e);
   // Moves the camera the scale bands are measured from (m, world); patches already live keep
   // their scale.
   void set_camera(const Eigen::Vector3d& position);

@@ -117,6 +117,7 @@ struct TerrainManager::Impl {
     std::string name;
     double speed = 0, limit = 0;  // m/s, world: the fastest seen, and the limit then
     long long frames = 0;         // frames over the limit
+    double last = -1;             // s, simulated time of the last frame over it (an event when it goes over again)
   };
   std::map<std::int64_t, FastTool> fast_tools;
   std::unordered_set<std::int64_t> shells_sampled;  // bodies whose shell was sampled ahead (body_key)
@@ -124,6 +125,28 @@ struct TerrainManager::Impl {
   // m (world): a body's shell joins a patch when the body's lowest point is within half of
   // this above the patch's highest surface point; the simulation's domain reaches this high.
   static constexpr double engage_height = 1.0;
+  // m (world): a kinematic or static body whose shell a patch has enabled keeps it while its
+  // lowest point is less than this above the patch's highest surface point: the top of the
+  // simulation's domain, so a bucket lifting soil out of the patch carries it up to there
+  // (docs/manager.md "Carrying soil up"); above it the shell is let go, the soil falls, and
+  // the drop is reported (soil_dropped, PatchEventKind::SoilDropped).
+  static constexpr double carry_height = engage_height;
+  // The height (m above the patch's highest surface point) up to which a body engages slot s:
+  // carry_height for a kinematic or static body whose shell s has enabled, else engage_height / 2.
+  double engage_limit(const Slot& s, RigidBodyId b) const;
+  // Soil a tool took out of a patch (coupling.cpp couple_before): the report's soil_dropped.
+  struct SoilDrop {
+    std::string name;
+    double time = 0;      // s, simulated
+    int patch = -1;
+    double height = 0;    // m, its lowest point above the patch's highest surface point
+    int granules = 0;     // granules whose centres were within its bounds
+    double volume = 0;    // m³, their bulk volume at the bed's packing
+  };
+  std::vector<SoilDrop> soil_drops;
+  // Granules of slot s whose centres lie within the world box [lo, hi] (m) grown by a granule
+  // radius, above lo.y: what a tool there holds.
+  int granules_within(const Slot& s, const Eigen::Vector3d& lo, const Eigen::Vector3d& hi) const;
 
   // ---- shared helpers ----
   // The GL backend's context must be current for any slot call (other GL users of the
@@ -284,8 +307,13 @@ struct TerrainManager::Impl {
   // Planned paths (body_key -> bounds over time) and what planning made of them (the report's
   // planned_paths).
   std::unordered_map<std::int64_t, std::vector<TerrainManager::PathPose>> paths;
+  // Bodies whose path is extrapolated from the game's motion, frame by frame (World
+  // look_ahead), not keyframed: a stretch too big for a slot in one frame is followed
+  // ballistically in that frame only (a keyframed path's is for the rest of the path).
+  std::unordered_set<std::int64_t> extrapolated;
   struct PathLog {
     std::string name;
+    bool extrapolated = false;    // the path is the game's motion held for lod.horizon
     long long asked_frames = 0;   // frames its stretch was not covered by a live patch (asked for)
     long long too_big_frames = 0;  // frames its stretch needed more granules than a slot holds
     PatchRequest last;            // the last stretch asked for (m, world, apron included)
@@ -342,7 +370,9 @@ struct TerrainManager::Impl {
   Status step_patches(double time, double dt);
   // After the Bullet step: patches whose DEM came to rest fall asleep (their bodies stop).
   void update_sleep(double time, double dt);
-  bool engages(const Slot& s, const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, bool* inside) const;
+  // `above`: m over the patch's highest surface point the body's lowest point must be below.
+  bool engages(const Slot& s, const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, bool* inside,
+               double above = 0.5 * engage_height) const;
   void choose_carriers();
   bool lying(RigidBodyId b, const Eigen::Vector3d& lo, const Eigen::Vector3d& hi) const;
   Status couple_before(Slot& slot, double dt);

@@ -43,6 +43,7 @@ Status World::enable_patches(const TerrainManagerDef& def) {
   if (!m) return m.errors();
   manager_ = std::move(*m);
   follow_apron_ = def.lod.apron;
+  look_ahead_s_ = def.lod.horizon;
   return Ok{};
 }
 
@@ -331,14 +332,21 @@ Status World::step(double dt, int substeps) {
     // A body that crosses more than a patch's apron in one frame outruns the patch machinery:
     // no patch can be ready where it lands, and the heightfield takes the contact. Not an
     // error (its speed is allowed); reported once per body with its fastest speed.
+    // Also an event (PatchEventKind::TooFastToFollow) each time a body goes over.
     const double follow = follow_apron_ / dt;  // m/s
+    std::set<std::pair<int, int>> over;
     for (RigidBodyId id : bullet_->bodies()) {
       const double v = double(bullet_->state(id).linear_velocity.norm());
       if (!(v > follow)) continue;
       const std::string& n = bullet_->definition(id).name;
-      double& m = too_fast_[n.empty() ? "body " + std::to_string(id.index) : n];
+      const std::string name = n.empty() ? "body " + std::to_string(id.index) : n;
+      double& m = too_fast_[name];
       m = std::max(m, v);
+      over.insert({id.index, id.generation});
+      if (!over_follow_.count({id.index, id.generation}))
+        manager_->add_event({PatchEventKind::TooFastToFollow, -1, t, 0, 0, name, v, follow, 0});
     }
+    over_follow_.swap(over);
     peak_granules_ = std::max(peak_granules_, manager_->granules());
     // A conversion frame: one in which a part of a promotion or a demotion ran (a slot
     // reset, a fill cut, an upload, a demotion part).
@@ -548,6 +556,13 @@ nlohmann::ordered_json World::report() const {
       w.push_back("bodies." + name + ": reached " + format_number(v) + " m/s, faster than the patches can follow (" +
                   "simulation.lod.apron / dt = " + format_number(follow_apron_ / (dt_ > 0 ? dt_ : 1.0)) +
                   " m/s): where it met the ground the heightfield, not granules, took the contact");
+    if (r.contains("soil_dropped"))
+      for (const auto& d : r["soil_dropped"])
+        w.push_back("bodies." + d["body"].get<std::string>() + ": let go of " + std::to_string(d["granules"].get<int>()) +
+                    " granules (" + format_number(d["volume_m3"].get<double>()) + " m³ at the bed's packing) at " +
+                    format_number(d["time_s"].get<double>()) + " s, " + format_number(d["height_m"].get<double>()) +
+                    " m above its patch's highest surface point: a patch carries a tool's soil up to " +
+                    format_number(d["limit_m"].get<double>()) + " m above it and within its sides; the soil fell");
     r["warnings"] = w;
   }
   r["final_state_hash"] = Hasher::to_hex(state_hash());

@@ -32,6 +32,7 @@
 #include <nlohmann/json.hpp>
 #include <string>
 #include <map>
+#include <set>
 #include <unordered_map>
 #include <vector>
 
@@ -302,6 +303,7 @@ class World {
   void drive_kinematic(double t, double dt);
   void enter_kinematic(std::size_t entry, const RigidBodyDef& def);
   static std::vector<TerrainManager::PathPose> planned_path(const RigidShape& shape, const std::vector<Keyframe>& keys, double t);
+  void look_ahead(std::size_t entry, const BodyState& st, const Eigen::Vector3d& p, const Eigen::Quaternionf& q, double t, double dt);
   void keep_original_heights();
   void make_due_joints();
   void drive_motors(double t);
@@ -331,6 +333,7 @@ class World {
     Eigen::Vector3d target = Eigen::Vector3d::Zero();
     Eigen::Quaternionf target_q = Eigen::Quaternionf::Identity();
     Eigen::Vector3f v = Eigen::Vector3f::Zero(), w = Eigen::Vector3f::Zero();
+    bool looked_ahead = false;            // the manager holds a path extrapolated from its motion (look_ahead)
   };
   std::vector<Kinematic> kinematic_;
   // Elevation tiles as they were before a demotion first wrote them (tile index -> samples).
@@ -355,7 +358,9 @@ class World {
   // Bodies that outran the patch machinery (a frame's travel over the LOD apron): name (or
   // "body N") → the fastest speed seen, m/s; the report's warnings.
   double follow_apron_ = 0;            // m, the manager's lod.apron
+  double look_ahead_s_ = 0;            // s, the manager's lod.horizon: how far a game-driven tool's motion is extrapolated
   std::map<std::string, double> too_fast_;
+  std::set<std::pair<int, int>> over_follow_;  // bodies (index, generation) over that speed in the last frame
 };
 
 }  // namespace sandpatch

@@ -1,6 +1,6 @@
 // World's bodies driven by the game or the scene: forces, torques and impulses, the scene's
 // load schedules, joints and their motor phases, kinematic bodies (targets, velocities,
-// keyframes) and the planned paths of keyframed tools. The frame itself is in world.cpp.
+// keyframes) and the planned paths of tools (keyframed, or extrapolated from the game's motion). The frame itself is in world.cpp.
 #include <algorithm>
 #include <cmath>
 #include <optional>
@@ -380,19 +380,66 @@ void World::drive_kinematic(double t, double dt) {
       const Keyframe end = keyframe_at(kin.keys, t + dt);
       p = end.position;
       q = end.orientation.cast<float>();
-    } else if (kin.has_target) {
-      p = kin.target;
-      q = kin.target_q;
-      kin.has_target = false;
     } else {
-      p = st.position + dt * kin.v.cast<double>();
-      q = st.orientation;
-      const float angle = kin.w.norm() * float(dt);
-      if (angle > 0) q = Eigen::Quaternionf(Eigen::AngleAxisf(angle, kin.w.normalized())) * q;
-      q.normalize();
+      if (kin.has_target) {
+        p = kin.target;
+        q = kin.target_q;
+        kin.has_target = false;
+      } else {
+        p = st.position + dt * kin.v.cast<double>();
+        q = st.orientation;
+        const float angle = kin.w.norm() * float(dt);
+        if (angle > 0) q = Eigen::Quaternionf(Eigen::AngleAxisf(angle, kin.w.normalized())) * q;
+        q.normalize();
+      }
+      if (manager_) look_ahead(k, st, p, q, t, dt);
     }
     bullet_->set_kinematic_target(e.id, p, q, float(dt));
   }
+}
+
+// A kinematic body the game drives (a target pose or a velocity each frame, no keyframes):
+// what it does this frame, from its pose `st` at t to (p, q) at t + dt, is taken to go on for
+// twice the manager's lod.horizon (at least one frame), and that extrapolated motion is handed
+// to the manager as its planned path, sampled like a keyframed one's (planned_path), so the lod
+// stage plans its patch by the same code (planning.cpp plan_path: docs/manager.md "Tools on
+// a planned path"). The velocity the game set, or the motion to the target it set (the
+// step from the last pose it set to the next), is the best guess the game gives of where the
+// tool goes. A body holding still has no path: it is planned for like any other body.
+void World::look_ahead(std::size_t entry, const BodyState& st, const Eigen::Vector3d& p, const Eigen::Quaternionf& q, double t,
+                       double dt) {
+  Kinematic& kin = kinematic_[entry];
+  const RigidBodyId id = entries_[entry].id;
+  const Eigen::Vector3d v = (p - st.position) / dt;  // m/s
+  Eigen::Quaterniond turn = (q.cast<double>() * st.orientation.cast<double>().conjugate()).normalized();  // over dt
+  if (turn.w() < 0) turn.coeffs() = -turn.coeffs();  // the shorter way round
+  const Eigen::AngleAxisd aa(turn);
+  const double rate = aa.angle() / dt;  // rad/s
+  if (!(v.squaredNorm() > 0) && !(rate > 0)) {
+    if (kin.looked_ahead) manager_->set_planned_path(id, {});
+    kin.looked_ahead = false;
+    return;
+  }
+  // Contacts are looked for within lod.horizon (plan_path); the second horizon is the stretch
+  // after the contact the request covers (a tool grazing the ground at 15 m/s first comes
+  // within lod.margin of it 1.5 m before it cuts in: with the path cut at one horizon, the
+  // patch asked for ended short of where it cut in). Keyframes every frame (at most 600 of
+  // them: a longer horizon is sampled more coarsely) along the straight line and the
+  // constant rotation.
+  const double horizon = std::max(2.0 * look_ahead_s_, dt);  // s
+  const int n = int(std::clamp(std::ceil(horizon / dt - 1e-9), 1.0, 600.0));
+  const Eigen::Quaterniond q0 = st.orientation.cast<double>().normalized();
+  std::vector<Keyframe> keys(std::size_t(n) + 1);
+  for (int k = 0; k <= n; ++k) {
+    const double u = horizon * k / n;  // s from now
+    Keyframe& f = keys[std::size_t(k)];
+    f.t = t + u;
+    f.position = st.position + u * v;
+    f.orientation = rate > 0 ? Eigen::Quaterniond(Eigen::AngleAxisd(rate * u, aa.axis())) * q0 : q0;
+    f.orientation.normalize();
+  }
+  manager_->set_planned_path(id, planned_path(bullet_->definition(id).shape, keys, t), /*extrapolated=*/true);
+  kin.looked_ahead = true;
 }
 
 // A keyframed body's bounds along its keyframes from t to the last one (the path the manager

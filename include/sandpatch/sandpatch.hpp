@@ -175,7 +175,8 @@ struct TerrainDef {
   bool gl_depth_render = false;                // demotion renders on GL (true) or ray casts on the CPU (false)
   int threads = 0;                             // DEM threads, 0 = OpenMP default, [0, 1024]
   // -- contact prediction (docs/manager.md "The frame", lod): a patch is requested when a
-  //    body's ballistic path reaches the terrain within lod_horizon
+  //    body's path reaches the terrain within lod_horizon (its ballistic path; a kinematic
+  //    body's keyframes, or the motion the game gives it held for twice lod_horizon)
   double lod_horizon = 0.5;                    // s, how far ahead, (0, 10]
   double lod_margin = 0.05;                    // m, clearance that already counts as contact, [0, 100]
   double lod_apron = 1.0;                      // m, added around the contact footprint on every side, [0, 1000]
@@ -395,7 +396,15 @@ enum class EventKind {
   Ready,      // every granule of the patch is simulating
   Asleep,     // the patch came to rest and stopped stepping
   Woke,       // a moving body woke it
-  Demoted     // granules → heightfield; the slot is free again (wall_ms: render + write)
+  Demoted,    // granules → heightfield; the slot is free again (wall_ms: render + write)
+  // Warnings about a body (`body` names it; docs/api.md "Events"):
+  TooFastToFollow,     // it crossed more than lod_apron in one step: value its speed, limit lod_apron / dt (m/s);
+                       //   where it meets the ground the heightfield, not granules, may take the contact
+  TooFastForGranules,  // a kinematic or static body moved into a patch faster than its granules can be
+                       //   stopped: value its speed, limit 2 r sqrt(k_n / m_pt) (m/s)
+  SoilDropped          // a tool a patch carried left it with granules in it (lifted more than `limit` m above
+                       //   the patch's highest surface point, or out over its side): value its lowest point's
+                       //   height above that point (m), granules and volume (m³, at the bed's packing) what fell
 };
 SANDPATCH_API const char* to_string(EventKind k);  // "promoted", ...
 
@@ -404,7 +413,11 @@ struct Event {
   int patch = -1;         // patch number, unique over the terrain's life (-1: not yet a patch)
   double time = 0;        // s, simulated time of the step it happened in
   double wall_ms = 0;     // conversion cost (promoted, demoted)
-  int granules = 0;       // granules of the patch
+  int granules = 0;       // granules of the patch (SoilDropped: the granules the tool let go of)
+  std::string body;       // the body a warning is about (its name, or "body N"); empty for the patch events
+  double value = 0;       // a warning's measure: m/s (too fast), m (SoilDropped)
+  double limit = 0;       // and its limit, in the same unit
+  double volume = 0;      // m³ (SoilDropped)
 };
 
 // A rectangle of heightfield samples [i0, i0 + ni) × [j0, j0 + nj).

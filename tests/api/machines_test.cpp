@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <string>
 #include <vector>
 #include <sandpatch/sandpatch.hpp>
@@ -279,7 +280,8 @@ TEST(ApiKinematic, PlatePressIsTheSameWhateverTheThreads) {
 
 // A tool driven into a patch faster than its granules can be stopped within 2 granule radii
 // (2 r sqrt(k_n / m_pt) = 19.3 m/s for these 5 cm granules) is reported in the report's
-// tools_too_fast with its speed and the limit, not silently let through.
+// tools_too_fast and by an event (EventKind::TooFastForGranules) with its speed and the limit,
+// not silently let through.
 TEST(ApiKinematic, ToolTooFastForThePatchIsReported) {
   auto t = sp::Terrain::create(sand_def());
   auto h = t->add_body(box("rammer", sp::BodyMotion::Kinematic, {0.25, 0.05, 0.25}, {2, 1.2, 2}));
@@ -290,6 +292,16 @@ TEST(ApiKinematic, ToolTooFastForThePatchIsReported) {
   ASSERT_NE(at, std::string::npos) << r;
   EXPECT_NE(r.find("\"rammer\"", at), std::string::npos);
   EXPECT_NE(r.find("\"limit_m_s\"", at), std::string::npos);
+  // and an event, once as it went over, with its speed and the limit
+  int n = 0;
+  for (const sp::Event& e : t->poll_events()) {
+    if (e.kind != sp::EventKind::TooFastForGranules) continue;
+    ++n;
+    EXPECT_EQ(e.body, "rammer");
+    EXPECT_NEAR(e.value, 25.0, 1e-3);
+    EXPECT_NEAR(e.limit, 19.3, 0.1);
+  }
+  EXPECT_EQ(n, 1);
 }
 
 // Bad input is refused naming the field: keyframes with NaN or infinite values, times not
@@ -324,4 +336,92 @@ TEST(ApiKinematic, BadKeyframesAndTargetsAreRefused) {
   auto d = t->add_body(box("crate", sp::BodyMotion::Dynamic, {0.2, 0.2, 0.2}, {3, 2, 3}));
   EXPECT_EQ(first_error(t->set_keyframes(*d, {{0.0, {3, 2, 3}, {1, 0, 0, 0}}})).field, "set_keyframes.body");
   EXPECT_EQ(first_error(t->set_kinematic_target(*d, {3, 2, 3}, {1, 0, 0, 0})).field, "set_kinematic_target.body");
+}
+
+namespace {
+
+// A kinematic box driven by the game with set_body_velocity along `v` (m/s) from `start` over
+// the sand (14 m × 4 m, surface y = 1 m, lod_apron 0.3 m, one slot), one step of kDt at a
+// time, the velocity set again every step as a game does.
+struct DriveResult {
+  int contact_step = -1;        // the first step ending with its lowest point at or below the surface
+  int ready_step = -1;          // the step the patch live at contact became ready (-1: none was)
+  int promoted_by_contact = 0;  // patches promoted up to the contact step
+  bool carried_at_contact = false;  // a patch carried it in the contact step
+  std::vector<sp::Event> events;    // every event of the run
+  std::string report;
+};
+DriveResult drive_into_sand(sp::Vec3 start, sp::Vec3f v, int steps, double apron = 0.3) {
+  DriveResult out;
+  auto def = sand_def();
+  def.lod_apron = apron;
+  def.samples_x = 141;
+  auto t = sp::Terrain::create(def);
+  EXPECT_TRUE(t.ok()) << t.message();
+  if (!t.ok()) return out;
+  auto h = t->add_body(box("bucket", sp::BodyMotion::Kinematic, {0.2, 0.05, 0.2}, start));
+  EXPECT_TRUE(h.ok()) << h.message();
+  for (int k = 1; k <= steps; ++k) {
+    EXPECT_TRUE(t->set_body_velocity(*h, v, {0.0f, 0.0f, 0.0f}).ok());
+    auto st = t->step(kDt);
+    EXPECT_TRUE(st.ok()) << st.message();
+    for (const sp::Event& e : t->poll_events()) {
+      if (out.contact_step < 0) {
+        if (e.kind == sp::EventKind::Ready) out.ready_step = k;
+        if (e.kind == sp::EventKind::Demoted) out.ready_step = -1;
+        out.promoted_by_contact += e.kind == sp::EventKind::Promoted;
+      }
+      out.events.push_back(e);
+    }
+    const auto c = t->body_contact(*h);
+    if (out.contact_step < 0 && c->lowest_y <= 1.0 + 1e-9) {
+      out.contact_step = k;
+      out.carried_at_contact = c->on_particles;
+    }
+  }
+  out.report = t->report_json();
+  return out;
+}
+
+}  // namespace
+
+// A tool the game drives (a velocity set every frame, no keyframes) is looked ahead of like a
+// keyframed one: its motion held for lod_horizon is its planned path (planning.cpp plan_path).
+// The box skims 0.3 m over the sand at 15 m/s, sinking at 0.5 m/s, and meets it after 0.6 s
+// (step 36) at x = 10 m. Asserted: one patch, over where it meets the sand, ready before that
+// step, carrying it from its first contact. (Followed ballistically, gravity bent its
+// predicted path into the ground 2 m ahead of it: three patches one after another on the one
+// slot, each demoted for the next, and the one under the contact became ready in the contact
+// step itself.)
+TEST(ApiKinematic, AGameDrivenToolHasItsPatchReadyBeforeItMeetsTheSand) {
+  const DriveResult r = drive_into_sand({1.0, 1.35, 2.0}, {15.0f, -0.5f, 0.0f}, 40);
+  std::printf("ready at step %d, contact at step %d, %d patch(es) promoted by then, carried %d\n", r.ready_step,
+              r.contact_step, r.promoted_by_contact, int(r.carried_at_contact));
+  ASSERT_NEAR(r.contact_step, 36, 1);
+  ASSERT_GT(r.ready_step, 0) << "no patch was ready at contact";
+  EXPECT_LT(r.ready_step, r.contact_step);
+  EXPECT_EQ(r.promoted_by_contact, 1);
+  EXPECT_TRUE(r.carried_at_contact);
+}
+
+// A game-driven tool faster than the patches can follow (more than lod_apron in one step:
+// 0.3 m × 60 = 18 m/s here) is reported, naming it, with its speed and the speed that can be
+// followed: an event (EventKind::TooFastToFollow, once as it goes over) and the report's
+// warnings; the same tool at 15 m/s is not.
+TEST(ApiKinematic, AGameDrivenToolTooFastToFollowIsReported) {
+  const DriveResult fast = drive_into_sand({1.0, 1.35, 2.0}, {20.0f, -0.5f, 0.0f}, 30);
+  int n = 0;
+  for (const sp::Event& e : fast.events) {
+    if (e.kind != sp::EventKind::TooFastToFollow) continue;
+    ++n;
+    EXPECT_EQ(e.body, "bucket");
+    EXPECT_NEAR(e.value, std::hypot(20.0, 0.5), 1e-3);  // m/s
+    EXPECT_NEAR(e.limit, 0.3 * 60.0, 1e-9);              // m/s: lod_apron / dt
+    EXPECT_STREQ(sp::to_string(e.kind), "too_fast_to_follow");
+  }
+  EXPECT_EQ(n, 1);
+  EXPECT_NE(fast.report.find("bodies.bucket: reached 20.0"), std::string::npos) << fast.report.substr(fast.report.find("\"warnings\""), 400);
+  const DriveResult ok = drive_into_sand({1.0, 1.35, 2.0}, {15.0f, -0.5f, 0.0f}, 30);
+  for (const sp::Event& e : ok.events) EXPECT_NE(e.kind, sp::EventKind::TooFastToFollow);
+  EXPECT_EQ(ok.report.find("bodies.bucket: reached"), std::string::npos);
 }

@@ -272,5 +272,70 @@ TEST(Dig, BladePushesTheCutIntoABermAheadOfItsEnd) {
   EXPECT_LT(std::abs(l["error_pct"].get<double>()), 1.0);
 }
 
+// Soil lifted out of the patch (docs/manager.md "Carrying soil up"): the shipped bucket digs
+// 0.4 m, curls mouth up and lifts its load to 0.7 m above the sand (its lowest point), where
+// the patch still carries it (its shell is let go of only above carry_height, 1 m, the top
+// of the DEM's domain: before, at 0.5 m, and the soil fell without a word), then to 1.6 m,
+// where it is let go of and the soil falls back into the patch: reported (an event naming the
+// bucket, its height, the limit, the granules and their volume; the report's soil_dropped and
+// warnings). The ledger closes within 1 % either way.
+TEST(Dig, SoilLiftedAboveTheCarryHeightIsReportedAndTheLedgerCloses) {
+  test::Rig rig(test::flat_terrain(46, 0.1f, 0.5f));
+  ASSERT_TRUE(rig.ok()) << rig.error;
+  auto bucket = rig.core->add_body(bucket_body());
+  ASSERT_TRUE(bucket.ok()) << bucket.message();
+  // down at x = 1.0 m, a 0.4 m drag 22 cm deep, curl mouth up; lift to y = 1.5 m (its lowest
+  // point about 0.7 m above the sand), hold; lift to y = 2.4 m (about 1.6 m above), hold
+  const std::vector<World::Keyframe> keys = {key(0.0, 1.0, 0.85, -20), key(0.6, 1.2, 0.62, -20), key(1.3, 1.5, 0.52, 0),
+                                             key(1.9, 1.8, 0.52, 0),   key(2.5, 1.9, 0.75, 90),  key(3.0, 1.9, 1.5, 90),
+                                             key(3.8, 1.9, 1.5, 90),   key(4.2, 1.9, 2.4, 90)};
+  ASSERT_TRUE(rig.core->set_keyframes(0, keys).ok());
+  TerrainManagerDef def = test::small_manager_def();
+  def.material.radius = 0.04f;
+  def.granules_per_slot = 6000;
+  def.patch_depth = 0.4;
+  def.soil_depth = 0.8;
+  def.lod.apron = 0.3;
+  def.threads = 1;
+  ASSERT_TRUE(rig.start(def).ok()) << rig.error;
+  double carried_n = 0, lowest = 0;
+  int carried_frames = 0;
+  ASSERT_TRUE(rig.frames(int(std::lround(5.0 / rig.dt)), [&] {
+                   const double t = rig.t();
+                   if (t > 3.2 && t < 3.8) {  // held 0.7 m up
+                     carried_n += -rig.core->soil_force(*bucket).force.y();
+                     lowest = rig.core->lowest_point(*bucket);
+                     ++carried_frames;
+                   }
+                   return false;
+                 }).ok())
+      << rig.error;
+  ASSERT_TRUE(rig.demote_all().ok()) << rig.error;
+  const double carried_kg = carried_n / std::max(carried_frames, 1) / 9.81;
+  int drops = 0;
+  PatchEvent drop{};
+  for (const PatchEvent& e : rig.manager->events())
+    if (e.kind == PatchEventKind::SoilDropped) ++drops, drop = e;
+  const auto report = rig.core->report();
+  std::printf("held %.2f m above the sand: %.1f kg carried; dropped %d time(s): %d granules, %.4f m3 at %.2f m (limit %.1f m) at %.2f s\n",
+              lowest - 0.5, carried_kg, drops, drop.granules, drop.volume, drop.value, drop.limit, drop.time);
+  EXPECT_GT(lowest - 0.5, 0.6);  // above the old engage limit (0.5 m)
+  EXPECT_GT(carried_kg, 20.0);   // its soil still in it
+  ASSERT_EQ(drops, 1);
+  EXPECT_EQ(drop.body, "bucket");
+  EXPECT_GT(drop.value, 1.0);
+  EXPECT_NEAR(drop.limit, 1.0, 1e-12);
+  EXPECT_GT(drop.granules, 10);
+  // its volume: the granules at the tile's packing
+  const double pf = report["tile"]["packing_fraction"].get<double>();
+  EXPECT_NEAR(drop.volume, drop.granules * 4.0 * 4.0 / 3.0 * M_PI * std::pow(0.04, 3) / pf, 1e-6 * drop.volume);
+  ASSERT_TRUE(report.contains("soil_dropped")) << report.dump(2);
+  EXPECT_EQ(report["soil_dropped"][0]["granules"].get<int>(), drop.granules);
+  EXPECT_NE(report["warnings"].dump().find("bodies.bucket: let go of"), std::string::npos) << report["warnings"].dump();
+  ASSERT_EQ(report["ledger"]["patches"].size(), 1u);
+  std::printf("ledger %.3f %%\n", report["ledger"]["patches"][0]["error_pct"].get<double>());
+  EXPECT_LT(std::abs(report["ledger"]["patches"][0]["error_pct"].get<double>()), 1.0);
+}
+
 }  // namespace
 }  // namespace sandpatch
