@@ -72,20 +72,23 @@ TEST(World, NonFiniteBodyStopsTheStepNamingItAndTheStage) {
   EXPECT_NE(s.message().find("bodies stage"), std::string::npos) << s.message();
 }
 
-// A ball resting on the sand at the start: prepare() makes its patch whole before the first
-// frame, so frame 0 does no conversion work (without it, frame 0 fills the patch at once),
-// the ball does not move during prepare(), and a later prepare() does nothing.
+// A ball rolling on the sand at the start (a body at rest asks for no patch): prepare() makes
+// its patch whole before the first frame, so frame 0 does no conversion work (without it,
+// frame 0 fills the patch at once), the ball does not move during prepare(), and a later
+// prepare() does nothing.
 TEST(World, PrepareMakesThePatchesNeededAtOnceBeforeTheFirstFrame) {
   for (const bool prepare : {false, true}) {
     SCOPED_TRACE(prepare ? "prepare" : "no prepare");
     auto w = flat_world(true);
-    auto id = w->add_body(test::sphere_body(0.1f, 1.0f, {4.0, 1.1, 4.0}));  // resting on y = 1 m
+    RigidBodyDef ball = test::sphere_body(0.1f, 1.0f, {4.0, 1.1, 4.0});  // on the ground, y = 1 m
+    ball.linear_velocity = {1.0f, 0.0f, 0.0f};                           // m/s, rolling
+    auto id = w->add_body(ball);
     ASSERT_TRUE(id.ok());
-    const Eigen::Vector3f before = w->bullet().state(*id).position;
+    const auto before = w->bullet().state(*id).position;
     if (prepare) {
       ASSERT_TRUE(w->prepare(1.0 / 60.0).ok());
       EXPECT_GT(w->manager()->granules(), 0) << "the ball's patch is made before the first frame";
-      EXPECT_EQ((w->bullet().state(*id).position - before).norm(), 0.0f);
+      EXPECT_EQ((w->bullet().state(*id).position - before).norm(), 0.0);
       EXPECT_GT(w->prepare_ms(), 0.0);
       const int granules = w->manager()->granules();
       ASSERT_TRUE(w->prepare(1.0 / 60.0).ok());  // once only
