@@ -151,13 +151,21 @@ Result<HeightImage> ParticleDepthRenderer::render(const float* s, std::size_t n,
 HeightImage render_heights_cpu(const float* s, std::size_t n, int res, float x0, float z0, float x1, float z1,
                                float floor_y) {
   HeightImage img = blank_image(res, x0, z0, x1, z1, floor_y);
-  const float du = (x1 - x0) / float(res), dv = (z1 - z0) / float(res);
+  render_heights_cpu_rows(s, n, img, 0, res);
+  return img;
+}
+
+void render_heights_cpu_rows(const float* s, std::size_t n, HeightImage& img, int row0, int row1) {
+  const int res = img.width;
+  const float x0 = img.x0, z0 = img.z0;
+  const float du = (img.x1 - x0) / float(res), dv = (img.z1 - z0) / float(img.height);
+  row0 = std::max(row0, 0), row1 = std::min(row1, img.height);
   for (std::size_t k = 0; k < n; ++k) {
     const float cx = s[4 * k], cy = s[4 * k + 1], cz = s[4 * k + 2], r = s[4 * k + 3];
     const int u0 = std::max(0, int(std::ceil((cx - r - x0) / du - 0.5f)));
     const int u1 = std::min(res - 1, int(std::floor((cx + r - x0) / du - 0.5f)));
-    const int v0 = std::max(0, int(std::ceil((cz - r - z0) / dv - 0.5f)));
-    const int v1 = std::min(res - 1, int(std::floor((cz + r - z0) / dv - 0.5f)));
+    const int v0 = std::max(row0, int(std::ceil((cz - r - z0) / dv - 0.5f)));
+    const int v1 = std::min(row1 - 1, int(std::floor((cz + r - z0) / dv - 0.5f)));
     for (int v = v0; v <= v1; ++v)
       for (int u = u0; u <= u1; ++u) {
         const float x = x0 + (u + 0.5f) * du - cx, z = z0 + (v + 0.5f) * dv - cz;
@@ -167,13 +175,10 @@ HeightImage render_heights_cpu(const float* s, std::size_t n, int res, float x0,
         h = std::max(h, cy + std::sqrt(r * r - d2));
       }
   }
-  return img;
 }
 
 void lower_by_probe(HeightImage& image, float floor_y, float probe) {
-  if (probe <= 0) return;
-  for (float& h : image.h)
-    if (h > floor_y) h = std::max(floor_y, h - probe);
+  for (float& h : image.h) h = probe_lowered(h, floor_y, probe);
 }
 
 void write_to_heightfield(const HeightImage& image, GridRegion r, Heightfield& hf, int border_width,

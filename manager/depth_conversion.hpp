@@ -12,6 +12,7 @@
 //    stitches it into the untouched terrain around it.
 #pragma once
 
+#include <algorithm>
 #include <memory>
 #include <vector>
 
@@ -72,6 +73,10 @@ class ParticleDepthRenderer {
 // the GL path is tested against.
 HeightImage render_heights_cpu(const float* spheres_xyzr, std::size_t n, int resolution, float x0, float z0, float x1,
                                float z1, float floor_y);
+// Rows [v0, v1) of that image into `image` (made by render_heights_cpu's caller with every
+// texel at the floor, or by an earlier band): a render spread over frames, band by band,
+// gives the image of one whole render.
+void render_heights_cpu_rows(const float* spheres_xyzr, std::size_t n, HeightImage& image, int v0, int v1);
 
 // The surface a probe ball of radius `probe` (m) resting on the spheres would feel, as
 // rendered from spheres drawn with their radius grown by `probe`: lowers every covered
@@ -81,6 +86,10 @@ HeightImage render_heights_cpu(const float* spheres_xyzr, std::size_t n, int res
 // narrower than about 2·probe and leave a smooth bed's mean height unchanged up to a
 // constant that the fill calibrates (docs/manager.md has the measurements).
 void lower_by_probe(HeightImage& image, float floor_y, float probe);
+// One texel of it: a covered texel (above the floor) lowered by `probe`, never below the floor.
+inline float probe_lowered(float h, float floor_y, float probe) {
+  return probe > 0 && h > floor_y ? std::max(floor_y, h - probe) : h;
+}
 
 // What the region looked like when its patch was filled: the fill's own granules rendered
 // the same way (same rectangle, resolution and probe) and the heightfield's values then.

@@ -82,6 +82,8 @@ struct Slot {
   // fill's surface rendered, 2 the surface now rendered too; the next part writes them.
   struct Demotion {
     int stage = 0;
+    int row = 0;  // the first row of the stage's CPU depth render still to do (demotion.cpp)
+    int parts = 0;  // parts done so far (report: ledger.patches[].demotion_parts)
     bool releasing = false;  // released for a request (planning.cpp release_idle): held, not stepped
     HeightImage was, now;
     bool on_gl = false;

@@ -282,6 +282,10 @@ Status World::prepare(double dt) {
   const double t = time();
   if (Status s = spawn_due(t); !s) return s;
   make_due_joints();
+  for (std::size_t k = 0; k < entries_.size(); ++k)
+    if (!entries_[k].removed && entries_[k].spawned() && alive(entries_[k].id) &&
+        bullet_->motion(entries_[k].id) == RigidMotion::Kinematic)
+      place_keyframed(k, t);  // keyframed tools' paths planned as the first frame would
   if (manager_)
     if (Status s = manager_->prepare(t, dt, profile_); !s) return fail("activation", s);
   prepare_ms_ = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();

@@ -296,6 +296,7 @@ class World {
   void apply_scene_loads(double t);
 
   Status spawn_due(double t);
+  void place_keyframed(std::size_t entry, double t);
   Status fail(const char* stage, Status s);
   std::size_t entry_of(RigidBodyId id) const;  // entries_.size() when none
   Status check_dynamic(RigidBodyId id) const;

@@ -357,6 +357,24 @@ Status World::set_kinematic_velocity(RigidBodyId id, const Eigen::Vector3f& line
 
 // Every kinematic body's pose at the end of the frame [t, t + dt] handed to Bullet (which
 // moves it there over the frame's substeps): its keyframes', its target, or its velocity's.
+// A keyframed body where its keyframes have it when it enters (at rest), and its path handed
+// to the manager (drive_kinematic in its first frame, or prepare before the first frame).
+void World::place_keyframed(std::size_t k, double t) {
+  if (kinematic_.size() < entries_.size()) kinematic_.resize(entries_.size());
+  const Entry& e = entries_[k];
+  Kinematic& kin = kinematic_[k];
+  if (kin.placed || kin.keys.empty() || !e.spawned() || !alive(e.id)) return;
+  BodyState st = bullet_->state(e.id);
+  const Keyframe now = keyframe_at(kin.keys, t);
+  st.position = now.position;
+  st.orientation = now.orientation.cast<float>();
+  st.linear_velocity.setZero();
+  st.angular_velocity.setZero();
+  bullet_->set_state(e.id, st);
+  kin.placed = true;
+  if (manager_) manager_->set_planned_path(e.id, planned_path(bullet_->definition(e.id).shape, kin.keys, t));
+}
+
 void World::drive_kinematic(double t, double dt) {
   if (kinematic_.size() < entries_.size()) kinematic_.resize(entries_.size());
   for (std::size_t k = 0; k < entries_.size(); ++k) {
@@ -367,15 +385,9 @@ void World::drive_kinematic(double t, double dt) {
     Eigen::Vector3d p;
     Eigen::Quaternionf q;
     if (!kin.keys.empty()) {
-      if (!kin.placed) {  // where its keyframes have it when it enters
-        const Keyframe now = keyframe_at(kin.keys, t);
-        st.position = now.position;
-        st.orientation = now.orientation.cast<float>();
-        st.linear_velocity.setZero();
-        st.angular_velocity.setZero();
-        bullet_->set_state(e.id, st);
-        kin.placed = true;
-        if (manager_) manager_->set_planned_path(e.id, planned_path(bullet_->definition(e.id).shape, kin.keys, t));
+      if (!kin.placed) {
+        place_keyframed(k, t);
+        st = bullet_->state(e.id);
       }
       const Keyframe end = keyframe_at(kin.keys, t + dt);
       p = end.position;

@@ -86,6 +86,21 @@ TEST(DepthConversion, RandomSpheresMatchCpuRaycast) {
   EXPECT_EQ(cpu_off, 0);
 }
 
+// A CPU render spread over frames, band by band (render_heights_cpu_rows, as a staged
+// demotion does it), gives exactly the image of one whole render, whatever the band height.
+TEST(DepthConversion, CpuRenderInBandsEqualsTheWholeRender) {
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<float> ux(0.0f, 2.0f), uy(0.0f, 0.5f), ur(0.03f, 0.08f);
+  std::vector<float> s;
+  for (int i = 0; i < 800; ++i) s.insert(s.end(), {ux(rng), uy(rng), ux(rng), ur(rng)});
+  const HeightImage whole = render_heights_cpu(s.data(), 800, 100, 0, 0, 2, 2, -0.2f);
+  for (const int rows : {1, 7, 64, 100}) {
+    HeightImage bands = render_heights_cpu(nullptr, 0, 100, 0, 0, 2, 2, -0.2f);
+    for (int v0 = 0; v0 < 100; v0 += rows) render_heights_cpu_rows(s.data(), 800, bands, v0, v0 + rows);
+    EXPECT_EQ(bands.h, whole.h) << "bands of " << rows << " rows";
+  }
+}
+
 // Writing a flat layer back: a square lattice of touching spheres (r = 5 cm) whose tops are
 // at 1.0 m covers the region; every written sample lies between the lowest visible surface
 // (the floor at 0.9 m, seen between spheres) and 1.0 m, the region is smooth (neighbouring
