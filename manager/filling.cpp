@@ -301,7 +301,6 @@ Status TerrainManager::Impl::promote(Slot& slot, const PatchRequest& req, double
   const auto t0 = Clock::now();
   PatchRecord& rec = record(slot);
   const double s = scale_for(req);
-  TileSet& tset = set_for(s);
   auto reg = region_for(req, s);
   if (!reg) return reg.errors();
   const GridRegion region = *reg;
