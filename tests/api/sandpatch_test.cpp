@@ -435,6 +435,21 @@ TEST(Api, SameInputsSameStateHash) {
 // granules keep moving (measured 2026-11-22: it slept at 0.5 and 1 m/s, not at 0.1 m/s within
 // 1.5 s, and the threshold moved with the manager's changes that day; docs/api.md "Not done
 // yet"); this test checks the event plumbing, not the sleep criterion.
+// prepare() refuses a dt the step would refuse, naming the field and the range, and does
+// nothing after the first step.
+TEST(Api, PrepareRefusesABadDt) {
+  auto t = sp::Terrain::create(sand_def());
+  ASSERT_TRUE(t.ok()) << t.message();
+  for (const double dt : {0.0, -1.0, 0.5, std::numeric_limits<double>::quiet_NaN()}) {
+    const sp::Status s = t->prepare(dt);
+    ASSERT_FALSE(s.ok()) << dt;
+    EXPECT_NE(s.message().find("prepare.dt"), std::string::npos) << s.message();
+  }
+  ASSERT_TRUE(t->prepare(1.0 / 60.0).ok());
+  ASSERT_TRUE(t->step(1.0 / 60.0).ok());
+  EXPECT_TRUE(t->prepare(1.0 / 60.0).ok());  // after the first step: nothing to do
+}
+
 TEST(Api, UntouchedPatchSleepsAndIsDemoted) {
   sp::TerrainDef d = sand_def();
   d.sleep_speed = 3.0;

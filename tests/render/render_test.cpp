@@ -347,6 +347,26 @@ TEST(SceneRenderer, HeightfieldCraterChangesItsPixels) {
   EXPECT_GT(sum / n_px, 9.0);
 }
 
+// The shadow tests' ground: 32 m of flat ground at 0.125 m, with (`wall`) a wall 1 m high
+// across x in [16, 16.5] m, z in [8, 24] m; and the camera that looks across it.
+Heightfield wall_terrain(bool wall) {
+  Heightfield hf = terrain(257, 0.125f, plane(0, 0));
+  if (wall)
+    for (int j = 64; j <= 192; ++j)
+      for (int i = 128; i <= 132; ++i) hf.set_height(i, j, 1.0f);
+  return hf;
+}
+
+CameraView wall_camera() {
+  CameraView cam;
+  cam.position = {24, 7, 16};
+  cam.target = {17.5, 0, 16};
+  cam.fov_deg = 50;
+  cam.width = 320;
+  cam.height = 240;
+  return cam;
+}
+
 // The terrain shadows itself (terrain.frag terrain_sun_visibility): a wall 1 m high and 0.5 m
 // thick across flat ground, the default sun 25 degrees high from -x. Behind the wall, within
 // its shadow's length H / tan 25 deg = 2.1 m (1.6 m along x), the ground gets the ambient light
@@ -356,15 +376,8 @@ TEST(SceneRenderer, HeightfieldCraterChangesItsPixels) {
 TEST(SceneRenderer, TerrainShadowsItselfBehindAWall) {
   auto ctx = make_context();
   if (!ctx) GTEST_SKIP() << "no GL context";
-  Heightfield hf = terrain(257, 0.125f, plane(0, 0));
-  for (int j = 64; j <= 192; ++j)  // z in [8, 24] m
-    for (int i = 128; i <= 132; ++i) hf.set_height(i, j, 1.0f);  // x in [16, 16.5] m
-  CameraView cam;
-  cam.position = {24, 7, 16};
-  cam.target = {17.5, 0, 16};
-  cam.fov_deg = 50;
-  cam.width = 320;
-  cam.height = 240;
+  Heightfield hf = wall_terrain(true);
+  const CameraView cam = wall_camera();
   auto mean_luma = [&](SceneRenderer& r, const Image& img, double x0, double x1) {
     double sum = 0;
     int n = 0;
@@ -412,16 +425,9 @@ TEST(SceneRenderer, TerrainShadowsItselfBehindAWall) {
 TEST(SceneRenderer, TerrainShadowFallsOnBodiesAndGranules) {
   auto ctx = make_context();
   if (!ctx) GTEST_SKIP() << "no GL context";
-  Heightfield open = terrain(257, 0.125f, plane(0, 0));
-  Heightfield walled = terrain(257, 0.125f, plane(0, 0));
-  for (int j = 64; j <= 192; ++j)  // z in [8, 24] m
-    for (int i = 128; i <= 132; ++i) walled.set_height(i, j, 1.0f);  // x in [16, 16.5] m
-  CameraView cam;
-  cam.position = {24, 7, 16};
-  cam.target = {17.5, 0, 16};
-  cam.fov_deg = 50;
-  cam.width = 320;
-  cam.height = 240;
+  Heightfield open = wall_terrain(false);
+  Heightfield walled = wall_terrain(true);
+  const CameraView cam = wall_camera();
   BodyInstance plate;
   plate.kind = BodyShapeKind::Box;
   plate.half_extents = {0.3f, 0.05f, 0.3f};
