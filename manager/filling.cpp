@@ -93,7 +93,11 @@ Status TerrainManager::Impl::activate(double time, double dt) {
     const bool others = std::any_of(slots.begin(), slots.end(), [&](const Slot& s) {
       return s.state == SlotState::Filling || (s.live() && (!budget_on() || wanted(s)));
     });
-    if (!c.fits && others) {
+    // A patch asked for ahead of a body that a live patch carries (planning.cpp extend) does
+    // not wait: waiting, the body reaches its patch's edge before the next patch is filled,
+    // and then either the whole fill falls in one frame or the body stops at the edge. It is
+    // filled part by part at the rung the budget chose, and counted as an overrun.
+    if (!c.fits && others && !it->ahead_of_carried) {
       ++budget_waits;
       ++it;
       continue;

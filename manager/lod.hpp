@@ -54,6 +54,9 @@ struct PatchRequest {
   // ahead of (TerrainManager extend); -1: none. The budget trims its apron on the two sides
   // across that one only, so it stays against the patch it abuts and reaches as far ahead.
   int abuts = -1;
+  // Asked for ahead of a body the patch it abuts carries: the frame budget does not make it
+  // wait (filling.cpp; the body would meet the patch's edge first).
+  bool ahead_of_carried = false;
   double width() const { return x1 - x0; }
   double depth() const { return z1 - z0; }
   bool overlaps(const PatchRequest& o) const { return x0 < o.x1 && o.x0 < x1 && z0 < o.z1 && o.z0 < z1; }

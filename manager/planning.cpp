@@ -14,6 +14,7 @@ using manager_detail::body_key;
 
 Status TerrainManager::Impl::plan(double time) {
   std::vector<BodyMotion> motions;
+  std::vector<RigidBodyId> motion_ids;  // the body of each motion
   std::vector<PatchRequest> planned;  // from planned paths
   for (RigidBodyId b : world->bodies()) {
     if (shells_sampled.insert(body_key(b)).second) {
@@ -47,6 +48,7 @@ Status TerrainManager::Impl::plan(double time) {
     // and go under it.
     if (!carried_anywhere(b) && lying(b, m.lo, m.hi)) continue;
     motions.push_back(m);
+    motion_ids.push_back(b);
   }
   // Requests are clipped to the terrain: a body landing at its edge asks for what exists
   // (before, a request reaching past the edge was never `covered` by the clipped patch and
@@ -72,7 +74,7 @@ Status TerrainManager::Impl::plan(double time) {
   for (auto& r : reqs) {
     if (covered(r) || !has_soil(r)) continue;
     if (overlaps_patch(r)) {
-      if (auto e = extend(r, time); !e) return e.errors();
+      if (auto e = extend(r, time, motion_ids); !e) return e.errors();
       continue;
     }
     bool queued = false;
@@ -270,7 +272,7 @@ bool TerrainManager::Impl::overlaps_patch(const PatchRequest& r) const {
 // slot (release_idle) or after idle_timeout. Nothing is demoted and filled again in one frame
 // (before, the patch was demoted and the union promoted in the same frame: a whole patch's
 // work twice in one frame). Returns whether it asked.
-Result<bool> TerrainManager::Impl::extend(const PatchRequest& r, double time) {
+Result<bool> TerrainManager::Impl::extend(const PatchRequest& r, double time, const std::vector<RigidBodyId>& ids) {
   for (Slot& s : slots) {
     if ((s.state != SlotState::Active && s.state != SlotState::Asleep) || !rect(s).overlaps(r)) continue;
     const PatchRequest a = rect(s);
@@ -300,6 +302,12 @@ Result<bool> TerrainManager::Impl::extend(const PatchRequest& r, double time) {
       if (q.overlaps(u)) return false;  // asked already
     u.time_to_contact = 0;
     u.abuts = side ^ 1;  // (side 0, x0 of the patch, is its x1; and so on)
+    // (ahead of a body the patch carries: it does not wait for the budget, filling.cpp)
+    for (int k : r.bodies)
+      for (const Carried& c : s.carried)
+        if (k >= 0 && k < int(ids.size()) && c.enabled && c.body.index == ids[std::size_t(k)].index &&
+            c.body.generation == ids[std::size_t(k)].generation)
+          u.ahead_of_carried = true;
     // The budget may trim its apron across the way it extends only (budget.cpp choose).
     u.apron = budget_on() ? r.apron : 0;
     u.particle_scale = budget_on() ? 0.0 : s.scale;  // its scale, or the budget's choice again

@@ -340,7 +340,8 @@ struct TerrainManager::Impl {
   Result<GridRegion> region_for(const PatchRequest& r, double s) const;
   bool covered(const PatchRequest& r) const;
   bool overlaps_patch(const PatchRequest& r) const;
-  Result<bool> extend(const PatchRequest& r, double time);
+  // `ids`: the bodies of the requests' BodyMotion indices (PatchRequest::bodies).
+  Result<bool> extend(const PatchRequest& r, double time, const std::vector<RigidBodyId>& ids);
   Result<bool> release_idle(double time);
   bool wanted_for_release(const Slot& s) const;
 

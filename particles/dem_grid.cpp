@@ -2,6 +2,7 @@
 // spheres by cell and the Verlet neighbour list with its contact history carried over by
 // partner id (dem.hpp steps 2; dem_impl.hpp).
 #include "particles/dem_impl.hpp"
+#include "particles/grid_simd.hpp"
 
 #include <algorithm>
 #include <cassert>
@@ -105,27 +106,50 @@ void Simulation::Impl::for_forward(int i, F&& f) const {
   const int c = cell[i];
   const int cx = c % gx, cy = (c / gx) % gy, cz = c / (gx * gy);
   const int x0 = cx > 0 ? cx - 1 : 0, x1 = cx < gx - 1 ? cx + 1 : gx - 1;
-  auto run = [&](int j, int j1) __attribute__((always_inline)) {
-    for (; j < j1; ++j) {
-      const float dx = pi.x - P[4 * j], dy = pi.y - P[4 * j + 1], dz = pi.z - P[4 * j + 2];
-      const float rs = ri + P[4 * j + 3] + sk;
-      if (dx * dx + dy * dy + dz * dz >= rs * rs) continue;
-      const std::int32_t bj = BODY[j];
-      if (!physics::spheres_interact(bi, gi, bj, GROUP[bj])) continue;  // same body or group
-      if (!dyn_i && V[4 * j + 3] == 0.0f) continue;  // neither moves under forces
-      f(j);
-    }
+  // the five runs of sorted indices
+  std::int32_t runs[5][2];
+  int nruns = 0, total = 0;
+  auto add_run = [&](int j0, int j1) {
+    if (j1 <= j0) return;
+    runs[nruns][0] = j0, runs[nruns][1] = j1;
+    ++nruns, total += j1 - j0;
   };
   const int row0 = (cz * gy + cy) * gx;
-  run(i + 1, CS[row0 + x1 + 1]);  // the rest of i's cell and the next one in x
+  add_run(i + 1, CS[row0 + x1 + 1]);  // the rest of i's cell and the next one in x
   if (cy < gy - 1) {
     const int row = row0 + gx;
-    run(CS[row + x0], CS[row + x1 + 1]);
+    add_run(CS[row + x0], CS[row + x1 + 1]);
   }
   if (cz < gz - 1)
     for (int yy = (cy > 0 ? cy - 1 : 0); yy <= (cy < gy - 1 ? cy + 1 : gy - 1); ++yy) {
       const int row = ((cz + 1) * gy + yy) * gx;
-      run(CS[row + x0], CS[row + x1 + 1]);
+      add_run(CS[row + x0], CS[row + x1 + 1]);
+    }
+  // what a near candidate must also be: of another body (not of i's collision group,
+  // physics_common.glsl spheres_interact), and one of the two moved by forces
+  auto keep = [&](int j) __attribute__((always_inline)) {
+    const std::int32_t bj = BODY[j];
+    if (!physics::spheres_interact(bi, gi, bj, GROUP[bj])) return;  // same body or group
+    if (!dyn_i && V[4 * j + 3] == 0.0f) return;                      // neither moves under forces
+    f(j);
+  };
+#ifdef SANDPATCH_AVX2_KERNEL
+  if (simd_pairs) {
+    // the distance test 8 candidates at a time (grid_simd.hpp: the same candidates, in order)
+    thread_local std::vector<std::int32_t> near;
+    if (int(near.size()) < total) near.resize(std::size_t(total));
+    const int n = simd::near_spheres_avx2(P, int(p.pos.size() / 4), simd::SearchSphere{pi.x, pi.y, pi.z, ri, sk}, runs,
+                                          nruns, near.data());
+    for (int k = 0; k < n; ++k) keep(near[std::size_t(k)]);
+    return;
+  }
+#endif
+  for (int k = 0; k < nruns; ++k)
+    for (int j = runs[k][0], j1 = runs[k][1]; j < j1; ++j) {
+      const float dx = pi.x - P[4 * j], dy = pi.y - P[4 * j + 1], dz = pi.z - P[4 * j + 2];
+      const float rs = ri + P[4 * j + 3] + sk;
+      if (dx * dx + dy * dy + dz * dz >= rs * rs) continue;
+      keep(j);
     }
 }
 

@@ -127,11 +127,17 @@ TEST(SceneFrames, CoarsePatchReadsAsSandWithoutSpecks) {
   ASSERT_TRUE(w.ok()) << w.message();
   World& world = *w.value();
   ASSERT_TRUE(step_to(world, 2.0, s.simulation.dt).ok());
+  // The first patch, at scale 3 (the budget fits nothing finer). A patch asked for ahead of a
+  // body it carries does not wait for the budget, so a second one may abut it: its footprint
+  // (and 0.5 m around it) is left out of the regions below.
   const auto patches = world.manager()->patches();
-  ASSERT_EQ(patches.size(), 1u);
-  const auto& p = patches.front();
-  ASSERT_TRUE(p.ready);
-  ASSERT_EQ(p.particle_scale, 3.0);
+  ASSERT_GE(patches.size(), 1u);
+  ASSERT_LE(patches.size(), 2u);
+  for (const auto& q : patches) {
+    ASSERT_TRUE(q.ready);
+    ASSERT_EQ(q.particle_scale, 3.0);
+  }
+  const auto& p = *std::min_element(patches.begin(), patches.end(), [](const auto& a, const auto& b) { return a.patch < b.patch; });
   FrameWriter images(world);
   const render::CameraView cam = camera_at(s.cameras.front(), world.time());
   auto img = images.render(cam);
@@ -142,10 +148,20 @@ TEST(SceneFrames, CoarsePatchReadsAsSandWithoutSpecks) {
   const double h = hf.spacing();
   const double x0 = hf.origin_x() + h * p.region.i0, z0 = hf.origin_z() + h * p.region.j0;
   const double x1 = hf.origin_x() + h * (p.region.i0 + p.region.ni - 1), z1 = hf.origin_z() + h * (p.region.j0 + p.region.nj - 1);
+  auto near_other = [&](double x, double z) {
+    for (const auto& q : patches) {
+      if (q.patch == p.patch) continue;
+      const double a0 = hf.origin_x() + h * q.region.i0 - 0.5, a1 = hf.origin_x() + h * (q.region.i0 + q.region.ni - 1) + 0.5;
+      const double b0 = hf.origin_z() + h * q.region.j0 - 0.5, b1 = hf.origin_z() + h * (q.region.j0 + q.region.nj - 1) + 0.5;
+      if (x > a0 && x < a1 && z > b0 && z < b1) return true;
+    }
+    return false;
+  };
   const int W = cam.width, H = cam.height;
   std::vector<int> region(std::size_t(W) * H, 0);  // 1 inside, 2 ring, 3 band
   for (double x = x0 - 1.5; x <= x1 + 1.5; x += 0.01)
     for (double z = z0 - 1.5; z <= z1 + 1.5; z += 0.01) {
+      if (near_other(x, z)) continue;
       const double out = std::max(std::max(x0 - x, x - x1), std::max(z0 - z, z - z1));  // m outside the footprint
       const double y = hf.sample(float(x - hf.origin_x()), float(z - hf.origin_z())) + hf.origin_y();
       auto q = images.renderer()->project(cam, {x, y, z});
@@ -184,9 +200,9 @@ TEST(SceneFrames, CoarsePatchReadsAsSandWithoutSpecks) {
     const double patch = (sum[1][i] + sum[3][i]) / (n[1] + n[3]), ring = sum[2][i] / n[2];
     d2 += (patch - ring) * (patch - ring);
   }
-  std::printf("coarse patch at 2 s (%d granules, scale %.0f): local contrast inside %.2f, band %.2f, ring %.2f; specks "
+  std::printf("coarse patch at 2 s (%d granules, scale %.0f; %zu patches): local contrast inside %.2f, band %.2f, ring %.2f; specks "
               "inside %d, band %d, ring %d (pixels %d, %d, %d); mean colour footprint vs ring %.1f\n",
-              p.granules, p.particle_scale, contrast[1] / n[1], contrast[3] / n[3], contrast[2] / n[2], specks[1], specks[3],
+              p.granules, p.particle_scale, patches.size(), contrast[1] / n[1], contrast[3] / n[3], contrast[2] / n[2], specks[1], specks[3],
               specks[2], n[1], n[3], n[2], std::sqrt(d2));
   EXPECT_LT(contrast[1] / n[1], 9.0) << "granules shaded as the sand they stand for (15.2 as balls)";
   EXPECT_LT(specks[1] + specks[3], 60) << "154 before";
