@@ -142,9 +142,11 @@ double TerrainManager::Impl::body_scale_cap(const PatchRequest& r, std::string* 
 // those settling after their body left) step, the longest held first, while the predicted DEM
 // of everything stepped so far fits 80 % of the budget (the share `choose` gives the DEM); one
 // that does not fit is held this frame: not stepped, its granules where they are, its time
-// behind the frame's (nothing outside the patch reads it). A patch is held at most kMaxHeldFrames in a
-// row, so it still settles and sleeps, at a fraction of the rate. Without a budget every
-// awake patch steps, in slot order.
+// behind the frame's (nothing outside the patch reads it). A patch no body wants is held at
+// most kMaxHeldFrames in a row, so it still settles and sleeps, at a fraction of the rate; one
+// a body is heading for waits for the body (stepped every kMaxHeldFrames beside the patches
+// its body was on, it made frames of three patches' work). Without a budget every awake patch
+// steps, in slot order.
 std::vector<Slot*> TerrainManager::Impl::stepping_order(const std::vector<Slot*>& awake, double dt) {
   if (!budget_on()) return awake;
   constexpr int kMaxHeldFrames = 30;
@@ -174,7 +176,7 @@ std::vector<Slot*> TerrainManager::Impl::stepping_order(const std::vector<Slot*>
   std::vector<Slot*> step;
   for (auto [s, t] : order) {
     const double ms = predict_ms(s->sim->particle_count(), dt, s->steps_per_contact);
-    if (t < 2 && used + ms > avail && s->held < kMaxHeldFrames) {
+    if (t < 2 && used + ms > avail && (t == 1 || s->held < kMaxHeldFrames)) {
       ++s->held;
       ++budget_held;
       budget_held_ahead += t == 1;

@@ -280,10 +280,25 @@ Result<bool> TerrainManager::Impl::extend(const PatchRequest& r, double time, co
     // two granule diameters of the patch's edge: a body settling near the middle whose
     // apron pokes out by a few mm must not make the patch grow.
     // A side of the patch on the terrain's edge cannot be crossed (requests are clipped there).
+    // The margin holds on the sides the request's bodies move toward, by at least the margin
+    // within lod.horizon; on the others only the contact reaching past the edge itself asks (a
+    // wheel running alongside a patch's side 0.3 m from it, jostled sideways as it sank in,
+    // asked at once for patches on both sides, which held two slots for nothing).
     const double m = 4.0 * radius_world(s), ap = r.apron, e = 1e-6;
+    const double toward = m / std::max(1e-6, double(def.lod.horizon));  // m/s
+    double mm[4] = {0, 0, 0, 0};
+    for (int k : r.bodies) {
+      if (k < 0 || k >= int(ids.size())) continue;
+      const Eigen::Vector3f v = world->state(ids[std::size_t(k)]).linear_velocity;
+      if (v.x() <= -toward) mm[0] = m;
+      if (v.x() >= toward) mm[1] = m;
+      if (v.z() <= -toward) mm[2] = m;
+      if (v.z() >= toward) mm[3] = m;
+    }
+    if (r.bodies.empty() || r.bodies.front() < 0) mm[0] = mm[1] = mm[2] = mm[3] = m;  // a planned path's
     const PatchRequest t = terrain_rect(*hf);
-    const double past[4] = {a.x0 <= t.x0 + e ? -1.0 : (a.x0 + m) - (r.x0 + ap), a.x1 >= t.x1 - e ? -1.0 : (r.x1 - ap) - (a.x1 - m),
-                            a.z0 <= t.z0 + e ? -1.0 : (a.z0 + m) - (r.z0 + ap), a.z1 >= t.z1 - e ? -1.0 : (r.z1 - ap) - (a.z1 - m)};
+    const double past[4] = {a.x0 <= t.x0 + e ? -1.0 : (a.x0 + mm[0]) - (r.x0 + ap), a.x1 >= t.x1 - e ? -1.0 : (r.x1 - ap) - (a.x1 - mm[1]),
+                            a.z0 <= t.z0 + e ? -1.0 : (a.z0 + mm[2]) - (r.z0 + ap), a.z1 >= t.z1 - e ? -1.0 : (r.z1 - ap) - (a.z1 - mm[3])};
     const int side = int(std::max_element(past, past + 4) - past);
     if (!(past[side] > 0)) return false;
     // The part ahead, at least one tile period deep (patch_region rounds it to whole periods,
@@ -302,12 +317,17 @@ Result<bool> TerrainManager::Impl::extend(const PatchRequest& r, double time, co
       if (q.overlaps(u)) return false;  // asked already
     u.time_to_contact = 0;
     u.abuts = side ^ 1;  // (side 0, x0 of the patch, is its x1; and so on)
-    // (ahead of a body the patch carries: it does not wait for the budget, filling.cpp)
-    for (int k : r.bodies)
+    // (ahead of a body the patch carries, moving toward that side faster than sleep_speed: it
+    // does not wait for the budget, filling.cpp)
+    const Eigen::Vector2d out[4] = {{-1, 0}, {1, 0}, {0, -1}, {0, 1}};
+    for (int k : r.bodies) {
+      if (k < 0 || k >= int(ids.size())) continue;
+      const RigidBodyId b = ids[std::size_t(k)];
+      const Eigen::Vector3f v = world->state(b).linear_velocity;
+      if (out[side].dot(Eigen::Vector2d(v.x(), v.z())) <= def.sleep_speed) continue;
       for (const Carried& c : s.carried)
-        if (k >= 0 && k < int(ids.size()) && c.enabled && c.body.index == ids[std::size_t(k)].index &&
-            c.body.generation == ids[std::size_t(k)].generation)
-          u.ahead_of_carried = true;
+        if (c.enabled && c.body.index == b.index && c.body.generation == b.generation) u.ahead_of_carried = true;
+    }
     // The budget may trim its apron across the way it extends only (budget.cpp choose).
     u.apron = budget_on() ? r.apron : 0;
     u.particle_scale = budget_on() ? 0.0 : s.scale;  // its scale, or the budget's choice again

