@@ -264,8 +264,8 @@ TEST(Dig, BladePushesTheCutIntoABermAheadOfItsEnd) {
   EXPECT_GT(ahead, 0.6 * berm);
   // The berm holds the cut's soil at the tile's packing (the demotion cuts the rendered rise,
   // looser, to its granules at that packing: docs/manager.md "The volume ledger"): its volume
-  // is the cut's within 15 % (measured 1.00; 1.24 as rendered), and so is the berm less the
-  // report's remaining dilation (measured 1.04). The ledger over the push within 1 %
+  // is the cut's within 15 % (measured 1.00), and so is the berm less the report's remaining
+  // dilation (measured 0.92). The ledger over the push within 1 %
   // (measured 0.000 %).
   EXPECT_NEAR(berm / cut, 1.0, 0.15);
   EXPECT_NEAR((berm - dilation) / cut, 1.0, 0.15);
