@@ -1,6 +1,7 @@
 #include "manager/world.hpp"
 
 #include <algorithm>
+#include <cstdio>
 #include <chrono>
 #include <cmath>
 #include <optional>
@@ -567,6 +568,33 @@ nlohmann::ordered_json World::report() const {
                     format_number(d["time_s"].get<double>()) + " s, " + format_number(d["height_m"].get<double>()) +
                     " m above its patch's highest surface point: a patch carries a tool's soil up to " +
                     format_number(d["limit_m"].get<double>()) + " m above it and within its sides; the soil fell");
+    // The frame budget: patches that did not fit it even at their cheapest rung, with the
+    // budget that would have fitted the worst of them (their DEM share is 80 % of the budget,
+    // less what Bullet and planning took; docs/manager.md "Frame budget").
+    if (r.contains("budget") && r["budget"].value("on", false) && r["budget"].contains("patches")) {
+      int over = 0, n = 0;
+      double need = 0, worst_pred = 0, worst_avail = 0;
+      for (const auto& p : r["budget"]["patches"]) {
+        ++n;
+        if (p.value("fits", true)) continue;
+        ++over;
+        const double pred = p.value("predicted_ms", 0.0), avail = p.value("available_ms", 0.0);
+        if (pred - avail > need) need = pred - avail, worst_pred = pred, worst_avail = avail;
+      }
+      const double budget = r.contains("frames") && r["frames"]["budget_ms"].is_number() ? r["frames"]["budget_ms"].get<double>() : 0.0;
+      auto ms = [](double v) {
+        char b[32];
+        std::snprintf(b, sizeof b, "%.2f", v);
+        return std::string(b);
+      };
+      if (over > 0 && budget > 0)
+        w.push_back("simulation.frame_budget_ms: " + std::to_string(over) + " of " + std::to_string(n) +
+                    " patches did not fit the frame budget of " + ms(budget) +
+                    " ms even at their cheapest particle scale, extent and substeps (the worst needed " + ms(worst_pred) +
+                    " ms of DEM a frame against " + ms(worst_avail) +
+                    " ms left to the DEM); they ran over it. A budget of about " + ms(budget + need / 0.8) +
+                    " ms fits them on this machine");
+    }
     r["warnings"] = w;
   }
   r["final_state_hash"] = Hasher::to_hex(state_hash());

@@ -182,4 +182,9 @@ TEST(SceneVehicles, ShippedVehicleDrivesOffUnderABudgetNothingFits) {
               4 * frames);
   EXPECT_EQ(off, 0) << "wheel-frames on the heightfield";
   EXPECT_GT(moved, 2.5) << "m in 4 s (0.66 m when it sank into its first patch's hollows)";
+  // Nothing fitted, and the report says so, with a budget that would have fitted
+  const auto r = world.report();
+  bool said = false;
+  for (const auto& w : r["warnings"]) said = said || w.get<std::string>().starts_with("simulation.frame_budget_ms: ");
+  EXPECT_TRUE(said) << r["warnings"].dump();
 }
