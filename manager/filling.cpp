@@ -449,7 +449,7 @@ Status TerrainManager::Impl::cut(Slot& slot, double time, std::size_t units) {
 
 // The share of a body's weight the kept granules may push with: at most half, so the body is
 // never pushed up (its net force stays downward) and settles onto them. Measured (docs/
-// BENCHMARKS.md "A patch promoted under a resting body"): with the whole weight a resting box
+// BENCHMARKS.md "Why the car stuck under a tight budget"): with the whole weight a resting box
 // moved 7.5 mm (a 0.05 m sphere diameter), with half 0.48 mm as with no granule kept; a parked
 // car's first patch at a coarse rung let it drive away with half or a quarter, not with none.
 constexpr double kHeldWeight = 0.5;
