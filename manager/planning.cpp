@@ -92,10 +92,12 @@ Status TerrainManager::Impl::plan(double time) {
 }
 
 // A tool on a planned path (its keyframes, known ahead): the stretch of the path that works
-// the ground is the run of path samples within reach of it (lowest point below the highest
-// surface sample under the footprint + engage_height / 2, where a patch's shell engages the
-// body: coupling.cpp engages) around its first contact from now on (lowest point within
-// lod.margin of that surface). One request covers the stretch's footprint plus lod.apron,
+// the ground is the run of path samples within reach of it around its first contact from now
+// on (lowest point within lod.margin of the highest surface sample under the footprint): before
+// the contact, lowest point below that surface + engage_height / 2 (where a patch's shell
+// engages the body: coupling.cpp engages); after it, below the surface + carry_height (where
+// the patch still carries what the tool scooped), so a carry up to 1 m high stays in the
+// patch that dug it. One request covers the stretch's footprint plus lod.apron,
 // asked for when that contact is within lod.horizon: the dig, the carry in the air and the
 // dump are one patch, so the granules the tool scoops stay in the simulation that carries
 // them until they are poured out (docs/manager.md "Tools on a planned path"). Without a
@@ -118,9 +120,12 @@ bool TerrainManager::Impl::plan_path(RigidBodyId b, double time, std::vector<Pat
                                   path.begin());
   if (first > 0) --first;
   auto ground = [&](const TerrainManager::PathPose& p) { return max_height_under(*hf, p.lo.x(), p.lo.z(), p.hi.x(), p.hi.z()); };
-  auto in_reach = [&](const TerrainManager::PathPose& p) {
+  // (within `above` m of the ground: engage_height / 2 on the way to the contact, where a
+  // patch's shell engages the tool; carry_height after it, up to which the patch carries what
+  // the tool scooped, coupling.cpp engage_limit)
+  auto in_reach = [&](const TerrainManager::PathPose& p, double above) {
     const double g = ground(p);
-    return std::isfinite(g) && p.lo.y() < g + 0.5 * engage_height;
+    return std::isfinite(g) && p.lo.y() < g + above;
   };
   std::size_t k0 = path.size();
   for (std::size_t k = first; k < path.size() && path[k].t <= time + def.lod.horizon; ++k) {
@@ -134,8 +139,8 @@ bool TerrainManager::Impl::plan_path(RigidBodyId b, double time, std::vector<Pat
   std::size_t s = k0, e = k0;
   // (An extrapolated path's stretch starts at its contact: what lies before it is the game's
   // tool on its way there, in the air, and no patch is needed under it.)
-  while (!extrapolated_path && s > first && in_reach(path[s - 1])) --s;
-  while (e + 1 < path.size() && in_reach(path[e + 1])) ++e;
+  while (!extrapolated_path && s > first && in_reach(path[s - 1], 0.5 * engage_height)) --s;
+  while (e + 1 < path.size() && in_reach(path[e + 1], carry_height)) ++e;
   Eigen::Vector3d lo = path[s].lo, hi = path[s].hi;
   for (std::size_t k = s; k <= e; ++k) lo = lo.cwiseMin(path[k].lo), hi = hi.cwiseMax(path[k].hi);
   PatchRequest r;

@@ -337,5 +337,59 @@ TEST(Dig, SoilLiftedAboveTheCarryHeightIsReportedAndTheLedgerCloses) {
   EXPECT_LT(std::abs(report["ledger"]["patches"][0]["error_pct"].get<double>()), 1.0);
 }
 
+// The same cycle carried high: lifted to 0.8 m above the sand (the bucket's lowest point;
+// below carry_height, 1 m, where a patch still carries a tool's soil), carried 0.9 m, lowered
+// to 0.3 m and poured. The stretch of path that works the ground runs on through the carry
+// while the tool stays within carry_height of the ground after it has worked it, so the dig,
+// the carry and the pour are one patch and the soil is poured where the path pours it. Before,
+// the stretch ended where the bucket rose past engage_height / 2 (0.5 m): the pour was a second
+// stretch and a second patch, and the soil fell where the bucket left the first one's side.
+TEST(Dig, ACarryBelowTheCarryHeightStaysInOnePatch) {
+  test::Rig rig(test::flat_terrain(91, 0.1f, 0.5f));  // 9 m square, room to carry 3 m
+  ASSERT_TRUE(rig.ok()) << rig.error;
+  auto bucket = rig.core->add_body(bucket_body());
+  ASSERT_TRUE(bucket.ok()) << bucket.message();
+  const std::vector<World::Keyframe> keys = {
+      key(0.0, 1.0, 0.85, -20), key(0.6, 1.2, 0.62, -20), key(1.3, 1.5, 0.52, 0), key(2.3, 2.0, 0.52, 0),
+      key(3.1, 2.2, 0.75, 90),  key(3.7, 2.2, 1.55, 90),  key(5.3, 5.0, 1.55, 90), key(5.9, 5.0, 1.05, 90),
+      key(6.3, 5.0, 1.05, 0),   key(6.7, 5.0, 1.05, -90), key(7.5, 5.0, 1.05, -90), key(7.9, 5.0, 1.90, -90)};
+  ASSERT_TRUE(rig.core->set_keyframes(0, keys).ok());
+  TerrainManagerDef def = test::small_manager_def();
+  def.material.radius = 0.04f;
+  def.granules_per_slot = 6000;
+  def.patch_depth = 0.4;
+  def.soil_depth = 0.8;
+  def.lod.apron = 0.3;
+  def.threads = 1;
+  ASSERT_TRUE(rig.start(def).ok()) << rig.error;
+  std::vector<float> before(std::size_t(rig.hf().samples_x()) * rig.hf().samples_z());
+  for (int j = 0; j < rig.hf().samples_z(); ++j)
+    for (int i = 0; i < rig.hf().samples_x(); ++i) before[std::size_t(j) * rig.hf().samples_x() + i] = rig.hf().height(i, j);
+  double carried_n = 0;
+  int carried_frames = 0;
+  ASSERT_TRUE(rig.frames(int(std::lround(8.1 / rig.dt)), [&] {
+                   const double t = rig.t();
+                   if (t > 3.8 && t < 5.2) {  // high in the air, carrying
+                     carried_n += -rig.core->soil_force(*bucket).force.y();
+                     ++carried_frames;
+                   }
+                   return false;
+                 }).ok())
+      << rig.error;
+  ASSERT_TRUE(rig.demote_all().ok()) << rig.error;
+  const auto report = rig.manager->report();
+  const double carried_kg = carried_n / std::max(carried_frames, 1) / 9.81;
+  const double pile = volume_change(rig.hf(), before, 4.6, 5.5, true);  // m³, where it was poured
+  std::printf("carried high: %.1f kg in the air; %d patch(es); soil dropped %zu time(s); pile %.4f m3; ledger %.3f %%\n",
+              carried_kg, test::count_events(*rig.manager, PatchEventKind::Promoted),
+              report.contains("soil_dropped") ? report["soil_dropped"].size() : std::size_t(0), pile,
+              report["ledger"]["total"]["error_pct"].get<double>());
+  EXPECT_EQ(test::count_events(*rig.manager, PatchEventKind::Promoted), 1);
+  EXPECT_EQ(test::count_events(*rig.manager, PatchEventKind::SoilDropped), 0);
+  EXPECT_GT(carried_kg, 30.0);  // soil in the bucket high in the air
+  EXPECT_GT(pile, carried_kg / (2650.0 * report["tile"]["packing_fraction"].get<double>()));  // poured where the path pours
+  EXPECT_LT(std::abs(report["ledger"]["total"]["error_pct"].get<double>()), 1.0);
+}
+
 }  // namespace
 }  // namespace sandpatch
