@@ -49,6 +49,27 @@ std::vector<World::Keyframe> cycle() {
           key(5.9, 3.1, 1.05, -90), key(6.3, 3.1, 1.90, -90)};
 }
 
+// The bucket cycles' manager: 4 cm granules, 6,000 a slot, a 0.4 m deep patch on 0.8 m of
+// soil, a 0.3 m apron, one thread.
+TerrainManagerDef bucket_def() {
+  TerrainManagerDef def = test::small_manager_def();
+  def.material.radius = 0.04f;
+  def.granules_per_slot = 6000;
+  def.patch_depth = 0.4;
+  def.soil_depth = 0.8;
+  def.lod.apron = 0.3;
+  def.threads = 1;
+  return def;
+}
+
+// The heightfield's samples (row by row), to compare with after a cycle.
+std::vector<float> heights(const Heightfield& hf) {
+  std::vector<float> h(std::size_t(hf.samples_x()) * hf.samples_z());
+  for (int j = 0; j < hf.samples_z(); ++j)
+    for (int i = 0; i < hf.samples_x(); ++i) h[std::size_t(j) * hf.samples_x() + i] = hf.height(i, j);
+  return h;
+}
+
 // Soil volume (m³) between the heightfield now and `before` over the samples with x in
 // [x0, x1] (m, world; the terrain's origin is 0): the part above (`above` true) or below it.
 double volume_change(const Heightfield& hf, const std::vector<float>& before, double x0, double x1, bool above) {
@@ -80,17 +101,8 @@ TEST(Dig, BucketDigsCarriesAndDepositsInOnePatch) {
   ASSERT_TRUE(bucket.ok()) << bucket.message();
   std::vector<World::Keyframe> keys = cycle();
   ASSERT_TRUE(rig.core->set_keyframes(0, keys).ok());
-  TerrainManagerDef def = test::small_manager_def();
-  def.material.radius = 0.04f;
-  def.granules_per_slot = 6000;
-  def.patch_depth = 0.4;
-  def.soil_depth = 0.8;
-  def.lod.apron = 0.3;
-  def.threads = 1;
-  ASSERT_TRUE(rig.start(def).ok()) << rig.error;
-  std::vector<float> before(std::size_t(rig.hf().samples_x()) * rig.hf().samples_z());
-  for (int j = 0; j < rig.hf().samples_z(); ++j)
-    for (int i = 0; i < rig.hf().samples_x(); ++i) before[std::size_t(j) * rig.hf().samples_x() + i] = rig.hf().height(i, j);
+  ASSERT_TRUE(rig.start(bucket_def()).ok()) << rig.error;
+  const std::vector<float> before = heights(rig.hf());
 
   // Carried: the soil's mean vertical force on the bucket while it is in the air (t in
   // [3.6, 4.2] s: lifted and carrying, before it turns).
@@ -220,18 +232,12 @@ TEST(Dig, BladePushesTheCutIntoABermAheadOfItsEnd) {
     return k;
   };
   ASSERT_TRUE(rig.core->set_keyframes(0, {at(0.0, 1.0, 0.9), at(0.6, 1.0, y_cut), at(2.6, x_end, y_cut), at(3.2, x_end, 1.4)}).ok());
-  TerrainManagerDef def = test::small_manager_def();
-  def.material.radius = 0.04f;
-  def.granules_per_slot = 6000;
+  TerrainManagerDef def = bucket_def();  // (a shallower patch)
   def.patch_depth = 0.3;
   def.soil_depth = 0.6;
-  def.lod.apron = 0.3;
-  def.threads = 1;
   ASSERT_TRUE(rig.start(def).ok()) << rig.error;
   const Heightfield& hf = rig.hf();
-  std::vector<float> before(std::size_t(hf.samples_x()) * hf.samples_z());
-  for (int j = 0; j < hf.samples_z(); ++j)
-    for (int i = 0; i < hf.samples_x(); ++i) before[std::size_t(j) * hf.samples_x() + i] = hf.height(i, j);
+  const std::vector<float> before = heights(hf);
   ASSERT_TRUE(rig.frames(int(std::lround(4.5 / rig.dt))).ok()) << rig.error;
   ASSERT_TRUE(rig.demote_all().ok()) << rig.error;
 
@@ -290,14 +296,7 @@ TEST(Dig, SoilLiftedAboveTheCarryHeightIsReportedAndTheLedgerCloses) {
                                              key(1.9, 1.8, 0.52, 0),   key(2.5, 1.9, 0.75, 90),  key(3.0, 1.9, 1.5, 90),
                                              key(3.8, 1.9, 1.5, 90),   key(4.2, 1.9, 2.4, 90)};
   ASSERT_TRUE(rig.core->set_keyframes(0, keys).ok());
-  TerrainManagerDef def = test::small_manager_def();
-  def.material.radius = 0.04f;
-  def.granules_per_slot = 6000;
-  def.patch_depth = 0.4;
-  def.soil_depth = 0.8;
-  def.lod.apron = 0.3;
-  def.threads = 1;
-  ASSERT_TRUE(rig.start(def).ok()) << rig.error;
+  ASSERT_TRUE(rig.start(bucket_def()).ok()) << rig.error;
   double carried_n = 0, lowest = 0;
   int carried_frames = 0;
   ASSERT_TRUE(rig.frames(int(std::lround(5.0 / rig.dt)), [&] {
@@ -354,17 +353,8 @@ TEST(Dig, ACarryBelowTheCarryHeightStaysInOnePatch) {
       key(3.1, 2.2, 0.75, 90),  key(3.7, 2.2, 1.55, 90),  key(5.3, 5.0, 1.55, 90), key(5.9, 5.0, 1.05, 90),
       key(6.3, 5.0, 1.05, 0),   key(6.7, 5.0, 1.05, -90), key(7.5, 5.0, 1.05, -90), key(7.9, 5.0, 1.90, -90)};
   ASSERT_TRUE(rig.core->set_keyframes(0, keys).ok());
-  TerrainManagerDef def = test::small_manager_def();
-  def.material.radius = 0.04f;
-  def.granules_per_slot = 6000;
-  def.patch_depth = 0.4;
-  def.soil_depth = 0.8;
-  def.lod.apron = 0.3;
-  def.threads = 1;
-  ASSERT_TRUE(rig.start(def).ok()) << rig.error;
-  std::vector<float> before(std::size_t(rig.hf().samples_x()) * rig.hf().samples_z());
-  for (int j = 0; j < rig.hf().samples_z(); ++j)
-    for (int i = 0; i < rig.hf().samples_x(); ++i) before[std::size_t(j) * rig.hf().samples_x() + i] = rig.hf().height(i, j);
+  ASSERT_TRUE(rig.start(bucket_def()).ok()) << rig.error;
+  const std::vector<float> before = heights(rig.hf());
   double carried_n = 0;
   int carried_frames = 0;
   ASSERT_TRUE(rig.frames(int(std::lround(8.1 / rig.dt)), [&] {
