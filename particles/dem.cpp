@@ -169,6 +169,13 @@ Result<Simulation> Simulation::make(const SimulationDef& d, Impl* reuse) {
   s.guard_arm.assign(d.max_bodies, 0.0f);
   s.guard_rmin.assign(d.max_bodies, 0.0f);
   s.size_grid();
+  // OpenMP's worker threads are made on the first parallel region with this many threads:
+  // here, at creation, not in the first frame that steps a patch large enough to run its
+  // stages in parallel (measured: that frame took 16.5 ms in the default scene, against 2 ms).
+  if (s.threads > 1) {
+#pragma omp parallel num_threads(s.threads)
+    { (void)omp_get_thread_num(); }
+  }
   return Simulation(std::move(im));
 }
 

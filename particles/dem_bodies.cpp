@@ -174,7 +174,7 @@ bool Simulation::Impl::bodies(float dt, float* d2max_out) {
   const bool ordered = int(body_order.size()) == n;
   const std::int32_t* order = body_order.data();
   const GatherCtx gctx = gather_ctx();
-#pragma omp parallel for num_threads(threads) schedule(dynamic, 128) reduction(max : d2max, vmax) reduction(+ : bad, nwall) if (n > 2048 || np > 4096)
+#pragma omp parallel for num_threads(threads) schedule(dynamic, 128) reduction(max : d2max, vmax) reduction(+ : bad, nwall) if (n > kParallelSpheres / 2 || np > kParallelSpheres)
   for (int t = 0; t < n; ++t) {
     const int i = ordered ? order[t] : t;
     const std::uint32_t fl = b.flags[i];

@@ -82,7 +82,7 @@ void Simulation::Impl::contacts(float dt) {
     float dx, dy, dz, rj, rs, d2;
     float* xe;
   };
-#pragma omp parallel num_threads(threads) if (n > 4096)
+#pragma omp parallel num_threads(threads) if (n > kParallelSpheres)
   {
   // The walk both passes make over slab c: every list entry of its spheres. A pair apart
   // (|d| >= r_i + r_j, or the same centre) has its spring forgotten (part); a touching one is

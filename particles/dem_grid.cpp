@@ -171,7 +171,7 @@ void Simulation::Impl::build_list(const std::vector<std::int32_t>& old_slot) {
   nstart.assign(n + 1, 0);
   const int blocks = (n + kListBlock - 1) / kListBlock;
   if (int(list_blocks.size()) < blocks) list_blocks.resize(std::size_t(blocks));
-#pragma omp parallel for num_threads(threads) schedule(dynamic, 1) if (n > 4096)
+#pragma omp parallel for num_threads(threads) schedule(dynamic, 1) if (n > kParallelSpheres)
   for (int blk = 0; blk < blocks; ++blk) {
     std::vector<std::int32_t>& found = list_blocks[std::size_t(blk)];
     found.clear();
@@ -194,7 +194,7 @@ void Simulation::Impl::build_list(const std::vector<std::int32_t>& old_slot) {
       if (onbr_id[k] == partner_id) return k;
     return -1;
   };
-#pragma omp parallel for num_threads(threads) schedule(dynamic, 1) if (n > 4096)
+#pragma omp parallel for num_threads(threads) schedule(dynamic, 1) if (n > kParallelSpheres)
   for (int blk = 0; blk < blocks; ++blk) {
     const std::int32_t* found = list_blocks[std::size_t(blk)].data();
     for (int i = blk * kListBlock, i1 = std::min(n, i + kListBlock); i < i1; ++i) {

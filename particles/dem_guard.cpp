@@ -52,7 +52,7 @@ Status Simulation::Impl::check_impacts() const {
   if (!(f > 0)) return Ok{};
   const double kn = def.material.normal_stiffness, m_light = lightest_point_mass();
   int first_bad = nb;
-#pragma omp parallel for num_threads(threads) schedule(static) reduction(min : first_bad) if (nb > 2048)
+#pragma omp parallel for num_threads(threads) schedule(static) reduction(min : first_bad) if (nb > kParallelSpheres / 2)
   for (int i = 0; i < nb; ++i) {
     if (b.flags[i] & kBodyStatic) continue;
     const ImpactCheck c = impact_of(i, kn, m_light);

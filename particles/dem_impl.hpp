@@ -166,6 +166,12 @@ struct Simulation::Impl {
   // build_list's scratch, kept between rebuilds: the partners found by each block of
   // kListBlock spheres, in sphere order
   static constexpr int kListBlock = 256;
+  // The stages run on `threads` OpenMP threads above this many spheres (the body stage also
+  // above half as many bodies); smaller simulations run them on one. Measured on two cores
+  // (docs/BENCHMARKS.md "Patches of 1,000-4,000 spheres on two threads"): from 4,096 down to
+  // 1,024 the default scene's DEM took 37 % less time and leach_3's 40 % less, with the same
+  // final states; at 512 no better.
+  static constexpr int kParallelSpheres = 1024;
   std::vector<std::vector<std::int32_t>> list_blocks;
   std::vector<std::uint32_t> sort_scratch;  // sort()'s copy of one particle field (4-byte values)
   // The pairs' contact history (fields.hpp): xi, the tangential spring (3 per entry, m), and

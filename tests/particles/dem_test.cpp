@@ -164,7 +164,7 @@ TEST(Simulation, DeterministicAcrossThreadsAndRuns) {
   EXPECT_EQ(run_pile(1, 3000, 50), run_pile(2, 3000, 50));
 }
 
-// Above 4,096 spheres the stages run on the threads (smaller beds run serially): 1,200 granules
+// Above 1,024 spheres the stages run on the threads (smaller beds run serially): 1,200 granules
 // falling in a box give the same state whether they run on 1 thread, on 2, or switch between
 // the two mid-run (Simulation::set_threads); a negative count is refused naming the field.
 TEST(Simulation, SetThreadsMidRunKeepsTheState) {
