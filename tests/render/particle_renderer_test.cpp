@@ -53,6 +53,23 @@ Scene make_scene() {
   return s;
 }
 
+// Flat ground (129 samples at 0.5 m, y = 0) seen from about 10 m at 45 degrees, 320 x 240,
+// looking at (32, 0, 32), as the default scene's camera sees its patches.
+Scene make_flat_scene() {
+  Scene s = make_scene();
+  if (!s.renderer) return s;
+  s.hf = terrain(129, 0.5f, plane(0, 0));
+  auto r = SceneRenderer::create(*s.ctx, s.hf);
+  EXPECT_TRUE(r.ok()) << r.message();
+  s.renderer = r.ok() ? std::move(r.value()) : nullptr;
+  s.cam.position = {38, 4, 40};
+  s.cam.target = {32, 0, 32};
+  s.cam.fov_deg = 45;
+  s.cam.width = 320;
+  s.cam.height = 240;
+  return s;
+}
+
 // Pixels whose view ray falls inside the patch square (shrunk by `margin` pixels).
 std::vector<std::uint8_t> patch_mask(const Scene& s, float x0, float z0, float w, int margin) {
   const Eigen::Vector3f eye = s.cam.position.cast<float>(), target = s.cam.target.cast<float>();
@@ -336,17 +353,8 @@ double mean_smooth_luma_change(const Image& a, const Image& b, const std::vector
 // occluded); in Leach's order without the cut the heightfield covers the crater: the change is
 // only the granule caps that sank below the surface, and it is checked to be at most half.
 TEST(ParticleRenderer, CraterInAPatchShowsWithItsFootprintCutOut) {
-  Scene s = make_scene();
+  Scene s = make_flat_scene();
   if (!s.renderer) GTEST_SKIP() << "no GL context";
-  s.hf = terrain(129, 0.5f, plane(0, 0));
-  auto r = SceneRenderer::create(*s.ctx, s.hf);
-  ASSERT_TRUE(r.ok()) << r.message();
-  s.renderer = std::move(r.value());
-  s.cam.position = {38, 4, 40};
-  s.cam.target = {32, 0, 32};
-  s.cam.fov_deg = 45;
-  s.cam.width = 320;
-  s.cam.height = 240;
   const Eigen::Vector2f c(32, 32);
   const float r_g = 0.04f, w = 3.0f;
   ParticleBuffer flat(bed_with_crater(c, w, r_g, 0.0f, 0.5f));
@@ -423,17 +431,8 @@ int count_specks(const Image& img, const std::vector<std::uint8_t>& mask, double
 // bed's normal taken across a silhouette no longer tilts a pixel wildly, and a granule of a
 // coarse patch is shaded as the finer sand it stands for, not as a ball with a hard outline).
 TEST(ParticleRenderer, FewSpecksWhereACoarsePatchMeetsTheTerrain) {
-  Scene s = make_scene();
+  Scene s = make_flat_scene();
   if (!s.renderer) GTEST_SKIP() << "no GL context";
-  s.hf = terrain(129, 0.5f, plane(0, 0));
-  auto rr = SceneRenderer::create(*s.ctx, s.hf);
-  ASSERT_TRUE(rr.ok()) << rr.message();
-  s.renderer = std::move(rr.value());
-  s.cam.position = {38, 4, 40};
-  s.cam.target = {32, 0, 32};
-  s.cam.fov_deg = 45;
-  s.cam.width = 320;
-  s.cam.height = 240;
   const float r = 0.12f, w = 4.0f, cx = 32, cz = 32;
   std::uint32_t seed = 12345;
   auto rnd = [&seed] {  // uniform in [0, 1)

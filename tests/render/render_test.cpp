@@ -43,6 +43,18 @@ void paint_materials(Heightfield& hf) {
   hf.write({0, 3 * n / 4, n, n / 6}, ramp.data(), Layer::Material3);
 }
 
+// A 320 x 240 view from `position` toward `target` (m, world) with a vertical field of view
+// of `fov` degrees.
+CameraView view_320x240(const Eigen::Vector3d& position, const Eigen::Vector3d& target, float fov) {
+  CameraView cam;
+  cam.position = position;
+  cam.target = target;
+  cam.fov_deg = fov;
+  cam.width = 320;
+  cam.height = 240;
+  return cam;
+}
+
 }  // namespace
 
 // A plane, a slope and hills, each seen from several positions, heights and headings with the
@@ -307,12 +319,7 @@ TEST(SceneRenderer, HeightfieldCraterChangesItsPixels) {
   Heightfield hf = terrain(257, 0.125f, plane(0, 0));
   auto r = SceneRenderer::create(*ctx, hf);
   ASSERT_TRUE(r.ok()) << r.message();
-  CameraView cam;
-  cam.position = {22, 4, 24};
-  cam.target = {16, 0, 16};
-  cam.fov_deg = 45;
-  cam.width = 320;
-  cam.height = 240;
+  const CameraView cam = view_320x240({22, 4, 24}, {16, 0, 16}, 45);
   std::vector<std::uint8_t> mask(std::size_t(cam.width) * cam.height, 0);
   int n_px = 0;
   for (double z = 15.4; z <= 16.6; z += 0.005)
@@ -358,13 +365,7 @@ Heightfield wall_terrain(bool wall) {
 }
 
 CameraView wall_camera() {
-  CameraView cam;
-  cam.position = {24, 7, 16};
-  cam.target = {17.5, 0, 16};
-  cam.fov_deg = 50;
-  cam.width = 320;
-  cam.height = 240;
-  return cam;
+  return view_320x240({24, 7, 16}, {17.5, 0, 16}, 50);
 }
 
 // The terrain shadows itself (terrain.frag terrain_sun_visibility): a wall 1 m high and 0.5 m
