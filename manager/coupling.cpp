@@ -145,6 +145,7 @@ Status TerrainManager::Impl::step_patches(double time, double dt) {
         frame_stats.wall_contacts = one.wall_contacts;
         frame_stats.neighbour_entries = one.neighbour_entries;
         frame_stats.resorts += one.resorts;
+        frame_stats.shell_lists += one.shell_lists;
         frame_stats.slept = one.slept;
         frame_stats.guard_seconds += one.guard_seconds;
         frame_stats.pair_seconds += one.pair_seconds;

@@ -427,7 +427,9 @@ nlohmann::ordered_json TerrainManager::Impl::dem_report() const {
                        {"sphere_steps", c->sphere_steps},
                        {"wall_ms", c->wall_ms},
                        {"sphere_steps_per_s", c->sphere_steps_per_s()},
+                       {"mean_list_entries_per_sphere", c->mean_list_entries_per_sphere()},
                        {"grid_rebuilds", c->grid_rebuilds},
+                       {"shell_list_rebuilds", c->shell_lists},
                        {"stage_ms", {{"sort", c->sort_ms}, {"pairs", c->pair_ms}, {"bodies", c->body_ms}}}});
     t.wall_ms += c->wall_ms;
     t.substeps += c->substeps;
@@ -435,6 +437,8 @@ nlohmann::ordered_json TerrainManager::Impl::dem_report() const {
     t.frames += c->frames;
     t.contact_sphere_steps += c->contact_sphere_steps;
     t.grid_rebuilds += c->grid_rebuilds;
+    t.shell_lists += c->shell_lists;
+    t.entry_sphere_steps += c->entry_sphere_steps;
     t.sort_ms += c->sort_ms, t.pair_ms += c->pair_ms, t.body_ms += c->body_ms;
     t.substep_dt = std::max(t.substep_dt, c->substep_dt);
   }
@@ -448,7 +452,9 @@ nlohmann::ordered_json TerrainManager::Impl::dem_report() const {
                  {"sphere_steps", t.sphere_steps},
                  {"wall_ms", t.wall_ms},
                  {"sphere_steps_per_s", t.sphere_steps_per_s()},
+                 {"mean_list_entries_per_sphere", t.mean_list_entries_per_sphere()},
                  {"grid_rebuilds", t.grid_rebuilds},
+                 {"shell_list_rebuilds", t.shell_lists},
                  {"stage_ms", {{"sort", t.sort_ms}, {"pairs", t.pair_ms}, {"bodies", t.body_ms}}}};
   return {{"patches", patches}, {"total", total}};
 }

@@ -9,6 +9,8 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cstdlib>
+#include <cstring>
 #include <cmath>
 #include <limits>
 #include <string>
@@ -28,24 +30,35 @@ Status Simulation::Impl::substep(float dt) {
   pred_gain = float(predictor_gain(dt));
   first_law = timing_on(dt);
   auto t0 = Clock::now();
-  if (need_sort) {
-    sort();
+  if (need_sort || need_shell_list) {
+    if (need_sort) {
+      sort();  // (rebuilds the shell list too)
+    } else {
+      build_shell_list();
+      stats.shell_lists++;
+    }
     stats.sort_seconds += since(t0);
     t0 = Clock::now();
   }
   contacts(dt);
   stats.pair_seconds += since(t0);
   t0 = Clock::now();
-  float d2max = 0;
-  const bool finite = bodies(dt, &d2max);
+  float d2max = 0, d2shell = 0;
+  const bool finite = bodies(dt, &d2max, &d2shell);
   stats.body_seconds += since(t0);
   if (!finite)
     return Error{"", "step", "NaN", "a body state became non-finite in the integrate stage",
                  "reduce the frame dt or material.normal_stiffness, or check the inputs"};
-  if (4.0f * d2max > skin * skin) need_sort = true;
-  if (need_sort) {
+  if (4.0f * d2max > skin * skin) need_sort = true;              // a granule moved skin/2
+  if (d2shell > shell_trip * shell_trip || shell_list_each_substep) need_shell_list = true;  // a shell sphere moved shell_trip
+  if (need_sort || need_shell_list) {
     t0 = Clock::now();
-    sort();
+    if (need_sort) {
+      sort();
+    } else {
+      build_shell_list();
+      stats.shell_lists++;
+    }
     stats.sort_seconds += since(t0);
   }
   time += dt;
@@ -148,9 +161,12 @@ Result<Simulation> Simulation::make(const SimulationDef& d, Impl* reuse) {
   s.gravity = d.scale.gravity_to_sim(d.gravity_world);
   s.threads = d.threads > 0 ? d.threads : omp_get_max_threads();
   s.simd_pairs = simd::use_avx2_pair_kernel();
+  if (const char* e = std::getenv("SANDPATCH_DEM_SHELL_LIST")) s.shell_list_each_substep = std::strcmp(e, "each") == 0;
   s.zeta = damping_ratio_from_restitution(d.material.restitution);
   s.r_max = d.particle_radius;
   s.skin = d.cell_skin > 0 ? d.cell_skin : 0.2f * d.particle_radius;
+  s.shell_skin = Impl::kShellSkinFactor * s.skin;
+  s.shell_trip = std::min(0.5f * s.shell_skin, s.shell_skin - s.skin);
   {
     float h = 2.0f * s.r_max + s.skin;
     Vec3 ext = d.bounds_max - d.bounds_min;
@@ -165,6 +181,7 @@ Result<Simulation> Simulation::make(const SimulationDef& d, Impl* reuse) {
   s.slot_of.assign(d.max_particles, -1);
   s.cell.assign(d.max_particles, 0);
   s.pos_at_sort.assign(std::size_t(d.max_particles) * 4, 0.0f);
+  s.srow_of.assign(std::size_t(d.max_particles), -1);
   s.acc.assign(std::size_t(d.max_particles), Impl::SphereSums{});
   s.guard_pt_mass.assign(d.max_bodies, 0.0f);
   s.guard_arm.assign(d.max_bodies, 0.0f);
@@ -346,6 +363,10 @@ double Simulation::tangential_spring_energy() const {
     const float* x = &s.pairs.xi[3 * k];
     e += 0.5 * kt * (double(x[0]) * x[0] + double(x[1]) * x[1] + double(x[2]) * x[2]);
   }
+  for (std::size_t k = 0; k < s.snbr.size(); ++k) {  // the shell list's
+    const float* x = &s.spairs.xi[3 * k];
+    e += 0.5 * kt * (double(x[0]) * x[0] + double(x[1]) * x[1] + double(x[2]) * x[2]);
+  }
   for (int i = 0; i < s.np; ++i)
     for (int k = 0; k < kWallSlots; ++k) {
       if (!(s.p.wall_mask[i] & (1u << k))) continue;
@@ -394,10 +415,12 @@ double Simulation::potential_energy() const {
   // elastic: normal springs at the current positions, tangential springs from the history
   const Material& m = s.def.material;
   const float kn = m.normal_stiffness, kt = m.normal_stiffness * m.tangential_stiffness_ratio;
+  auto granule = [&](int sphere) { return bool(s.b.flags[s.p.body[sphere]] & kBodyGranule); };
   for (int i = 0; i < s.np; ++i) {
     Vec3 pi = ld3(s.p.pos, i);
     float ri = s.p.pos[4 * i + 3];
     bool dyn_i = s.p.vel[4 * i + 3] > 0;
+    const bool granule_i = granule(i);
     int c = s.cell_of(pi);
     int cx = c % s.gx, cy = (c / s.gx) % s.gy, cz = c / (s.gx * s.gy);
     for (int zz = std::max(0, cz - 1); zz <= std::min(s.gz - 1, cz + 1); ++zz)
@@ -406,6 +429,7 @@ double Simulation::potential_energy() const {
           int cc = (zz * s.gy + yy) * s.gx + xx;
           for (int j = s.cell_start[cc]; j < s.cell_start[cc + 1]; ++j) {
             if (s.p.body[j] == s.p.body[i]) continue;
+            if (!granule_i || !granule(j)) continue;  // a shell's pairs: from the shell list below
             if (!dyn_i && s.p.vel[4 * j + 3] == 0) continue;
             float d = length(pi - ld3(s.p.pos, j));
             float del = ri + s.p.pos[4 * j + 3] - d;
@@ -436,6 +460,17 @@ double Simulation::potential_energy() const {
       }
     }
   }
+  // the shells' pairs (their cells are those of the last sort, the shell list's are current)
+  for (int r = 0, rows = int(s.srow.size()); r < rows; ++r) {
+    const int i = s.srow[std::size_t(r)];
+    for (int k = s.sstart[std::size_t(r)]; k < s.sstart[std::size_t(r) + 1]; ++k) {
+      const int j = s.snbr[std::size_t(k)];
+      const float del = s.p.pos[4 * i + 3] + s.p.pos[4 * j + 3] - length(ld3(s.p.pos, i) - ld3(s.p.pos, j));
+      if (del > 0) e += 0.5 * kn * double(del) * del;
+      const float* x = &s.spairs.xi[3 * std::size_t(k)];
+      e += 0.5 * kt * (double(x[0]) * x[0] + double(x[1]) * x[1] + double(x[2]) * x[2]);
+    }
+  }
   return e;
 }
 
@@ -459,6 +494,12 @@ std::uint64_t Simulation::state_hash() const {
   SANDPATCH_FIELD_ON(CPU, backend, if (hashed) h.bytes(s.pairs.name.data(), sizeof(type) * std::size_t(n) * entries);)
   SANDPATCH_PAIR_CONTACT_FIELDS(SP_HASH_C)
 #undef SP_HASH_C
+  // the shell list's, in its order
+  const std::size_t shell_entries = s.snbr.size();
+#define SP_HASH_S(type, name, n, hashed, backend, unit) \
+  SANDPATCH_FIELD_ON(CPU, backend, if (hashed) h.bytes(s.spairs.name.data(), sizeof(type) * std::size_t(n) * shell_entries);)
+  SANDPATCH_PAIR_CONTACT_FIELDS(SP_HASH_S)
+#undef SP_HASH_S
   return h.value();
 }
 
@@ -493,7 +534,12 @@ Status Simulation::set_body_state(BodyId id, Vec3 x, Quat q, Vec3 v, Vec3 w) {
   // the substep makes after the body stage). A shell that follows its Bullet body is set every
   // frame it moves; rebuilding the list each time was 70 of the 664 rebuilds of the default
   // scene's patches over 1.5 s (docs/BENCHMARKS.md, "The DEM inside a scene").
-  if (4.0f * s.rebuild_body(id.index) > s.skin * s.skin) s.need_sort = true;
+  const float d2 = s.rebuild_body(id.index);
+  if (s.b.flags[id.index] & kBodyGranule) {
+    if (4.0f * d2 > s.skin * s.skin) s.need_sort = true;
+  } else if (d2 > s.shell_trip * s.shell_trip) {
+    s.need_shell_list = true;  // a shell's pairs are in the shell list (dem_impl.hpp)
+  }
   wake();
   return Ok{};
 }

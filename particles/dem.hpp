@@ -155,8 +155,9 @@ struct StepStats {
   double substep_dt = 0;                 // s
   std::int64_t contacts = 0;             // sphere-sphere contacts (pairs) at the last substep
   std::int64_t wall_contacts = 0;        // sphere-floor/wall/terrain contacts, last substep
-  std::int64_t neighbour_entries = 0;    // entries of the neighbour list (one per pair within r_i + r_j + skin)
+  std::int64_t neighbour_entries = 0;    // entries of the neighbour lists (one per pair within r_i + r_j + skin)
   int resorts = 0;                       // grid + neighbour-list rebuilds this step
+  int shell_lists = 0;                   // rebuilds of the shell list alone this step (CPU backend)
   bool slept = false;                    // the step did nothing because the sim was asleep
   // Wall time of the step's stages, summed over its substeps (s, steady clock): the overlap
   // guard (check_impacts), the pair pass (contacts), the body stage (gather, integrate,

@@ -164,17 +164,17 @@ __attribute__((always_inline)) inline void Simulation::Impl::granule_update(cons
 
 // ---- body stage: gather each sphere (gather_sphere), sum the spheres' forces in id order,
 // integrate, rebuild the spheres
-bool Simulation::Impl::bodies(float dt, float* d2max_out) {
+bool Simulation::Impl::bodies(float dt, float* d2max_out, float* d2shell_out) {
   const Vec3 g = gravity;
   const float reach = shape.centre_distance + shape.radius;
-  float d2max = 0, vmax = 0;
+  float d2max = 0, d2shell = 0, vmax = 0;
   int bad = 0;
   std::int64_t nwall = 0;
   const int n = nb;
   const bool ordered = int(body_order.size()) == n;
   const std::int32_t* order = body_order.data();
   const GatherCtx gctx = gather_ctx();
-#pragma omp parallel for num_threads(threads) schedule(dynamic, 128) reduction(max : d2max, vmax) reduction(+ : bad, nwall) if (n > kParallelSpheres / 2 || np > kParallelSpheres)
+#pragma omp parallel for num_threads(threads) schedule(dynamic, 128) reduction(max : d2max, d2shell, vmax) reduction(+ : bad, nwall) if (n > kParallelSpheres / 2 || np > kParallelSpheres)
   for (int t = 0; t < n; ++t) {
     const int i = ordered ? order[t] : t;
     const std::uint32_t fl = b.flags[i];
@@ -236,9 +236,14 @@ bool Simulation::Impl::bodies(float dt, float* d2max_out) {
     // first substep (rebuild_body(i) elsewhere). Translation only: predicting w as well kept
     // granule piles and beds jittering (rotation about a contact has a smaller point mass,
     // so a larger damping per substep; measured, docs/dem.md "Step size").
-    d2max = std::max(d2max, rebuild_body(i, v + pred_gain * (v - v_old), w));
+    // (a granule on this path: granule_update takes them all; a shell's spheres are measured
+    // from the shell list's build)
+    const float d2 = rebuild_body(i, v + pred_gain * (v - v_old), w);
+    if (fl & kBodyGranule) d2max = std::max(d2max, d2);
+    else d2shell = std::max(d2shell, d2);
   }
   *d2max_out = d2max;
+  *d2shell_out = d2shell;
   granule_vmax = vmax;
   stats.wall_contacts = nwall;
   return bad == 0;

@@ -82,6 +82,33 @@ void Simulation::Impl::contacts(float dt) {
     float dx, dy, dz, rj, rs, d2;
     float* xe;
   };
+  // A touching pair by the scalar law (contact.hpp): sphere i (o) and t.j, with the pair's
+  // history (spring t.xe, touch flag tch, largest overlap dm) and c_n = cn; its force and
+  // n x f_t into both sums and, with the ledger on, its dissipated work into ln, lf, lu.
+  auto scalar_pair = [&](int i, const Own& o, const Touch& t, float cn, std::uint8_t& tch, float& dm, double& ln,
+                         double& lf, double& lu) __attribute__((always_inline)) {
+    const int j = t.j;
+    float* xe = t.xe;
+    const float inv = 1.0f / std::sqrt(t.d2);
+    const float dist = t.d2 * inv;
+    const Vec3 nrm{t.dx * inv, t.dy * inv, t.dz * inv};
+    const Vec3 uj{V[4 * j], V[4 * j + 1], V[4 * j + 2]};
+    const Vec3 rwj = t.rj * Vec3{W[4 * j], W[4 * j + 1], W[4 * j + 2]};
+    // contact-point velocity (physics_common.glsl); the spheres' velocities are the
+    // bodies' predicted to this substep's time (`bodies`)
+    const Vec3 v = physics::pair_contact_velocity(o.u, uj, nrm, o.rw + rwj);
+    Vec3 xi{xe[0], xe[1], xe[2]};  // zero for a new contact; carried over on rebuilds
+    const ContactParams cp{kn, cn, kt, ctr * cn, mu, dt, first_law && tch == 0};  // new_contact: first substep
+    tch = 1;
+    const float xi2_old = dot(xi, xi);
+    const float dm_old = dm;
+    ContactForce cf = contact_force_h(cp, kn2, nrm, t.rs - dist, v, xi, dm);
+    if (led) ledger_terms(kn, kn2, kt, t.rs - dist, dm_old, dm, nrm, v, dt, xi2_old, cf.f, cf.ft, xi, ln, lf, lu);
+    xe[0] = xi.x;
+    xe[1] = xi.y;
+    xe[2] = xi.z;
+    add_pair(i, j, from_vec3(cf.f), from_vec3(cross(nrm, cf.ft)));
+  };
 #pragma omp parallel num_threads(threads) if (n > kParallelSpheres)
   {
   // The walk both passes make over slab c: every list entry of its spheres. A pair apart
@@ -172,44 +199,56 @@ void Simulation::Impl::contacts(float dt) {
     // is reused while the pair's inverse masses are the same
     float last_invm_i = -1.0f, last_invm_j = -1.0f, last_cn = 0.0f;
     walk_slab(c, npairs, [&](int i, const Own& o, const Touch& t) __attribute__((always_inline)) {
-      const int j = t.j, e = t.e;
-      float* xe = t.xe;
-      const float inv = 1.0f / std::sqrt(t.d2);
-      const float dist = t.d2 * inv;
-      const Vec3 nrm{t.dx * inv, t.dy * inv, t.dz * inv};
-      const Vec3 uj{V[4 * j], V[4 * j + 1], V[4 * j + 2]};
-      const Vec3 rwj = t.rj * Vec3{W[4 * j], W[4 * j + 1], W[4 * j + 2]};
-      // contact-point velocity (physics_common.glsl); the spheres' velocities are the
-      // bodies' predicted to this substep's time (`bodies`)
-      const Vec3 v = physics::pair_contact_velocity(o.u, uj, nrm, o.rw + rwj);
-      const float invm_j = V[4 * j + 3];
+      const float invm_j = V[4 * t.j + 3];
       if (invm_j != last_invm_j || o.invm != last_invm_i) {
         last_invm_i = o.invm;
         last_invm_j = invm_j;
         last_cn = cn0 / std::sqrt(o.invm + invm_j);
       }
-      const float cn = last_cn;
-      Vec3 xi{xe[0], xe[1], xe[2]};  // zero for a new contact; carried over on rebuilds
-      const ContactParams cp{kn, cn, kt, ctr * cn, mu, dt, first_law && TCH[e] == 0};  // new_contact: first substep
-      TCH[e] = 1;
-      const float xi2_old = dot(xi, xi);
-      const float dm_old = DM[e];
-      ContactForce cf = contact_force_h(cp, kn2, nrm, t.rs - dist, v, xi, DM[e]);
-      if (led) ledger_terms(kn, kn2, kt, t.rs - dist, dm_old, DM[e], nrm, v, dt, xi2_old, cf.f, cf.ft, xi, led_n, led_f, led_u);
-      xe[0] = xi.x;
-      xe[1] = xi.y;
-      xe[2] = xi.z;
-      add_pair(i, j, from_vec3(cf.f), from_vec3(cross(nrm, cf.ft)));
+      scalar_pair(i, o, t, last_cn, TCH[t.e], DM[t.e], led_n, led_f, led_u);
     });
   }
   }
   }  // scalar pair pass
   }  // omp parallel
+  // the shell list's pairs, in list order on this thread (dem_impl.hpp: a few per shell sphere
+  // near the sand), after the slabs': the same sums for any thread count
+  {
+    const std::int32_t* SN = snbr.data();
+    float* SXI = spairs.xi.data();
+    std::uint8_t* STCH = spairs.touch.data();
+    float* SDM = spairs.dmax.data();
+    std::int64_t touching = 0;
+    for (int r = 0, rows = int(srow.size()); r < rows; ++r) {
+      const int i = srow[std::size_t(r)];
+      const float ri = P[4 * i + 3];
+      const Own o{{P[4 * i], P[4 * i + 1], P[4 * i + 2]}, ri, {V[4 * i], V[4 * i + 1], V[4 * i + 2]}, V[4 * i + 3],
+                  ri * Vec3{W[4 * i], W[4 * i + 1], W[4 * i + 2]}};
+      for (int e = sstart[std::size_t(r)]; e < sstart[std::size_t(r) + 1]; ++e) {
+        const int j = SN[e];
+        const float dx = o.p.x - P[4 * j], dy = o.p.y - P[4 * j + 1], dz = o.p.z - P[4 * j + 2];
+        const float rj = P[4 * j + 3];
+        const float rs = ri + rj;
+        const float d2 = dx * dx + dy * dy + dz * dz;
+        float* xe = SXI + 3 * std::size_t(e);
+        if (d2 >= rs * rs || d2 <= 0.0f) {  // apart: the spring is forgotten
+          STCH[e] = 0;
+          if (hysteretic) SDM[e] = 0.0f;
+          xe[0] = xe[1] = xe[2] = 0.0f;
+          continue;
+        }
+        ++touching;
+        scalar_pair(i, o, Touch{e, j, dx, dy, dz, rj, rs, d2, xe}, cn0 / std::sqrt(o.invm + V[4 * j + 3]), STCH[e],
+                    SDM[e], led_n, led_f, led_u);
+      }
+    }
+    npairs += touching;
+  }
   ledger_normal += led_n;
   ledger_friction += led_f;
   if (led) ledger_spring_pairs = led_u;
   stats.contacts = npairs;
-  stats.neighbour_entries = nstart.empty() ? 0 : nstart[np];
+  stats.neighbour_entries = (nstart.empty() ? 0 : nstart[np]) + std::int64_t(snbr.size());
 }
 
 }  // namespace sandpatch

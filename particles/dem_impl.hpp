@@ -173,6 +173,36 @@ struct Simulation::Impl {
   // final states; at 512 no better.
   static constexpr int kParallelSpheres = 1024;
   std::vector<std::vector<std::int32_t>> list_blocks;
+  // The shell list: every pair with a sphere of a shell (a body that is not a granule: a
+  // Bullet body's surface, a tool, a static obstacle), apart from the granules' list above,
+  // one row per shell sphere (stable ids ascending, rows kept while the bodies are), each
+  // with its partners within r_i + r_j + shell_skin: granules, and spheres of other shells
+  // with a higher id. A shell moving over the sand (a rolling wheel's rim moves at twice the
+  // car's speed) reaches the skin long before the granules around it; it rebuilt the whole
+  // list every few substeps (in a car's patch 96 % of the rebuilds were tripped by a shell
+  // sphere). Now only this list is rebuilt when a shell sphere has moved
+  // shell_trip = min(shell_skin/2, shell_skin - skin) since its last build (a granule moves
+  // at most skin between two builds: skin/2 from the sort each side), found through the
+  // granules' grid. The granules' list is rebuilt by the granules alone, and rebuilds this
+  // list too. Its pairs are computed after the slabs' pass, in list order on one thread
+  // (dem_contacts.cpp). docs/dem.md "Neighbour lists".
+  static constexpr float kShellSkinFactor = 2.0f;  // shell_skin / skin
+  float shell_skin = 0, shell_trip = 0;            // m
+  bool need_shell_list = true;
+  // SANDPATCH_DEM_SHELL_LIST=each rebuilds the shell list every substep (the reference the
+  // tests compare the trip with: the same touching pairs in the same order, so the same state)
+  bool shell_list_each_substep = false;
+  std::vector<std::int32_t> srow_id;     // row -> the shell sphere's stable id
+  std::vector<std::int32_t> srow;        // row -> its sorted index (until the next sort)
+  std::vector<std::int32_t> srow_of;     // stable id -> row, or -1 (max_particles)
+  std::vector<std::int32_t> sstart;      // rows + 1
+  std::vector<std::int32_t> snbr;        // sorted index of the partner (until the next sort)
+  std::vector<std::int32_t> snbr_id;     // stable id of the partner (history carry-over)
+  PairArrays spairs;                     // the shell pairs' contact history
+  int shell_touching = 0;                // shell pairs touching at the last substep
+  // Rebuilds the shell list from the current positions (serial, deterministic) and carries
+  // each pair's spring over by (row id, partner id); sets the shells' pos_at_sort.
+  void build_shell_list();
   std::vector<std::uint32_t> sort_scratch;  // sort()'s copy of one particle field (4-byte values)
   // The pairs' contact history (fields.hpp): xi, the tangential spring (3 per entry, m), and
   // touch, 1 if the pair touched at the last substep (a touching pair without it is in its
@@ -374,7 +404,9 @@ struct Simulation::Impl {
 
   // ---- body stage: gather each sphere (gather_sphere), sum the spheres' forces in id order,
   // integrate, rebuild the spheres
-  bool bodies(float dt, float* d2max_out);
+  // The largest squared displacement (m^2) of a granule's sphere since the sort into
+  // *d2max_out, of a shell's since the shell list's build into *d2shell_out.
+  bool bodies(float dt, float* d2max_out, float* d2shell_out);
 
   // The substep's stages, each timed into stats (StepStats::*_seconds).
   Status substep(float dt);

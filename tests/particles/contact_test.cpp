@@ -281,6 +281,7 @@ namespace {
 // about z (equivalent to a plane tilted by theta). Returns x(t) samples.
 struct Incline {
   double a_measured = 0, drift = 0;
+  int resorts = 0, shell_lists = 0;  // grid + both lists, the shell list alone (StepStats)
 };
 Incline run_incline(double theta_deg, ShearLaw law, double t0, double t1, bool force_rebuilds = false) {
   SimulationDef def;
@@ -308,9 +309,11 @@ Incline run_incline(double theta_deg, ShearLaw law, double t0, double t1, bool f
   p.position = {0, float(kR), 0};
   auto id = sim->add_shell(p);
   EXPECT_TRUE(id.ok());
+  BodyId far{};
   if (force_rebuilds) {
-    // a kinematic sphere far away moving at 2 m/s: moves > skin/2 every 10 steps, so the grid
-    // and neighbour list are rebuilt again and again under the resting plate
+    // a kinematic sphere far away moving at 2 m/s: moves more than the shell list's trip every
+    // ~20 steps, so the shell list is rebuilt again and again under the resting plate; and its
+    // collision group changed every 10 steps rebuilds the grid and both lists
     ShellDef k;
     k.offsets = {{0, 0, 0}};
     k.radii = {float(kR)};
@@ -320,18 +323,22 @@ Incline run_incline(double theta_deg, ShearLaw law, double t0, double t1, bool f
     auto kid = sim->add_shell(k);
     EXPECT_TRUE(kid.ok());
     EXPECT_TRUE(sim->set_kinematic_velocity(*kid, {0, 0, 2.0f}, {}).ok());
+    far = *kid;
   }
   const double dt = 5e-5;
+  Incline out;
   double x0 = 0, v0 = 0;
   int n0 = int(t0 / dt), n1 = int(t1 / dt);
   for (int k = 1; k <= n1; ++k) {
+    if (force_rebuilds && k % 10 == 0) EXPECT_TRUE(sim->set_body_group(far, (k / 10) % 2).ok());
     EXPECT_TRUE(sim->step(dt).ok());
+    out.resorts += sim->last_step().resorts;
+    out.shell_lists += sim->last_step().shell_lists;
     if (k == n0) {
       x0 = sim->body_position(*id).x;
       v0 = sim->body_velocity(*id).x;
     }
   }
-  Incline out;
   out.a_measured = (sim->body_velocity(*id).x - v0) / (t1 - t0);
   out.drift = sim->body_position(*id).x - x0;
   return out;
@@ -354,10 +361,13 @@ TEST(Friction, StaysBelowFrictionAngle) {
 }
 
 // The tangential springs survive grid/neighbour-list rebuilds (they are carried over by
-// partner id): the same plate stays put while the lists are rebuilt every ~10 steps.
+// partner id, the boundary planes' with the sort): the same plate stays put while the grid and
+// both lists are rebuilt every 10 steps and the shell list alone in between.
 TEST(Friction, SpringsSurviveListRebuilds) {
   Incline r = run_incline(20.0, ShearLaw::SpringHistory, 0.1, 0.6, true);
   EXPECT_LT(std::abs(r.drift), 0.001 * 2 * kR);
+  EXPECT_GE(r.resorts, 1000);     // 12,000 steps
+  EXPECT_GE(r.shell_lists, 100);
 }
 
 
