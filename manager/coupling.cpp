@@ -87,6 +87,7 @@ double lift_to_clear(const DemBackend& sim, std::size_t granule_spheres, const s
 }  // namespace
 
 Status TerrainManager::Impl::step_patches(double time, double dt) {
+  ++frame;
   choose_carriers();
   std::vector<Slot*> awake;
   for (auto& s : slots) {

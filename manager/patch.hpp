@@ -106,6 +106,7 @@ struct DemCost {
   std::int64_t sphere_steps = 0;     // sum over step calls of spheres x substeps
   std::int64_t frames = 0;           // step calls (frames the patch was stepped awake)
   double last_wall_ms = 0;           // ms, the last step call
+  std::int64_t last_frame = -1;      // the manager's frame (step_patches call) of the last step call
   int last_substeps = 0;             // the last step call's (0 if it found the DEM asleep)
   int last_spheres = 0;              // spheres of the last step call
   double substep_dt = 0;             // s (simulation time), the last substep length

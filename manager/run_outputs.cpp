@@ -417,8 +417,8 @@ Status RunCsv::frame(const World& world, double t) {
   if (const TerrainManager* m = world.manager())
     for (const auto& p : m->patches())
       std::fprintf(patch_rows_, "%.9g,%d,%s,%d,%d,%d,%.6g\n", t, p.patch,
-                   !p.ready ? "filling" : p.asleep ? "asleep" : "active", p.granules, p.last_spheres,
-                   p.asleep ? 0 : p.last_substeps, p.asleep ? 0.0 : p.last_step_ms);
+                   !p.ready ? "filling" : p.asleep ? "asleep" : p.stepped ? "active" : "held", p.granules, p.last_spheres,
+                   p.stepped ? p.last_substeps : 0, p.stepped ? p.last_step_ms : 0.0);
   if (std::ferror(bodies_) || std::ferror(patch_rows_)) return Error{path_.string(), "", "", "must be writable", "write failed"};
   return Ok{};
 }

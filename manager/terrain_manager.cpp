@@ -357,6 +357,7 @@ std::vector<TerrainManager::PatchInfo> TerrainManager::patches() const {
       p.last_substeps = c.last_substeps;
       p.last_spheres = c.last_spheres;
       p.last_step_ms = c.last_wall_ms;
+      p.stepped = c.last_frame == impl_->frame;
     }
     out.push_back(p);
   }

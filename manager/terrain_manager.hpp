@@ -241,9 +241,11 @@ class TerrainManager {
     bool ready = false;                        // filled (simulating or asleep)
     bool asleep = false;
     // Its DEM's last step call (0 when it has not stepped since its promotion): substeps,
-    // spheres (granules' and enabled shells') and wall ms.
+    // spheres (granules' and enabled shells') and wall ms; `stepped`: that call was in the last
+    // frame (false for a patch asleep, filling, or held by the frame budget).
     int last_substeps = 0, last_spheres = 0;
     double last_step_ms = 0;
+    bool stepped = false;
   };
   std::vector<PatchInfo> patches() const;
   const std::vector<PatchEvent>& events() const;

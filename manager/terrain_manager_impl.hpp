@@ -177,6 +177,7 @@ struct TerrainManager::Impl {
       if (k.enabled) spheres += s.sim->body_particle_count(k.shell);
     const StepStats& st = stats ? *stats : s.sim->last_step();
     c.add(wall_ms, st, spheres);
+    c.last_frame = frame;
     ++work.patches_stepped;
     work.substeps += st.substeps;
     work.sphere_steps += std::int64_t(spheres) * st.substeps;
@@ -369,6 +370,7 @@ struct TerrainManager::Impl {
   // Chooses carriers, hands every ready patch its bodies, steps the awake ones and hands the
   // contact forces back to Bullet.
   Status step_patches(double time, double dt);
+  std::int64_t frame = 0;  // step_patches calls so far (DemCost::last_frame)
   // After the Bullet step: patches whose DEM came to rest fall asleep (their bodies stop).
   void update_sleep(double time, double dt);
   // `above`: m over the patch's highest surface point the body's lowest point must be below.

@@ -335,7 +335,7 @@ std::array<int, 4> draw_overlay(render::Image& img, render::SceneRenderer* r, co
     const std::size_t shown = std::min<std::size_t>(patches.size(), 8);
     for (std::size_t k = 0; k < shown; ++k) {
       const auto& p = patches[k];
-      const char* state = !p.ready ? "filling" : p.asleep ? "asleep" : "active";
+      const char* state = !p.ready ? "filling" : p.asleep ? "asleep" : p.stepped ? "active" : "held";
       lines.push_back({format(" #%d %s %d granules", p.patch, state, p.granules), state_color(p)});
     }
     if (patches.size() > shown) lines.push_back({format(" +%zu more", patches.size() - shown), kText});
