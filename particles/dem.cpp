@@ -181,7 +181,6 @@ Result<Simulation> Simulation::make(const SimulationDef& d, Impl* reuse) {
   s.slot_of.assign(d.max_particles, -1);
   s.cell.assign(d.max_particles, 0);
   s.pos_at_sort.assign(std::size_t(d.max_particles) * 4, 0.0f);
-  s.srow_of.assign(std::size_t(d.max_particles), -1);
   s.acc.assign(std::size_t(d.max_particles), Impl::SphereSums{});
   s.guard_pt_mass.assign(d.max_bodies, 0.0f);
   s.guard_arm.assign(d.max_bodies, 0.0f);

@@ -93,14 +93,13 @@ void Simulation::Impl::build_shell_list() {
   orow_id.swap(srow_id);
   onbr_id.swap(snbr_id);
   old.swap(spairs);
-  for (const std::int32_t id : orow_id) srow_of[std::size_t(id)] = -1;
   srow.clear();
   snbr.clear();
   sstart.assign(1, 0);
   need_shell_list = false;
   const std::uint32_t* FL = b.flags.data();
   auto is_shell = [&](int body) { return !(FL[body] & (kBodyGranule | kBodyParked)); };
-  // the granules' extent (m): their spheres' centres now, +- their radius
+  // the granules' extent (m): their centres now (their spheres lie within granule_reach of them)
   Vec3 lo{std::numeric_limits<float>::infinity(), std::numeric_limits<float>::infinity(),
           std::numeric_limits<float>::infinity()};
   Vec3 hi{-lo.x, -lo.y, -lo.z};
@@ -144,10 +143,8 @@ void Simulation::Impl::build_shell_list() {
       const int id = first + k, i = slot_of[id];
       const Vec3 xi{P[4 * i], P[4 * i + 1], P[4 * i + 2]};
       const float ri = P[4 * i + 3];
-      const int row = int(srow_id.size());
       srow_id.push_back(id);
       srow.push_back(i);
-      srow_of[std::size_t(id)] = row;
       st3(pos_at_sort, std::size_t(i), xi);  // (the trip is measured from here)
       // the granules: every grid cell within reach of the sphere
       const float reach = ri + r_max + shell_skin + drift;

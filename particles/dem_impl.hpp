@@ -194,7 +194,6 @@ struct Simulation::Impl {
   bool shell_list_each_substep = false;
   std::vector<std::int32_t> srow_id;     // row -> the shell sphere's stable id
   std::vector<std::int32_t> srow;        // row -> its sorted index (until the next sort)
-  std::vector<std::int32_t> srow_of;     // stable id -> row, or -1 (max_particles)
   std::vector<std::int32_t> sstart;      // rows + 1
   std::vector<std::int32_t> snbr;        // sorted index of the partner (until the next sort)
   std::vector<std::int32_t> snbr_id;     // stable id of the partner (history carry-over)
