@@ -311,7 +311,7 @@ Result<bool> TerrainManager::Impl::extend(const PatchRequest& r, double time, co
     const double past[4] = {a.x0 <= t.x0 + e ? -1.0 : (a.x0 + mm[0]) - (r.x0 + ap), a.x1 >= t.x1 - e ? -1.0 : (r.x1 - ap) - (a.x1 - mm[1]),
                             a.z0 <= t.z0 + e ? -1.0 : (a.z0 + mm[2]) - (r.z0 + ap), a.z1 >= t.z1 - e ? -1.0 : (r.z1 - ap) - (a.z1 - mm[3])};
     const int side = int(std::max_element(past, past + 4) - past);
-    if (!(past[side] > 0)) return false;
+    if (!(past[side] > 0)) continue;  // (another patch it overlaps may be the one it passes)
     // The part ahead, at least one tile period deep (patch_region rounds it to whole periods,
     // and promote() moves it clear of the patch it abuts).
     const double period = set_for(s.scale).cells * double(hf->spacing());
@@ -323,7 +323,9 @@ Result<bool> TerrainManager::Impl::extend(const PatchRequest& r, double time, co
       default: u.z0 = a.z1, u.z1 = std::max(r.z1, a.z1 + period); break;
     }
     clip_to_terrain(*hf, u);
-    if (u.x1 - u.x0 < 1e-6 || u.z1 - u.z0 < 1e-6 || overlaps_patch(u) || !has_soil(u)) return false;
+    // (ahead of this patch lies another: the part ahead may be asked for beyond that one, when
+    // the request overlaps it too, as where a body turning crosses the corner of two patches)
+    if (u.x1 - u.x0 < 1e-6 || u.z1 - u.z0 < 1e-6 || overlaps_patch(u) || !has_soil(u)) continue;
     for (const PatchRequest& q : queue)
       if (q.overlaps(u)) return false;  // asked already
     u.time_to_contact = 0;
