@@ -76,6 +76,20 @@ Status TerrainManager::Impl::demote_idle(double time) {
         (!next || s.demotion.stage > next->demotion.stage))
       next = &s;
   if (next) return demote(*next, time, true, /*staged=*/true);
+  // A full pool keeps a slot ready for the next request: a patch no body wants any more (none
+  // carried by it, over or near it, or heading for it) is released now, one part a frame, not
+  // when a request needs its slot. Waiting for that, a car turning across a corner of its
+  // patches drove on the heightfield while the patch it had left behind was demoted.
+  for (const Slot& s : slots)
+    if (s.state == SlotState::Free || s.demotion.releasing) return Ok{};  // (a slot free, or one being released)
+  for (Slot& s : slots) {
+    if (!s.ready() || s.carried.empty() || wanted(s) || wanted_for_release(s)) continue;  // (not reached yet: kept)
+    s.demotion.releasing = true;
+    if (Status st = demote(s, time, false, /*staged=*/true); !st) return st;
+    released += s.state == SlotState::Free;
+    ++early_releases;
+    return Ok{};
+  }
   return Ok{};
 }
 

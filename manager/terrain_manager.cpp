@@ -491,7 +491,8 @@ nlohmann::ordered_json TerrainManager::report() const {
                {"peak_queued_requests", I.peak_queue},
                {"lapsed_requests", I.lapsed_requests},
                {"extensions", I.extensions},
-               {"released", I.released}};
+               {"released", I.released},
+               {"released_early", I.early_releases}};
   nlohmann::ordered_json tiles = nlohmann::ordered_json::array();
   for (const TileSet& set : I.tile_sets)
     for (const GranuleTile& t : set.tiles)

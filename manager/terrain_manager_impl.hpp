@@ -64,7 +64,8 @@ struct TerrainManager::Impl {
   std::unordered_map<std::int64_t, int> still_frames;  // frames each body (body_key) has been at rest
   int lapsed_requests = 0;  // queued requests dropped because no body predicted contact there any more
   int extensions = 0;       // patches asked for ahead of a body heading past its patch's edge
-  int released = 0;         // patches no body was over, demoted for a request waiting for a slot
+  int released = 0;         // patches no body was over, demoted for a request waiting for a slot or to keep one ready
+  int early_releases = 0;   // of which released with the pool full before a request needed the slot (demotion.cpp)
 
   // ---- the pool ----
   // The GL context (the GL backend's and the demotion's depth render's, made by create())
