@@ -190,20 +190,21 @@ TEST(SceneVehicles, ShippedVehicleDrivesOffUnderABudgetNothingFits) {
   EXPECT_TRUE(said) << r["warnings"].dump();
 }
 
-// The shipped vehicle turning left (0.25 rad from 1.5 s to 6 s) under a budget nothing fits,
-// with the scene's three slots: it crosses its patches' corners diagonally, where its wheels sit
+// scenes/vehicle_turn.json (the shipped vehicle turning left, 0.25 rad from 1.5 s to 6 s) under
+// a budget nothing fits, with the scene's three slots: it crosses its patches' corners diagonally, where its wheels sit
 // in up to three patches while it needs a fourth ahead. A patch asked for ahead of a body may
 // lie beyond any of the patches the body's request overlaps (manager/planning.cpp extend tries
 // each; it gave up when the first one's part ahead overlapped the second), and a full pool
 // releases a patch no body wants at once, not when a request needs its slot (manager/
 // demotion.cpp). Wheel-frames off the particles, of 3,796: 306 before, 66 after.
 TEST(SceneVehicles, ShippedVehicleTurningAcrossPatchCorners) {
-  auto s = load_scene_file(std::string(SANDPATCH_SOURCE_DIR) + "/scenes/vehicle_drive.json");
+  auto s = load_scene_file(std::string(SANDPATCH_SOURCE_DIR) + "/scenes/vehicle_turn.json");
   ASSERT_TRUE(s.ok()) << s.message();
   s->terrain.frame_budget_ms = 0.5;
   ASSERT_EQ(s->terrain.slots, 3);
   ASSERT_EQ(s->vehicles.size(), 1u);
-  s->vehicles[0].steering = {SteeringPhaseDef{1.5, 6.0, 0.25}};
+  ASSERT_EQ(s->vehicles[0].steering.size(), 1u);
+  EXPECT_EQ(s->vehicles[0].steering[0].angle, 0.25);
   auto w = make_world(*s, 2, "cpu");
   ASSERT_TRUE(w.ok()) << w.message();
   World& world = **w;
