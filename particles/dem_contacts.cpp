@@ -50,12 +50,6 @@ void Simulation::Impl::contacts(float dt) {
   double led_n = 0, led_f = 0, led_u = 0;
   if (led) ledger_spring_walls = 0;  // summed again by this substep's boundary contacts
 
-  // not touching: the spring is forgotten
-  auto part = [&](int e, float* xe) __attribute__((always_inline)) {
-    TCH[e] = 0;
-    if (hysteretic) DM[e] = 0.0f;
-    if (xe[0] != 0.0f || xe[1] != 0.0f || xe[2] != 0.0f) xe[0] = xe[1] = xe[2] = 0.0f;
-  };
   // the pair's force f on i (N) and n x f_t (N) into both sums: i gets +f, j gets -f, both
   // + n x f_t (their torques about their centres are -r_i and -r_j times it)
   auto add_pair = [&](int i, int j, __m128 f4, __m128 c4) __attribute__((always_inline)) {
@@ -109,33 +103,38 @@ void Simulation::Impl::contacts(float dt) {
     xe[2] = xi.z;
     add_pair(i, j, from_vec3(cf.f), from_vec3(cross(nrm, cf.ft)));
   };
+  // The walk over the entries [e0, e1) of sphere i's row in a list (partners nb, springs xs,
+  // touch flags tch, largest overlaps dm): a pair apart (|d| >= r_i + r_j, or the same centre)
+  // has its spring forgotten; a touching one is counted in `touching` and handed to
+  // pair(i, sphere i, touch). The granules' list (slab by slab) and the shell list's.
+  auto walk_row = [&](int i, int e0, int e1, const std::int32_t* nb, float* xs, std::uint8_t* tch, float* dm,
+                      std::int64_t& touching, auto&& pair) __attribute__((always_inline)) {
+    if (e0 == e1) return;
+    const float ri = P[4 * i + 3];
+    const Own o{{P[4 * i], P[4 * i + 1], P[4 * i + 2]}, ri, {V[4 * i], V[4 * i + 1], V[4 * i + 2]}, V[4 * i + 3],
+                ri * Vec3{W[4 * i], W[4 * i + 1], W[4 * i + 2]}};
+    for (int e = e0; e < e1; ++e) {
+      const int j = nb[e];
+      const float dx = o.p.x - P[4 * j], dy = o.p.y - P[4 * j + 1], dz = o.p.z - P[4 * j + 2];
+      const float rj = P[4 * j + 3];
+      const float rs = ri + rj;
+      const float d2 = dx * dx + dy * dy + dz * dz;
+      float* xe = xs + 3 * std::size_t(e);
+      if (d2 >= rs * rs || d2 <= 0.0f) {  // apart: the spring is forgotten
+        tch[e] = 0;
+        if (hysteretic) dm[e] = 0.0f;
+        if (xe[0] != 0.0f || xe[1] != 0.0f || xe[2] != 0.0f) xe[0] = xe[1] = xe[2] = 0.0f;
+        continue;
+      }
+      ++touching;
+      pair(i, o, Touch{e, j, dx, dy, dz, rj, rs, d2, xe});
+    }
+  };
 #pragma omp parallel num_threads(threads) if (n > kParallelSpheres)
   {
-  // The walk both passes make over slab c: every list entry of its spheres. A pair apart
-  // (|d| >= r_i + r_j, or the same centre) has its spring forgotten (part); a touching one is
-  // counted in `touching` and handed to pair(i, sphere i, touch).
+  // The walk both passes make over slab c: every entry of its spheres' rows (walk_row).
   auto walk_slab = [&](int c, std::int64_t& touching, auto&& pair) __attribute__((always_inline)) {
-    for (int i = CS[c], i1 = CS[c + 1]; i < i1; ++i) {
-      const int e0 = NS[i], e1 = NS[i + 1];
-      if (e0 == e1) continue;
-      const float ri = P[4 * i + 3];
-      const Own o{{P[4 * i], P[4 * i + 1], P[4 * i + 2]}, ri, {V[4 * i], V[4 * i + 1], V[4 * i + 2]}, V[4 * i + 3],
-                  ri * Vec3{W[4 * i], W[4 * i + 1], W[4 * i + 2]}};
-      for (int e = e0; e < e1; ++e) {
-        const int j = NB[e];
-        const float dx = o.p.x - P[4 * j], dy = o.p.y - P[4 * j + 1], dz = o.p.z - P[4 * j + 2];
-        const float rj = P[4 * j + 3];
-        const float rs = ri + rj;
-        const float d2 = dx * dx + dy * dy + dz * dz;
-        float* xe = XI + 3 * std::size_t(e);
-        if (d2 >= rs * rs || d2 <= 0.0f) {
-          part(e, xe);
-          continue;
-        }
-        ++touching;
-        pair(i, o, Touch{e, j, dx, dy, dz, rj, rs, d2, xe});
-      }
-    }
+    for (int i = CS[c], i1 = CS[c + 1]; i < i1; ++i) walk_row(i, NS[i], NS[i + 1], NB, XI, TCH, DM, touching, pair);
   };
   if (simd_pairs && !ledger) {
   // pair pass, AVX2: the same walk; touching pairs are collected per thread into batches of
@@ -219,29 +218,11 @@ void Simulation::Impl::contacts(float dt) {
     std::uint8_t* STCH = spairs.touch.data();
     float* SDM = spairs.dmax.data();
     std::int64_t touching = 0;
-    for (int r = 0, rows = int(srow.size()); r < rows; ++r) {
-      const int i = srow[std::size_t(r)];
-      const float ri = P[4 * i + 3];
-      const Own o{{P[4 * i], P[4 * i + 1], P[4 * i + 2]}, ri, {V[4 * i], V[4 * i + 1], V[4 * i + 2]}, V[4 * i + 3],
-                  ri * Vec3{W[4 * i], W[4 * i + 1], W[4 * i + 2]}};
-      for (int e = sstart[std::size_t(r)]; e < sstart[std::size_t(r) + 1]; ++e) {
-        const int j = SN[e];
-        const float dx = o.p.x - P[4 * j], dy = o.p.y - P[4 * j + 1], dz = o.p.z - P[4 * j + 2];
-        const float rj = P[4 * j + 3];
-        const float rs = ri + rj;
-        const float d2 = dx * dx + dy * dy + dz * dz;
-        float* xe = SXI + 3 * std::size_t(e);
-        if (d2 >= rs * rs || d2 <= 0.0f) {  // apart: the spring is forgotten
-          STCH[e] = 0;
-          if (hysteretic) SDM[e] = 0.0f;
-          xe[0] = xe[1] = xe[2] = 0.0f;
-          continue;
-        }
-        ++touching;
-        scalar_pair(i, o, Touch{e, j, dx, dy, dz, rj, rs, d2, xe}, cn0 / std::sqrt(o.invm + V[4 * j + 3]), STCH[e],
-                    SDM[e], led_n, led_f, led_u);
-      }
-    }
+    for (int r = 0, rows = int(srow.size()); r < rows; ++r)
+      walk_row(srow[std::size_t(r)], sstart[std::size_t(r)], sstart[std::size_t(r) + 1], SN, SXI, STCH, SDM, touching,
+               [&](int i, const Own& o, const Touch& t) {
+                 scalar_pair(i, o, t, cn0 / std::sqrt(o.invm + V[4 * t.j + 3]), STCH[t.e], SDM[t.e], led_n, led_f, led_u);
+               });
     npairs += touching;
   }
   ledger_normal += led_n;

@@ -8,6 +8,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -43,6 +44,34 @@ bool has_field(const std::vector<Error>& es, const std::string& field) {
   return false;
 }
 
+
+
+// A shipped vehicle scene (scenes/NAME) under a frame budget (ms), its world made (2 threads,
+// CPU) and prepared, with the entries of the car's wheels and chassis.
+struct CarRun {
+  SceneDef scene;
+  std::unique_ptr<World> world;
+  std::vector<std::size_t> wheels;
+  std::size_t chassis = 0;
+};
+void start_car(const std::string& name, double budget_ms, CarRun& run) {
+  auto s = load_scene_file(std::string(SANDPATCH_SOURCE_DIR) + "/scenes/" + name);
+  ASSERT_TRUE(s.ok()) << s.message();
+  run.scene = *s;
+  run.scene.terrain.frame_budget_ms = budget_ms;
+  auto w = make_world(run.scene, 2, "cpu");
+  ASSERT_TRUE(w.ok()) << w.message();
+  run.world = std::move(*w);
+  ASSERT_TRUE(run.world->prepare(run.scene.simulation.dt).ok());
+  const auto& entries = run.world->entries();
+  run.chassis = entries.size();
+  for (std::size_t e = 0; e < entries.size(); ++e) {
+    if (entries[e].name.starts_with("car.wheel")) run.wheels.push_back(e);
+    if (entries[e].name == "car.chassis") run.chassis = e;
+  }
+  ASSERT_EQ(run.wheels.size(), 4u);
+  ASSERT_LT(run.chassis, entries.size());
+}
 
 }  // namespace
 
@@ -153,23 +182,13 @@ TEST(SceneVehicles, ShippedVehicleDriveIsAFourWheeledVehicle) {
 // filling.cpp clear_bodies), its first patch left granule-deep hollows under the parked wheels
 // and it moved 0.66 m in 4 s; now 4.5 m.
 TEST(SceneVehicles, ShippedVehicleDrivesOffUnderABudgetNothingFits) {
-  auto s = load_scene_file(std::string(SANDPATCH_SOURCE_DIR) + "/scenes/vehicle_drive.json");
-  ASSERT_TRUE(s.ok()) << s.message();
-  s->terrain.frame_budget_ms = 0.5;
-  auto w = make_world(*s, 2, "cpu");
-  ASSERT_TRUE(w.ok()) << w.message();
-  World& world = **w;
-  const double dt = s->simulation.dt;
-  ASSERT_TRUE(world.prepare(dt).ok());
+  CarRun run;
+  ASSERT_NO_FATAL_FAILURE(start_car("vehicle_drive.json", 0.5, run));
+  World& world = *run.world;
+  const double dt = run.scene.simulation.dt;
   const auto& entries = world.entries();
-  std::vector<std::size_t> wheels;
-  std::size_t chassis = entries.size();
-  for (std::size_t e = 0; e < entries.size(); ++e) {
-    if (entries[e].name.starts_with("car.wheel")) wheels.push_back(e);
-    if (entries[e].name == "car.chassis") chassis = e;
-  }
-  ASSERT_EQ(wheels.size(), 4u);
-  ASSERT_LT(chassis, entries.size());
+  const std::vector<std::size_t>& wheels = run.wheels;
+  const std::size_t chassis = run.chassis;
   const double x0 = world.bullet().state(entries[chassis].id).position.x();
   int off = 0, frames = 0;
   for (int k = 0; k < int(std::lround(4.0 / dt)); ++k) {
@@ -198,23 +217,16 @@ TEST(SceneVehicles, ShippedVehicleDrivesOffUnderABudgetNothingFits) {
 // releases a patch no body wants at once, not when a request needs its slot (manager/
 // demotion.cpp). Wheel-frames off the particles, of 3,796: 306 before, 66 after.
 TEST(SceneVehicles, ShippedVehicleTurningAcrossPatchCorners) {
-  auto s = load_scene_file(std::string(SANDPATCH_SOURCE_DIR) + "/scenes/vehicle_turn.json");
-  ASSERT_TRUE(s.ok()) << s.message();
-  s->terrain.frame_budget_ms = 0.5;
-  ASSERT_EQ(s->terrain.slots, 3);
-  ASSERT_EQ(s->vehicles.size(), 1u);
-  ASSERT_EQ(s->vehicles[0].steering.size(), 1u);
-  EXPECT_EQ(s->vehicles[0].steering[0].angle, 0.25);
-  auto w = make_world(*s, 2, "cpu");
-  ASSERT_TRUE(w.ok()) << w.message();
-  World& world = **w;
-  const double dt = s->simulation.dt;
-  ASSERT_TRUE(world.prepare(dt).ok());
+  CarRun run;
+  ASSERT_NO_FATAL_FAILURE(start_car("vehicle_turn.json", 0.5, run));
+  ASSERT_EQ(run.scene.terrain.slots, 3);
+  ASSERT_EQ(run.scene.vehicles.size(), 1u);
+  ASSERT_EQ(run.scene.vehicles[0].steering.size(), 1u);
+  EXPECT_EQ(run.scene.vehicles[0].steering[0].angle, 0.25);
+  World& world = *run.world;
+  const double dt = run.scene.simulation.dt;
   const auto& entries = world.entries();
-  std::vector<std::size_t> wheels;
-  for (std::size_t e = 0; e < entries.size(); ++e)
-    if (entries[e].name.starts_with("car.wheel")) wheels.push_back(e);
-  ASSERT_EQ(wheels.size(), 4u);
+  const std::vector<std::size_t>& wheels = run.wheels;
   int off = 0, frames = 0;
   for (int k = 0; k < int(std::lround(8.0 / dt)); ++k) {
     ASSERT_TRUE(world.step(dt).ok()) << "frame " << k;
