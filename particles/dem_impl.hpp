@@ -185,7 +185,7 @@ struct Simulation::Impl {
   // at most skin between two builds: skin/2 from the sort each side), found through the
   // granules' grid. The granules' list is rebuilt by the granules alone, and rebuilds this
   // list too. Its pairs are computed after the slabs' pass, in list order on one thread
-  // (dem_contacts.cpp). docs/dem.md "Neighbour lists".
+  // (dem_contacts.cpp). docs/dem.md "Neighbour search, contact store, threads".
   static constexpr float kShellSkinFactor = 2.0f;  // shell_skin / skin
   float shell_skin = 0, shell_trip = 0;            // m
   bool need_shell_list = true;
@@ -198,7 +198,6 @@ struct Simulation::Impl {
   std::vector<std::int32_t> snbr;        // sorted index of the partner (until the next sort)
   std::vector<std::int32_t> snbr_id;     // stable id of the partner (history carry-over)
   PairArrays spairs;                     // the shell pairs' contact history
-  int shell_touching = 0;                // shell pairs touching at the last substep
   // Rebuilds the shell list from the current positions (serial, deterministic) and carries
   // each pair's spring over by (row id, partner id); sets the shells' pos_at_sort.
   void build_shell_list();
