@@ -97,16 +97,7 @@ Status TerrainManager::Impl::activate(double time, double dt) {
     // not wait: waiting, the body reaches its patch's edge before the next patch is filled,
     // and then either the whole fill falls in one frame or the body stops at the edge. It is
     // filled part by part at the rung the budget chose, and counted as an overrun.
-    // Nor does one whose body would touch the terrain before a patch started later could be
-    // filled part by part (its reset, cut and uploads, one part a frame, twice over), as long
-    // as the frame is predicted to stay within 1.5 x the budget: waiting, the body lands on the
-    // heightfield (a ball dropped beside a car's path bounced on it and came to rest without
-    // ever meeting a granule). Beyond that it waits, and lands on the heightfield.
-    const double fill_frames = 2.0 + std::ceil(double(c.granules) / double(kCutUnitsPerFrame)) +
-                               std::ceil(double(c.granules) / double(std::max(1, def.fill_granules_per_frame)));
-    const bool imminent = !it->bodies.empty() && it->time_to_contact <= 2.0 * fill_frames * dt &&
-                          c.predicted_ms <= c.available_ms + 0.5 * c.budget_ms;
-    if (!c.fits && others && !it->ahead_of_carried && !imminent) {
+    if (!c.fits && others && !it->ahead_of_carried) {
       ++budget_waits;
       ++it;
       continue;

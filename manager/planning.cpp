@@ -78,13 +78,7 @@ Status TerrainManager::Impl::plan(double time) {
       continue;
     }
     bool queued = false;
-    for (auto& q : queue)
-      if (q.overlaps(r)) {
-        queued = true;
-        // the latest prediction's time to contact (what the queue's order and a waiting
-        // request's urgency read: filling.cpp)
-        if (!q.bodies.empty()) q.time_to_contact = r.time_to_contact;
-      }
+    for (const auto& q : queue) queued = queued || q.overlaps(r);
     if (!queued) {
       queue.push_back(r);
       events.push_back({PatchEventKind::Requested, -1, time, 0, 0});
