@@ -84,11 +84,8 @@ Status TerrainManager::Impl::demote_idle(double time) {
     if (s.state == SlotState::Free || s.demotion.releasing) return Ok{};  // (a slot free, or one being released)
   for (Slot& s : slots) {
     if (!s.ready() || s.carried.empty() || wanted(s) || wanted_for_release(s)) continue;  // (not reached yet: kept)
-    s.demotion.releasing = true;
-    if (Status st = demote(s, time, false, /*staged=*/true); !st) return st;
-    released += s.state == SlotState::Free;
     ++early_releases;
-    return Ok{};
+    return release(s, time);
   }
   return Ok{};
 }

@@ -367,15 +367,21 @@ bool TerrainManager::Impl::wanted_for_release(const Slot& s) const {
 // starts its demotion to free its slot for a request waiting for one: it is held (not
 // stepped) and demoted one part a frame (activate), the first part now. Returns whether one
 // started (or one is under way already).
+// Its first part: held from now on, demoted one part a frame (activate runs the rest).
+Status TerrainManager::Impl::release(Slot& s, double time) {
+  s.demotion.releasing = true;
+  if (Status st = demote(s, time, false, /*staged=*/true); !st) return st;
+  released += s.state == SlotState::Free;
+  return Ok{};
+}
+
 Result<bool> TerrainManager::Impl::release_idle(double time) {
   for (Slot& s : slots)
     if (s.demotion.releasing) return true;
   for (Slot& s : slots) {
     if (!s.ready() || s.carried.empty()) continue;  // a patch no body has reached yet is kept
     if (wanted_for_release(s)) continue;
-    s.demotion.releasing = true;
-    if (Status st = demote(s, time, false, /*staged=*/true); !st) return st.errors();
-    released += s.state == SlotState::Free;
+    if (Status st = release(s, time); !st) return st.errors();
     return true;
   }
   return false;

@@ -344,6 +344,8 @@ struct TerrainManager::Impl {
   bool overlaps_patch(const PatchRequest& r) const;
   // `ids`: the bodies of the requests' BodyMotion indices (PatchRequest::bodies).
   Result<bool> extend(const PatchRequest& r, double time, const std::vector<RigidBodyId>& ids);
+  // A patch no body is over given up: held, demoted one part a frame (planning.cpp).
+  Status release(Slot& s, double time);
   Result<bool> release_idle(double time);
   bool wanted_for_release(const Slot& s) const;
 

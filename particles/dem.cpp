@@ -23,6 +23,22 @@
 
 namespace sandpatch {
 
+// A granule's sphere moved skin/2 since the sort (d2_granule, m^2): the grid and both lists;
+// a shell's sphere moved shell_trip since the shell list's build (d2_shell): that list.
+void Simulation::Impl::note_moved(float d2_granule, float d2_shell) {
+  if (4.0f * d2_granule > skin * skin) need_sort = true;
+  if (d2_shell > shell_trip * shell_trip) need_shell_list = true;
+}
+
+void Simulation::Impl::refresh_lists() {
+  if (need_sort) {
+    sort();  // (rebuilds the shell list too)
+  } else if (need_shell_list) {
+    build_shell_list();
+    stats.shell_lists++;
+  }
+}
+
 // The substep's stages, each timed into stats (StepStats::*_seconds).
 Status Simulation::Impl::substep(float dt) {
   using Clock = std::chrono::steady_clock;
@@ -31,12 +47,7 @@ Status Simulation::Impl::substep(float dt) {
   first_law = timing_on(dt);
   auto t0 = Clock::now();
   if (need_sort || need_shell_list) {
-    if (need_sort) {
-      sort();  // (rebuilds the shell list too)
-    } else {
-      build_shell_list();
-      stats.shell_lists++;
-    }
+    refresh_lists();
     stats.sort_seconds += since(t0);
     t0 = Clock::now();
   }
@@ -49,16 +60,11 @@ Status Simulation::Impl::substep(float dt) {
   if (!finite)
     return Error{"", "step", "NaN", "a body state became non-finite in the integrate stage",
                  "reduce the frame dt or material.normal_stiffness, or check the inputs"};
-  if (4.0f * d2max > skin * skin) need_sort = true;              // a granule moved skin/2
-  if (d2shell > shell_trip * shell_trip || shell_list_each_substep) need_shell_list = true;  // a shell sphere moved shell_trip
+  note_moved(d2max, d2shell);
+  if (shell_list_each_substep) need_shell_list = true;
   if (need_sort || need_shell_list) {
     t0 = Clock::now();
-    if (need_sort) {
-      sort();
-    } else {
-      build_shell_list();
-      stats.shell_lists++;
-    }
+    refresh_lists();
     stats.sort_seconds += since(t0);
   }
   time += dt;
@@ -534,11 +540,8 @@ Status Simulation::set_body_state(BodyId id, Vec3 x, Quat q, Vec3 v, Vec3 w) {
   // frame it moves; rebuilding the list each time was 70 of the 664 rebuilds of the default
   // scene's patches over 1.5 s (docs/BENCHMARKS.md, "The DEM inside a scene").
   const float d2 = s.rebuild_body(id.index);
-  if (s.b.flags[id.index] & kBodyGranule) {
-    if (4.0f * d2 > s.skin * s.skin) s.need_sort = true;
-  } else if (d2 > s.shell_trip * s.shell_trip) {
-    s.need_shell_list = true;  // a shell's pairs are in the shell list (dem_impl.hpp)
-  }
+  if (s.b.flags[id.index] & kBodyGranule) s.note_moved(d2, 0.0f);
+  else s.note_moved(0.0f, d2);  // (a shell's pairs are in the shell list, dem_impl.hpp)
   wake();
   return Ok{};
 }

@@ -236,11 +236,8 @@ bool Simulation::Impl::bodies(float dt, float* d2max_out, float* d2shell_out) {
     // first substep (rebuild_body(i) elsewhere). Translation only: predicting w as well kept
     // granule piles and beds jittering (rotation about a contact has a smaller point mass,
     // so a larger damping per substep; measured, docs/dem.md "Step size").
-    // (a granule on this path: granule_update takes them all; a shell's spheres are measured
-    // from the shell list's build)
-    const float d2 = rebuild_body(i, v + pred_gain * (v - v_old), w);
-    if (fl & kBodyGranule) d2max = std::max(d2max, d2);
-    else d2shell = std::max(d2shell, d2);
+    // (a shell: granules take granule_update; its spheres are measured from the shell list's build)
+    d2shell = std::max(d2shell, rebuild_body(i, v + pred_gain * (v - v_old), w));
   }
   *d2max_out = d2max;
   *d2shell_out = d2shell;

@@ -201,6 +201,11 @@ struct Simulation::Impl {
   // Rebuilds the shell list from the current positions (serial, deterministic) and carries
   // each pair's spring over by (row id, partner id); sets the shells' pos_at_sort.
   void build_shell_list();
+  // The trip tests: sets need_sort / need_shell_list from the largest squared displacements (m^2)
+  // of a granule's sphere since the sort and of a shell's since the shell list's build.
+  void note_moved(float d2_granule, float d2_shell);
+  // Rebuilds what is stale: the grid and both lists (sort), or the shell list alone.
+  void refresh_lists();
   std::vector<std::uint32_t> sort_scratch;  // sort()'s copy of one particle field (4-byte values)
   // The pairs' contact history (fields.hpp): xi, the tangential spring (3 per entry, m), and
   // touch, 1 if the pair touched at the last substep (a touching pair without it is in its

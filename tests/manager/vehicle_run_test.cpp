@@ -73,6 +73,20 @@ void start_car(const std::string& name, double budget_ms, CarRun& run) {
   ASSERT_LT(run.chassis, entries.size());
 }
 
+// Steps the run for `seconds` (s) of frames; counts the wheel-frames after the first 0.1 s in
+// which a wheel was not carried by a patch, and those wheel-frames in all.
+void drive_counting_wheels_off(CarRun& run, double seconds, int& off, int& wheel_frames) {
+  World& world = *run.world;
+  const double dt = run.scene.simulation.dt;
+  off = wheel_frames = 0;
+  for (int k = 0; k < int(std::lround(seconds / dt)); ++k) {
+    ASSERT_TRUE(world.step(dt).ok()) << "frame " << k;
+    if (world.time() < 0.1) continue;
+    for (std::size_t e : run.wheels) off += !world.contact(world.entries()[e].id).granular.carried;
+    wheel_frames += int(run.wheels.size());
+  }
+}
+
 }  // namespace
 
 TEST(SceneVehicles, ParseExpandAndSurviveTheCanonicalJson) {
@@ -185,21 +199,14 @@ TEST(SceneVehicles, ShippedVehicleDrivesOffUnderABudgetNothingFits) {
   CarRun run;
   ASSERT_NO_FATAL_FAILURE(start_car("vehicle_drive.json", 0.5, run));
   World& world = *run.world;
-  const double dt = run.scene.simulation.dt;
   const auto& entries = world.entries();
-  const std::vector<std::size_t>& wheels = run.wheels;
   const std::size_t chassis = run.chassis;
   const double x0 = world.bullet().state(entries[chassis].id).position.x();
-  int off = 0, frames = 0;
-  for (int k = 0; k < int(std::lround(4.0 / dt)); ++k) {
-    ASSERT_TRUE(world.step(dt).ok()) << "frame " << k;
-    if (world.time() < 0.1) continue;
-    for (std::size_t e : wheels) off += !world.contact(entries[e].id).granular.carried;
-    ++frames;
-  }
+  int off = 0, wheel_frames = 0;
+  ASSERT_NO_FATAL_FAILURE(drive_counting_wheels_off(run, 4.0, off, wheel_frames));
   const double moved = world.bullet().state(entries[chassis].id).position.x() - x0;
   std::printf("vehicle under a 0.5 ms budget: moved %.2f m in 4 s, wheel-frames off particles %d of %d\n", moved, off,
-              4 * frames);
+              wheel_frames);
   EXPECT_EQ(off, 0) << "wheel-frames on the heightfield";
   EXPECT_GT(moved, 2.5) << "m in 4 s (0.66 m when it sank into its first patch's hollows)";
   // Nothing fitted, and the report says so, with a budget that would have fitted
@@ -210,8 +217,8 @@ TEST(SceneVehicles, ShippedVehicleDrivesOffUnderABudgetNothingFits) {
 }
 
 // scenes/vehicle_turn.json (the shipped vehicle turning left, 0.25 rad from 1.5 s to 6 s) under
-// a budget nothing fits, with the scene's three slots: it crosses its patches' corners diagonally, where its wheels sit
-// in up to three patches while it needs a fourth ahead. A patch asked for ahead of a body may
+// a budget nothing fits, with the scene's three slots: it crosses its patches' corners
+// diagonally, where its wheels sit in up to three patches while it needs a fourth ahead. A patch asked for ahead of a body may
 // lie beyond any of the patches the body's request overlaps (manager/planning.cpp extend tries
 // each; it gave up when the first one's part ahead overlapped the second), and a full pool
 // releases a patch no body wants at once, not when a request needs its slot (manager/
@@ -223,17 +230,8 @@ TEST(SceneVehicles, ShippedVehicleTurningAcrossPatchCorners) {
   ASSERT_EQ(run.scene.vehicles.size(), 1u);
   ASSERT_EQ(run.scene.vehicles[0].steering.size(), 1u);
   EXPECT_EQ(run.scene.vehicles[0].steering[0].angle, 0.25);
-  World& world = *run.world;
-  const double dt = run.scene.simulation.dt;
-  const auto& entries = world.entries();
-  const std::vector<std::size_t>& wheels = run.wheels;
-  int off = 0, frames = 0;
-  for (int k = 0; k < int(std::lround(8.0 / dt)); ++k) {
-    ASSERT_TRUE(world.step(dt).ok()) << "frame " << k;
-    if (world.time() < 0.1) continue;
-    for (std::size_t e : wheels) off += !world.contact(entries[e].id).granular.carried;
-    ++frames;
-  }
-  std::printf("vehicle turning under a 0.5 ms budget, 3 slots: wheel-frames off particles %d of %d\n", off, 4 * frames);
+  int off = 0, wheel_frames = 0;
+  ASSERT_NO_FATAL_FAILURE(drive_counting_wheels_off(run, 8.0, off, wheel_frames));
+  std::printf("vehicle turning under a 0.5 ms budget, 3 slots: wheel-frames off particles %d of %d\n", off, wheel_frames);
   EXPECT_LE(off, 120) << "wheel-frames off the particles (306 before)";
 }
