@@ -34,7 +34,9 @@ double TerrainManager::Impl::budget_ms(double dt) const {
 // Spheres a live slot steps per frame: its granules' (uploaded and pending) and its shells'.
 static int slot_spheres(const Slot& s, int granules) {
   if (s.state == SlotState::Filling && !s.cut) return 4 * s.predicted_granules;  // not cut yet: the prediction
-  return std::max(s.sim->particle_count(), 4 * (granules + int(s.pending.size()) - int(s.uploaded)));
+  const int all = std::max(s.sim->particle_count(), 4 * (granules + int(s.pending.size()) - int(s.uploaded)));
+  // (less the granules asleep in still regions at its last step: they cost next to nothing)
+  return s.state == SlotState::Active ? all - 4 * s.sim->last_step().sleeping_granules : all;
 }
 
 // (slot 0's substeps at its own N, scaled to N: n_sub = ceil(dt N / t_c))
@@ -194,7 +196,9 @@ std::vector<Slot*> TerrainManager::Impl::stepping_order(const std::vector<Slot*>
 // and one slow frame, e.g. the machine busy elsewhere for a moment, does not throw it).
 void TerrainManager::Impl::observe_cost(const Slot& s, double wall_ms, double dt) {
   if (pinned()) return;
-  const double pred = predict_ms(s.sim->particle_count(), dt, s.steps_per_contact) / load;
+  // (the spheres it stepped: those asleep in still regions cost next to nothing)
+  const int awake = s.sim->particle_count() - 4 * s.sim->last_step().sleeping_granules;
+  const double pred = predict_ms(awake, dt, s.steps_per_contact) / load;
   if (!(pred > 0) || !(wall_ms > 0)) return;
   load += 0.2 * (std::clamp(wall_ms / pred, 0.1, 100.0) - load);
 }

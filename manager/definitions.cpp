@@ -222,6 +222,7 @@ TerrainManagerDef manager_def(const api::TerrainDef& def) {
   m.soil_depth = def.soil_depth;
   m.sleep_speed = def.sleep_speed;
   m.sleep_time = def.sleep_time;
+  m.sleep_regions = def.sleep_regions;
   m.idle_timeout = def.idle_timeout;
   m.use_gl = def.gl_depth_render;
   m.backend = def.backend;

@@ -118,6 +118,7 @@ struct DemCost {
   std::int64_t grid_rebuilds = 0;    // the DEM's grid sorts + neighbour-list rebuilds (StepStats::resorts)
   std::int64_t shell_lists = 0;      // rebuilds of the shell list alone (StepStats::shell_lists)
   double entry_sphere_steps = 0;     // sum over step calls of neighbour-list entries at its last substep x substeps
+  std::int64_t sleeping_sphere_steps = 0;  // of sphere_steps, those of granules asleep in still regions (StepStats::sleeping_granules)
   // ms, wall, of the CPU backend's stages in the step calls (StepStats; 0 on the GL backend):
   // the grid sort + neighbour list, the pair pass, the body stage
   double sort_ms = 0, pair_ms = 0, body_ms = 0;
@@ -127,6 +128,12 @@ struct DemCost {
   double mean_contacts_per_sphere() const { return sphere_steps > 0 ? contact_sphere_steps / double(sphere_steps) : 0.0; }
   // neighbour-list entries (pairs within r_i + r_j + skin) per sphere, the same way
   double mean_list_entries_per_sphere() const { return sphere_steps > 0 ? entry_sphere_steps / double(sphere_steps) : 0.0; }
+  // the fraction of sphere-steps whose granule slept in a still region (dem.md "Sleeping regions")
+  double sleeping_fraction() const { return sphere_steps > 0 ? double(sleeping_sphere_steps) / double(sphere_steps) : 0.0; }
+  // sphere-steps per second of the spheres that were awake (the work done; 0 before any)
+  double awake_sphere_steps_per_s() const {
+    return wall_ms > 0 ? double(sphere_steps - sleeping_sphere_steps) / (1e-3 * wall_ms) : 0.0;
+  }
   // One step call of `spheres` spheres that took wall_ms and ran st.substeps substeps.
   void add(double ms, const StepStats& st, int spheres) {
     wall_ms += ms;
@@ -140,6 +147,7 @@ struct DemCost {
     grid_rebuilds += st.resorts;
     shell_lists += st.shell_lists;
     entry_sphere_steps += double(st.neighbour_entries) * st.substeps;
+    sleeping_sphere_steps += 4 * std::int64_t(st.sleeping_granules) * st.substeps;
     sort_ms += 1e3 * st.sort_seconds;
     pair_ms += 1e3 * st.pair_seconds;
     body_ms += 1e3 * st.body_seconds;

@@ -41,6 +41,13 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
     o.frame_budget_ms.reset();
     return run_scene(s, o);
   }
+  if (opt.sleep_regions) {  // the same way
+    SceneDef s = scene;
+    s.terrain.sleep_regions = *opt.sleep_regions;
+    RunOptions o = opt;
+    o.sleep_regions.reset();
+    return run_scene(s, o);
+  }
   RunResult res;
   auto fail = [&](ExitCode code, const std::string& stage, const std::string& msg) {
     res.code = code;

@@ -37,6 +37,8 @@ struct RunOptions {
   int threads = -1;           // >= 0 overrides simulation.threads (0 = all hardware threads)
   // Overrides simulation.frame_budget_ms (ms > 0; infinity = no budget).
   std::optional<double> frame_budget_ms;
+  // Overrides simulation.sleep.regions.
+  std::optional<bool> sleep_regions;
   ProgressStyle progress = ProgressStyle::Auto;  // Auto: a bar on a terminal, plain lines otherwise
   std::string command_line;   // recorded in the report
   std::string final_image;    // when set: after the last frame, render this PNG (`sandpatch render`)

@@ -428,6 +428,8 @@ nlohmann::ordered_json TerrainManager::Impl::dem_report() const {
                        {"sphere_steps", c->sphere_steps},
                        {"wall_ms", c->wall_ms},
                        {"sphere_steps_per_s", c->sphere_steps_per_s()},
+                       {"sleeping_fraction", c->sleeping_fraction()},
+                       {"awake_sphere_steps_per_s", c->awake_sphere_steps_per_s()},
                        {"mean_list_entries_per_sphere", c->mean_list_entries_per_sphere()},
                        {"grid_rebuilds", c->grid_rebuilds},
                        {"shell_list_rebuilds", c->shell_lists},
@@ -440,6 +442,7 @@ nlohmann::ordered_json TerrainManager::Impl::dem_report() const {
     t.grid_rebuilds += c->grid_rebuilds;
     t.shell_lists += c->shell_lists;
     t.entry_sphere_steps += c->entry_sphere_steps;
+    t.sleeping_sphere_steps += c->sleeping_sphere_steps;
     t.sort_ms += c->sort_ms, t.pair_ms += c->pair_ms, t.body_ms += c->body_ms;
     t.substep_dt = std::max(t.substep_dt, c->substep_dt);
   }
@@ -453,6 +456,8 @@ nlohmann::ordered_json TerrainManager::Impl::dem_report() const {
                  {"sphere_steps", t.sphere_steps},
                  {"wall_ms", t.wall_ms},
                  {"sphere_steps_per_s", t.sphere_steps_per_s()},
+                 {"sleeping_fraction", t.sleeping_fraction()},
+                 {"awake_sphere_steps_per_s", t.awake_sphere_steps_per_s()},
                  {"mean_list_entries_per_sphere", t.mean_list_entries_per_sphere()},
                  {"grid_rebuilds", t.grid_rebuilds},
                  {"shell_list_rebuilds", t.shell_lists},

@@ -90,6 +90,9 @@ struct TerrainManagerDef {
   double bedrock_height = -std::numeric_limits<double>::infinity();
   double sleep_speed = knobs::kSleepSpeed.def; // m/s, a patch sleeps when everything is slower ...
   double sleep_time = knobs::kSleepTime.def;   // s, ... for this long
+  // The still parts of an awake patch sleep by the same rule, column by column of the bed (the
+  // CPU backend's SimulationDef::sleep_regions; the GL backend steps every granule).
+  bool sleep_regions = true;
   double idle_timeout = knobs::kIdleTimeout.def;  // s asleep before demotion (Leach & Marais: two minutes)
   LodDef lod;                                  // contact prediction
   // The frame budget (docs/manager.md "Frame budget"): wall-clock ms a frame's patches may

@@ -33,6 +33,7 @@ void Simulation::Impl::note_moved(float d2_granule, float d2_shell) {
 void Simulation::Impl::refresh_lists() {
   if (need_sort) {
     sort();  // (rebuilds the shell list too)
+    if (def.sleep_regions) refresh_sphere_dozing();
   } else if (need_shell_list) {
     build_shell_list();
     stats.shell_lists++;
@@ -191,6 +192,13 @@ Result<Simulation> Simulation::make(const SimulationDef& d, Impl* reuse) {
   s.guard_pt_mass.assign(d.max_bodies, 0.0f);
   s.guard_arm.assign(d.max_bodies, 0.0f);
   s.guard_rmin.assign(d.max_bodies, 0.0f);
+  s.still_drift = Impl::kStillDrift * d.particle_radius;
+  if (d.sleep_regions) {
+    s.still_for.assign(d.max_bodies, 0.0f);
+    s.anchor.assign(std::size_t(d.max_bodies) * 4, 0.0f);
+    s.dozing.assign(d.max_bodies, 0);
+    s.sphere_dozing.assign(d.max_particles, 0);
+  }
   s.size_grid();
   // OpenMP's worker threads are made on the first parallel region with this many threads:
   // here, at the process's first creation with that many, not in the first frame that steps a
@@ -326,6 +334,8 @@ Status Simulation::step(double dt_frame) {
     if (!touched) s.move_kinematic(dt_frame);
     if (asleep_frame(s, dt_frame, touched)) return Ok{};
   }
+  s.update_regions(dt_frame);  // dem_regions.cpp (sleep_regions)
+  s.stats.sleeping_granules = s.dozing_granules;
   const float dt = float(dt_frame / *ns);
   for (int k = 0; k < *ns; ++k)
     if (auto st = s.substep(dt); !st) return st;
@@ -340,6 +350,10 @@ double Simulation::velocity_predictor_gain(double dt) const { return impl_->pred
 bool Simulation::contact_timing_on(double dt) const { return impl_->timing_on(dt); }
 bool Simulation::asleep() const { return impl_->asleep; }
 void Simulation::wake() { wake_up(*impl_); }
+bool Simulation::region_asleep(BodyId b) const {
+  const Impl& s = *impl_;
+  return s.def.sleep_regions && b.index >= 0 && b.index < s.nb && s.dozing[std::size_t(b.index)] != 0;
+}
 int Simulation::body_count() const { return impl_->nb; }
 int Simulation::particle_count() const { return impl_->np; }
 int Simulation::body_particle_count(BodyId b) const {
@@ -505,6 +519,11 @@ std::uint64_t Simulation::state_hash() const {
   SANDPATCH_FIELD_ON(CPU, backend, if (hashed) h.bytes(s.spairs.name.data(), sizeof(type) * std::size_t(n) * shell_entries);)
   SANDPATCH_PAIR_CONTACT_FIELDS(SP_HASH_S)
 #undef SP_HASH_S
+  if (s.def.sleep_regions) {  // which granules sleep, and how long each has been still
+    h.bytes(s.dozing.data(), std::size_t(s.nb));
+    h.bytes(s.still_for.data(), sizeof(float) * std::size_t(s.nb));
+    h.bytes(s.anchor.data(), sizeof(float) * 4 * std::size_t(s.nb));
+  }
   return h.value();
 }
 
@@ -539,6 +558,7 @@ Status Simulation::set_body_state(BodyId id, Vec3 x, Quat q, Vec3 v, Vec3 w) {
   // the substep makes after the body stage). A shell that follows its Bullet body is set every
   // frame it moves; rebuilding the list each time was 70 of the 664 rebuilds of the default
   // scene's patches over 1.5 s (docs/BENCHMARKS.md, "The DEM inside a scene").
+  s.rouse(id.index);  // (a granule set from outside is awake and not still)
   const float d2 = s.rebuild_body(id.index);
   if (s.b.flags[id.index] & kBodyGranule) s.note_moved(d2, 0.0f);
   else s.note_moved(0.0f, d2);  // (a shell's pairs are in the shell list, dem_impl.hpp)
@@ -552,6 +572,7 @@ Status Simulation::set_body_enabled(BodyId id, bool enabled) {
   std::uint32_t& f = s.b.flags[id.index];
   const bool parked = f & kBodyParked;
   if (enabled == !parked) return Ok{};
+  s.rouse(id.index);
   if (!enabled) {
     f = parked_flags(f);  // dem_control.hpp, as the GL backend
     st3(s.b.pos, id.index, parking_position(s.def));

@@ -114,6 +114,12 @@ struct SimulationDef {
   // sleep
   float sleep_speed = 0.005f;            // m/s (sim units): asleep when every granule is slower
   float sleep_time = 0.5f;               // s held below sleep_speed
+  // Sleeping regions (CPU backend; the GL backend refuses it): a granule that has stayed within
+  // 0.1 sphere radii of one place for sleep_time, whose column of the bed and the columns
+  // around it hold no granule that has not and no moving shell near, is frozen where it lies
+  // (no integration, no pairs with other frozen granules, its contact history kept) until
+  // motion comes near. docs/dem.md "Sleeping regions".
+  bool sleep_regions = false;
 
   int threads = 0;                       // OpenMP threads; 0 = OpenMP's default
 };
@@ -159,6 +165,7 @@ struct StepStats {
   int resorts = 0;                       // grid + neighbour-list rebuilds this step
   int shell_lists = 0;                   // rebuilds of the shell list alone this step (CPU backend)
   bool slept = false;                    // the step did nothing because the sim was asleep
+  int sleeping_granules = 0;             // granules asleep in still regions this step (sleep_regions)
   // Wall time of the step's stages, summed over its substeps (s, steady clock): the overlap
   // guard (check_impacts), the pair pass (contacts), the body stage (gather, integrate,
   // rebuild the spheres) and the grid sort + neighbour-list rebuild.
@@ -219,6 +226,9 @@ class Simulation {
   // Sleep.
   bool asleep() const;
   void wake();
+  // Whether granule b sleeps in a still region (SimulationDef::sleep_regions); false for any
+  // other body or id.
+  bool region_asleep(BodyId b) const;
 
   // Queries (sim units).
   int body_count() const;

@@ -174,6 +174,7 @@ bool Simulation::Impl::bodies(float dt, float* d2max_out, float* d2shell_out) {
   const bool ordered = int(body_order.size()) == n;
   const std::int32_t* order = body_order.data();
   const GatherCtx gctx = gather_ctx();
+  const std::uint8_t* doze = def.sleep_regions ? dozing.data() : nullptr;
 #pragma omp parallel for num_threads(threads) schedule(dynamic, 128) reduction(max : d2max, d2shell, vmax) reduction(+ : bad, nwall) if (n > kParallelSpheres / 2 || np > kParallelSpheres)
   for (int t = 0; t < n; ++t) {
     const int i = ordered ? order[t] : t;
@@ -188,6 +189,10 @@ bool Simulation::Impl::bodies(float dt, float* d2max_out, float* d2shell_out) {
       continue;
     }
     if (fl & kBodyGranule) {  // (granules are dynamic)
+      if (doze && doze[i]) {  // asleep in a still region (dem_regions.cpp): its sums are only cleared
+        for (int k = 0, first = b.first[i]; k < 4; ++k) acc[std::size_t(slot_of[first + k])] = SphereSums{};
+        continue;
+      }
       granule_update(gctx, i, dt, nwall, d2max, vmax, bad);
       continue;
     }

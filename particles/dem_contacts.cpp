@@ -33,6 +33,7 @@ void Simulation::Impl::contacts(float dt) {
   const float* P = p.pos.data();
   const float* V = p.vel.data();
   const float* W = p.omega.data();
+  const std::uint8_t* DZ = def.sleep_regions ? sphere_dozing.data() : nullptr;  // asleep in a still region
   const std::int32_t* NS = nstart.data();
   const std::int32_t* NB = nbr.data();
   const std::int32_t* CS = chunk_start.data();
@@ -113,8 +114,12 @@ void Simulation::Impl::contacts(float dt) {
     const float ri = P[4 * i + 3];
     const Own o{{P[4 * i], P[4 * i + 1], P[4 * i + 2]}, ri, {V[4 * i], V[4 * i + 1], V[4 * i + 2]}, V[4 * i + 3],
                 ri * Vec3{W[4 * i], W[4 * i + 1], W[4 * i + 2]}};
+    // a sphere asleep in a still region skips its pairs with other sleeping spheres, their
+    // history left as it is (dem_regions.cpp)
+    const bool dozing_i = DZ && DZ[i];
     for (int e = e0; e < e1; ++e) {
       const int j = nb[e];
+      if (dozing_i && DZ[j]) continue;
       const float dx = o.p.x - P[4 * j], dy = o.p.y - P[4 * j + 1], dz = o.p.z - P[4 * j + 2];
       const float rj = P[4 * j + 3];
       const float rs = ri + rj;

@@ -320,6 +320,50 @@ struct Simulation::Impl {
   // round where the owner changed).
   void build_list(const std::vector<std::int32_t>& old_slot);
 
+  // ---- sleeping regions (SimulationDef::sleep_regions; dem_regions.cpp)
+  // The bed is divided into columns (x, z) of kRegionColumn granule reaches (centre distance +
+  // sphere radius) a side. Once a frame, before its substeps (update_regions), a column is
+  // active when one of its granules has not been still (kStillDrift) for sleep_time, or a
+  // sphere of a moving shell (dynamic or kinematic, not parked) reaches its granules' top
+  // within its radius grown by the shell's motion over the frame and half a column; a granule
+  // sleeps when neither its column nor any of the 8 around it is active, and wakes when one is. A sleeping granule is not integrated (velocity 0), its
+  // spheres take no boundary contacts, and its pairs with other sleeping granules are skipped
+  // by the pair pass but kept in the list with their history (springs, touch flags), so a
+  // region wakes as it fell asleep; its pairs with awake spheres are computed as before
+  // (it is a fixed obstacle to them). A woken granule keeps its still time: it makes its column
+  // active only once it moves.
+  static constexpr float kRegionColumn = 2.0f;   // granule reaches per column side
+  // A granule is still while it stays within kStillDrift sphere radii of where its still time
+  // began (its anchor), not while it is slower than sleep_speed: a bed under a moving load
+  // rings elastically through the whole patch at 1-30 mm/s (measured under the car of
+  // scenes/vehicle_drive.json: half the granules faster than 1 cm/s at any instant, a few
+  // with 0.1 mm amplitude), and a speed test kept 88 % of them awake however far the load was.
+  static constexpr float kStillDrift = 0.1f;
+  static constexpr int kMaxRegionColumns = 1 << 20;  // columns at most (larger columns beyond)
+  std::vector<float> still_for;                   // body -> s its granule has been slower than sleep_speed
+  std::vector<std::uint8_t> dozing;               // body -> 1 while the granule sleeps
+  std::vector<std::uint8_t> sphere_dozing;        // sorted index -> its body's dozing
+  std::vector<std::uint8_t> col_active;           // update_regions' scratch: column -> active
+  std::vector<float> col_top;                     // column -> its granules' highest reach, m
+  int dozing_granules = 0;
+  float still_drift = 0;  // m: a granule is still while it stays within this of its anchor
+  std::vector<float> anchor;  // body -> where its still time began (x, y, z, -), m
+  // Once a frame of dt_frame s, before its substeps: which granules sleep.
+  void update_regions(double dt_frame);
+  // sphere_dozing from dozing (after a sort permuted the spheres).
+  void refresh_sphere_dozing();
+  // A granule's body state changed from outside (set_body_state): awake, not still.
+  void rouse(int body) {
+    if (!def.sleep_regions || !(b.flags[body] & kBodyGranule)) return;
+    still_for[std::size_t(body)] = 0;
+    for (int k = 0; k < 3; ++k) anchor[4 * std::size_t(body) + k] = b.pos[4 * std::size_t(body) + k];
+    if (dozing[std::size_t(body)]) {
+      dozing[std::size_t(body)] = 0;
+      --dozing_granules;
+      for (int k = 0; k < b.count[body]; ++k) sphere_dozing[std::size_t(slot_of[b.first[body] + k])] = 0;
+    }
+  }
+
   // ---- guard
   double guard_meff() const;
   double body_pair_meff() const { return 0.5 * double(shape.mass); }

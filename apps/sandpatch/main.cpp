@@ -99,6 +99,7 @@ struct RunCli {
   long long frames = -1;
   int threads = -1;
   std::string frame_budget;
+  std::string sleep_regions;
   bool quiet = false;
 };
 
@@ -114,6 +115,9 @@ void add_run(CLI::App& app, RunCli& a) {
   run->add_option("--threads", a.threads, "Worker threads (0 = all)")->check(CLI::NonNegativeNumber);
   run->add_option("--frame-budget", a.frame_budget,
                   "Wall-clock ms a frame's patches may take, or off (overrides simulation.frame_budget_ms)");
+  run->add_option("--sleep-regions", a.sleep_regions,
+                  "Whether the still parts of an awake patch sleep (overrides simulation.sleep.regions)")
+      ->check(CLI::IsMember({"on", "off"}));
   run->add_flag("--quiet", a.quiet, "No progress output");
   run->add_option("--video", a.video, "Also write a video of the scene's first camera to this file, through ffmpeg");
   run->add_option("--video-fps", a.video_fps, "Video frames per simulated second (default 30; at most 1 / dt)");
@@ -202,6 +206,7 @@ int cmd_run(const RunCli& a, int argc, char** argv) {
     opt.threads = a.threads;
     if (a.frame_budget == "off") opt.frame_budget_ms = std::numeric_limits<double>::infinity();
     else if (!a.frame_budget.empty()) opt.frame_budget_ms = parse_budget(a.frame_budget);
+    if (!a.sleep_regions.empty()) opt.sleep_regions = a.sleep_regions == "on";
     opt.progress = a.quiet ? ProgressStyle::None : ProgressStyle::Auto;
     opt.video = a.video;
     opt.video_fps = a.video_fps;

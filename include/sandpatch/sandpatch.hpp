@@ -170,6 +170,8 @@ struct TerrainDef {
   int max_substeps = 0;                        // most DEM substeps in one step() before it is refused; 0 = max(64, 64 N / 20), [0, 100000]
   double sleep_speed = 0.01;                   // m/s: a patch sleeps when every granule is slower ... [0, 100]
   double sleep_time = 0.5;                     // s ... for this long, [0, 1e4]
+  bool sleep_regions = true;                   // the still parts of an awake patch sleep too (CPU backend;
+                                               //   docs/dem.md "Sleeping regions")
   double idle_timeout = 120.0;                 // s asleep before it is turned back into heightfield, [0, 1e6]
   std::string backend = "cpu";                 // DEM backend: "cpu" (OpenMP) | "gl" (compute shaders)
   bool gl_depth_render = false;                // demotion renders on GL (true) or ray casts on the CPU (false)

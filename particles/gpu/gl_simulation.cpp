@@ -74,6 +74,9 @@ Status validate_common(const SimulationDef& d, const GlOptions& o) {
     bad("GlOptions.max_contacts_per_sphere", o.max_contacts_per_sphere, "must be in [1, 64]");
   if (o.workgroup_size < 1 || o.workgroup_size > 1024 || (o.workgroup_size & (o.workgroup_size - 1)))
     bad("GlOptions.workgroup_size", o.workgroup_size, "must be a power of two in [1, 1024]");
+  if (d.sleep_regions)
+    es.push_back(Error{"", "SimulationDef.sleep_regions", "true", "is a CPU backend feature: must be false on the GL backend",
+                       "the GL backend steps every granule of an awake simulation"});
   if (!es.empty()) return es;
   return Ok{};
 }

@@ -422,6 +422,17 @@ TEST(GlSimulation, SettledBedMatchesCpu) {
 
 // The std430 offsets generated from fields.hpp (layout.hpp) are the ones the driver uses
 // for the generated GLSL blocks: every particle and body field, asked of the driver.
+// Sleeping regions are the CPU backend's: the GL backend refuses them, naming the field.
+TEST(GlSimulation, RefusesSleepingRegions) {
+  auto ctx = context();
+  ASSERT_TRUE(ctx);
+  SimulationDef d = box_def(ShearLaw::SpringHistory);
+  d.sleep_regions = true;
+  auto gpu = GlSimulation::create(d);
+  ASSERT_FALSE(gpu.ok());
+  EXPECT_NE(gpu.message().find("SimulationDef.sleep_regions"), std::string::npos) << gpu.message();
+}
+
 TEST(GlSimulation, GeneratedLayoutMatchesTheDriver) {
   auto ctx = context();
   ASSERT_TRUE(ctx);
