@@ -7,7 +7,9 @@
 // upward speed (a patch appearing under it, or one it reaches, must not throw it up), and the
 // frame budget's report.
 //
-//   push_box [frame_budget_ms | off]      (default: the library's, half of each step's dt)
+//   push_box [frame_budget_ms | off | default] [regions | no-regions]
+//     frame budget: default the library's, half of each step's dt; regions: whether the still
+//     parts of an awake patch sleep (TerrainDef::sleep_regions, default on)
 //
 // Exit code: 0 when the loop ran, 1 on a failure, 2 on bad input.
 #include <sandpatch/sandpatch.hpp>
@@ -35,10 +37,18 @@ int main(int argc, char** argv) {
     const double v = std::strtod(a.c_str(), &end);
     if (a == "off") def.frame_budget_ms = std::numeric_limits<double>::infinity();
     else if (end && *end == '\0' && v > 0) def.frame_budget_ms = v;
-    else {
-      std::fprintf(stderr, "push_box: frame budget '%s': must be a number of ms > 0, or off\n", a.c_str());
+    else if (a != "default") {
+      std::fprintf(stderr, "push_box: frame budget '%s': must be a number of ms > 0, off or default\n", a.c_str());
       return 2;
     }
+  }
+  if (argc > 2) {
+    const std::string a = argv[2];
+    if (a != "regions" && a != "no-regions") {
+      std::fprintf(stderr, "push_box: '%s': must be regions or no-regions\n", a.c_str());
+      return 2;
+    }
+    def.sleep_regions = a == "regions";
   }
   auto terrain = sp::Terrain::create(def);
   if (!terrain) {
