@@ -54,9 +54,12 @@ void main() {
   vec3 n_bed = normalize(v_ground_normal);
   if (u_bed_on) {
     // The bed's normal from the pre-pass, (1 + s) / 2 times further out at particle scale s: a
-    // coarse patch's bed is as smooth as the sand it stands for, over as many granules. Two
+    // coarse patch's bed is as smooth as the sand it stands for, over as many granules. Eight
     // estimates, each the cross product of the differences across two perpendicular pairs of
-    // samples (along the image's axes, and along its diagonals), averaged. A sample across a
+    // samples, the pairs turned by 11.25 degrees from one estimate to the next, averaged (with two,
+    // along the image's axes and diagonals, a patch of granules 1.5 px in radius was mottled: its
+    // local contrast 15 luma against the ground's 0.5, now 10.5-13.8; docs/BENCHMARKS.md
+    // "A fine patch at the default camera"). A sample across a
     // silhouette (a granule in front of or behind this pixel's bed point, or a gap) would tilt
     // an estimate wildly and leave a dark or bright speck at the patch's edge: an estimate counts
     // only when its four samples lie within kSteep times their distance across the image from
@@ -67,8 +70,9 @@ void main() {
     vec4 c = bed_eye(gl_FragCoord.xy);
     const float kSteep = 3.0;
     vec3 sum = vec3(0.0);
-    for (int k = 0; k < 2 && c.w > 0.0; ++k) {
-      vec2 u = (k == 0 ? vec2(1.0, 0.0) : vec2(0.70710678, 0.70710678)) * l_px;
+    for (int k = 0; k < 8 && c.w > 0.0; ++k) {
+      const float a = 3.14159265 * 0.5 * float(k) / 8.0;
+      vec2 u = vec2(cos(a), sin(a)) * l_px;
       vec2 v = vec2(-u.y, u.x);
       vec4 l = bed_eye(gl_FragCoord.xy - u), r = bed_eye(gl_FragCoord.xy + u);
       vec4 b = bed_eye(gl_FragCoord.xy - v), t = bed_eye(gl_FragCoord.xy + v);
