@@ -90,9 +90,12 @@ void Simulation::Impl::update_regions(double dt_frame) {
     if (dozing[bi] == std::uint8_t(!near)) continue;
     dozing[bi] = std::uint8_t(!near);
     if (!near) {
-      // falls asleep at rest: its spheres carry velocity 0 into its awake partners' contacts
+      // falls asleep at rest: its spheres carry velocity 0 into its awake partners' contacts,
+      // and it reports no contact force while it sleeps
       st3(b.vel, bi, Vec3{});
       st3(b.omega, bi, Vec3{});
+      st3(b.force, bi, Vec3{});
+      st3(b.torque, bi, Vec3{});
       rebuild_body(i);
       ++dozing_granules;
     } else {
