@@ -81,7 +81,9 @@ std::int64_t ParticleRenderer::draw(const std::vector<ParticleSource>& sources, 
   glDepthFunc(GL_LESS);
   glEnable(GL_PROGRAM_POINT_SIZE);
   glEnable(GL_BLEND);
-  glBlendFunc(GL_SRC_ALPHA, GL_ONE_MINUS_SRC_ALPHA);
+  // a fading patch's colour over the terrain's; the frame's alpha stays 1 (opaque: a PNG with
+  // alpha below 1 there showed a fading patch pale, composited over the viewer's background)
+  glBlendFuncSeparate(GL_SRC_ALPHA, GL_ONE_MINUS_SRC_ALPHA, GL_ZERO, GL_ONE);
   const Eigen::Matrix4f view_inv = view.inverse();
   glUniformMatrix4fv(loc("u_view"), 1, GL_FALSE, view.data());
   glUniformMatrix4fv(loc("u_proj"), 1, GL_FALSE, proj.data());

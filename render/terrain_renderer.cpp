@@ -252,7 +252,7 @@ void TerrainRenderer::draw_selection(const std::vector<Eigen::Vector4f>& cuts, c
     glUniform4fv(loc(p, "u_cuts"), n_cuts, cuts.front().data());
     glUniform1fv(loc(p, "u_cut_band"), n_cuts, b.data());
     glEnable(GL_BLEND);
-    glBlendFunc(GL_SRC_ALPHA, GL_ONE_MINUS_SRC_ALPHA);
+    glBlendFuncSeparate(GL_SRC_ALPHA, GL_ONE_MINUS_SRC_ALPHA, GL_ZERO, GL_ONE);  // (the frame's alpha stays 1)
   }
   const GLint l_origin = loc(p, "u_piece_origin"), l_level = loc(p, "u_level"), l_spacing = loc(p, "u_spacing"),
               l_coarser = loc(p, "u_has_coarser");

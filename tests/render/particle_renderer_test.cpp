@@ -125,7 +125,9 @@ TEST(ParticleRenderer, ParticlesUnderTheSurfaceAreInvisible) {
 
 // A fully faded-in patch stacked to the surface (top centres on it, as Leach §5.1 fills a patch)
 // and the heightfield it came from look alike inside the patch; with fade 0 the image is the
-// terrain's exactly, and half faded lies in between.
+// terrain's exactly, and half faded lies in between. Every frame is opaque (alpha 255 in every
+// pixel): a half-faded patch left alpha below 1 in the frame, and a PNG viewer showed it pale
+// over its own background (11,825 of 36,000 pixels of the default scene's patches at 0.8 s).
 TEST(ParticleRenderer, FadedInPatchLooksLikeTheHeightfield) {
   Scene s = make_scene();
   ASSERT_TRUE(s.renderer);
@@ -158,6 +160,10 @@ TEST(ParticleRenderer, FadedInPatchLooksLikeTheHeightfield) {
                 d.p99, d.max_abs, lp, la);
     luma_gap[k] = lp - la;
     mean[k++] = d.mean_abs;
+    int translucent = 0;
+    for (int y = 0; y < img->height; ++y)
+      for (int x = 0; x < img->width; ++x) translucent += img->pixel(x, y)[3] != 255;
+    EXPECT_EQ(translucent, 0) << "pixels with alpha below 255 at fade " << fade;
     if (fade == 1.0f) save_png(output_path("patch_fade1.actual.png"), img.value());
   }
   save_png(output_path("patch_alone.actual.png"), alone.value());
