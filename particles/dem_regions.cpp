@@ -1,8 +1,7 @@
 // Sleeping regions of the CPU backend (SimulationDef::sleep_regions): which granules of an
-// awake simulation are frozen where they lie because nothing near them moves. The rule is the
-// whole simulation's sleep rule (slower than sleep_speed for sleep_time) applied column by
-// column of the bed; the rest is in dem_impl.hpp ("sleeping regions") and docs/dem.md
-// "Sleeping regions".
+// awake simulation are frozen where they lie because nothing near them moves: still (within
+// kStillDrift sphere radii of one place) for sleep_time, column by column of the bed; the rest
+// is in dem_impl.hpp ("sleeping regions") and docs/dem.md "Sleeping regions".
 #include <algorithm>
 #include <cmath>
 

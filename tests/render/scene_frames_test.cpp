@@ -121,6 +121,26 @@ PatchLook patch_look(World& world, FrameWriter& images, const render::CameraView
   return o;
 }
 
+// The default scene with frame_budget_ms `budget` (ms; infinity: off), two threads, stepped to
+// `t` s, for the patch-look tests below.
+void default_scene_at(double budget, double t, SceneDef& s, std::unique_ptr<World>& world) {
+  auto scene = load_default_scene();
+  ASSERT_TRUE(scene.ok()) << scene.message();
+  s = scene.value();
+  s.terrain.frame_budget_ms = budget;
+  auto w = make_world(s, 2, "cpu");
+  ASSERT_TRUE(w.ok()) << w.message();
+  world = std::move(w.value());
+  ASSERT_TRUE(step_to(*world, t, s.simulation.dt).ok());
+}
+
+void print_look(const char* what, const TerrainManager::PatchInfo& p, const PatchLook& look) {
+  std::printf("%s patch %d (%d granules, scale %.0f): local contrast inside %.2f, band %.2f, ring %.2f; specks inside %d, "
+              "band %d, ring %d (pixels %d, %d, %d); mean colour footprint vs ring %.1f\n",
+              what, p.patch, p.granules, p.particle_scale, look.contrast[1], look.contrast[3], look.contrast[2], look.specks[1],
+              look.specks[3], look.specks[2], look.n[1], look.n[3], look.n[2], look.colour_distance);
+}
+
 }  // namespace
 
 // Both bodies of the default scene in the air (the crate spawns at 0.5 s): at 0.6 s each body's
@@ -194,14 +214,10 @@ TEST(SceneFrames, DefaultSceneShowsBothBodiesWhereTheReportSaysTheyAre) {
 // bytes) of the footprint (inside and band) and of the ring. docs/BENCHMARKS.md "What a user
 // sees" has the numbers before and after; the bounds here sit between them.
 TEST(SceneFrames, CoarsePatchReadsAsSandWithoutSpecks) {
-  auto scene = load_default_scene();
-  ASSERT_TRUE(scene.ok()) << scene.message();
-  SceneDef s = scene.value();
-  s.terrain.frame_budget_ms = 0.01;
-  auto w = make_world(s, 2, "cpu");
-  ASSERT_TRUE(w.ok()) << w.message();
-  World& world = *w.value();
-  ASSERT_TRUE(step_to(world, 2.0, s.simulation.dt).ok());
+  SceneDef s;
+  std::unique_ptr<World> w;
+  ASSERT_NO_FATAL_FAILURE(default_scene_at(0.01, 2.0, s, w));
+  World& world = *w;
   // The first patch, at scale 3 (the budget fits nothing finer). A patch asked for ahead of a
   // body it carries does not wait for the budget, so a second one may abut it: its footprint
   // (and 0.5 m around it) is left out of the regions below.
@@ -220,21 +236,14 @@ TEST(SceneFrames, CoarsePatchReadsAsSandWithoutSpecks) {
   if (images.unavailable()) GTEST_SKIP() << "no GL context: " << images.why();
   ASSERT_TRUE(render::save_png(output_path("coarse_patch.actual.png"), *img).ok());
   const PatchLook look = patch_look(world, images, cam, *img, p, patches);
+  print_look("coarse, 2 s,", p, look);
   ASSERT_GT(look.n[1], 2000);
   ASSERT_GT(look.n[2], 5000);
   ASSERT_GT(look.n[3], 5000);
-  const double contrast[4] = {0, look.contrast[1] * look.n[1], look.contrast[2] * look.n[2], look.contrast[3] * look.n[3]};
-  const int* n = look.n;
-  const int* specks = look.specks;
-  std::printf("coarse patch at 2 s (%d granules, scale %.0f; %zu patches): local contrast inside %.2f, band %.2f, ring %.2f; specks "
-              "inside %d, band %d, ring %d (pixels %d, %d, %d); mean colour footprint vs ring %.1f\n",
-              p.granules, p.particle_scale, patches.size(), look.contrast[1], look.contrast[3], look.contrast[2], specks[1], specks[3],
-              specks[2], n[1], n[3], n[2], look.colour_distance);
-  const double d2 = look.colour_distance * look.colour_distance;
-  EXPECT_LT(contrast[1] / n[1], 9.0) << "granules shaded as the sand they stand for (15.2 as balls)";
-  EXPECT_LT(specks[1] + specks[3], 60) << "154 before";
+  EXPECT_LT(look.contrast[1], 9.0) << "granules shaded as the sand they stand for (15.2 as balls)";
+  EXPECT_LT(look.specks[1] + look.specks[3], 60) << "154 before";
   // (5.8 with the one patch and its whole ring; 8.0 with the ring less the second patch's side)
-  EXPECT_LT(std::sqrt(d2), 9.0);
+  EXPECT_LT(look.colour_distance, 9.0);
 }
 
 // What a user sees of a patch at particle scale 1 (granules 2.5 cm in radius, 1.5 px at the
@@ -244,14 +253,10 @@ TEST(SceneFrames, CoarsePatchReadsAsSandWithoutSpecks) {
 // ground around: 0.6, 0.3), specks inside and in the band 57 and 214 -> 39 and 123
 // (docs/BENCHMARKS.md "A fine patch at the default camera"); the bounds sit between.
 TEST(SceneFrames, FinePatchReadsAsSand) {
-  auto scene = load_default_scene();
-  ASSERT_TRUE(scene.ok()) << scene.message();
-  SceneDef s = scene.value();
-  s.terrain.frame_budget_ms = std::numeric_limits<double>::infinity();
-  auto w = make_world(s, 2, "cpu");
-  ASSERT_TRUE(w.ok()) << w.message();
-  World& world = *w.value();
-  ASSERT_TRUE(step_to(world, 3.0, s.simulation.dt).ok());
+  SceneDef s;
+  std::unique_ptr<World> w;
+  ASSERT_NO_FATAL_FAILURE(default_scene_at(std::numeric_limits<double>::infinity(), 3.0, s, w));
+  World& world = *w;
   const auto patches = world.manager()->patches();
   ASSERT_GE(patches.size(), 1u);
   FrameWriter images(world);
@@ -263,10 +268,7 @@ TEST(SceneFrames, FinePatchReadsAsSand) {
   for (const auto& p : patches) {
     ASSERT_EQ(p.particle_scale, 1.0);
     const PatchLook look = patch_look(world, images, cam, *img, p, patches);
-    std::printf("fine patch %d at 3 s (%d granules): local contrast inside %.2f, band %.2f, ring %.2f; specks inside %d, band %d, "
-                "ring %d (pixels %d, %d, %d); mean colour footprint vs ring %.1f\n",
-                p.patch, p.granules, look.contrast[1], look.contrast[3], look.contrast[2], look.specks[1], look.specks[3],
-                look.specks[2], look.n[1], look.n[3], look.n[2], look.colour_distance);
+    print_look("fine, 3 s,", p, look);
     ASSERT_GT(look.n[1], 1000);
     ASSERT_GT(look.n[2], 5000);
     EXPECT_LT(look.contrast[1], 14.6) << "patch " << p.patch << ": 15.3-15.5 with two estimates of the bed's normal";
