@@ -340,7 +340,7 @@ struct Simulation::Impl {
   // with 0.1 mm amplitude), and a speed test kept 88 % of them awake however far the load was.
   static constexpr float kStillDrift = 0.1f;
   static constexpr int kMaxRegionColumns = 1 << 20;  // columns at most (larger columns beyond)
-  std::vector<float> still_for;                   // body -> s its granule has been slower than sleep_speed
+  std::vector<float> still_for;                   // body -> s its granule has stayed within still_drift of its anchor
   std::vector<std::uint8_t> dozing;               // body -> 1 while the granule sleeps
   std::vector<std::uint8_t> sphere_dozing;        // sorted index -> its body's dozing
   std::vector<std::uint8_t> col_active;           // update_regions' scratch: column -> active
