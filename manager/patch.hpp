@@ -122,6 +122,9 @@ struct DemCost {
   // ms, wall, of the CPU backend's stages in the step calls (StepStats; 0 on the GL backend):
   // the grid sort + neighbour list, the pair pass, the body stage
   double sort_ms = 0, pair_ms = 0, body_ms = 0;
+  // ms, wall, of the GL backend's step calls (StepStats; 0 on the CPU backend): issuing the
+  // substeps' commands, and the frame's read-back (waiting for the GPU)
+  double submit_ms = 0, readback_ms = 0;
   // sphere-steps per second of wall time in the step calls (0 before any)
   double sphere_steps_per_s() const { return wall_ms > 0 ? double(sphere_steps) / (1e-3 * wall_ms) : 0.0; }
   // contacts per sphere over all substeps, each frame's taken from its last substep
@@ -151,6 +154,8 @@ struct DemCost {
     sort_ms += 1e3 * st.sort_seconds;
     pair_ms += 1e3 * st.pair_seconds;
     body_ms += 1e3 * st.body_seconds;
+    submit_ms += 1e3 * st.submit_seconds;
+    readback_ms += 1e3 * st.readback_seconds;
     if (st.substeps > 0) {
       substep_dt = st.substep_dt;
       contacts_per_sphere = spheres > 0 ? 2.0 * double(st.contacts) / spheres : 0.0;

@@ -433,7 +433,8 @@ nlohmann::ordered_json TerrainManager::Impl::dem_report() const {
                        {"mean_list_entries_per_sphere", c->mean_list_entries_per_sphere()},
                        {"grid_rebuilds", c->grid_rebuilds},
                        {"shell_list_rebuilds", c->shell_lists},
-                       {"stage_ms", {{"sort", c->sort_ms}, {"pairs", c->pair_ms}, {"bodies", c->body_ms}}}});
+                       {"stage_ms", {{"sort", c->sort_ms}, {"pairs", c->pair_ms}, {"bodies", c->body_ms},
+                                     {"gl_submit", c->submit_ms}, {"gl_readback", c->readback_ms}}}});
     t.wall_ms += c->wall_ms;
     t.substeps += c->substeps;
     t.sphere_steps += c->sphere_steps;
@@ -444,6 +445,7 @@ nlohmann::ordered_json TerrainManager::Impl::dem_report() const {
     t.entry_sphere_steps += c->entry_sphere_steps;
     t.sleeping_sphere_steps += c->sleeping_sphere_steps;
     t.sort_ms += c->sort_ms, t.pair_ms += c->pair_ms, t.body_ms += c->body_ms;
+    t.submit_ms += c->submit_ms, t.readback_ms += c->readback_ms;
     t.substep_dt = std::max(t.substep_dt, c->substep_dt);
   }
   ojson total = {{"patches", int(all.size())},
@@ -461,7 +463,8 @@ nlohmann::ordered_json TerrainManager::Impl::dem_report() const {
                  {"mean_list_entries_per_sphere", t.mean_list_entries_per_sphere()},
                  {"grid_rebuilds", t.grid_rebuilds},
                  {"shell_list_rebuilds", t.shell_lists},
-                 {"stage_ms", {{"sort", t.sort_ms}, {"pairs", t.pair_ms}, {"bodies", t.body_ms}}}};
+                 {"stage_ms", {{"sort", t.sort_ms}, {"pairs", t.pair_ms}, {"bodies", t.body_ms},
+                               {"gl_submit", t.submit_ms}, {"gl_readback", t.readback_ms}}}};
   return {{"patches", patches}, {"total", total}};
 }
 

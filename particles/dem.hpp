@@ -170,6 +170,9 @@ struct StepStats {
   // guard (check_impacts), the pair pass (contacts), the body stage (gather, integrate,
   // rebuild the spheres) and the grid sort + neighbour-list rebuild.
   double guard_seconds = 0, pair_seconds = 0, body_seconds = 0, sort_seconds = 0;
+  // GL backend (0 on the CPU): host wall time issuing the substeps' GL commands, and reading
+  // the frame's status block back, which waits for the GPU to finish them (s).
+  double submit_seconds = 0, readback_seconds = 0;
 };
 
 class Simulation {

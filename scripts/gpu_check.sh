@@ -2,7 +2,7 @@
 # The GL backend's checks on a machine with a GPU, in one run (docs/BENCHMARKS.md "GL backend on a
 # GPU"): the GPU's name and the renderer EGL finds, the GL tests (context, GL-against-CPU
 # cross-checks, pool, a scene on the GL backend, rendering), the DEM throughput of both backends
-# on the same settled beds, and the default and Leach scenes on each backend.
+# on the same settled beds, the default and Leach scenes on each backend and the car scene on GL.
 #
 #   bash scripts/gpu_check.sh BIN_DIR OUT_DIR
 #
@@ -46,6 +46,8 @@ f = r["frames"]
 print("  backend", r["backend"], "threads", r["threads"], "rtf", round(r["real_time_factor"], 3),
       "frames", r["frame_count"], "median_ms", round(f["median_ms"], 2), "max_ms", round(f["max_ms"], 1),
       "hash", r["final_state_hash"], "ledger_pct", round(r["ledger"]["total"]["error_pct"], 2),
+      "gl_submit_ms", round(r["dem"]["total"]["stage_ms"]["gl_submit"]),
+      "gl_readback_ms", round(r["dem"]["total"]["stage_ms"]["gl_readback"]),
       "depth_render", [p.get("depth_render") for p in r["ledger"]["patches"]][:3])
 EOF
 }
@@ -78,6 +80,7 @@ step gl_pool 60 "$BIN/particles_gpu_gl_pool_test"
 step run_gl_test 60 "$BIN/manager_run_test" --gtest_filter='Run.GlBackend*'
 scene leach_3_ten_bodies gl
 scene leach_3_ten_bodies cpu
+scene vehicle_drive gl
 for t in render_render_test render_scene_frames_test render_particle_renderer_test render_body_renderer_test; do
   step "$t" 60 "$BIN/$t"
 done

@@ -39,12 +39,22 @@ constexpr int kScanBlock = 1024;  // cells per workgroup of scan_blocks.comp
 // write_grid_dispatch), the contact and the body stage.
 enum Kernel {
   kGridDecide, kGridCount, kScanBlocks, kScanTop, kGridScatter, kGridGather, kGridCopyBack,
-  kForce, kBodies, kKinematicTouch, kKernelCount
+  kForce, kBodies, kBodiesWide, kKinematicTouch, kKernelCount
 };
 inline constexpr const char* kKernelFile[kKernelCount] = {
     "dem/grid_decide.comp",  "dem/grid_count.comp",    "dem/scan_blocks.comp", "dem/scan_top.comp",
     "dem/grid_scatter.comp", "dem/grid_gather.comp",   "dem/grid_copyback.comp", "dem/force.comp",
-    "dem/bodies.comp",       "dem/kinematic_touch.comp"};
+    "dem/bodies.comp",       "dem/bodies.comp",        "dem/kinematic_touch.comp"};
+// A macro defined before a kernel's source (nullptr: none): kBodiesWide is bodies.comp's
+// workgroup-per-body pass.
+inline constexpr const char* kKernelDefine[kKernelCount] = {nullptr, nullptr, nullptr, nullptr, nullptr, nullptr, nullptr,
+                                                           nullptr, nullptr, "SP_WIDE_PASS", nullptr};
+
+// A body of more spheres than this (a shell) is summed, integrated and rebuilt by a workgroup
+// of its own this size (bodies.comp's SP_WIDE_PASS); the others, granules first, by one
+// invocation each. One invocation looping over a shell of a few thousand spheres took most of
+// a scene's GL step (docs/BENCHMARKS.md "Shells on the GL backend").
+constexpr int kWideSpheres = 32;
 
 // CPU staging of bodies/particles added since the last upload (generated SoA, as dem.cpp).
 struct ParticleStage {
@@ -111,6 +121,7 @@ struct GlSimulation::Impl {
   int cap_p = 0, cap_b = 0, cap_cells = 0, scan_blocks_cap = 0, K = 16, wg = 64;
   std::size_t cap_terrain = 0;  // terrain height samples (fixed at creation)
   int np = 0, nb = 0, np_gpu = 0, nb_gpu = 0;  // *_gpu: uploaded
+  int n_wide = 0;  // uploaded bodies of more than kWideSpheres spheres, listed in G.wide_body
   ParticleStage pst;
   BodyStage bst;
   std::vector<std::uint32_t> host_flags;  // every body's flags (only the host changes them): no read-back
@@ -157,9 +168,15 @@ struct GlSimulation::Impl {
   std::size_t boff(int f) const { return std430_offset(kBodyFields, f, std::size_t(cap_b)); }
   // Byte offsets inside the other blocks (common.glsl's declarations).
   std::size_t g_cell_start() const { return sizeof(physics::DemStatus); }
+  // G.wide_body (common.glsl): after the cell starts, counts and block sums
+  std::size_t g_wide_body() const {
+    return g_cell_start() + 4 * (2 * std::size_t(cap_cells) + 1 + std::size_t(scan_blocks_cap));
+  }
   std::size_t s_slot_of() const { return 0; }
   std::size_t sort_terrain_offset() const { return round_up(12 * std::size_t(cap_p), 16) + 16 * std::size_t(cap_p); }
 
+  // The one buffer every write() goes through (write()).
+  GLuint staging = 0;
   ~Impl() {
     // a program in use is only flagged for deletion: release ours so the names really go
     GLint current = 0;
@@ -170,6 +187,7 @@ struct GlSimulation::Impl {
     for (GLuint b : buf) any = any || b != 0;
     if (any) glDeleteBuffers(kBufCount, buf);
     if (args_buf != 0) glDeleteBuffers(1, &args_buf);
+    if (staging != 0) glDeleteBuffers(1, &staging);
     if (!queries.empty()) glDeleteQueries(GLsizei(queries.size()), queries.data());
   }
 
@@ -222,6 +240,26 @@ struct GlSimulation::Impl {
     glMemoryBarrier(after);
   }
 
+  // Kernel k in `groups` workgroups, no barrier (the caller's next dispatch orders it).
+  void dispatch_groups(Kernel k, int groups) {
+    if (groups <= 0) return;
+    begin_query(k);
+    glUseProgram(prog[k].id());
+    glDispatchCompute(GLuint(groups), 1, 1);
+    end_query();
+  }
+
+  // Lists the uploaded bodies of more than kWideSpheres spheres in G.wide_body, for the
+  // workgroup-per-body pass (after an upload: bodies never change their sphere count).
+  void update_wide_list() {
+    std::vector<std::int32_t> wide;
+    for (int i = 0; i < nb_gpu; ++i)
+      if (host_count[std::size_t(i)] > kWideSpheres) wide.push_back(i);
+    n_wide = int(wide.size());
+    glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
+    write(kG, g_wide_body(), wide.size() * 4, wide.data());
+  }
+
   // A grid kernel with the arguments in args_buf (bound as GL_DISPATCH_INDIRECT_BUFFER by
   // bind_substep_targets; 0 workgroups: no re-sort), then the storage barrier: each grid
   // stage reads what the one before wrote, and the contact stage the grid.
@@ -262,10 +300,17 @@ struct GlSimulation::Impl {
     glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
     write(kG, offset, 4, &v);
   }
+  // Bytes into buffer b at offset: copied into `staging` (a fresh allocation each time) and
+  // from there by the GPU (glCopyBufferSubData), in command order. A glBufferSubData straight
+  // into a buffer the GPU was still using took about 1 ms a call on NVIDIA's driver
+  // (docs/BENCHMARKS.md "The GL backend's host time in scenes").
   void write(Buf b, std::size_t offset, std::size_t bytes, const void* data) {
     if (bytes == 0) return;
+    if (staging == 0) glGenBuffers(1, &staging);
+    glBindBuffer(GL_COPY_READ_BUFFER, staging);
+    glBufferData(GL_COPY_READ_BUFFER, GLsizeiptr(bytes), data, GL_STREAM_DRAW);
     glBindBuffer(GL_COPY_WRITE_BUFFER, buf[b]);
-    glBufferSubData(GL_COPY_WRITE_BUFFER, GLintptr(offset), GLsizeiptr(bytes), data);
+    glCopyBufferSubData(GL_COPY_READ_BUFFER, GL_COPY_WRITE_BUFFER, 0, GLintptr(offset), GLsizeiptr(bytes));
   }
   void read(Buf b, std::size_t offset, std::size_t bytes, void* out) const {
     if (bytes == 0) return;

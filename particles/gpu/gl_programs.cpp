@@ -20,6 +20,7 @@ std::string GlSimulation::Impl::preamble() const {
   s += "#define SP_SCAN_BLOCKS " + std::to_string(scan_blocks_cap) + "\n";
   s += "#define SP_K " + std::to_string(K) + "\n";
   s += "#define SP_WG " + std::to_string(wg) + "\n";
+  s += "#define SP_WIDE " + std::to_string(kWideSpheres) + "\n";
   s += "#define SP_BODY_GRANULE " + std::to_string(unsigned(kBodyGranule)) + "u\n";
   s += "#define SP_BODY_STATIC " + std::to_string(unsigned(kBodyStatic)) + "u\n";
   s += "#define SP_BODY_KINEMATIC " + std::to_string(unsigned(kBodyKinematic)) + "u\n";
@@ -42,7 +43,8 @@ Status GlSimulation::Impl::build_programs() {
   for (int k = 0; k < kKernelCount; ++k) {
     std::string_view src = shaders::source(kKernelFile[k]);
     if (src.empty()) return Error{"", std::string("shaders/") + kKernelFile[k], "missing", "must be embedded", ""};
-    auto p = gl::Program::compute(std::string("shaders/") + kKernelFile[k], pre + std::string(src));
+    const std::string define = kKernelDefine[k] ? "#define " + std::string(kKernelDefine[k]) + "\n#line 1 3\n" : "";
+    auto p = gl::Program::compute(std::string("shaders/") + kKernelFile[k], pre + define + std::string(src));
     if (!p) return p.errors();
     prog[k] = std::move(*p);
     const GLuint id = prog[k].id();

@@ -3,6 +3,7 @@
 // files are listed in gl_impl.hpp; the kernels are shaders/dem/*.comp.
 #include "particles/gpu/gl_simulation.hpp"
 
+#include <chrono>
 #include <GL/glcorearb.h>
 
 #include <algorithm>
@@ -21,8 +22,9 @@ namespace sandpatch::gpu {
 // storage buffers (bind_all) and the copy and indirect targets (bind_substep_targets), set the
 // frame's uniforms (u_dt, u_first_law, u_pred: the same for every substep of a frame) and ran
 // grid_decide.comp, which wrote the grid kernels' arguments from the re-sort flag. Per
-// substep: 1 buffer copy, 8 dispatches (6 of them indirect), 8 program switches, 8 barriers and
-// 2 storage-buffer bindings; no uniform.
+// substep: 1 buffer copy, 8 dispatches (6 of them indirect; 9 with a body of more than
+// kWideSpheres spheres), 8 program switches (9), 8 barriers and 2 storage-buffer bindings; no
+// uniform.
 void GlSimulation::Impl::substep() {
   // The grid kernels' arguments into args_buf. Read in place, from the grid block that the
   // grid kernels write, every indirect dispatch after a kernel that wrote the block cost on
@@ -43,6 +45,8 @@ void GlSimulation::Impl::substep() {
   // bodies; storage barrier: the next substep's kernels read the spheres and the re-sort flag;
   // buffer-update barrier: its argument copy (and step's status writes and read-back) see the
   // arguments request_resort wrote and the counters
+  // (the shells: a workgroup each, on other bodies and spheres than kBodies: one barrier after both)
+  dispatch_groups(kBodiesWide, n_wide);
   dispatch(kBodies, nb_gpu, wg, GL_SHADER_STORAGE_BARRIER_BIT | GL_BUFFER_UPDATE_BARRIER_BIT);
 }
 
@@ -127,7 +131,7 @@ Status GlSimulation::Impl::configure(const SimulationDef& d, const char* cap_pre
   skin = d.cell_skin > 0 ? d.cell_skin : 0.2f * d.particle_radius;
   size_grid();
   // empty: live counts, staging, springs and wall contacts of every particle id
-  np = nb = np_gpu = nb_gpu = 0;
+  np = nb = np_gpu = nb_gpu = n_wide = 0;
   pst.clear();
   bst.clear();
   host_flags.clear();
@@ -172,7 +176,7 @@ Result<GlSimulation> GlSimulation::create(const SimulationDef& d, const GlOption
   const std::size_t P = std::size_t(s.cap_p);
   s.buf_bytes[Impl::kP0] = s.buf_bytes[Impl::kP1] = std430_size(kParticleFields, P);
   s.buf_bytes[Impl::kB] = std430_size(kBodyFields, std::size_t(s.cap_b));
-  s.buf_bytes[Impl::kG] = sizeof(physics::DemStatus) + 4 * (std::size_t(s.cap_cells) + 1 + std::size_t(s.cap_cells) + s.scan_blocks_cap);
+  s.buf_bytes[Impl::kG] = s.g_wide_body() + 4 * std::size_t(s.cap_b);
   // springs (common.glsl SpringsIn/Out): counts, K slots of (xi, partner id), K dmax
   s.buf_bytes[Impl::kS0] = s.buf_bytes[Impl::kS1] = round_up(4 * P, 16) + 20 * P * std::size_t(s.K);
   s.buf_bytes[Impl::kW] = round_up(4 * P, 16) + 16 * P * kWallSlots;
@@ -390,13 +394,16 @@ Status GlSimulation::step(double dt_frame) {
   s.bind_all();
   glProgramUniform1f(s.prog[kForce].id(), s.u[kForce].dt, dt);
   glProgramUniform1i(s.prog[kForce].id(), s.u[kForce].first_law, s.guard->contact_timing_on(dt) ? 1 : 0);
-  glProgramUniform1f(s.prog[kBodies].id(), s.u[kBodies].dt, dt);
-  glProgramUniform1f(s.prog[kBodies].id(), s.u[kBodies].pred, float(s.guard->velocity_predictor_gain(dt)));
+  for (Kernel k : {kBodies, kBodiesWide}) {
+    glProgramUniform1f(s.prog[k].id(), s.u[k].dt, dt);
+    glProgramUniform1f(s.prog[k].id(), s.u[k].pred, float(s.guard->velocity_predictor_gain(dt)));
+  }
   // the grid kernels' arguments from the re-sort flag (which an upload or a moved body may have
   // raised); storage barrier: the grid kernels write the same words after it; buffer-update
   // barrier: the first substep's copy reads them
   s.dispatch(kGridDecide, 1, 1, GL_SHADER_STORAGE_BARRIER_BIT | GL_BUFFER_UPDATE_BARRIER_BIT);
   s.bind_substep_targets();
+  const auto t_submit = std::chrono::steady_clock::now();
   for (int k = 0; k < *ns; ++k) {
     if (k + 1 == *ns) {  // the counters describe the last substep, as on the CPU
       // (no barrier of its own: the one after the last body stage, or grid_decide's, has
@@ -404,14 +411,17 @@ Status GlSimulation::step(double dt_frame) {
       constexpr std::size_t first = offsetof(physics::DemStatus, max_partners);
       s.write(Impl::kG, first, offsetof(physics::DemStatus, resort) - first, &status.max_partners);
       s.write(Impl::kG, offsetof(physics::DemStatus, max_granule_speed), 4, &status.max_granule_speed);
-      glBindBuffer(GL_COPY_WRITE_BUFFER, s.args_buf);  // write() bound the status block there
+      s.bind_substep_targets();  // write() bound the status block there
     }
     s.substep();
     s.time += dt;
   }
   glBindBuffer(GL_DISPATCH_INDIRECT_BUFFER, 0);
   glUseProgram(0);
+  const auto t_read = std::chrono::steady_clock::now();
   s.read(Impl::kG, 0, offsetof(physics::DemStatus, grid_dispatch), &status);
+  s.stats.submit_seconds = std::chrono::duration<double>(t_read - t_submit).count();
+  s.stats.readback_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_read).count();
   if (s.opt.profile) s.resolve_queries();
   float vmax;
   std::memcpy(&vmax, &status.max_granule_speed, 4);
@@ -539,7 +549,10 @@ double GlSimulation::time() const { return impl_->time; }
 unsigned GlSimulation::particle_buffer() const { return impl_->buf[Impl::kP0 + impl_->cur_p]; }
 
 std::vector<unsigned> GlSimulation::gl_buffers() const {
-  return std::vector<unsigned>(std::begin(impl_->buf), std::end(impl_->buf));
+  std::vector<unsigned> out(std::begin(impl_->buf), std::end(impl_->buf));
+  for (GLuint b : {impl_->args_buf, impl_->staging})
+    if (b != 0) out.push_back(b);
+  return out;
 }
 std::vector<unsigned> GlSimulation::gl_programs() const {
   std::vector<unsigned> out;
@@ -554,7 +567,9 @@ int GlSimulation::uploaded_body_count() const { return impl_->nb_gpu; }
 
 std::vector<std::pair<std::string, double>> GlSimulation::kernel_seconds() const {
   std::vector<std::pair<std::string, double>> out;
-  for (int k = 0; k < kKernelCount; ++k) out.emplace_back(kKernelFile[k], impl_->kernel_seconds[k]);
+  for (int k = 0; k < kKernelCount; ++k)
+    out.emplace_back(std::string(kKernelFile[k]) + (kKernelDefine[k] ? std::string(" ") + kKernelDefine[k] : ""),
+                     impl_->kernel_seconds[k]);
   return out;
 }
 

@@ -7,7 +7,7 @@
 //   0 P    particles, current (cell-sorted) order        generated from fields.hpp
 //   1 Pn   particles, scratch copy                       (the grid's gather writes it)
 //   2 B    bodies, creation order                        generated from fields.hpp
-//   3 G    status counters, cells, prefix-sum block sums
+//   3 G    status counters, cells, prefix-sum block sums, the list of wide bodies
 //   4 SIn  contact springs read this substep (by particle id, K slots each): per slot the
 //          tangential spring xi and the partner id (slot), and the largest overlap of the
 //          contact (dmax, m: the hysteretic normal spring, physics_common.glsl contact_force_h;
@@ -24,6 +24,7 @@ layout(std430, binding = 3) buffer Grid {
   uint cell_start[SP_CELLS + 1];
   uint cell_count[SP_CELLS];
   uint block_sum[SP_SCAN_BLOCKS];
+  int wide_body[SP_BODIES];  // the bodies of more than SP_WIDE spheres (bodies.comp SP_WIDE_PASS)
 } G;
 
 layout(std430, binding = 4) buffer SpringsIn {

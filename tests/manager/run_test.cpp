@@ -179,4 +179,11 @@ TEST(Run, GlBackendDrivesThePatches) {
   EXPECT_GT(r.report["counts"]["peak_granules"].get<int>(), 100);
   EXPECT_EQ(r.report["ledger"]["patches"].size(), 1u);
   EXPECT_GT(r.report["stages"]["dem"]["total_ms"].get<double>(), 0.0);
+  // the GL step's host time is reported: issuing the substeps and the read-back, within the
+  // step calls' wall time
+  const auto& st = r.report["dem"]["total"]["stage_ms"];
+  EXPECT_GT(st["gl_submit"].get<double>(), 0.0);
+  EXPECT_GT(st["gl_readback"].get<double>(), 0.0);
+  EXPECT_LE(st["gl_submit"].get<double>() + st["gl_readback"].get<double>(),
+            r.report["dem"]["total"]["wall_ms"].get<double>());
 }

@@ -346,6 +346,91 @@ void trajectories_agree(float lambda) {
 TEST(GlSimulation, TrajectoriesAgreeOver200Steps) { trajectories_agree(1.0f); }
 TEST(GlSimulation, TrajectoriesAgreeOver200StepsHysteretic) { trajectories_agree(11.111111f); }
 
+// A square plate shell of n x n spheres of radius r, 1.6 r apart in x and z, moving down at
+// 0.5 m/s (a body of more than kWideSpheres spheres for n >= 6).
+ShellDef wide_plate(const SimulationDef& d, int n, Vec3 centre, MotionType m) {
+  const float r = d.particle_radius;
+  const float ms = d.material.density * 4.0f / 3.0f * 3.14159265f * r * r * r;
+  ShellDef sh;
+  const float a = 1.6f * r;
+  for (int k = 0; k < n; ++k)
+    for (int i = 0; i < n; ++i) sh.offsets.push_back({(i - 0.5f * (n - 1)) * a, 0.0f, (k - 0.5f * (n - 1)) * a});
+  sh.radii = {r};
+  sh.motion = m;
+  if (m == MotionType::Dynamic) {
+    sh.mass = float(n * n) * ms;
+    const float side = float(n) * a, i0 = sh.mass * side * side / 12.0f;
+    sh.inertia = {i0, 2.0f * i0, i0};
+  }
+  sh.position = centre;
+  sh.velocity = {0.0f, -0.5f, 0.0f};
+  return sh;
+}
+
+// Shells of more than kWideSpheres spheres are summed, integrated and rebuilt by a workgroup
+// each (bodies.comp SP_WIDE_PASS), in another summation order than the CPU's sphere-id order.
+// The falling bed of drop_bed with a dynamic plate of 9 x 9 spheres (81: 2 or 3 per
+// invocation) dropped on it at 0.5 m/s and a kinematic plate of 6 x 6 (36) pushed down
+// beside it: over 400 steps of 5e-5 s both plates press into the granules (peak force
+// ~500 N). The plates' centres stay within 0.001 particle diameters of the CPU's (llvmpipe
+// 5e-9 m, an H200 4e-7 m, against 5e-6 m). The granules the plates strike diverge as
+// chaotically as any collision (trajectories_agree): until the impact (step 50) within the
+// growth of a CPU run one ulp away, and by the end within 0.05 diameters (llvmpipe 2.2e-6 m
+// or 0.0005 d, the same as the one-ulp run; an H200, whose compiler fuses multiply-adds,
+// 7.9e-5 m or 0.016 d, against 2.5e-4 m).
+TEST(GlSimulation, WideShellsMatchCpu) {
+  auto ctx = context();
+  ASSERT_TRUE(ctx);
+  SimulationDef d = box_def(ShearLaw::SpringHistory);
+  const float r = d.particle_radius;
+  const float ms = d.material.density * 4.0f / 3.0f * 3.14159265f * r * r * r;
+  const ShellDef dyn = wide_plate(d, 9, {0.035f, 0.0745f, 0.035f}, MotionType::Dynamic);
+  const ShellDef kin = wide_plate(d, 6, {0.063f, 0.0745f, 0.035f}, MotionType::Kinematic);
+  ASSERT_GT(int(dyn.offsets.size()), kWideSpheres);
+  ASSERT_GT(int(kin.offsets.size()), kWideSpheres);
+  auto cpu = Simulation::create(d);
+  auto cpu2 = Simulation::create(d);
+  auto gpu = GlSimulation::create(d);
+  ASSERT_TRUE(cpu.ok() && cpu2.ok() && gpu.ok()) << gpu.message();
+  BodyId plates[2];
+  auto build = [&](auto& sim, float nudge) {
+    drop_bed(sim, nudge);
+    plates[0] = *sim.add_shell(dyn);
+    plates[1] = *sim.add_shell(kin);
+  };
+  build(*cpu, 0.0f);
+  build(*cpu2, 1.0f);
+  build(*gpu, 0.0f);
+  const double dt = 5e-5;
+  std::vector<double> dev_gl, dev_ulp;
+  double plate_force = 0, plate_dev = 0;
+  for (int s = 1; s <= 400; ++s) {
+    ASSERT_TRUE(cpu->step(dt).ok());
+    ASSERT_TRUE(cpu2->step(dt).ok());
+    auto st = gpu->step(dt);
+    ASSERT_TRUE(st.ok()) << st.message();
+    dev_gl.push_back(max_dev(*gpu, *cpu));
+    dev_ulp.push_back(max_dev(*cpu2, *cpu));
+    for (BodyId b : plates) {
+      plate_force = std::max(plate_force, double(norm(cpu->body_force(b))));
+      plate_dev = std::max(plate_dev, double(norm(gpu->body_position(b) - cpu->body_position(b))));
+    }
+  }
+  std::printf("step  dev_gl(m)  dev_1ulp(m)\n");
+  for (int s : {1, 10, 50, 100, 200, 300, 400}) std::printf("%4d  %.3e  %.3e\n", s, dev_gl[s - 1], dev_ulp[s - 1]);
+  std::printf("largest contact force on a plate %.3g N; plate centres within %.3g m\n", plate_force, plate_dev);
+  for (BodyId b : plates) {
+    Vec3 a = cpu->body_position(b), g = gpu->body_position(b);
+    std::printf("plate %d cpu %.5f %.5f %.5f gl %.5f %.5f %.5f\n", b.index, a.x, a.y, a.z, g.x, g.y, g.z);
+  }
+  EXPECT_GT(plate_force, 10.0 * ms * 9.81) << "the plates must press into the granules";
+  const double d10 = std::max(dev_gl[9], 1e-9), u10 = std::max(dev_ulp[9], 1e-12);
+  for (int s = 10; s < 50; ++s)
+    EXPECT_LE(dev_gl[s], 20.0 * std::max(dev_ulp[s], 1e-12) * d10 / u10 + 1e-7) << "step " << s + 1;
+  EXPECT_LT(dev_gl.back(), 5e-2 * 2 * r);
+  EXPECT_LT(plate_dev, 1e-3 * 2 * r);
+}
+
 // Statistics after settling: the same loose bed of 96 granules poured into a
 // walled box settles to a statistically equal bed on both backends. Bed height = twice the
 // mean sphere-centre height (the height of a uniform layer with that centroid), within 2 %
@@ -470,7 +555,9 @@ TEST(GlSimulation, GeneratedLayoutMatchesTheDriver) {
 
 // Same scene, same GPU: the same state bit for bit, run after run and for any workgroup
 // size (which changes the scheduling of the atomics in the counting sort): fixed summation
-// order, no float atomics.
+// order, no float atomics. The falling bed with a plate of 81 spheres dropped on it (summed
+// by a workgroup of kWideSpheres invocations whatever the workgroup size).
+
 TEST(GlSimulation, DeterministicAcrossRunsAndWorkgroupSizes) {
   auto ctx = context();
   ASSERT_TRUE(ctx);
@@ -482,11 +569,15 @@ TEST(GlSimulation, DeterministicAcrossRunsAndWorkgroupSizes) {
     auto gpu = GlSimulation::create(d, o);
     ASSERT_TRUE(gpu.ok()) << gpu.message();
     drop_bed(*gpu, 0.0f);
+    const BodyId plate = *gpu->add_shell(wide_plate(d, 9, {0.035f, 0.0745f, 0.035f}, MotionType::Dynamic));
     std::int64_t resorts = 0;
-    for (int s = 0; s < 100; ++s) {
+    double plate_force = 0;
+    for (int s = 0; s < 300; ++s) {
       ASSERT_TRUE(gpu->step(5e-5).ok());
       resorts += gpu->last_step().resorts;
+      plate_force = std::max(plate_force, double(norm(gpu->body_force(plate))));
     }
+    EXPECT_GT(plate_force, 1.0) << "the plate must land on the granules";
     EXPECT_GT(gpu->last_step().contacts, 10);
     EXPECT_GT(resorts, 1);
     h.push_back(gpu->state_hash());
@@ -506,7 +597,7 @@ TEST(GlSimulation, GlObjectsReturnToTheirStart) {
     ASSERT_TRUE(gpu->step(1e-4).ok());
     bufs = gpu->gl_buffers();
     progs = gpu->gl_programs();
-    ASSERT_EQ(bufs.size(), 8u);
+    ASSERT_EQ(bufs.size(), 10u);  // the 8 blocks, the grid arguments' and the writes' staging buffer
     ASSERT_EQ(progs.size(), std::size_t(kKernelCount));
     for (unsigned b : bufs) EXPECT_TRUE(glIsBuffer(b)) << b;
     for (unsigned p : progs) EXPECT_TRUE(glIsProgram(p)) << p;
