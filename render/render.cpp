@@ -298,8 +298,19 @@ Result<Image> SceneRenderer::render(const CameraView& cam, const FrameFlags& fla
   glClearDepth(1.0);
   glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
 
-  // Leach & Marais §5.1: terrain, clear depth, particles, terrain again (without the
-  // footprints of the sources that have one: there the granules are the surface).
+  // The footprints of the sources that have one: there the granules are the surface, so the
+  // terrain's second pass leaves them out and no shadow march samples the heightfield there.
+  std::vector<Eigen::Vector4f> cuts;
+  std::vector<float> bands;
+  for (const ParticleSource& s : particles_)
+    if (s.has_footprint() && s.count > 0) {
+      cuts.push_back({float(s.footprint[0] - origin.x()), float(s.footprint[1] - origin.z()),
+                      float(s.footprint[2] - origin.x()), float(s.footprint[3] - origin.z())});
+      bands.push_back(s.footprint_band);
+    }
+  terrain_->set_live_footprints(cuts);
+
+  // Leach & Marais §5.1: terrain, clear depth, particles, terrain again (without the footprints).
   terrain_->draw(view_proj);
   st.terrain_passes = 1;
   if (!particles_.empty()) {
@@ -315,14 +326,6 @@ Result<Image> SceneRenderer::render(const CameraView& cam, const FrameFlags& fla
     st.particles = particle_renderer_->draw(particles_, view, proj, cam.height, *terrain_, origin,
                                             def_.particle_normal_bend, def_.particle_color_variation, &shadow,
                                             def_.particle_gain, &bed, /*terrain_shadow=*/true);
-    std::vector<Eigen::Vector4f> cuts;
-    std::vector<float> bands;
-    for (const ParticleSource& s : particles_)
-      if (s.has_footprint() && s.count > 0) {
-        cuts.push_back({float(s.footprint[0] - origin.x()), float(s.footprint[1] - origin.z()),
-                        float(s.footprint[2] - origin.x()), float(s.footprint[3] - origin.z())});
-        bands.push_back(s.footprint_band);
-      }
     terrain_->redraw(cuts, bands);
     st.terrain_passes = 2;
   }

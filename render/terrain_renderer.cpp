@@ -288,6 +288,9 @@ void TerrainRenderer::bind_terrain_shadow(unsigned p, int unit, int steps) const
   glUniform1i(loc(p, "u_levels"), def_.levels);
   glUniform1i(loc(p, "u_terrain_shadow_steps"), steps);
   if (steps > 0) glUniform1f(loc(p, "u_max_height"), hf_->max_height());  // cached per tile
+  const int n_live = std::min(int(live_.size()), kMaxCuts);  // terrain_shadow.glsl's kMaxLive
+  glUniform1i(loc(p, "u_live_count"), n_live);
+  if (n_live > 0) glUniform4fv(loc(p, "u_live"), n_live, live_.front().data());
 }
 
 std::vector<float> TerrainRenderer::read_texture(int which, int level) const {

@@ -84,6 +84,10 @@ class TerrainRenderer {
   // The terrain's shadow on itself: steps of the march toward the sun through the clipmap's
   // heights (terrain.frag), 0 = none.
   void set_terrain_shadow_steps(int steps) { shadow_steps_ = steps; }
+  // The live patches' footprints (local x0, z0, x1, z1, m; at most kMaxCuts, the rest are
+  // ignored): the terrain's shadow march takes no heightfield sample inside them
+  // (terrain_shadow.glsl), for every program bind_terrain_shadow serves.
+  void set_live_footprints(std::vector<Eigen::Vector4f> live) { live_ = std::move(live); }
   int terrain_shadow_steps() const { return shadow_steps_; }
   // Sets the uniforms of shaders/render/terrain_shadow.glsl on `program` (current) and binds the
   // elevation texture to texture unit `unit`, so that shader's points receive the terrain's
@@ -118,6 +122,7 @@ class TerrainRenderer {
   Eigen::Matrix4f view_proj_ = Eigen::Matrix4f::Identity();
   Eigen::Vector3f sun_ = Eigen::Vector3f(-0.6f, 0.6f, 0.55f).normalized();
   int shadow_steps_ = 0;
+  std::vector<Eigen::Vector4f> live_;  // set_live_footprints
   ClipmapSelection selection_;
   ShadowMap shadow_;
   std::map<std::pair<int, int>, Mesh> meshes_;  // grid meshes by (cells_x, cells_z)

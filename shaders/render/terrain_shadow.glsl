@@ -13,6 +13,21 @@ uniform float u_w;                  // transition width (samples)
 uniform vec2 u_viewer;              // viewer (x, z), local m: the rings' centre
 uniform int u_terrain_shadow_steps; // the march toward the sun (0 = no terrain shadow)
 uniform float u_max_height;         // m, local: the heightfield's highest sample
+// The live patches' footprints (local x0, z0, x1, z1, m; TerrainRenderer::set_live_footprints).
+// Inside one the heightfield still holds the surface the patch was promoted from, which its
+// granules have since dug into or heaped up, so the march takes no sample there: a granule
+// at the bottom of a trough is not shadowed by the ground that was above it before. (The
+// granules cast no shadow of their own on the march; the bodies' shadow map and the ambient
+// occlusion darken them.)
+const int kMaxLive = 32;
+uniform int u_live_count;
+uniform vec4 u_live[kMaxLive];
+
+bool sp_in_live_footprint(vec2 xz) {
+  for (int k = 0; k < u_live_count; ++k)
+    if (all(greaterThan(xz, u_live[k].xy)) && all(lessThan(xz, u_live[k].zw))) return true;
+  return false;
+}
 
 // Height (m, local) of level l at local (x, z) m: bilinear between its four samples.
 float sp_level_height(vec2 xz, int l) {
@@ -67,7 +82,7 @@ float terrain_sun_visibility(vec3 p) {
     if (can_stop && 8.0 * (q.y - u_max_height + 0.02 * t) >= t) break;
     float h;
     if (!sp_surface_height(q.xz, h)) break;
-    vis = min(vis, 8.0 * (q.y - h + 0.02 * t) / t);
+    if (!sp_in_live_footprint(q.xz)) vis = min(vis, 8.0 * (q.y - h + 0.02 * t) / t);
     if (vis <= 0.0) return 0.0;
     t += max(u_base_spacing, 0.2 * t);
   }

@@ -54,9 +54,10 @@ Status step_to(World& w, double t, double dt) {
 // local contrast |luma - its 5 x 5 mean| per region, the specks (luma more than 40 from its
 // 3 x 3 median) per region, and the distance between the mean colours (sRGB bytes) of the
 // footprint (inside and band) and of the ring.
+// Dark pixels: luma below half the ring's mean (a granule in shadow, or a gap).
 struct PatchLook {
   double contrast[4] = {};
-  int n[4] = {}, specks[4] = {};
+  int n[4] = {}, specks[4] = {}, dark[4] = {};
   double colour_distance = 0;
 };
 PatchLook patch_look(World& world, FrameWriter& images, const render::CameraView& cam, const render::Image& img,
@@ -118,6 +119,11 @@ PatchLook patch_look(World& world, FrameWriter& images, const render::CameraView
   }
   for (int k = 1; k < 4; ++k) o.contrast[k] = n[k] > 0 ? contrast[k] / n[k] : 0.0;
   o.colour_distance = std::sqrt(d2);
+  const double ring_luma = 0.2126 * sum[2][0] + 0.7152 * sum[2][1] + 0.0722 * sum[2][2];
+  const double dark_below = 0.5 * ring_luma / std::max(1, n[2]);
+  for (int y = 2; y < H - 2; ++y)
+    for (int x = 2; x < W - 2; ++x)
+      if (const int k = region[std::size_t(y) * W + x]; k && luma(img.pixel(x, y)) < dark_below) ++o.dark[k];
   return o;
 }
 
@@ -136,9 +142,10 @@ void default_scene_at(double budget, double t, SceneDef& s, std::unique_ptr<Worl
 
 void print_look(const char* what, const TerrainManager::PatchInfo& p, const PatchLook& look) {
   std::printf("%s patch %d (%d granules, scale %.0f): local contrast inside %.2f, band %.2f, ring %.2f; specks inside %d, "
-              "band %d, ring %d (pixels %d, %d, %d); mean colour footprint vs ring %.1f\n",
+              "band %d, ring %d; dark inside %d, band %d, ring %d (pixels %d, %d, %d); mean colour footprint vs ring %.1f\n",
               what, p.patch, p.granules, p.particle_scale, look.contrast[1], look.contrast[3], look.contrast[2], look.specks[1],
-              look.specks[3], look.specks[2], look.n[1], look.n[3], look.n[2], look.colour_distance);
+              look.specks[3], look.specks[2], look.dark[1], look.dark[3], look.dark[2], look.n[1], look.n[3], look.n[2],
+              look.colour_distance);
 }
 
 }  // namespace
@@ -244,6 +251,39 @@ TEST(SceneFrames, CoarsePatchReadsAsSandWithoutSpecks) {
   EXPECT_LT(look.specks[1] + look.specks[3], 60) << "154 before";
   // (5.8 with the one patch and its whole ring; 8.0 with the ring less the second patch's side)
   EXPECT_LT(look.colour_distance, 9.0);
+}
+
+// The trough the crate ploughs through a coarse patch (the default scene at 3 s under a budget
+// no rung fits: particle scale 3), 640 x 360: the granules the crate uncovered lie below the
+// surface the patch was promoted from, and the terrain's shadow march no longer takes that
+// surface for ground above them (terrain_shadow.glsl: no sample inside a live footprint).
+// Dark pixels (luma below half the ring's mean) inside the footprints and their bands, summed
+// over the patches: docs/BENCHMARKS.md "Shadows inside a live patch" has the count before and
+// after; the bound sits between them.
+TEST(SceneFrames, TroughInACoarsePatchIsNotShadowedByTheOldSurface) {
+  SceneDef s;
+  std::unique_ptr<World> w;
+  ASSERT_NO_FATAL_FAILURE(default_scene_at(0.01, 3.0, s, w));
+  World& world = *w;
+  const auto patches = world.manager()->patches();
+  ASSERT_GE(patches.size(), 1u);
+  FrameWriter images(world);
+  const render::CameraView cam = camera_at(s.cameras.front(), world.time());
+  auto img = images.render(cam);
+  ASSERT_TRUE(img.ok()) << img.message();
+  if (images.unavailable()) GTEST_SKIP() << "no GL context: " << images.why();
+  ASSERT_TRUE(render::save_png(output_path("coarse_trough.actual.png"), *img).ok());
+  int dark = 0, pixels = 0;
+  for (const auto& p : patches) {
+    ASSERT_EQ(p.particle_scale, 3.0);
+    const PatchLook look = patch_look(world, images, cam, *img, p, patches);
+    print_look("coarse, 3 s,", p, look);
+    dark += look.dark[1] + look.dark[3];
+    pixels += look.n[1] + look.n[3];
+  }
+  std::printf("dark pixels in the footprints and bands: %d of %d\n", dark, pixels);
+  ASSERT_GT(pixels, 5000);
+  EXPECT_LT(dark, 1100) << "1708 when the march sampled the old surface (655 after)";
 }
 
 // What a user sees of a patch at particle scale 1 (granules 2.5 cm in radius, 1.5 px at the
