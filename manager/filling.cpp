@@ -129,6 +129,12 @@ Status TerrainManager::Impl::activate(double time, double dt) {
                             {"traded", c.traded},
                             {"steps_per_contact", free->steps_per_contact > 0 ? free->steps_per_contact : def.steps_per_contact}});
       if (c.body_cap > 0) budget_log.back()["capped_by"] = {{"body", c.capped_by}, {"smallest_dimension_m", c.capped_size_m}};
+      // A patch that does not fit even with half the substeps (rung 5) joins patches that
+      // step at the full N (made when they fitted): those take its N from now on, so the
+      // frames in which they step together (a car straddling the edge between two patches)
+      // cost what the budget's last rung assumed.
+      if (!c.fits && free->steps_per_contact > 0)
+        if (Status st = trade_live_substeps(*free, time); !st) return st;
     }
     queue.erase(it);
     if (Status st = finish_due(); !st) return st;
@@ -137,6 +143,26 @@ Status TerrainManager::Impl::activate(double time, double dt) {
   used = 0;
   for (auto& s : slots) used += s.state != SlotState::Free;
   peak_slots = std::max(peak_slots, used);
+  return Ok{};
+}
+
+// The live patches other than `to` that step at a larger N than `to` (a patch the budget
+// promoted at half the substeps and still over it) take its N: set_steps_per_contact on
+// their DEM, their budget entry notes "substeps (live)" and when.
+Status TerrainManager::Impl::trade_live_substeps(const Slot& to, double time) {
+  const int n = to.steps_per_contact;
+  for (Slot& s : slots) {
+    if (&s == &to || s.state == SlotState::Free || !s.sim || s.sim->def().accuracy_steps_per_contact <= n) continue;
+    if (Status st = s.sim->set_steps_per_contact(n); !st) return st;
+    s.steps_per_contact = n;
+    ++budget_live_trades;
+    if (s.budget_entry >= 0 && s.budget_entry < int(budget_log.size())) {
+      auto& e = budget_log[std::size_t(s.budget_entry)];
+      e["traded"].push_back("substeps (live)");
+      e["steps_per_contact"] = n;
+      e["live_trade_s"] = time;
+    }
+  }
   return Ok{};
 }
 

@@ -258,6 +258,7 @@ struct TerrainManager::Impl {
   int lifts = 0;
   double lift_max = 0;
   int budget_overruns = 0;         // promotions that did not fit and went ahead (nothing else live)
+  int budget_live_trades = 0;      // live patches whose substeps a later patch's overrun halved (trade_live_substeps)
   long long budget_held = 0;       // patch-frames a patch carrying no body was held (not stepped)
   long long budget_held_ahead = 0;  // of which a body was heading for the patch (further than two frames)
   int budget_longest_hold = 0;     // frames in a row, the longest hold
@@ -344,6 +345,7 @@ struct TerrainManager::Impl {
   bool overlaps_patch(const PatchRequest& r) const;
   // `ids`: the bodies of the requests' BodyMotion indices (PatchRequest::bodies).
   Result<bool> extend(const PatchRequest& r, double time, const std::vector<RigidBodyId>& ids);
+  Status trade_live_substeps(const Slot& to, double time);  // filling.cpp
   // A patch no body is over given up: held, demoted one part a frame (planning.cpp).
   Status release(Slot& s, double time);
   Result<bool> release_idle(double time);

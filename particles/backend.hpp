@@ -24,6 +24,8 @@ class DemBackend {
   virtual Status set_body_enabled(BodyId b, bool enabled) = 0;
   // A shell's collision group (ShellDef::group): shells of one group > 0 do not touch.
   virtual Status set_body_group(BodyId b, std::int32_t group) = 0;
+  // The substep bound N of the following steps (Simulation::set_steps_per_contact).
+  virtual Status set_steps_per_contact(int n) = 0;
   virtual std::int32_t body_group(BodyId b) const = 0;
   virtual Status step(double dt_frame) = 0;
   // DEM substeps a frame of dt_frame seconds takes (dt_sub <= t_c / N), or the error step() gives.
@@ -65,6 +67,7 @@ class DemBackendOf final : public DemBackend {
   Status set_body_state(BodyId b, Vec3 p, Quat q, Vec3 v, Vec3 w) override { return sim_.set_body_state(b, p, q, v, w); }
   Status set_body_enabled(BodyId b, bool e) override { return sim_.set_body_enabled(b, e); }
   Status set_body_group(BodyId b, std::int32_t g) override { return sim_.set_body_group(b, g); }
+  Status set_steps_per_contact(int n) override { return sim_.set_steps_per_contact(n); }
   std::int32_t body_group(BodyId b) const override { return sim_.body_group(b); }
   Status step(double dt) override { return sim_.step(dt); }
   Result<int> substeps_for(double dt) const override { return sim_.substeps_for(dt); }

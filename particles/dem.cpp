@@ -400,6 +400,12 @@ Status Simulation::set_threads(int threads) {
   impl_->threads = threads > 0 ? threads : omp_get_max_threads();
   return Ok{};
 }
+Status Simulation::set_steps_per_contact(int n) {
+  if (n < 2)
+    return Error{"", "SimulationDef.accuracy_steps_per_contact", std::to_string(n), "must be >= 2 (20 or more for accuracy)", ""};
+  impl_->def.accuracy_steps_per_contact = n;
+  return Ok{};
+}
 const SimulationDef& Simulation::def() const { return impl_->def; }
 const GranuleShape& Simulation::granule_shape() const { return impl_->shape; }
 double Simulation::time() const { return impl_->time; }

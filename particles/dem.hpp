@@ -266,6 +266,10 @@ class Simulation {
   // OpenMP threads of the following steps (0 = OpenMP's default); the results do not depend
   // on it. Negative counts are refused.
   Status set_threads(int threads);
+  // The substep bound N of the following steps (dt_sub <= t_c / N: SimulationDef::
+  // accuracy_steps_per_contact), for a frame budget that lowers a live patch's cost; N >= 2,
+  // else refused naming the field. The state is kept: the next step takes the new substeps.
+  Status set_steps_per_contact(int n);
   std::uint64_t state_hash() const;              // over the fields marked hashed in fields.hpp
   const SimulationDef& def() const;
   const GranuleShape& granule_shape() const;

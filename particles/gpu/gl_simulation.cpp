@@ -340,6 +340,11 @@ std::int32_t GlSimulation::body_group(BodyId id) const {
 }
 
 Result<int> GlSimulation::substeps_for(double dt_frame) const { return impl_->guard->substeps_for(dt_frame); }
+Status GlSimulation::set_steps_per_contact(int n) {
+  if (Status st = impl_->guard->set_steps_per_contact(n); !st) return st;
+  impl_->def.accuracy_steps_per_contact = n;
+  return Ok{};
+}
 double GlSimulation::contact_time() const { return impl_->guard->contact_time(); }
 double GlSimulation::max_substep_dt() const { return impl_->guard->max_substep_dt(); }
 

@@ -93,6 +93,8 @@ class GlSimulation {
   // partners than GlOptions::max_contacts_per_sphere (names the option; the frame has run).
   Status step(double dt_frame);
   Result<int> substeps_for(double dt_frame) const;
+  // As Simulation::set_steps_per_contact (the guard's and this definition's N).
+  Status set_steps_per_contact(int n);
   double contact_time() const;
   double max_substep_dt() const;
 

@@ -256,6 +256,65 @@ TEST(Budget, FramesOverBudgetAreCounted) {
   EXPECT_LE(f["patch_awake_frames"].get<long long>(), 20);
 }
 
+// A patch asked for ahead of a body that does not fit even at half the substeps (rung 5) is
+// promoted anyway (the body must not reach its patch's edge first) and counted as an overrun;
+// the patch the body is leaving, made when it fitted at the full N = 20, then takes N = 10 as
+// well, so the frames in which the two step together cost what the last rung assumed. A
+// 0.1 m sphere (the bodies cap the scale at 1), landed, then driven sideways at 0.4 m/s; the
+// budget (pinned cost model) holds the first patch at rung 0 and barely more.
+TEST(Budget, ALivePatchTakesTheHalvedSubstepsOfAnOverrunningPatchAhead) {
+  auto run = [](double budget_ms, std::vector<int>* first_substeps, ojson* report) {
+    test::Rig rig(test::terrain_8m("flat"));
+    ASSERT_TRUE(rig.ok()) << rig.error;
+    auto id = rig.add_sphere(0.05f, 2.0f, {3.0, 1.25, 4.0});
+    ASSERT_TRUE(id.ok());
+    TerrainManagerDef d = budget_def(budget_ms);
+    d.slots = 2;  // the patch it is in and the one ahead
+    d.patch_depth = 0.2;
+    d.depth_resolution = 256;
+    d.lod.apron = 0.2;
+    ASSERT_TRUE(rig.start(d).ok()) << rig.error;
+    for (int f = 0; f < 200; ++f) {
+      if (rig.t() >= 1.0) {  // landed and settled: drive it
+        BodyState st = rig.world->state(*id);
+        st.linear_velocity = {0.4f, st.linear_velocity.y(), 0.0f};
+        rig.world->set_state(*id, st);
+      }
+      ASSERT_TRUE(rig.frame().ok()) << rig.error;
+      for (const auto& p : rig.manager->patches())
+        if (p.patch == 0 && p.stepped && first_substeps) first_substeps->push_back(p.last_substeps);
+    }
+    *report = rig.manager->report();
+  };
+  // The first patch's cost with room for everything: the budget then holds it and 5 % more.
+  ojson wide;
+  ASSERT_NO_FATAL_FAILURE(run(1e5, nullptr, &wide));
+  ASSERT_GE(wide["budget"]["patches"].size(), 2u) << "a patch is asked for ahead";
+  EXPECT_EQ(wide["budget"]["live_substeps_traded"].get<int>(), 0);
+  const double one_ms = wide["budget"]["patches"][0]["predicted_ms"].get<double>();
+  std::vector<int> substeps;
+  ojson rep;
+  ASSERT_NO_FATAL_FAILURE(run(1.05 * one_ms / 0.8, &substeps, &rep));
+  const ojson& b = rep["budget"];
+  ASSERT_GE(b["patches"].size(), 2u) << b.dump(1);
+  const ojson& first = b["patches"][0];
+  const ojson& ahead = b["patches"][1];
+  EXPECT_EQ(first["rung"].get<int>(), 0) << first.dump();
+  EXPECT_TRUE(first["fits"].get<bool>());
+  EXPECT_FALSE(ahead["fits"].get<bool>()) << ahead.dump();
+  EXPECT_EQ(ahead["rung"].get<int>(), 5);
+  EXPECT_EQ(ahead["steps_per_contact"].get<int>(), 10);
+  EXPECT_EQ(b["live_substeps_traded"].get<int>(), 1);
+  EXPECT_EQ(first["traded"], ojson::array({"substeps (live)"})) << first.dump();
+  EXPECT_EQ(first["steps_per_contact"].get<int>(), 10);
+  EXPECT_DOUBLE_EQ(first["live_trade_s"].get<double>(), ahead["time_s"].get<double>());
+  // The first patch's substeps a frame: N = 20's before, half after (rounded up)
+  ASSERT_GE(substeps.size(), 2u);
+  const int before = substeps.front(), after = substeps.back();
+  std::printf("first patch: %d substeps a frame, %d after the patch ahead (%zu frames stepped)\n", before, after, substeps.size());
+  EXPECT_NEAR(after, 0.5 * before, 1.0);
+}
+
 }  // namespace
 }  // namespace sandpatch
 
