@@ -54,13 +54,17 @@ float HeightImage::hat_mean(float x, float z, float sp) const {
   const int v0 = std::max(0, int(std::floor((z - sp - z0) / dv - 0.5f)) + 1);
   const int v1 = std::min(height - 1, int(std::ceil((z + sp - z0) / dv - 0.5f)) - 1);
   double sum = 0, wsum = 0;
+  // the columns' weights, the same in every row (computed once: the same values as inline)
+  std::vector<double> wx(std::size_t(std::max(0, u1 - u0 + 1)));
+  for (int u = u0; u <= u1; ++u) wx[std::size_t(u - u0)] = 1.0 - std::abs(double(x0) + (u + 0.5) * du - x) / sp;
   for (int v = v0; v <= v1; ++v) {
     const double wz = 1.0 - std::abs(double(z0) + (v + 0.5) * dv - z) / sp;
     if (wz <= 0) continue;
+    const float* row = &h[std::size_t(v) * width];
     for (int u = u0; u <= u1; ++u) {
-      const double w = wz * (1.0 - std::abs(double(x0) + (u + 0.5) * du - x) / sp);
+      const double w = wz * wx[std::size_t(u - u0)];
       if (w <= 0) continue;
-      sum += w * at(u, v);
+      sum += w * row[u];
       wsum += w;
     }
   }
@@ -185,8 +189,10 @@ void write_to_heightfield(const HeightImage& image, GridRegion r, Heightfield& h
                           const RenderBaseline* base, WriteStages* stages) {
   const float sp = hf.spacing();
   const std::size_t n = std::size_t(r.ni) * r.nj;
+  // (rows in parallel: each sample is its own sum, so the heights do not depend on the threads)
   auto samples = [&](const HeightImage& img) {
     std::vector<float> h(n);
+#pragma omp parallel for schedule(static) if (n >= 64)
     for (int j = 0; j < r.nj; ++j)
       for (int i = 0; i < r.ni; ++i) h[std::size_t(j) * r.ni + i] = img.hat_mean(float(r.i0 + i) * sp, float(r.j0 + j) * sp, sp);
     return h;
