@@ -248,6 +248,10 @@ Status FrameWriter::set_particles_gpu() {
     src.stride = 16;
     src.position_offset = 0;
     src.radius_offset = 12;
+    // only the granules: the bodies' shell spheres share the buffer (in cell order), and
+    // drawn as sand they covered the bodies
+    src.id_offset = int(g.id_offset);
+    src.id_limit = g.granule_spheres;
     src.origin = g.origin;
     src.scale = g.scale;
     src.fade = g.fade;

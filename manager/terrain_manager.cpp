@@ -381,6 +381,8 @@ std::vector<TerrainManager::GpuParticles> TerrainManager::gpu_particles() const 
     GpuParticles g;
     g.buffer = s.sim->gpu_particle_buffer();
     g.count = s.sim->particle_count();
+    g.id_offset = s.sim->gpu_particle_id_offset();
+    g.granule_spheres = std::int64_t(4) * impl_->record(s).granules;
     g.origin = s.origin;
     g.scale = float(s.scale);
     g.fade = impl_->def.fade_frames > 0 ? std::min(1.0f, float(s.fade) / float(impl_->def.fade_frames)) : 1.0f;

@@ -282,7 +282,9 @@ class TerrainManager {
   // particle scale and fade-in. Drawn straight from the simulation's buffer, no CPU copy.
   struct GpuParticles {
     unsigned buffer = 0;
-    std::int64_t count = 0;
+    std::int64_t count = 0;             // spheres in the buffer (granules' and shells')
+    long long id_offset = -1;           // bytes to their int32 ids in the buffer (GlSimulation::particle_id_offset)
+    std::int64_t granule_spheres = 0;   // the granules' spheres: ids 0 .. granule_spheres - 1
     Eigen::Vector3d origin = Eigen::Vector3d::Zero();
     float scale = 1, fade = 1;
   };

@@ -52,6 +52,9 @@ class DemBackend {
   // GL backend: the buffer whose first member is vec4 pos[] (xyz, radius) of every sphere, for
   // drawing without a copy to the CPU; 0 on the CPU backend.
   virtual unsigned gpu_particle_buffer() const { return 0; }
+  // GL backend: the byte offset of the spheres' int32 ids (stride 4, the same order) in that
+  // buffer; -1 on the CPU backend.
+  virtual long long gpu_particle_id_offset() const { return -1; }
 };
 
 // A DemBackend around any simulation type with the CPU Simulation's methods (the CPU
@@ -87,6 +90,10 @@ class DemBackendOf final : public DemBackend {
   unsigned gpu_particle_buffer() const override {
     if constexpr (requires(const Sim& s) { s.particle_buffer(); }) return sim_.particle_buffer();
     return 0;
+  }
+  long long gpu_particle_id_offset() const override {
+    if constexpr (requires(const Sim& s) { s.particle_id_offset(); }) return (long long)sim_.particle_id_offset();
+    return -1;
   }
 
  private:

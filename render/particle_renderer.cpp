@@ -31,6 +31,11 @@ Status validate(const ParticleSource& s, int index) {
     es.push_back(Error{"", f + "shading_scale", std::to_string(s.shading_scale), "must be in [1, 64]"});
   if (!s.origin.allFinite()) es.push_back(Error{"", f + "origin", "non-finite", "must be finite (m)"});
   if (!s.footprint.allFinite()) es.push_back(Error{"", f + "footprint", "non-finite", "must be finite (m) or empty"});
+  if (s.id_offset < -1) es.push_back(Error{"", f + "id_offset", std::to_string(s.id_offset), "must be -1 (no ids) or >= 0 bytes"});
+  if (s.id_offset >= 0 && s.id_offset % 4 != 0)
+    es.push_back(Error{"", f + "id_offset", std::to_string(s.id_offset), "must be a multiple of 4 bytes (int32 ids)"});
+  if (s.id_limit >= 0 && s.id_offset < 0) es.push_back(Error{"", f + "id_limit", std::to_string(s.id_limit), "needs id_offset >= 0"});
+  if (s.id_limit > std::int64_t(0x7fffffff)) es.push_back(Error{"", f + "id_limit", std::to_string(s.id_limit), "must be < 2^31"});
   if (!(s.footprint_band >= 0 && std::isfinite(s.footprint_band)))
     es.push_back(Error{"", f + "footprint_band", std::to_string(s.footprint_band), "must be >= 0 and finite (m)"});
   if (!es.empty()) return es;
@@ -127,7 +132,8 @@ std::int64_t ParticleRenderer::draw(const std::vector<ParticleSource>& sources, 
   glUniform2f(loc("u_viewport"), bed ? float(bed->width) : 1.0f, bed ? float(bed->height) : 1.0f);
   glUniform1f(loc("u_bed_scale"), bed ? bed->scale : 4.0f);
   const GLint l_origin = loc("u_patch_origin"), l_scale = loc("u_scale"), l_fade = loc("u_fade"),
-              l_first = loc("u_first_index"), l_shading = loc("u_shading_scale");
+              l_first = loc("u_first_index"), l_shading = loc("u_shading_scale"), l_has_id = loc("u_has_id"),
+              l_id_limit = loc("u_id_limit");
 
   glBindVertexArray(vao_);
   std::int64_t drawn = 0;
@@ -151,6 +157,15 @@ std::int64_t ParticleRenderer::draw(const std::vector<ParticleSource>& sources, 
       glDisableVertexAttribArray(1);
       glVertexAttrib1f(1, s.radius);
     }
+    if (s.id_offset >= 0) {
+      glEnableVertexAttribArray(2);
+      glVertexAttribIPointer(2, 1, GL_INT, 4, reinterpret_cast<const void*>(std::uintptr_t(s.id_offset) + 4 * std::uintptr_t(s.first)));
+    } else {
+      glDisableVertexAttribArray(2);
+      glVertexAttribI1i(2, 0);
+    }
+    glUniform1i(l_has_id, s.id_offset >= 0 ? 1 : 0);
+    glUniform1i(l_id_limit, s.id_limit >= 0 ? int(s.id_limit) : -1);
     if (s.fade < 1.0f) {
       glEnable(GL_BLEND);
     } else {
@@ -159,6 +174,7 @@ std::int64_t ParticleRenderer::draw(const std::vector<ParticleSource>& sources, 
     glDrawArrays(GL_POINTS, 0, GLsizei(s.count));
     drawn += s.count;
   }
+  glDisableVertexAttribArray(2);
   glBindVertexArray(0);
   glBindBuffer(GL_ARRAY_BUFFER, 0);
   glActiveTexture(GL_TEXTURE2);

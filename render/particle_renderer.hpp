@@ -51,6 +51,13 @@ struct ParticleSource {
   Eigen::Vector4d footprint{0, 0, 0, 0};
   // Inside the footprint the terrain fades out over this band (m, from the edge inward), >= 0.
   float footprint_band = 0.0f;
+  // Optional: the byte offset in `buffer` of one int32 id per particle (4 bytes apart, the same
+  // order as the positions, indexed from `first` like them), and with id_limit >= 0 only the
+  // particles of id below id_limit are drawn (a simulation buffer holding the granules' spheres
+  // first by id and the bodies' shell spheres after them, in another order). The ids also give
+  // each granule (id / 4) its own tint. < 0: no ids; every particle is drawn.
+  int id_offset = -1;
+  std::int64_t id_limit = -1;
   bool has_footprint() const { return footprint[2] > footprint[0] && footprint[3] > footprint[1]; }
 };
 

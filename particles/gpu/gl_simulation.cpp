@@ -552,6 +552,7 @@ const GranuleShape& GlSimulation::granule_shape() const { return impl_->shape; }
 double GlSimulation::time() const { return impl_->time; }
 
 unsigned GlSimulation::particle_buffer() const { return impl_->buf[Impl::kP0 + impl_->cur_p]; }
+std::size_t GlSimulation::particle_id_offset() const { return impl_->poff(kParticle_id); }
 
 std::vector<unsigned> GlSimulation::gl_buffers() const {
   std::vector<unsigned> out(std::begin(impl_->buf), std::end(impl_->buf));

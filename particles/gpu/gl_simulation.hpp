@@ -126,6 +126,10 @@ class GlSimulation {
   // `vec4 pos[capacity]` (xyz = sphere centre, w = radius; sim units), so a renderer can draw
   // the particle_count() spheres straight from it (stride 16, radius at offset 12).
   unsigned particle_buffer() const;
+  // Byte offset in particle_buffer() of `int id[capacity]`, each sphere's stable id in the
+  // same (cell-sorted) order as pos: granules' spheres come first (ids 0 .. 4 granules - 1)
+  // when they were added before any shell, so a renderer can leave the shells out.
+  std::size_t particle_id_offset() const;
   std::vector<unsigned> gl_programs() const;
   std::size_t gpu_bytes() const;  // bytes of GPU buffer storage held
   // With GlOptions::profile: GPU seconds spent in each kernel so far, in stage order.

@@ -6,6 +6,7 @@
 
 layout(location = 0) in vec3 a_position;  // m, patch frame, unit particle scale
 layout(location = 1) in float a_radius;   // m, unit scale (constant attribute when not in the buffer)
+layout(location = 2) in int a_id;         // the particle's id, when the source gives ids (u_has_id)
 
 uniform mat4 u_view;              // local -> eye
 uniform mat4 u_proj;              // eye -> clip
@@ -19,6 +20,8 @@ uniform sampler2DArray u_materials;
 uniform sampler2DArray u_normals;  // terrain normals (RGBA16F)
 uniform float u_color_variation;  // albedo factor 1 + v u per granule, u in [-1, 1]
 uniform int u_first_index;        // index of this draw's first particle in its buffer
+uniform bool u_has_id;            // a_id holds the particle's id
+uniform int u_id_limit;           // >= 0: only particles of id below it are drawn (the others are shells)
 
 out vec3 v_center_eye;
 out float v_radius;
@@ -28,6 +31,11 @@ out float v_tint;           // albedo factor of this granule
 out float v_terrain_vis;    // the sun's visibility over the terrain at the granule's centre (1 lit)
 
 void main() {
+  if (u_id_limit >= 0 && a_id >= u_id_limit) {  // not a granule's sphere: outside the clip volume
+    gl_Position = vec4(2.0, 2.0, 2.0, 1.0);
+    gl_PointSize = 1.0;
+    return;
+  }
   vec3 c = u_patch_origin + u_scale * a_position;
   float r = u_scale * a_radius;
   vec4 e = u_view * vec4(c, 1.0);
@@ -42,7 +50,7 @@ void main() {
   // pixels to a few tens across: one value for it, not one per fragment).
   v_terrain_vis = terrain_sun_visibility(c);
   // One factor per granule (its four spheres are consecutive), from an integer hash.
-  int granule = (u_first_index + gl_VertexID) >> 2;
+  int granule = (u_has_id ? a_id : u_first_index + gl_VertexID) >> 2;
   v_tint = 1.0 + u_color_variation * (2.0 * sp_hash01(ivec2(granule, 7919)) - 1.0);
   // Material weights and terrain normal: the finest level whose window holds the particle.
   v_weights = vec4(1.0, 0.0, 0.0, 0.0);

@@ -264,6 +264,18 @@ TEST(ParticleRenderer, BadSourceIsRefused) {
   st = s.renderer->set_particles({bad});
   ASSERT_FALSE(st.ok());
   EXPECT_NE(st.message().find("particles[0].shading_scale = nan"), std::string::npos) << st.message();
+  // ids: a byte offset of int32s (a multiple of 4), a limit only with them
+  bad = ParticleSource{};
+  bad.buffer = 7;
+  bad.id_offset = 6;
+  st = s.renderer->set_particles({bad});
+  ASSERT_FALSE(st.ok());
+  EXPECT_NE(st.message().find("particles[0].id_offset = 6"), std::string::npos) << st.message();
+  bad.id_offset = -1;
+  bad.id_limit = 100;
+  st = s.renderer->set_particles({bad});
+  ASSERT_FALSE(st.ok());
+  EXPECT_NE(st.message().find("particles[0].id_limit = 100"), std::string::npos) << st.message();
 }
 
 namespace {

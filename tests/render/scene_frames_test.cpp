@@ -212,6 +212,56 @@ TEST(SceneFrames, DefaultSceneShowsBothBodiesWhereTheReportSaysTheyAre) {
   EXPECT_GT(st.particles, 0) << "a patch is live at 0.6 s";
 }
 
+// The GL backend's particles are drawn straight from the simulation's buffer, where the bodies'
+// shell spheres lie among the granules' (in cell order): only the granules' are drawn (ids
+// below 4 x granules), so the bodies show. The default scene on the GL backend at 1.5 s, both
+// bodies carried by patches (their shells engaged): each body's centre projects onto that
+// body's pixel in the ID render and changes the lit frame. (Drawn as sand, the shells covered
+// both bodies: their centres showed granules.)
+TEST(SceneFrames, GlBackendShowsTheBodiesNotTheirShells) {
+  auto scene = load_default_scene();
+  ASSERT_TRUE(scene.ok()) << scene.message();
+  SceneDef s = scene.value();
+  s.cameras.front().width = 320;
+  s.cameras.front().height = 180;
+  auto w = make_world(s, 2, "gl");
+  if (!w.ok() && w.message().find("OpenGL") != std::string::npos) GTEST_SKIP() << w.message();
+  ASSERT_TRUE(w.ok()) << w.message();
+  World& world = *w.value();
+  ASSERT_TRUE(step_to(world, 1.5, s.simulation.dt).ok());
+  const auto report = world.report();
+  ASSERT_NE(world.manager()->gl_context(), nullptr) << "the GL backend's slots";
+  FrameWriter images(world);
+  const render::CameraView cam = camera_at(s.cameras.front(), world.time());
+  render::FrameFlags ids, bare;
+  ids.body_ids = true;
+  bare.bodies = false;
+  auto id_img = images.render(cam, ids);
+  ASSERT_TRUE(id_img.ok()) << id_img.message();
+  if (images.unavailable()) GTEST_SKIP() << "no GL context: " << images.why();
+  auto lit = images.render(cam);
+  auto none = images.render(cam, bare);
+  ASSERT_TRUE(lit.ok() && none.ok());
+  ASSERT_TRUE(render::save_png(output_path("gl_bodies.actual.png"), lit.value()).ok());
+  ASSERT_EQ(report["bodies"].size(), 2u);
+  for (std::size_t k = 0; k < 2; ++k) {
+    const auto& b = report["bodies"][k];
+    ASSERT_TRUE(b["carried_by_patch"].get<bool>()) << b.dump();
+    const Eigen::Vector3d c(b["position_m"][0].get<double>(), b["position_m"][1].get<double>(), b["position_m"][2].get<double>());
+    auto p = images.renderer()->project(cam, c);
+    ASSERT_TRUE(p.has_value());
+    const int x = int(p->pixel.x()), y = int(p->pixel.y());
+    ASSERT_TRUE(x >= 0 && x < cam.width && y >= 0 && y < cam.height) << b["name"] << " at " << x << ", " << y;
+    const std::uint8_t* px = id_img->pixel(x, y);
+    const auto id = render::body_id_color(int(k));
+    EXPECT_TRUE(px[0] == id[0] && px[1] == id[1] && px[2] == id[2])
+        << b["name"] << ": pixel " << x << ", " << y << " is " << int(px[0]) << " " << int(px[1]) << " " << int(px[2]);
+    const std::uint8_t* a = lit->pixel(x, y);
+    const std::uint8_t* n = none->pixel(x, y);
+    EXPECT_GT(std::abs(a[0] - n[0]) + std::abs(a[1] - n[1]) + std::abs(a[2] - n[2]), 60) << b["name"];
+  }
+}
+
 // What a user sees of a coarse patch: the default scene with a frame budget no rung fits
 // (0.01 ms: its patch takes the coarsest scale, 3; granules 12 cm in radius), at 2 s, 640 x 360.
 // Regions, from the ground's points projected: the footprint more than 0.5 m inside its edge,
