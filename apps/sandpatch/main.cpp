@@ -125,8 +125,9 @@ void add_run(CLI::App& app, RunCli& a) {
 }
 
 struct RenderCli {
-  std::string scene, image, camera, out_dir, frame_budget;
+  std::string scene, image, camera, out_dir, frame_budget, backend;
   double at = 0;
+  int threads = -1;
 };
 
 void add_render(CLI::App& app, RenderCli& a) {
@@ -136,6 +137,8 @@ void add_render(CLI::App& app, RenderCli& a) {
   rend->add_option("--camera", a.camera, "Camera of the scene (default: its first, or a view of the whole terrain)");
   rend->add_option("--image", a.image, "PNG to write (default: DIR/render_<ms>.png)");
   rend->add_option("--out", a.out_dir, "Output directory for the report (default: out/<scene name>)");
+  rend->add_option("--backend", a.backend, "DEM backend")->check(CLI::IsMember({"cpu", "gl"}));
+  rend->add_option("--threads", a.threads, "Worker threads (0 = all)")->check(CLI::NonNegativeNumber);
   rend->add_option("--frame-budget", a.frame_budget,
                    "Wall-clock ms a frame's patches may take, or off (overrides simulation.frame_budget_ms)");
 }
@@ -223,6 +226,8 @@ int cmd_render(const RenderCli& a, int argc, char** argv) {
     opt.seconds = a.at;
     opt.frames = a.at > 0 ? -1 : 1;
     opt.final_camera = a.camera;
+    opt.backend = a.backend;
+    opt.threads = a.threads;
     if (a.frame_budget == "off") opt.frame_budget_ms = std::numeric_limits<double>::infinity();
     else if (!a.frame_budget.empty()) opt.frame_budget_ms = parse_budget(a.frame_budget);
     char ms[32];
