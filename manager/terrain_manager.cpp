@@ -5,6 +5,7 @@
 #include "common/limits.hpp"
 
 #include <algorithm>
+#include <cstdlib>
 #include <cmath>
 #include <numbers>
 
@@ -144,7 +145,11 @@ Result<std::unique_ptr<TerrainManager>> TerrainManager::create(const TerrainMana
   }
   for (int k = 0; k < def.slots; ++k) {
     if (def.backend == "gl") {
-      auto sim = gpu::GlSimulation::create(cap);
+      // SANDPATCH_GL_PROFILE: every dispatch timed on the GPU (timer queries read at the end of
+      // each step), summed into the report's dem.total.gl_kernel_ms
+      gpu::GlOptions opt;
+      opt.profile = I.gl_profile = std::getenv("SANDPATCH_GL_PROFILE") != nullptr;
+      auto sim = gpu::GlSimulation::create(cap, opt);
       if (!sim) return sim.errors();
       I.slots.emplace_back(gpu::make_gl_backend(std::move(*sim)));
     } else {
@@ -467,6 +472,19 @@ nlohmann::ordered_json TerrainManager::Impl::dem_report() const {
                  {"shell_list_rebuilds", t.shell_lists},
                  {"stage_ms", {{"sort", t.sort_ms}, {"pairs", t.pair_ms}, {"bodies", t.body_ms},
                                {"gl_submit", t.submit_ms}, {"gl_readback", t.readback_ms}}}};
+  // GL backend with SANDPATCH_GL_PROFILE: each kernel's GPU time over the run, all slots
+  std::vector<std::pair<std::string, double>> kernels;
+  for (const auto& s : slots)
+    for (const auto& [name, sec] : s.sim->kernel_seconds()) {
+      auto it = std::find_if(kernels.begin(), kernels.end(), [&](const auto& k) { return k.first == name; });
+      if (it == kernels.end()) kernels.emplace_back(name, sec);
+      else it->second += sec;
+    }
+  if (gl_profile) {
+    ojson g = ojson::object();
+    for (const auto& [name, sec] : kernels) g[name] = 1e3 * sec;
+    total["gl_kernel_ms"] = g;
+  }
   return {{"patches", patches}, {"total", total}};
 }
 

@@ -258,7 +258,8 @@ struct TerrainManager::Impl {
   int lifts = 0;
   double lift_max = 0;
   int budget_overruns = 0;         // promotions that did not fit and went ahead (nothing else live)
-  int budget_live_trades = 0;      // live patches whose substeps a later patch's overrun halved (trade_live_substeps)
+  int budget_live_trades = 0;
+  bool gl_profile = false;  // GL slots time their kernels (SANDPATCH_GL_PROFILE): the report's dem.total.gl_kernel_ms      // live patches whose substeps a later patch's overrun halved (trade_live_substeps)
   long long budget_held = 0;       // patch-frames a patch carrying no body was held (not stepped)
   long long budget_held_ahead = 0;  // of which a body was heading for the patch (further than two frames)
   int budget_longest_hold = 0;     // frames in a row, the longest hold

@@ -5,6 +5,8 @@
 
 #include <cstdint>
 #include <memory>
+#include <string>
+#include <utility>
 #include <vector>
 
 #include "common/error.hpp"
@@ -55,6 +57,8 @@ class DemBackend {
   // GL backend: the byte offset of the spheres' int32 ids (stride 4, the same order) in that
   // buffer; -1 on the CPU backend.
   virtual long long gpu_particle_id_offset() const { return -1; }
+  // GL backend with GlOptions::profile: GPU seconds per kernel since creation (empty otherwise).
+  virtual std::vector<std::pair<std::string, double>> kernel_seconds() const { return {}; }
 };
 
 // A DemBackend around any simulation type with the CPU Simulation's methods (the CPU
@@ -90,6 +94,10 @@ class DemBackendOf final : public DemBackend {
   unsigned gpu_particle_buffer() const override {
     if constexpr (requires(const Sim& s) { s.particle_buffer(); }) return sim_.particle_buffer();
     return 0;
+  }
+  std::vector<std::pair<std::string, double>> kernel_seconds() const override {
+    if constexpr (requires(const Sim& s) { s.kernel_seconds(); }) return sim_.kernel_seconds();
+    return {};
   }
   long long gpu_particle_id_offset() const override {
     if constexpr (requires(const Sim& s) { s.particle_id_offset(); }) return (long long)sim_.particle_id_offset();

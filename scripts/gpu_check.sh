@@ -81,6 +81,11 @@ step run_gl_test 60 "$BIN/manager_run_test" --gtest_filter='Run.GlBackend*'
 scene leach_3_ten_bodies gl
 scene leach_3_ten_bodies cpu
 scene vehicle_drive gl
+# where a scene's GL step goes: every kernel's GPU time beside the host's submission
+SANDPATCH_GL_PROFILE=1 step profile_vehicle 90 "$BIN/sandpatch" run scenes/vehicle_drive.json --backend gl --seconds 1 \
+  --quiet --out "$OUT/logs/profile_vehicle"
+python3 -c "import json,sys; t=json.load(open(sys.argv[1]))['dem']['total']; print('  gl_kernel_ms', {k: round(v, 1) for k, v in t.get('gl_kernel_ms', {}).items()}, 'stage_ms', {k: round(v) for k, v in t['stage_ms'].items()})" \
+  "$OUT/logs/profile_vehicle/report.json" >>"$SUM" 2>&1
 for t in render_render_test render_scene_frames_test render_particle_renderer_test render_body_renderer_test; do
   step "$t" 60 "$BIN/$t"
 done

@@ -3,6 +3,8 @@
 // the heightfield says.
 #include <gtest/gtest.h>
 
+#include <cstdlib>
+
 #include <limits>
 
 #include <filesystem>
@@ -186,4 +188,27 @@ TEST(Run, GlBackendDrivesThePatches) {
   EXPECT_GT(st["gl_readback"].get<double>(), 0.0);
   EXPECT_LE(st["gl_submit"].get<double>() + st["gl_readback"].get<double>(),
             r.report["dem"]["total"]["wall_ms"].get<double>());
+  EXPECT_FALSE(r.report["dem"]["total"].contains("gl_kernel_ms")) << "only with SANDPATCH_GL_PROFILE";
+}
+
+// With SANDPATCH_GL_PROFILE set, every GL dispatch is timed on the GPU and the report sums each
+// kernel's time over the run (dem.total.gl_kernel_ms; llvmpipe's timer queries read about 0).
+TEST(Run, GlProfileReportsEveryKernel) {
+  auto scene = load_default_scene();
+  ASSERT_TRUE(scene.ok());
+  RunOptions opt;
+  opt.out_dir = test::fresh_dir("run_test", "gl_profile").string();
+  opt.seconds = 0.2;
+  opt.backend = "gl";
+  opt.progress = ProgressStyle::None;
+  ::setenv("SANDPATCH_GL_PROFILE", "1", 1);
+  RunResult r = run_scene(*scene, opt);
+  ::unsetenv("SANDPATCH_GL_PROFILE");
+  ASSERT_EQ(r.code, ExitCode::Ok) << r.stage << ": " << r.message;
+  const auto& t = r.report["dem"]["total"];
+  ASSERT_TRUE(t.contains("gl_kernel_ms")) << t.dump();
+  for (const char* k : {"dem/force.comp", "dem/bodies.comp", "dem/bodies.comp SP_WIDE_PASS", "dem/grid_count.comp"}) {
+    ASSERT_TRUE(t["gl_kernel_ms"].contains(k)) << k << " in " << t["gl_kernel_ms"].dump();
+    EXPECT_GE(t["gl_kernel_ms"][k].get<double>(), 0.0);
+  }
 }
