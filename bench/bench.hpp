@@ -34,6 +34,7 @@ struct BenchDemArgs {
   // status is read back once, as a scene's frame does); the CPU backend takes 1 only
   int substeps = 1;
   int workgroup = 0;  // GL backend: invocations per work group (0: the backend's default)
+  int idle_sims = 0;  // GL backend: more simulations of the bed in the context, never stepped
   bool json = false;
 };
 

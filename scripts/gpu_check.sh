@@ -76,6 +76,11 @@ scene default cpu
 bench 16000 1
 bench 4000 100
 bench 1000 100
+# does a context holding a pool of slots make each call dearer? the same bench with 3 idle sims
+step "bench_dem_1000_k11_idle3" 120 "$BIN/sandpatch" bench dem --backend gl --granules 1000 --steps 100 --substeps 11 --idle-sims 3 --json
+tail -n 1 "$OUT/logs/bench_dem_1000_k11_idle3.log" >>"$SUM"
+step "bench_dem_1000_k11_idle0" 120 "$BIN/sandpatch" bench dem --backend gl --granules 1000 --steps 100 --substeps 11 --json
+tail -n 1 "$OUT/logs/bench_dem_1000_k11_idle0.log" >>"$SUM"
 step gl_pool 60 "$BIN/particles_gpu_gl_pool_test"
 step run_gl_test 60 "$BIN/manager_run_test" --gtest_filter='Run.GlBackend*'
 scene leach_3_ten_bodies gl

@@ -5,6 +5,8 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <limits>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
@@ -15,7 +17,7 @@
 
 namespace sandpatch::gpu {
 
-int run_bench_dem_gl(int granules, int steps, int substeps, int workgroup, bool json) {
+int run_bench_dem_gl(int granules, int steps, int substeps, int workgroup, bool json, int idle_sims) {
   if (granules < 1 || granules > 4000000) {
     std::fprintf(stderr, "bench dem: --granules = %d: must be in [1, 4000000]\n", granules);
     return 2;
@@ -98,6 +100,22 @@ int run_bench_dem_gl(int granules, int steps, int substeps, int workgroup, bool 
       return 1;
     }
   }
+  // (--idle-sims: as many more simulations of the bed, uploaded and never stepped)
+  std::vector<GlSimulation> idle;
+  for (int k = 0; k < idle_sims; ++k) {
+    auto s = GlSimulation::create(def, opt);
+    if (!s) {
+      std::fprintf(stderr, "bench dem: idle simulation %d: %s", k, s.message().c_str());
+      return 1;
+    }
+    for (int i = 0; i < cpu->body_count(); ++i)
+      if (auto id = s->add_granule(cpu->body_position(BodyId{i}), cpu->body_orientation(BodyId{i})); !id) {
+        std::fprintf(stderr, "bench dem: %s", id.message().c_str());
+        return 1;
+      }
+    s->upload(std::numeric_limits<std::size_t>::max());
+    idle.push_back(std::move(*s));
+  }
   const int spheres = gsim->particle_count();
   if (!json)
     std::printf("bench dem (gl): %d granules (%d spheres), box %.3f m, %d layers, dt %g s\nrenderer: %s\n"
@@ -163,6 +181,7 @@ int run_bench_dem_gl(int granules, int steps, int substeps, int workgroup, bool 
                       {"gpu_bytes", gsim->gpu_bytes()},
                       {"substeps_per_step", double(gpu_substeps) / steps},
                       {"workgroup_size", opt.workgroup_size},
+                      {"idle_sims", idle_sims},
                       {"substep_dt", frame_dt * steps / double(gpu_substeps)},
                       {"cpu_sphere_steps_per_s", cpu_ssps},
                       {"contact_model", "linear spring-dashpot + tangential spring with history"}};

@@ -16,7 +16,10 @@ namespace sandpatch::gpu {
 // more). With the environment variable SANDPATCH_GL_PROFILE set, also the GPU time of each
 // kernel (timer queries) and their sum against the wall time.
 // workgroup > 0 sets GlOptions::workgroup_size (invocations per work group; the default if 0).
+// idle_sims > 0 makes that many more GlSimulations of the same capacity in the same context,
+// each holding the same bed, never stepped: whether a context holding a scene's pool of slots
+// makes each call of the timed simulation dearer (docs/dem-gpu.md "What is left").
 // Exit code 0 ok, 1 runtime failure, 2 bad input.
-int run_bench_dem_gl(int granules, int steps, int substeps, int workgroup, bool json);
+int run_bench_dem_gl(int granules, int steps, int substeps, int workgroup, bool json, int idle_sims = 0);
 
 }  // namespace sandpatch::gpu

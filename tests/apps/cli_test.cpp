@@ -85,6 +85,8 @@ TEST(Cli, BadOptionsExitWithTwo) {
   EXPECT_EQ(sandpatch("run --threads -1").code, 2);
   EXPECT_EQ(sandpatch("frobnicate").code, 2);
   EXPECT_EQ(sandpatch("check /nonexistent/scene.json").code, 2);
+  EXPECT_EQ(sandpatch("bench dem --granules 10 --idle-sims 2").code, 2);  // a GL backend option
+  EXPECT_EQ(sandpatch("bench dem --backend gl --idle-sims 17").code, 2);
   EXPECT_EQ(sandpatch("render --at 0.1 --backend vulkan").code, 2);
   EXPECT_EQ(sandpatch("render --at 0.1 --threads -1").code, 2);
   Outcome o = sandpatch("render --at 0.1 --frame-budget nope");
