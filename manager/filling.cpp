@@ -99,6 +99,7 @@ Status TerrainManager::Impl::activate(double time, double dt) {
     // filled part by part at the rung the budget chose, and counted as an overrun.
     if (!c.fits && others && !it->ahead_of_carried) {
       ++budget_waits;
+      ++it->waited_frames;
       ++it;
       continue;
     }

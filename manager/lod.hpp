@@ -57,6 +57,7 @@ struct PatchRequest {
   // Asked for ahead of a body the patch it abuts carries: the frame budget does not make it
   // wait (filling.cpp; the body would meet the patch's edge first).
   bool ahead_of_carried = false;
+  int waited_frames = 0;  // frames it waited in the queue because it did not fit the frame budget
   double width() const { return x1 - x0; }
   double depth() const { return z1 - z0; }
   bool overlaps(const PatchRequest& o) const { return x0 < o.x1 && o.x0 < x1 && z0 < o.z1 && o.z0 < z1; }

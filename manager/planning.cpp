@@ -67,6 +67,21 @@ Status TerrainManager::Impl::plan(double time) {
     if (live) {
       ++it;
     } else {
+      // One that waited for the frame budget: the bodies it was for now lie on the heightfield,
+      // where a patch would have taken them (the report's budget.lapsed_after_waiting).
+      if (it->waited_frames > 0 && budget_log_lapsed.size() < 256) {
+        std::vector<std::string> names;
+        for (RigidBodyId b : world->bodies()) {
+          const Eigen::Vector3d p = world->state(b).position;
+          if (!(p.x() >= it->x0 && p.x() <= it->x1 && p.z() >= it->z0 && p.z() <= it->z1)) continue;
+          const std::string& n = world->definition(b).name;
+          names.push_back(n.empty() ? "#" + std::to_string(b.index) : n);  // (unnamed: its index)
+        }
+        budget_log_lapsed.push_back({{"time_s", time},
+                                     {"waited_frames", it->waited_frames},
+                                     {"region_m", {it->x0, it->z0, it->x1, it->z1}},
+                                     {"bodies", names}});
+      }
       it = queue.erase(it);
       ++lapsed_requests;
     }

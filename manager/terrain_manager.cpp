@@ -555,6 +555,7 @@ nlohmann::ordered_json TerrainManager::report() const {
     b["patches_degraded"] = degraded;
     b["overruns"] = I.budget_overruns;
     b["live_substeps_traded"] = I.budget_live_trades;
+    b["lapsed_after_waiting"] = I.budget_log_lapsed;
     b["waited_request_frames"] = I.budget_waits;
     b["held_patch_frames"] = I.budget_held;
     b["held_ahead_patch_frames"] = I.budget_held_ahead;

@@ -252,6 +252,7 @@ struct TerrainManager::Impl {
     int steps_per_contact = 0;  // the DEM's N it runs at when it traded substeps (else 0)
   };
   std::vector<nlohmann::ordered_json> budget_log;  // one entry per promotion (the report's budget.patches)
+  std::vector<nlohmann::ordered_json> budget_log_lapsed;  // requests that waited for the budget and lapsed (at most 256)
   long long budget_waits = 0;      // request-frames a request waited in the queue because it did not fit
   // Bodies set on a patch's ground as they arrived on it (coupling.cpp couple_before): how
   // many times, and the largest rise (m, world). The report's arrivals.

@@ -345,6 +345,16 @@ TEST(Budget, TenBodiesLandingAtOnceKeepWithinIt) {
   EXPECT_EQ(b["overruns"].get<int>(), 0);
   EXPECT_GT(b["waited_request_frames"].get<long long>(), 0) << "some had to wait";
   EXPECT_LT(int(b["patches"].size()), 10) << "not every one fits 20 ms at once";
+  // Requests that waited and then lapsed (their sphere came to rest on the heightfield) are
+  // listed with the spheres lying in them: what the budget gave up.
+  const auto& lapsed = b["lapsed_after_waiting"];
+  ASSERT_TRUE(lapsed.is_array());
+  EXPECT_LE(int(lapsed.size()), rig.manager->report()["pool"]["lapsed_requests"].get<int>());
+  for (const auto& l : lapsed) {
+    EXPECT_GT(l["waited_frames"].get<int>(), 0) << l.dump();
+    EXPECT_FALSE(l["bodies"].empty()) << l.dump();
+  }
+  std::printf("%zu requests lapsed after waiting: %s\n", lapsed.size(), lapsed.dump().c_str());
   std::printf("ten bodies, budget 20 ms (pinned model): %d patches promoted, %lld request-frames waited\n", fitting,
               b["waited_request_frames"].get<long long>());
 }
