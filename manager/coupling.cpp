@@ -152,6 +152,8 @@ Status TerrainManager::Impl::step_patches(double time, double dt) {
         frame_stats.pair_seconds += one.pair_seconds;
         frame_stats.body_seconds += one.body_seconds;
         frame_stats.sort_seconds += one.sort_seconds;
+        frame_stats.submit_seconds += one.submit_seconds;
+        frame_stats.readback_seconds += one.readback_seconds;
         stepped += one.substeps > 0;
         for (Carried& c : s.carried)
           if (c.enabled && c.prescribed && one.substeps > 0) {
