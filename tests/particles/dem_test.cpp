@@ -207,6 +207,33 @@ TEST(Simulation, SetThreadsMidRunKeepsTheState) {
   EXPECT_NE(st.message().find("set_threads.threads = -1"), std::string::npos) << st.message();
 }
 
+// Simulation::set_steps_per_contact: the next steps take the new substep bound (a frame of
+// t_c-limited substeps takes about half as many at N = 10 as at N = 20), the state is kept,
+// and N < 2 is refused naming the field.
+TEST(Simulation, StepsPerContactChangesTheNextStepsSubsteps) {
+  SimulationDef d = small_box();
+  d.accuracy_steps_per_contact = 20;
+  auto s = Simulation::create(d);
+  ASSERT_TRUE(s.ok()) << s.message();
+  ASSERT_TRUE(s->add_granule({0.05f, 0.05f, 0.05f}).ok());
+  const double frame = 20 * s->max_substep_dt();  // 20 substeps at N = 20
+  auto n20 = s->substeps_for(frame);
+  ASSERT_TRUE(n20.ok()) << n20.message();
+  ASSERT_TRUE(s->step(frame).ok());
+  const std::uint64_t h = s->state_hash();
+  ASSERT_TRUE(s->set_steps_per_contact(10).ok());
+  EXPECT_EQ(s->state_hash(), h) << "the state is kept";
+  EXPECT_EQ(s->def().accuracy_steps_per_contact, 10);
+  auto n10 = s->substeps_for(frame);
+  ASSERT_TRUE(n10.ok());
+  EXPECT_NEAR(double(*n10), 0.5 * double(*n20), 1.0) << *n20 << " substeps at N = 20";
+  ASSERT_TRUE(s->step(frame).ok());
+  EXPECT_EQ(s->last_step().substeps, *n10);
+  const Status st = s->set_steps_per_contact(1);
+  ASSERT_FALSE(st.ok());
+  EXPECT_NE(st.message().find("accuracy_steps_per_contact = 1"), std::string::npos) << st.message();
+}
+
 // The AVX2 pair kernel (particles/contact_avx2.cpp, used when the CPU has AVX2) gives the
 // scalar contact law's results bit for bit: the same state hash with SANDPATCH_DEM_KERNEL=scalar,
 // with the timing correction off and on, and with the hysteretic normal spring (lambda = 11.1,
