@@ -162,19 +162,27 @@ TEST(Run, StepCountIsCheckedBeforeTheFirstFrame) {
   EXPECT_NE(tiny.message().find("simulation.duration"), std::string::npos) << tiny.message();
 }
 
+// The default scene for `seconds` on the GL backend, into a fresh folder `dir` (with a final
+// picture, final.png, when `image`).
+RunResult default_on_gl(const char* dir, double seconds, bool image, RunOptions* used = nullptr) {
+  auto scene = load_default_scene();
+  EXPECT_TRUE(scene.ok());
+  RunOptions opt;
+  opt.out_dir = test::fresh_dir("run_test", dir).string();
+  opt.seconds = seconds;
+  opt.backend = "gl";
+  opt.progress = ProgressStyle::None;
+  if (image) opt.final_image = (fs::path(opt.out_dir) / "final.png").string();
+  if (used) *used = opt;
+  return scene.ok() ? run_scene(*scene, opt) : RunResult{};
+}
+
 // `run --backend gl`: the terrain manager's pool runs on the GL compute-shader backend
 // (llvmpipe in CI); a patch is promoted, simulated and demoted, and the report says so; the
 // final picture draws the granules straight from the simulation's buffer (shared context).
 TEST(Run, GlBackendDrivesThePatches) {
-  auto scene = load_default_scene();
-  ASSERT_TRUE(scene.ok());
   RunOptions opt;
-  opt.out_dir = test::fresh_dir("run_test", "gl").string();
-  opt.seconds = 0.3;
-  opt.backend = "gl";
-  opt.progress = ProgressStyle::None;
-  opt.final_image = (fs::path(opt.out_dir) / "final.png").string();
-  RunResult r = run_scene(*scene, opt);
+  RunResult r = default_on_gl("gl", 0.3, true, &opt);
   ASSERT_EQ(r.code, ExitCode::Ok) << r.stage << ": " << r.message;
   EXPECT_EQ(r.report["backend"], "gl");
   EXPECT_GT(fs::file_size(opt.final_image), 1000u);
@@ -194,15 +202,8 @@ TEST(Run, GlBackendDrivesThePatches) {
 // With SANDPATCH_GL_PROFILE set, every GL dispatch is timed on the GPU and the report sums each
 // kernel's time over the run (dem.total.gl_kernel_ms; llvmpipe's timer queries read about 0).
 TEST(Run, GlProfileReportsEveryKernel) {
-  auto scene = load_default_scene();
-  ASSERT_TRUE(scene.ok());
-  RunOptions opt;
-  opt.out_dir = test::fresh_dir("run_test", "gl_profile").string();
-  opt.seconds = 0.2;
-  opt.backend = "gl";
-  opt.progress = ProgressStyle::None;
   ::setenv("SANDPATCH_GL_PROFILE", "1", 1);
-  RunResult r = run_scene(*scene, opt);
+  RunResult r = default_on_gl("gl_profile", 0.2, false);
   ::unsetenv("SANDPATCH_GL_PROFILE");
   ASSERT_EQ(r.code, ExitCode::Ok) << r.stage << ": " << r.message;
   const auto& t = r.report["dem"]["total"];

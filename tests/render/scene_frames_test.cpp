@@ -148,6 +148,45 @@ void print_look(const char* what, const TerrainManager::PatchInfo& p, const Patc
               look.colour_distance);
 }
 
+// Renders `cam` three ways (body IDs; lit, saved as `png`; without bodies) and checks that each
+// body of the world's report, which must have `state` true ("spawned", "carried_by_patch"),
+// has its centre on its ID colour in the ID render and changes the lit frame by more than 60
+// (RGB summed). false: no GL context (the caller skips).
+bool expect_bodies_seen(World& world, FrameWriter& images, const render::CameraView& cam, const char* state, const char* png) {
+  render::FrameFlags ids, bare;
+  ids.body_ids = true;
+  bare.bodies = false;
+  auto id_img = images.render(cam, ids);
+  EXPECT_TRUE(id_img.ok()) << id_img.message();
+  if (!id_img.ok() || images.unavailable()) return false;
+  auto lit = images.render(cam);
+  auto none = images.render(cam, bare);
+  EXPECT_TRUE(lit.ok() && none.ok());
+  if (!lit.ok() || !none.ok()) return true;
+  EXPECT_TRUE(render::save_png(output_path(png), lit.value()).ok());
+  const auto report = world.report();
+  EXPECT_EQ(report["bodies"].size(), 2u);
+  for (std::size_t k = 0; k < report["bodies"].size(); ++k) {
+    const auto& b = report["bodies"][k];
+    EXPECT_TRUE(b[state].get<bool>()) << b.dump();
+    const Eigen::Vector3d c(b["position_m"][0].get<double>(), b["position_m"][1].get<double>(), b["position_m"][2].get<double>());
+    auto p = images.renderer()->project(cam, c);
+    EXPECT_TRUE(p.has_value());
+    if (!p) continue;
+    const int x = int(p->pixel.x()), y = int(p->pixel.y());
+    EXPECT_TRUE(x >= 0 && x < cam.width && y >= 0 && y < cam.height) << b["name"] << " at " << x << ", " << y;
+    if (x < 0 || x >= cam.width || y < 0 || y >= cam.height) continue;
+    const std::uint8_t* px = id_img->pixel(x, y);
+    const auto id = render::body_id_color(int(k));
+    EXPECT_TRUE(px[0] == id[0] && px[1] == id[1] && px[2] == id[2])
+        << b["name"] << ": pixel " << x << ", " << y << " is " << int(px[0]) << " " << int(px[1]) << " " << int(px[2]);
+    const std::uint8_t* a = lit->pixel(x, y);
+    const std::uint8_t* n = none->pixel(x, y);
+    EXPECT_GT(std::abs(a[0] - n[0]) + std::abs(a[1] - n[1]) + std::abs(a[2] - n[2]), 60) << b["name"];
+  }
+  return true;
+}
+
 }  // namespace
 
 // Both bodies of the default scene in the air (the crate spawns at 0.5 s): at 0.6 s each body's
@@ -159,34 +198,10 @@ TEST(SceneFrames, DefaultSceneShowsBothBodiesWhereTheReportSaysTheyAre) {
   ASSERT_TRUE(step_to(*r.world, 0.6, r.scene.simulation.dt).ok());
   FrameWriter images(*r.world);
   const render::CameraView cam = camera_at(r.scene.cameras.front(), r.world->time());
-  render::FrameFlags ids, bare;
-  ids.body_ids = true;
+  if (!expect_bodies_seen(*r.world, images, cam, "spawned", "default_bodies.actual.png"))
+    GTEST_SKIP() << "no GL context: " << images.why();
+  render::FrameFlags bare;
   bare.bodies = false;
-  auto id_img = images.render(cam, ids);
-  ASSERT_TRUE(id_img.ok()) << id_img.message();
-  if (images.unavailable()) GTEST_SKIP() << "no GL context: " << images.why();
-  auto lit = images.render(cam);
-  auto none = images.render(cam, bare);
-  ASSERT_TRUE(lit.ok() && none.ok());
-  ASSERT_TRUE(render::save_png(output_path("default_bodies.actual.png"), lit.value()).ok());
-  const auto report = r.world->report();
-  ASSERT_EQ(report["bodies"].size(), 2u);
-  for (std::size_t k = 0; k < 2; ++k) {
-    const auto& b = report["bodies"][k];
-    ASSERT_TRUE(b["spawned"].get<bool>()) << b.dump();
-    const Eigen::Vector3d c(b["position_m"][0].get<double>(), b["position_m"][1].get<double>(), b["position_m"][2].get<double>());
-    auto p = images.renderer()->project(cam, c);
-    ASSERT_TRUE(p.has_value());
-    const int x = int(p->pixel.x()), y = int(p->pixel.y());
-    ASSERT_TRUE(x >= 0 && x < cam.width && y >= 0 && y < cam.height) << b["name"] << " at " << x << ", " << y;
-    const std::uint8_t* px = id_img->pixel(x, y);
-    const auto id = render::body_id_color(int(k));
-    EXPECT_TRUE(px[0] == id[0] && px[1] == id[1] && px[2] == id[2])
-        << b["name"] << ": pixel " << x << ", " << y << " is " << int(px[0]) << " " << int(px[1]) << " " << int(px[2]);
-    const std::uint8_t* a = lit->pixel(x, y);
-    const std::uint8_t* n = none->pixel(x, y);
-    EXPECT_GT(std::abs(a[0] - n[0]) + std::abs(a[1] - n[1]) + std::abs(a[2] - n[2]), 60) << b["name"];
-  }
   // The cost of one image of this frame at the scene camera's own 640 x 360 (docs/BENCHMARKS.md
   // "Rendering: images of a run"): median of 5, the whole FrameWriter::render (granules
   // copied from the simulation, bodies, shadow map, frame, ambient occlusion, read-back).
@@ -229,37 +244,11 @@ TEST(SceneFrames, GlBackendShowsTheBodiesNotTheirShells) {
   ASSERT_TRUE(w.ok()) << w.message();
   World& world = *w.value();
   ASSERT_TRUE(step_to(world, 1.5, s.simulation.dt).ok());
-  const auto report = world.report();
   ASSERT_NE(world.manager()->gl_context(), nullptr) << "the GL backend's slots";
   FrameWriter images(world);
   const render::CameraView cam = camera_at(s.cameras.front(), world.time());
-  render::FrameFlags ids, bare;
-  ids.body_ids = true;
-  bare.bodies = false;
-  auto id_img = images.render(cam, ids);
-  ASSERT_TRUE(id_img.ok()) << id_img.message();
-  if (images.unavailable()) GTEST_SKIP() << "no GL context: " << images.why();
-  auto lit = images.render(cam);
-  auto none = images.render(cam, bare);
-  ASSERT_TRUE(lit.ok() && none.ok());
-  ASSERT_TRUE(render::save_png(output_path("gl_bodies.actual.png"), lit.value()).ok());
-  ASSERT_EQ(report["bodies"].size(), 2u);
-  for (std::size_t k = 0; k < 2; ++k) {
-    const auto& b = report["bodies"][k];
-    ASSERT_TRUE(b["carried_by_patch"].get<bool>()) << b.dump();
-    const Eigen::Vector3d c(b["position_m"][0].get<double>(), b["position_m"][1].get<double>(), b["position_m"][2].get<double>());
-    auto p = images.renderer()->project(cam, c);
-    ASSERT_TRUE(p.has_value());
-    const int x = int(p->pixel.x()), y = int(p->pixel.y());
-    ASSERT_TRUE(x >= 0 && x < cam.width && y >= 0 && y < cam.height) << b["name"] << " at " << x << ", " << y;
-    const std::uint8_t* px = id_img->pixel(x, y);
-    const auto id = render::body_id_color(int(k));
-    EXPECT_TRUE(px[0] == id[0] && px[1] == id[1] && px[2] == id[2])
-        << b["name"] << ": pixel " << x << ", " << y << " is " << int(px[0]) << " " << int(px[1]) << " " << int(px[2]);
-    const std::uint8_t* a = lit->pixel(x, y);
-    const std::uint8_t* n = none->pixel(x, y);
-    EXPECT_GT(std::abs(a[0] - n[0]) + std::abs(a[1] - n[1]) + std::abs(a[2] - n[2]), 60) << b["name"];
-  }
+  if (!expect_bodies_seen(world, images, cam, "carried_by_patch", "gl_bodies.actual.png"))
+    GTEST_SKIP() << "no GL context: " << images.why();
 }
 
 // What a user sees of a coarse patch: the default scene with a frame budget no rung fits
