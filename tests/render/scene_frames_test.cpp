@@ -7,6 +7,7 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <optional>
 
 #include "manager/run_outputs.hpp"
 #include "manager/scene_world.hpp"
@@ -148,6 +149,16 @@ void print_look(const char* what, const TerrainManager::PatchInfo& p, const Patc
               look.colour_distance);
 }
 
+// One lit frame of `cam`, saved as `png`; nullopt without a GL context (the caller skips) or
+// when the render fails (the failure recorded).
+std::optional<render::Image> lit_frame(FrameWriter& images, const render::CameraView& cam, const char* png) {
+  auto img = images.render(cam);
+  EXPECT_TRUE(img.ok()) << img.message();
+  if (!img.ok() || images.unavailable()) return std::nullopt;
+  EXPECT_TRUE(render::save_png(output_path(png), *img).ok());
+  return std::move(*img);
+}
+
 // Renders `cam` three ways (body IDs; lit, saved as `png`; without bodies) and checks that each
 // body of the world's report, which must have `state` true ("spawned", "carried_by_patch"),
 // has its centre on its ID colour in the ID render and changes the lit frame by more than 60
@@ -277,10 +288,8 @@ TEST(SceneFrames, CoarsePatchReadsAsSandWithoutSpecks) {
   const auto& p = *std::min_element(patches.begin(), patches.end(), [](const auto& a, const auto& b) { return a.patch < b.patch; });
   FrameWriter images(world);
   const render::CameraView cam = camera_at(s.cameras.front(), world.time());
-  auto img = images.render(cam);
-  ASSERT_TRUE(img.ok()) << img.message();
-  if (images.unavailable()) GTEST_SKIP() << "no GL context: " << images.why();
-  ASSERT_TRUE(render::save_png(output_path("coarse_patch.actual.png"), *img).ok());
+  auto img = lit_frame(images, cam, "coarse_patch.actual.png");
+  if (!img) GTEST_SKIP() << "no GL context: " << images.why();
   const PatchLook look = patch_look(world, images, cam, *img, p, patches);
   print_look("coarse, 2 s,", p, look);
   ASSERT_GT(look.n[1], 2000);
@@ -308,10 +317,8 @@ TEST(SceneFrames, TroughInACoarsePatchIsNotShadowedByTheOldSurface) {
   ASSERT_GE(patches.size(), 1u);
   FrameWriter images(world);
   const render::CameraView cam = camera_at(s.cameras.front(), world.time());
-  auto img = images.render(cam);
-  ASSERT_TRUE(img.ok()) << img.message();
-  if (images.unavailable()) GTEST_SKIP() << "no GL context: " << images.why();
-  ASSERT_TRUE(render::save_png(output_path("coarse_trough.actual.png"), *img).ok());
+  auto img = lit_frame(images, cam, "coarse_trough.actual.png");
+  if (!img) GTEST_SKIP() << "no GL context: " << images.why();
   int dark = 0, pixels = 0;
   for (const auto& p : patches) {
     ASSERT_EQ(p.particle_scale, 3.0);
@@ -340,10 +347,8 @@ TEST(SceneFrames, FinePatchReadsAsSand) {
   ASSERT_GE(patches.size(), 1u);
   FrameWriter images(world);
   const render::CameraView cam = camera_at(s.cameras.front(), world.time());
-  auto img = images.render(cam);
-  ASSERT_TRUE(img.ok()) << img.message();
-  if (images.unavailable()) GTEST_SKIP() << "no GL context: " << images.why();
-  ASSERT_TRUE(render::save_png(output_path("fine_patch.actual.png"), *img).ok());
+  auto img = lit_frame(images, cam, "fine_patch.actual.png");
+  if (!img) GTEST_SKIP() << "no GL context: " << images.why();
   for (const auto& p : patches) {
     ASSERT_EQ(p.particle_scale, 1.0);
     const PatchLook look = patch_look(world, images, cam, *img, p, patches);
