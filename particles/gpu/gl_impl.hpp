@@ -53,7 +53,7 @@ inline constexpr const char* kKernelDefine[kKernelCount] = {nullptr, nullptr, nu
 // A body of more spheres than this (a shell) is summed, integrated and rebuilt by a workgroup
 // of its own this size (bodies.comp's SP_WIDE_PASS); the others, granules first, by one
 // invocation each. One invocation looping over a shell of a few thousand spheres took most of
-// a scene's GL step (docs/BENCHMARKS.md "Shells on the GL backend").
+// a scene's body stage (docs/BENCHMARKS.md "The GL backend's host time in scenes").
 constexpr int kWideSpheres = 32;
 
 // CPU staging of bodies/particles added since the last upload (generated SoA, as dem.cpp).
@@ -121,7 +121,7 @@ struct GlSimulation::Impl {
   int cap_p = 0, cap_b = 0, cap_cells = 0, scan_blocks_cap = 0, K = 16, wg = 64;
   std::size_t cap_terrain = 0;  // terrain height samples (fixed at creation)
   int np = 0, nb = 0, np_gpu = 0, nb_gpu = 0;  // *_gpu: uploaded
-  int n_wide = 0;  // uploaded bodies of more than kWideSpheres spheres, listed in G.wide_body
+  std::vector<std::int32_t> wide;  // uploaded bodies of more than kWideSpheres spheres, as in G.wide_body
   ParticleStage pst;
   BodyStage bst;
   std::vector<std::uint32_t> host_flags;  // every body's flags (only the host changes them): no read-back
@@ -249,15 +249,15 @@ struct GlSimulation::Impl {
     end_query();
   }
 
-  // Lists the uploaded bodies of more than kWideSpheres spheres in G.wide_body, for the
-  // workgroup-per-body pass (after an upload: bodies never change their sphere count).
-  void update_wide_list() {
-    std::vector<std::int32_t> wide;
-    for (int i = 0; i < nb_gpu; ++i)
+  // Appends the bodies [first, nb_gpu) of more than kWideSpheres spheres to G.wide_body, for
+  // the workgroup-per-body pass (after an upload: bodies never change their sphere count).
+  void append_wide(int first) {
+    const std::size_t had = wide.size();
+    for (int i = first; i < nb_gpu; ++i)
       if (host_count[std::size_t(i)] > kWideSpheres) wide.push_back(i);
-    n_wide = int(wide.size());
+    if (wide.size() == had) return;
     glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
-    write(kG, g_wide_body(), wide.size() * 4, wide.data());
+    write(kG, g_wide_body() + 4 * had, (wide.size() - had) * 4, wide.data() + had);
   }
 
   // A grid kernel with the arguments in args_buf (bound as GL_DISPATCH_INDIRECT_BUFFER by

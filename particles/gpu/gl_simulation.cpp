@@ -46,7 +46,7 @@ void GlSimulation::Impl::substep() {
   // buffer-update barrier: its argument copy (and step's status writes and read-back) see the
   // arguments request_resort wrote and the counters
   // (the shells: a workgroup each, on other bodies and spheres than kBodies: one barrier after both)
-  dispatch_groups(kBodiesWide, n_wide);
+  dispatch_groups(kBodiesWide, int(wide.size()));
   dispatch(kBodies, nb_gpu, wg, GL_SHADER_STORAGE_BARRIER_BIT | GL_BUFFER_UPDATE_BARRIER_BIT);
 }
 
@@ -131,7 +131,8 @@ Status GlSimulation::Impl::configure(const SimulationDef& d, const char* cap_pre
   skin = d.cell_skin > 0 ? d.cell_skin : 0.2f * d.particle_radius;
   size_grid();
   // empty: live counts, staging, springs and wall contacts of every particle id
-  np = nb = np_gpu = nb_gpu = n_wide = 0;
+  np = nb = np_gpu = nb_gpu = 0;
+  wide.clear();
   pst.clear();
   bst.clear();
   host_flags.clear();

@@ -47,7 +47,7 @@ SANDPATCH_FIELD_ON(GL, backend, write(kB, boff(kBody_##name) + b0 * 4 * (n), bn 
   np_gpu += int(pn);
   nb_gpu += int(bn);
   set_counts();
-  update_wide_list();
+  append_wide(int(b0));
   bind_all();
   glMemoryBarrier(GL_ALL_BARRIER_BITS);
   glProgramUniform1i(prog[kBodies].id(), u[kBodies].mode, 1);
