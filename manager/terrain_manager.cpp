@@ -475,10 +475,10 @@ nlohmann::ordered_json TerrainManager::Impl::dem_report() const {
   // GL backend with SANDPATCH_GL_PROFILE: each kernel's GPU time over the run, all slots
   std::vector<std::pair<std::string, double>> kernels;
   for (const auto& s : slots)
-    for (const auto& [name, sec] : s.sim->kernel_seconds()) {
-      auto it = std::find_if(kernels.begin(), kernels.end(), [&](const auto& k) { return k.first == name; });
-      if (it == kernels.end()) kernels.emplace_back(name, sec);
-      else it->second += sec;
+    for (const auto& ks : s.sim->kernel_seconds()) {
+      auto it = std::find_if(kernels.begin(), kernels.end(), [&](const auto& k) { return k.first == ks.first; });
+      if (it == kernels.end()) kernels.push_back(ks);
+      else it->second += ks.second;
     }
   if (gl_profile) {
     ojson g = ojson::object();
