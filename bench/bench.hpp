@@ -35,6 +35,7 @@ struct BenchDemArgs {
   int substeps = 1;
   int workgroup = 0;  // GL backend: invocations per work group (0: the backend's default)
   int idle_sims = 0;  // GL backend: more simulations of the bed in the context, never stepped
+  int capacity = 0;   // GL backend: granules the simulations have room for (0: the bed's)
   bool json = false;
 };
 

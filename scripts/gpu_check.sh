@@ -81,6 +81,9 @@ step "bench_dem_1000_k11_idle3" 120 "$BIN/sandpatch" bench dem --backend gl --gr
 tail -n 1 "$OUT/logs/bench_dem_1000_k11_idle3.log" >>"$SUM"
 step "bench_dem_1000_k11_idle0" 120 "$BIN/sandpatch" bench dem --backend gl --granules 1000 --steps 100 --substeps 11 --json
 tail -n 1 "$OUT/logs/bench_dem_1000_k11_idle0.log" >>"$SUM"
+# ... or the size of its own buffers? the same bed in a simulation sized as the car scene's slots
+step "bench_dem_1000_k11_cap65536" 120 "$BIN/sandpatch" bench dem --backend gl --granules 1000 --steps 100 --substeps 11 --capacity 65536 --json
+tail -n 1 "$OUT/logs/bench_dem_1000_k11_cap65536.log" >>"$SUM"
 step gl_pool 60 "$BIN/particles_gpu_gl_pool_test"
 step run_gl_test 60 "$BIN/manager_run_test" --gtest_filter='Run.GlBackend*'
 scene leach_3_ten_bodies gl

@@ -329,6 +329,9 @@ void add_bench(CLI::App& app, BenchCli& a) {
   bdem->add_option("--idle-sims", dem.idle_sims,
                    "GL backend: this many more simulations of the bed in the same context, never stepped (does a pool of slots make each call dearer?)")
       ->check(CLI::Range(0, 16));
+  bdem->add_option("--capacity", dem.capacity,
+                   "GL backend: room for this many granules in the simulations (a pool slot's size; default the bed's)")
+      ->check(CLI::NonNegativeNumber);
   bdem->add_flag("--json", dem.json, "Print one JSON object on the last line");
   render::BenchRenderArgs& brend = a.render;
   auto* bren = bench->add_subcommand("render", "Clipmap vs full-grid triangles and frame time per terrain size");
@@ -427,8 +430,8 @@ int cmd_bench(BenchCli& a) {
   CLI::App* bench = a.bench;
   if (bench->got_subcommand("dem")) {
     // GL: the same bed on the compute-shader backend, timed beside the CPU backend.
-    if (a.dem.backend == "gl") return gpu::run_bench_dem_gl(a.dem.granules, a.dem.steps, a.dem.substeps, a.dem.workgroup, a.dem.json, a.dem.idle_sims);
-    if (a.dem.substeps != 1 || a.dem.workgroup != 0 || a.dem.idle_sims != 0) {
+    if (a.dem.backend == "gl") return gpu::run_bench_dem_gl(a.dem.granules, a.dem.steps, a.dem.substeps, a.dem.workgroup, a.dem.json, a.dem.idle_sims, a.dem.capacity);
+    if (a.dem.substeps != 1 || a.dem.workgroup != 0 || a.dem.idle_sims != 0 || a.dem.capacity != 0) {
       std::fprintf(stderr, "bench dem: --substeps = %d, --workgroup = %d, --idle-sims = %d: the GL backend's options (the CPU backend reads nothing back between steps and has no work groups)\n",
                    a.dem.substeps, a.dem.workgroup, a.dem.idle_sims);
       return 2;

@@ -17,7 +17,7 @@
 
 namespace sandpatch::gpu {
 
-int run_bench_dem_gl(int granules, int steps, int substeps, int workgroup, bool json, int idle_sims) {
+int run_bench_dem_gl(int granules, int steps, int substeps, int workgroup, bool json, int idle_sims, int capacity) {
   if (granules < 1 || granules > 4000000) {
     std::fprintf(stderr, "bench dem: --granules = %d: must be in [1, 4000000]\n", granules);
     return 2;
@@ -28,6 +28,10 @@ int run_bench_dem_gl(int granules, int steps, int substeps, int workgroup, bool 
   }
   if (substeps < 1 || substeps > 10000) {
     std::fprintf(stderr, "bench dem: --substeps = %d: must be in [1, 10000]\n", substeps);
+    return 2;
+  }
+  if (capacity != 0 && (capacity < granules || capacity > 4000000)) {
+    std::fprintf(stderr, "bench dem: --capacity = %d: must be 0 (the bed's) or in [--granules = %d, 4000000]\n", capacity, granules);
     return 2;
   }
   // 1. the bed of bench/bench_dem.cpp, through the public API
@@ -86,7 +90,9 @@ int run_bench_dem_gl(int granules, int steps, int substeps, int workgroup, bool 
   GlOptions opt;
   opt.profile = std::getenv("SANDPATCH_GL_PROFILE") != nullptr;  // per-kernel GPU times
   if (workgroup > 0) opt.workgroup_size = workgroup;  // else GlOptions' default
-  auto gsim = GlSimulation::create(def, opt);
+  SimulationDef gdef = def;  // (--capacity: room for more granules than the bed, as a pool slot has)
+  if (capacity > granules) gdef.max_bodies = capacity, gdef.max_particles = 4 * capacity;
+  auto gsim = GlSimulation::create(gdef, opt);
   if (!gsim) {
     std::fprintf(stderr, "bench dem: %s", gsim.message().c_str());
     return 1;
@@ -103,7 +109,7 @@ int run_bench_dem_gl(int granules, int steps, int substeps, int workgroup, bool 
   // (--idle-sims: as many more simulations of the bed, uploaded and never stepped)
   std::vector<GlSimulation> idle;
   for (int k = 0; k < idle_sims; ++k) {
-    auto s = GlSimulation::create(def, opt);
+    auto s = GlSimulation::create(gdef, opt);
     if (!s) {
       std::fprintf(stderr, "bench dem: idle simulation %d: %s", k, s.message().c_str());
       return 1;
@@ -182,6 +188,7 @@ int run_bench_dem_gl(int granules, int steps, int substeps, int workgroup, bool 
                       {"substeps_per_step", double(gpu_substeps) / steps},
                       {"workgroup_size", opt.workgroup_size},
                       {"idle_sims", idle_sims},
+                      {"capacity_granules", capacity > granules ? capacity : granules},
                       {"substep_dt", frame_dt * steps / double(gpu_substeps)},
                       {"cpu_sphere_steps_per_s", cpu_ssps},
                       {"contact_model", "linear spring-dashpot + tangential spring with history"}};

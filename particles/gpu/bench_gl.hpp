@@ -19,7 +19,9 @@ namespace sandpatch::gpu {
 // idle_sims > 0 makes that many more GlSimulations of the same capacity in the same context,
 // each holding the same bed, never stepped: whether a context holding a scene's pool of slots
 // makes each call of the timed simulation dearer (docs/dem-gpu.md "What is left").
+// capacity > granules gives the GL simulations room for that many granules (and 4 x as many
+// spheres), as a scene's pool slots have: whether the buffers' size makes each call dearer.
 // Exit code 0 ok, 1 runtime failure, 2 bad input.
-int run_bench_dem_gl(int granules, int steps, int substeps, int workgroup, bool json, int idle_sims = 0);
+int run_bench_dem_gl(int granules, int steps, int substeps, int workgroup, bool json, int idle_sims = 0, int capacity = 0);
 
 }  // namespace sandpatch::gpu

@@ -87,6 +87,8 @@ TEST(Cli, BadOptionsExitWithTwo) {
   EXPECT_EQ(sandpatch("check /nonexistent/scene.json").code, 2);
   EXPECT_EQ(sandpatch("bench dem --granules 10 --idle-sims 2").code, 2);  // a GL backend option
   EXPECT_EQ(sandpatch("bench dem --backend gl --idle-sims 17").code, 2);
+  EXPECT_EQ(sandpatch("bench dem --granules 10 --capacity 100").code, 2);  // a GL backend option
+  EXPECT_EQ(sandpatch("bench dem --backend gl --granules 200 --capacity 100").code, 2);  // below the bed
   EXPECT_EQ(sandpatch("render --at 0.1 --backend vulkan").code, 2);
   EXPECT_EQ(sandpatch("render --at 0.1 --threads -1").code, 2);
   Outcome o = sandpatch("render --at 0.1 --frame-budget nope");
