@@ -473,16 +473,10 @@ nlohmann::ordered_json TerrainManager::Impl::dem_report() const {
                  {"stage_ms", {{"sort", t.sort_ms}, {"pairs", t.pair_ms}, {"bodies", t.body_ms},
                                {"gl_submit", t.submit_ms}, {"gl_readback", t.readback_ms}}}};
   // GL backend with SANDPATCH_GL_PROFILE: each kernel's GPU time over the run, all slots
-  std::vector<std::pair<std::string, double>> kernels;
-  for (const auto& s : slots)
-    for (const auto& ks : s.sim->kernel_seconds()) {
-      auto it = std::find_if(kernels.begin(), kernels.end(), [&](const auto& k) { return k.first == ks.first; });
-      if (it == kernels.end()) kernels.push_back(ks);
-      else it->second += ks.second;
-    }
   if (gl_profile) {
     ojson g = ojson::object();
-    for (const auto& [name, sec] : kernels) g[name] = 1e3 * sec;
+    for (const auto& s : slots)
+      for (const auto& [name, sec] : s.sim->kernel_seconds()) g[name] = g.value(name, 0.0) + 1e3 * sec;
     total["gl_kernel_ms"] = g;
   }
   return {{"patches", patches}, {"total", total}};
