@@ -247,6 +247,9 @@ Result<GranuleTile> make_granule_tile(const GranuleTileDef& def) {
   sd.side_walls = true;
   sd.threads = def.threads;
   sd.accuracy_steps_per_contact = def.steps_per_contact;
+  // A settling frame takes as many substeps as the contact time asks (fine, stiff granules
+  // need more than a game frame's 64): the guard is for frames, not for settling.
+  sd.max_substeps = 1 << 20;
   auto sim = Simulation::create(sd);
   if (!sim) return sim.errors();
   LatticeBedDef bed;
