@@ -116,3 +116,19 @@ TEST(GranuleTile, FillCutInStepsEqualsTheWholeCut) {
     if (units == 97) EXPECT_GT(steps, 10);
   }
 }
+
+// Fine, stiff granules (r = 1.4 cm at k_n = 1.5e5 N/m: t_c / 20 = 7e-5 s) need 120 substeps
+// in each 1/120 s settling frame, more than a game frame's 64: the tile still settles (it
+// was refused with "max_substeps = 64", which no caller of the manager could raise).
+TEST(GranuleTile, FineStiffGranulesSettle) {
+  GranuleTileDef d;
+  d.radius = 0.014f;
+  d.material.normal_stiffness = 1.5e5f;
+  d.material.density = 2650.0f;
+  d.columns = 4;
+  d.layers = 4;
+  d.settle_max_time = 0.3f;
+  auto r = make_granule_tile(d);
+  ASSERT_TRUE(r.ok()) << r.message();
+  EXPECT_GT(r->granules.size(), 10u);
+}
