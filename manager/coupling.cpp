@@ -238,7 +238,7 @@ bool TerrainManager::Impl::engages(const Slot& s, const Eigen::Vector3d& lo, con
 
 double TerrainManager::Impl::engage_limit(const Slot& s, RigidBodyId b) const {
   for (const Carried& c : s.carried)
-    if (c.body.index == b.index && c.body.generation == b.generation) return c.enabled && c.prescribed ? carry_height : 0.5 * engage_height;
+    if (c.body.index == b.index && c.body.generation == b.generation) return c.enabled && c.tool ? carry_height : 0.5 * engage_height;
   return 0.5 * engage_height;
 }
 
@@ -398,13 +398,14 @@ Status TerrainManager::Impl::couple_before(Slot& slot, double dt) {
       it = slot.carried.end() - 1;
     }
     Carried& c = *it;
+    c.tool = c.prescribed || groups[std::size_t(b.index)] > 0;
     if (const std::int32_t g = groups[std::size_t(b.index)]; !fresh && slot.sim->body_group(c.shell) != g)
       if (Status e = slot.sim->set_body_group(c.shell, g); !e) return e.errors();  // a joint added or removed
     const bool reenabled = touch && !c.enabled;  // parked until now: its state must be set
     if (touch != c.enabled) {
       // A tool let go of with granules in it (lifted above carry_height, or out over the
       // patch's side): they fall. Reported with its height and what it held.
-      if (!touch && c.prescribed) {
+      if (!touch && c.tool) {
         if (const int held = granules_within(slot, lo, hi); held > 0) {
           SoilDrop d;
           d.name = world->definition(b).name;
@@ -465,7 +466,12 @@ Status TerrainManager::Impl::couple_before(Slot& slot, double dt) {
       c.set_position = st.position;
       c.set_orientation = st.orientation;
     } else if (at_rest && !fresh && !reenabled) {
-      continue;
+      // ... while its shell rests too. A body held still in the air by a joint has a shell
+      // that falls freely in the DEM; left alone, it fell a frame's g dt faster each frame, and
+      // the change of momentum below gave the body one more m g of "soil force" each frame (a
+      // bucket held 0.5 m over the sand by its arm's servos was pushed down by 1-4 kN).
+      const double shell_speed = double(eig(slot.sim->body_velocity(c.shell)).norm()) * s;
+      if (shell_speed <= def.sleep_speed) continue;
     }
     const Vec3 p = slot.sim->def().scale.position_to_sim({st.position.x(), st.position.y(), st.position.z()});
     if (Status e = slot.sim->set_body_state(c.shell, p, quat(st.orientation), v3(Eigen::Vector3f(st.linear_velocity / float(s))),

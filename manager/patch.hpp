@@ -35,6 +35,11 @@ struct Carried {
   // they do not move it), its pose set from Bullet's, and the soil's force on it is the mean
   // of the DEM's contact force over the frame's substeps (sim units, summed in f_sum, t_sum).
   bool prescribed = false;
+  // A tool: a kinematic or static body, or a dynamic one joined to others (a machine's bucket
+  // on its arm). Its shell, once enabled, is kept up to carry_height over the patch (what it
+  // scooped is carried up), and what it lets go of with granules in it is reported
+  // (coupling.cpp engage_limit, couple_before). Set every frame: joints come and go.
+  bool tool = false;
   Eigen::Vector3d set_position = Eigen::Vector3d::Zero();  // m, world: the pose last given to the shell
   Eigen::Quaternionf set_orientation = Eigen::Quaternionf::Identity();
   Eigen::Vector3d f_sum = Eigen::Vector3d::Zero(), t_sum = Eigen::Vector3d::Zero();
