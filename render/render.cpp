@@ -308,7 +308,7 @@ Result<Image> SceneRenderer::render(const CameraView& cam, const FrameFlags& fla
                       float(s.footprint[2] - origin.x()), float(s.footprint[3] - origin.z())});
       bands.push_back(s.footprint_band);
     }
-  terrain_->set_live_footprints(cuts);
+  terrain_->set_live_footprints(std::move(cuts), std::move(bands));
 
   // Leach & Marais §5.1: terrain, clear depth, particles, terrain again (without the footprints).
   terrain_->draw(view_proj);
@@ -326,7 +326,7 @@ Result<Image> SceneRenderer::render(const CameraView& cam, const FrameFlags& fla
     st.particles = particle_renderer_->draw(particles_, view, proj, cam.height, *terrain_, origin,
                                             def_.particle_normal_bend, def_.particle_color_variation, &shadow,
                                             def_.particle_gain, &bed, /*terrain_shadow=*/true);
-    terrain_->redraw(cuts, bands);
+    terrain_->redraw();
     st.terrain_passes = 2;
   }
   // Bodies last: depth-tested against the terrain and the granules in front of them.

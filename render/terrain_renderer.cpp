@@ -221,9 +221,7 @@ void TerrainRenderer::draw(const Eigen::Matrix4f& view_proj, bool cull) {
   draw_selection();
 }
 
-void TerrainRenderer::redraw(const std::vector<Eigen::Vector4f>& cuts, const std::vector<float>& bands) {
-  draw_selection(cuts, bands);
-}
+void TerrainRenderer::redraw() { draw_selection(live_, live_bands_); }
 
 void TerrainRenderer::draw_selection(const std::vector<Eigen::Vector4f>& cuts, const std::vector<float>& bands) {
   const unsigned p = program_.id();

@@ -64,11 +64,11 @@ class TerrainRenderer {
   // Selects the pieces for this view (select_clipmap with the viewer of the last update()) and
   // draws them into the bound framebuffer with depth testing. view_proj: local -> clip.
   void draw(const Eigen::Matrix4f& view_proj, bool cull = true);
-  // Draws the last selection again (Leach's second terrain pass), leaving out the rectangles
-  // `cuts` (local x0, z0, x1, z1, m; at most kMaxCuts, the rest are ignored): inside a cut the
-  // terrain fades out (alpha-blended) over `bands[k]` m from its edge.
+  // Draws the last selection again (Leach's second terrain pass), leaving out the live
+  // footprints (set_live_footprints): inside one the terrain fades out (alpha-blended) over its
+  // band from its edge.
   static constexpr int kMaxCuts = 32;
-  void redraw(const std::vector<Eigen::Vector4f>& cuts = {}, const std::vector<float>& bands = {});
+  void redraw();
 
   const ClipmapSelection& selection() const { return selection_; }
   const ClipmapDef& def() const { return def_; }
@@ -85,9 +85,13 @@ class TerrainRenderer {
   // heights (terrain.frag), 0 = none.
   void set_terrain_shadow_steps(int steps) { shadow_steps_ = steps; }
   // The live patches' footprints (local x0, z0, x1, z1, m; at most kMaxCuts, the rest are
-  // ignored): the terrain's shadow march takes no heightfield sample inside them
-  // (terrain_shadow.glsl), for every program bind_terrain_shadow serves.
-  void set_live_footprints(std::vector<Eigen::Vector4f> live) { live_ = std::move(live); }
+  // ignored) and the band (m) over which the second terrain pass fades out inside each: the
+  // terrain's shadow march takes no heightfield sample inside them (terrain_shadow.glsl), for
+  // every program bind_terrain_shadow serves, and redraw() leaves them out.
+  void set_live_footprints(std::vector<Eigen::Vector4f> live, std::vector<float> bands = {}) {
+    live_ = std::move(live);
+    live_bands_ = std::move(bands);
+  }
   int terrain_shadow_steps() const { return shadow_steps_; }
   // Sets the uniforms of shaders/render/terrain_shadow.glsl on `program` (current) and binds the
   // elevation texture to texture unit `unit`, so that shader's points receive the terrain's
@@ -123,6 +127,7 @@ class TerrainRenderer {
   Eigen::Vector3f sun_ = Eigen::Vector3f(-0.6f, 0.6f, 0.55f).normalized();
   int shadow_steps_ = 0;
   std::vector<Eigen::Vector4f> live_;  // set_live_footprints
+  std::vector<float> live_bands_;
   ClipmapSelection selection_;
   ShadowMap shadow_;
   std::map<std::pair<int, int>, Mesh> meshes_;  // grid meshes by (cells_x, cells_z)
