@@ -18,6 +18,11 @@ double uehara_depth(double mu, double rho_b, double rho_g, double diameter, doub
   return d;
 }
 
+double uehara_prefactor(double mu, double rho_b, double rho_g, double diameter, double depth, double total_drop) {
+  if (!(mu > 0) || !(rho_b > 0) || !(rho_g > 0) || !(diameter > 0) || !(depth >= 0) || !(total_drop > 0)) return 0;
+  return depth * mu / (std::sqrt(rho_b / rho_g) * std::cbrt(diameter * diameter) * std::cbrt(total_drop));
+}
+
 Result<ImpactSeries> run_impact_series(const ImpactSeriesDef& def) {
   ImpactSeries out;
   const double shell = double(def.base.granule_radius) * def.knobs.particle_scale;

@@ -23,6 +23,10 @@ namespace sandpatch {
 // bed of bulk density rho_g and repose angle atan(mu): the root d of d = (0.14/mu)
 // (rho_b/rho_g)^(1/2) D_b^(2/3) (h + d)^(1/3) (fixed point; the map is a contraction).
 double uehara_depth(double mu, double rho_b, double rho_g, double diameter, double h);
+// The prefactor A of Uehara's law that a measured depth d (m) at total drop H = h + d (m) gives,
+// the exponents held at theirs: d = (A / mu) (rho_b / rho_g)^(1/2) D^(2/3) H^(1/3); the
+// experiments' A is 0.14. 0 for arguments out of range.
+double uehara_prefactor(double mu, double rho_b, double rho_g, double diameter, double depth, double total_drop);
 
 // One impact of a series: the drop's result and the penetration depth the comparison uses:
 // the Bullet sphere's lowest point below the original surface at the end plus the shell

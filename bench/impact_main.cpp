@@ -118,6 +118,20 @@ int run_series(const DropDef& d, const TradeoffKnobs& k) {
   };
   for (const ImpactPoint& p : r->by_height) point(p);
   for (const ImpactPoint& p : r->by_density) point(p);
+  // Uehara's prefactor (0.14 in the experiments) each distinct point gives with the law's
+  // exponents held: mean and standard deviation over the points.
+  std::vector<double> A;
+  for (const auto* v : {&r->by_height, &r->by_density})
+    for (const ImpactPoint& p : *v) {
+      if (v == &r->by_density && std::any_of(r->by_height.begin(), r->by_height.end(), [&](const ImpactPoint& q) {
+            return q.drop_height == p.drop_height && q.density == p.density;
+          }))
+        continue;  // (the density series' point at the height series' density)
+      A.push_back(uehara_prefactor(mu, p.density, r->bulk_density, Db, p.depth, p.total_drop));
+    }
+  double a_mean = 0, a_var = 0;
+  for (double a : A) a_mean += a / double(A.size());
+  for (double a : A) a_var += (a - a_mean) * (a - a_mean) / double(A.size() > 1 ? A.size() - 1 : 1);
   nlohmann::ordered_json f;
   f["bulk_density"] = r->bulk_density;
   f["ball_diameter_soil"] = Db;
@@ -125,6 +139,7 @@ int run_series(const DropDef& d, const TradeoffKnobs& k) {
                      {"prefactor", r->depth_vs_total_drop.prefactor}, {"n", r->depth_vs_total_drop.points}};
   f["depth_vs_rho"] = {{"exponent", r->depth_vs_density.exponent}, {"se", r->depth_vs_density.exponent_se},
                        {"prefactor", r->depth_vs_density.prefactor}, {"n", r->depth_vs_density.points}};
+  f["uehara_prefactor"] = {{"mean", a_mean}, {"sd", std::sqrt(a_var)}, {"n", A.size()}, {"experiments", 0.14}};
   f["worst_rebound"] = r->worst_rebound;
   std::cout << f.dump() << "\n";
   return 0;
