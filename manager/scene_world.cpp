@@ -57,6 +57,10 @@ std::vector<World::Load> to_loads(const BodyDef& body) {
     w.from = l.from;
     if (l.until) w.until = *l.until;
     w.body_frame = l.frame == LoadFrame::Body;
+    if (l.impulse) {
+      w.is_impulse = true;
+      w.impulse = vec3f(*l.impulse);
+    }
     out.push_back(w);
   }
   return out;

@@ -118,6 +118,11 @@ class World {
     double from = 0;                                   // s
     double until = std::numeric_limits<double>::infinity();  // s
     bool body_frame = false;  // force, torque and `at` in the body frame (they turn with it)
+    // An impulse instead (N s): given once, by apply_impulse at the start of the first step
+    // that starts at or after `from` (the body spawned), at `at` when given.
+    bool is_impulse = false;
+    Eigen::Vector3f impulse = Eigen::Vector3f::Zero();
+    bool given = false;  // the impulse was given
   };
   // The loads of the body at entry `entry` (entries()), from its spawn on; replaces any before.
   void set_loads(std::size_t entry, std::vector<Load> loads);

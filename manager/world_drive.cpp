@@ -153,7 +153,17 @@ void World::apply_scene_loads(double t) {
     const RigidBodyId id = entries_[k].id;
     const BodyState st = bullet_->state(id);
     const Eigen::Matrix3f R = st.orientation.toRotationMatrix();
-    for (const Load& l : loads_[k]) {
+    for (Load& l : loads_[k]) {
+      if (l.is_impulse) {
+        if (l.given || !(t + 1e-9 >= l.from)) continue;
+        l.given = true;
+        const Eigen::Vector3f j = l.body_frame ? Eigen::Vector3f(R * l.impulse) : l.impulse;
+        const Eigen::Vector3d p = st.position + (R * l.at).cast<double>();  // m, world
+        // (validated by the scene parser: finite, |J| <= kMaxLoad, `at` within 1e4 m, which
+        // the arm check below kMaxArm may still refuse; then it is not given)
+        (void)apply_impulse(id, j, l.at_centre ? nullptr : &p);
+        continue;
+      }
       if (!(t + 1e-9 >= l.from && t + 1e-9 < l.until)) continue;
       const Eigen::Vector3f f = l.body_frame ? Eigen::Vector3f(R * l.force) : l.force;
       Eigen::Vector3f tq = l.body_frame ? Eigen::Vector3f(R * l.torque) : l.torque;

@@ -124,9 +124,22 @@ LoadDef parse_load(Ctx& c, const json& j, const std::string& path) {
   };
   bounded("force", l.force, "N");
   bounded("torque", l.torque, "N m");
+  if (o.has("impulse")) {
+    Vec3d j{0.0, 0.0, 0.0};
+    bounded("impulse", j, "N s");
+    l.impulse = j;
+    // An impulse is given once: a load is one or the other.
+    for (const char* other : {"force", "torque", "until"})
+      if (o.has(other))
+        c.error(o.at(other), show(*o.get(other)),
+                "leave it out beside 'impulse': an impulse is given once, at 'from'; put a force or torque in a load of its own");
+  }
   if (const json* a = o.get("at")) {
     if (auto v = read_numbers<3>(c, *a, o.at("at"), closed(-1e4, 1e4, "m"))) l.at = *v;
-    if (!o.has("force")) c.error(o.at("at"), show(*a), "'at' is where the force acts: give 'force' too");
+    if (!o.has("force") && !o.has("impulse"))
+      c.error(o.at("at"), show(*a), "'at' is where the force or impulse acts: give 'force' or 'impulse' too");
+    else if (l.at && l.impulse && std::sqrt((*l.at)[0] * (*l.at)[0] + (*l.at)[1] * (*l.at)[1] + (*l.at)[2] * (*l.at)[2]) > 1e4)
+      c.error(o.at("at"), show(*a), "an impulse's point must be within 10000 m of the centre of mass (World::kMaxArm)");
   }
   o.number("from", l.from, closed(0.0, 1e6, "s"));
   l.until = o.number_opt("until", positive(1e6, "s"));
@@ -134,8 +147,8 @@ LoadDef parse_load(Ctx& c, const json& j, const std::string& path) {
     c.error(o.at("until"), show(*o.get("until")), "must be greater than 'from' (" + fmt_num(l.from) + " s)",
             "a load acts for from <= t < until");
   o.enumeration("frame", l.frame, kLoadFrames);
-  if (o.valid() && !o.has("force") && !o.has("torque"))
-    c.missing(o.at("force"), "'force' (N), 'torque' (N m) or both");
+  if (o.valid() && !o.has("force") && !o.has("torque") && !o.has("impulse"))
+    c.missing(o.at("force"), "'force' (N), 'torque' (N m) or both, or 'impulse' (N s)");
   o.finish();
   return l;
 }

@@ -88,14 +88,16 @@ using ShapeKind = api::ShapeKind;
 using MotionKind = api::BodyMotion;
 
 // A force and / or torque put on a body while the simulated time t of a step's start is in
-// [from, until) (World::set_loads): a push, a wheel's traction, a thrust.
+// [from, until) (World::set_loads): a push, a wheel's traction, a thrust. Or an impulse, given
+// once at the start of the first step that starts at or after `from`: a kick, a hammer blow.
 enum class LoadFrame { World, Body };
 inline constexpr int kMaxLoadsPerBody = 256;
 inline constexpr double kMaxLoad = 1e9;        // N or N m: the largest |force| and |torque| (as the API's)
 struct LoadDef {
   Vec3d force = {0.0, 0.0, 0.0};               // N, |force| <= kMaxLoad
   Vec3d torque = {0.0, 0.0, 0.0};              // N m, |torque| <= kMaxLoad
-  std::optional<Vec3d> at;                     // m, the force's point in the body frame (origin at the
+  std::optional<Vec3d> impulse;                // N s, |impulse| <= kMaxLoad; alone (no force, torque, until)
+  std::optional<Vec3d> at;                     // m, the force's or impulse's point in the body frame (origin at the
                                                //   centre of mass); none: the centre of mass
   double from = 0.0;                           // s
   std::optional<double> until;                 // s, > from; none: to the end of the run

@@ -104,7 +104,13 @@ nlohmann::json scene_to_json(const SceneDef& s) {
     if (!b.loads.empty()) {
       json loads = json::array();
       for (const LoadDef& l : b.loads) {
-        json lj = {{"force", l.force}, {"torque", l.torque}};
+        json lj = json::object();
+        if (l.impulse) {
+          lj["impulse"] = *l.impulse;
+        } else {
+          lj["force"] = l.force;
+          lj["torque"] = l.torque;
+        }
         if (l.at) lj["at"] = *l.at;
         lj["from"] = l.from;
         if (l.until) lj["until"] = *l.until;

@@ -274,6 +274,35 @@ TEST(WorldLoads, BodyFrameLoadsTurnWithTheBody) {
   }
 }
 
+// A scene's impulse is given once, at the start of the first step that starts at or after
+// `from`: 4 N s along x on the 2 kg ball from 0.1 s (dt 0.05 s) gives it 2 m/s in the step
+// starting at 0.1 s and nothing more after. With `at` (body frame, the ball turned 90° about y)
+// it also spins it: J = 1 N s along body x (world −z) at body (0, 0.5, 0) adds
+// Δω = (r × J) / I = ((0, 0.5, 0) × (0, 0, −1)) / 0.2 kg m² = (−2.5, 0, 0) rad/s.
+TEST(WorldLoads, ASceneImpulseIsGivenOnceAtItsTime) {
+  auto scene = loaded_scene(R"([{"impulse": [4.0, 0.0, 0.0], "from": 0.1}])");
+  ASSERT_TRUE(scene.ok()) << scene.message();
+  auto w = make_world(*scene, 1, "cpu");
+  ASSERT_TRUE(w.ok()) << w.message();
+  World& world = **w;
+  for (int k = 0; k < 8; ++k) {
+    ASSERT_TRUE(world.step(0.05).ok());
+    const float vx = world.bullet().state(world.entries()[0].id).linear_velocity.x();
+    const double t = world.time();  // s, the end of step k
+    EXPECT_NEAR(vx, t < 0.15 - 1e-9 ? 0.0f : 2.0f, 1e-5f) << "at t = " << t;
+  }
+  auto spun = loaded_scene(R"([{"impulse": [1.0, 0.0, 0.0], "at": [0.0, 0.5, 0.0], "frame": "body"}])");
+  ASSERT_TRUE(spun.ok()) << spun.message();
+  auto w2 = make_world(*spun, 1, "cpu");
+  ASSERT_TRUE(w2.ok()) << w2.message();
+  for (int k = 0; k < 3; ++k) ASSERT_TRUE((*w2)->step(0.05).ok());
+  const BodyState s = (*w2)->bullet().state((*w2)->entries()[0].id);
+  EXPECT_NEAR(s.linear_velocity.z(), -0.5f, 1e-5f);
+  EXPECT_NEAR(s.linear_velocity.x(), 0.0f, 1e-5f);
+  EXPECT_NEAR(s.angular_velocity.x(), -2.5f, 1e-4f);
+  EXPECT_NEAR(s.angular_velocity.z(), 0.0f, 1e-4f);
+}
+
 // World::apply_force refuses what the API documents (the API's tests name its fields).
 TEST(WorldLoads, BadLoadsAreRefused) {
   auto w = flat_world(false);

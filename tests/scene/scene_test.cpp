@@ -805,13 +805,19 @@ TEST(SceneLoads, FieldsAndDefaults) {
   json l0 = {{"force", {1.0, 2.0, 3.0}}};
   json l1 = {{"torque", {0.0, 4.0, 0.0}}, {"at", {0.0, 0.5, 0.0}}, {"force", {1.0, 0.0, 0.0}},
              {"from", 0.5},          {"until", 2.0},          {"frame", "body"}};
-  json body = {{"name", "b"}, {"shape", {{"type", "sphere"}, {"radius", 0.5}}}, {"mass", 2.0}, {"loads", json::array({l0, l1})}};
+  json l2 = {{"impulse", {0.0, 3.0, 0.0}}, {"at", {0.1, 0.0, 0.0}}, {"from", 1.5}};
+  json body = {{"name", "b"}, {"shape", {{"type", "sphere"}, {"radius", 0.5}}}, {"mass", 2.0}, {"loads", json::array({l0, l1, l2})}};
   json patch = json::object();
   patch["bodies"] = json::array({body});
   const auto r = parse(scene_with(patch));
   ASSERT_TRUE(r.ok()) << all(r);
   const auto& loads = r->bodies[0].loads;
-  ASSERT_EQ(loads.size(), 2u);
+  ASSERT_EQ(loads.size(), 3u);
+  EXPECT_FALSE(loads[0].impulse.has_value());
+  ASSERT_TRUE(loads[2].impulse.has_value());
+  EXPECT_EQ(*loads[2].impulse, (Vec3d{0.0, 3.0, 0.0}));
+  EXPECT_EQ(*loads[2].at, (Vec3d{0.1, 0.0, 0.0}));
+  EXPECT_EQ(loads[2].from, 1.5);
   EXPECT_EQ(loads[0].force, (Vec3d{1.0, 2.0, 3.0}));
   EXPECT_EQ(loads[0].torque, (Vec3d{0.0, 0.0, 0.0}));
   EXPECT_FALSE(loads[0].at.has_value());
@@ -858,9 +864,23 @@ TEST(SceneLoads, BadLoadsNameTheField) {
   EXPECT_TRUE(has_error(not_object, "bodies[0].loads[0]", "3", "object")) << all(not_object);
   const nlohmann::json torque_at = {{"torque", {0.0, 1.0, 0.0}}, {"at", {1.0, 0.0, 0.0}}};
   const auto at_alone = parse(body(nlohmann::json::array({torque_at})));
-  EXPECT_TRUE(has_error(at_alone, "bodies[0].loads[0].at", "[1.0,0.0,0.0]", "give 'force' too")) << all(at_alone);
+  EXPECT_TRUE(has_error(at_alone, "bodies[0].loads[0].at", "[1.0,0.0,0.0]", "give 'force' or 'impulse' too")) << all(at_alone);
   const auto not_array = parse(body(one));
   EXPECT_TRUE(has_error(not_array, "bodies[0].loads", "", "array")) << all(not_array);
+  // An impulse: finite and bounded like a force, given once (no force, torque or until
+  // beside it), its point within World::kMaxArm.
+  const nlohmann::json bad_impulses = nlohmann::json::array(
+      {{{"impulse", {1.0, "nan", 0.0}}},
+       {{"impulse", {0.0, 2e9, 0.0}}},
+       {{"impulse", {1.0, 0.0, 0.0}}, {"force", {1.0, 0.0, 0.0}}},
+       {{"impulse", {1.0, 0.0, 0.0}}, {"until", 2.0}},
+       {{"impulse", {1.0, 0.0, 0.0}}, {"at", {9000.0, 9000.0, 0.0}}}});
+  const auto bad = parse(body(bad_impulses));
+  EXPECT_TRUE(has_error(bad, "bodies[0].loads[0].impulse[1]", "\"nan\"", "NaN")) << all(bad);
+  EXPECT_TRUE(has_error(bad, "bodies[0].loads[1].impulse[1]", "2000000000.0", "N s")) << all(bad);
+  EXPECT_TRUE(has_error(bad, "bodies[0].loads[2].force", "[1.0,0.0,0.0]", "given once")) << all(bad);
+  EXPECT_TRUE(has_error(bad, "bodies[0].loads[3].until", "2", "given once")) << all(bad);
+  EXPECT_TRUE(has_error(bad, "bodies[0].loads[4].at", "[9000.0,9000.0,0.0]", "within 10000 m")) << all(bad);
 }
 
 // terrain.frame_budget_ms: a number of ms in (0, 1e6] or "off"; anything else is refused
