@@ -116,6 +116,7 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
   std::vector<std::size_t> next_export(scene.outputs.heightfields.size(), 0);
   std::vector<std::size_t> next_frame(scene.outputs.frames.size(), 0);
   FrameWriter images(world);
+  images.set_show_shells(opt.show_shells);
   std::size_t images_skipped = 0;
   std::vector<std::string> written;
   VideoWriter video;

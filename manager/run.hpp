@@ -48,6 +48,8 @@ struct RunOptions {
   // When set: the run's time series to this file (and its stem + "_patches.csv"), instead of
   // the scene's outputs.csv (relative to the output directory). RunCsv, docs/cli.md "CSV".
   std::string csv;
+  // Images and video also draw the bodies' particle shells (FrameWriter::set_show_shells).
+  bool show_shells = false;
   // Called at the end of every frame of the frame loop (after its frame time is measured,
   // so the callback's own time is not in frame_ms; it is in the run's wall_s).
   std::function<void(const FrameSample&)> on_frame;

@@ -272,7 +272,22 @@ Result<render::Image> FrameWriter::render(const render::CameraView& view, const 
   std::unique_ptr<render::ParticleBuffer> buf;  // alive until the frame is drawn
   const bool gpu = manager_ && manager_->gl_context();
   if (Status s = gpu ? set_particles_gpu() : set_particles_cpu(buf); !s) return s.errors();
-  if (Status s = renderer_->set_bodies(body_instances(world_)); !s) return s.errors();
+  std::vector<render::BodyInstance> bodies = body_instances(world_);
+  if (show_shells_ && manager_) {
+    std::vector<double> xyzr;
+    manager_->shell_spheres(xyzr);  // may make the manager's GL context current
+    if (Status s = context_->make_current(); !s) return s.errors();
+    for (std::size_t k = 0; k + 3 < xyzr.size(); k += 4) {
+      render::BodyInstance b;
+      b.kind = render::BodyShapeKind::Sphere;
+      b.radius = float(xyzr[k + 3]);
+      b.position = {xyzr[k], xyzr[k + 1], xyzr[k + 2]};
+      b.albedo = {0.85f, 0.15f, 0.75f};  // magenta: no body of the palette and no sand is near it
+      b.segments = 8;
+      bodies.push_back(b);
+    }
+  }
+  if (Status s = renderer_->set_bodies(bodies); !s) return s.errors();
   auto img = renderer_->render(view, flags);
   renderer_->clear_particles();
   renderer_->clear_bodies();

@@ -76,6 +76,9 @@ class FrameWriter {
   Result<render::Image> render(const render::CameraView& view, const render::FrameFlags& flags = {});
   // The renderer (null before the first image or when unavailable).
   render::SceneRenderer* renderer() { return renderer_.get(); }
+  // A debug overlay: the spheres of the bodies' particle shells in the live patches, drawn as
+  // small magenta spheres over the bodies (off by default; `sandpatch run|render --shells`).
+  void set_show_shells(bool on) { show_shells_ = on; }
 
  private:
   Status prepare();
@@ -88,6 +91,7 @@ class FrameWriter {
   std::unique_ptr<gl::Context> ctx_;    // own context (CPU backend)
   gl::Context* context_ = nullptr;      // the context in use (own or the manager's)
   std::unique_ptr<render::SceneRenderer> renderer_;
+  bool show_shells_ = false;
   std::string why_;
 };
 

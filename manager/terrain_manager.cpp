@@ -377,6 +377,29 @@ void TerrainManager::particles(std::vector<float>& xyzr) const {
     if (s.state != SlotState::Free) I.granule_spheres(s, xyzr);
 }
 
+void TerrainManager::shell_spheres(std::vector<double>& xyzr) const {
+  xyzr.clear();
+  const Impl& I = *impl_;
+  I.current();
+  for (const auto& s : I.slots) {
+    if (s.state == SlotState::Free) continue;
+    std::vector<Vec3> pos;  // read once a slot, when it carries an enabled shell
+    const double rw = I.radius_world(s);
+    for (const Carried& c : s.carried) {
+      if (!c.enabled) continue;
+      if (pos.empty()) pos = s.sim->particle_positions();
+      // a shell's spheres follow the bodies made before it (particle ids in creation order)
+      std::size_t first = 0;
+      for (int b = 0; b < c.shell.index; ++b) first += std::size_t(s.sim->body_particle_count(BodyId{b}));
+      const std::size_t n = std::size_t(s.sim->body_particle_count(c.shell));
+      for (std::size_t k = first; k < first + n && k < pos.size(); ++k) {
+        const auto w = s.sim->def().scale.position_to_world(pos[k]);
+        xyzr.insert(xyzr.end(), {w[0], w[1], w[2], rw});
+      }
+    }
+  }
+}
+
 gl::Context* TerrainManager::gl_context() const { return impl_->def.backend == "gl" ? impl_->gl.get() : nullptr; }
 
 std::vector<TerrainManager::GpuParticles> TerrainManager::gpu_particles() const {

@@ -274,6 +274,9 @@ class TerrainManager {
   // Sphere centres and radii of every live patch (x, y, z, r; m, world relative to the
   // heightfield origin) with each patch's fade-in factor, for rendering.
   void particles(std::vector<float>& xyzr) const;
+  // The spheres of the bodies' shells enabled in the live patches (x, y, z, r; m, world), for
+  // a debug overlay (docs/rendering.md "Bodies": `--shells`).
+  void shell_spheres(std::vector<double>& xyzr) const;
   // The same spheres grouped by patch, in the order particles() writes them: each group's
   // sphere count and fade-in factor in [0, 1] (1 after fade_frames frames of simulation).
   std::vector<std::pair<std::size_t, float>> particle_groups() const;

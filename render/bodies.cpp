@@ -45,6 +45,8 @@ Status validate(const BodyInstance& b, int index) {
     es.push_back(Error{"", f + "orientation", "non-finite or not unit", "must be a unit quaternion"});
   if (!(b.albedo.allFinite() && b.albedo.minCoeff() >= 0 && b.albedo.maxCoeff() <= 1))
     es.push_back(Error{"", f + "albedo", "out of range", "must be in [0, 1] per channel"});
+  if (b.segments != 0 && (b.segments < 4 || b.segments > 64))
+    es.push_back(Error{"", f + "segments", std::to_string(b.segments), "must be 0 (the default) or in [4, 64]"});
   switch (b.kind) {
     case BodyShapeKind::Sphere:
       if (!positive(b.radius)) es.push_back(Error{"", f + "radius", std::to_string(b.radius), "must be > 0 and finite (m)"});

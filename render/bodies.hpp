@@ -27,6 +27,9 @@ struct BodyInstance {
   Eigen::Vector3d position = Eigen::Vector3d::Zero();               // m, world: the body frame's origin
   Eigen::Quaternionf orientation = Eigen::Quaternionf::Identity();  // body -> world
   Eigen::Vector3f albedo{0.6f, 0.6f, 0.6f};                         // linear RGB in [0, 1]
+  // Tessellation (spheres, capsules, cylinders): segments around, 0 = the renderer's 32; else
+  // in [4, 64] (a debug overlay of many small spheres takes 8).
+  int segments = 0;
 };
 
 // Checks one body; errors name the field ("bodies[1].radius = -1: must be > 0 and finite (m)").

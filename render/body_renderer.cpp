@@ -44,7 +44,7 @@ std::size_t BodyRenderer::draw(const std::vector<BodyInstance>& bodies, const Ei
   std::size_t triangles = 0;
   for (std::size_t k = 0; k < bodies.size(); ++k) {
     tris_.clear();
-    triangles += tessellate(bodies[k], world_origin, tris_);
+    triangles += tessellate(bodies[k], world_origin, tris_, bodies[k].segments > 0 ? bodies[k].segments : 32);
     Eigen::Vector3f c = bodies[k].albedo;
     if (flat_ids) {
       const auto id = body_id_color(int(k));

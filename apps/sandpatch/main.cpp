@@ -1,7 +1,7 @@
 // sandpatch: the command-line program (docs/cli.md).
-//   sandpatch run [SCENE] [--out DIR] [--seconds S | --frames N] [--backend cpu|gl] [--threads T]
+//   sandpatch run [SCENE] [--out DIR] [--seconds S | --frames N] [--backend cpu|gl] [--threads T] [--shells]
 //                 [--video FILE [--video-fps F]] [--csv FILE]
-//   sandpatch render [SCENE] --at T [--camera NAME] [--image FILE] [--out DIR] [--frame-budget MS|off]
+//   sandpatch render [SCENE] --at T [--camera NAME] [--image FILE] [--out DIR] [--frame-budget MS|off] [--shells]
 //   sandpatch view [SCENE] [--frames N [--screenshot FILE]] [--size WxH] [--camera NAME] [--backend cpu|gl]
 //                  [--threads T] [--frame-budget MS|off] [--keys K,...] [--quality high|low]
 //   sandpatch check SCENE
@@ -101,6 +101,7 @@ struct RunCli {
   std::string frame_budget;
   std::string sleep_regions;
   bool quiet = false;
+  bool shells = false;
 };
 
 void add_run(CLI::App& app, RunCli& a) {
@@ -119,6 +120,7 @@ void add_run(CLI::App& app, RunCli& a) {
                   "Whether the still parts of an awake patch sleep (overrides simulation.sleep.regions)")
       ->check(CLI::IsMember({"on", "off"}));
   run->add_flag("--quiet", a.quiet, "No progress output");
+  run->add_flag("--shells", a.shells, "Images and video also draw the bodies' particle shells (a debug overlay)");
   run->add_option("--video", a.video, "Also write a video of the scene's first camera to this file, through ffmpeg");
   run->add_option("--video-fps", a.video_fps, "Video frames per simulated second (default 30; at most 1 / dt)");
   run->add_option("--csv", a.csv, "Also write each body's pose, velocity, soil forces and sinkage per frame to this CSV file (patches: its stem + _patches.csv)");
@@ -128,6 +130,7 @@ struct RenderCli {
   std::string scene, image, camera, out_dir, frame_budget, backend;
   double at = 0;
   int threads = -1;
+  bool shells = false;
 };
 
 void add_render(CLI::App& app, RenderCli& a) {
@@ -138,6 +141,7 @@ void add_render(CLI::App& app, RenderCli& a) {
   rend->add_option("--image", a.image, "PNG to write (default: DIR/render_<ms>.png)");
   rend->add_option("--out", a.out_dir, "Output directory for the report (default: out/<scene name>)");
   rend->add_option("--backend", a.backend, "DEM backend")->check(CLI::IsMember({"cpu", "gl"}));
+  rend->add_flag("--shells", a.shells, "Also draw the bodies' particle shells (a debug overlay)");
   rend->add_option("--threads", a.threads, "Worker threads (0 = all)")->check(CLI::NonNegativeNumber);
   rend->add_option("--frame-budget", a.frame_budget,
                    "Wall-clock ms a frame's patches may take, or off (overrides simulation.frame_budget_ms)");
@@ -214,6 +218,7 @@ int cmd_run(const RunCli& a, int argc, char** argv) {
     opt.video = a.video;
     opt.video_fps = a.video_fps;
     opt.csv = a.csv;
+    opt.show_shells = a.shells;
     return opt;
   }, argc, argv);
 }
@@ -228,6 +233,7 @@ int cmd_render(const RenderCli& a, int argc, char** argv) {
     opt.final_camera = a.camera;
     opt.backend = a.backend;
     opt.threads = a.threads;
+    opt.show_shells = a.shells;
     if (a.frame_budget == "off") opt.frame_budget_ms = std::numeric_limits<double>::infinity();
     else if (!a.frame_budget.empty()) opt.frame_budget_ms = parse_budget(a.frame_budget);
     char ms[32];

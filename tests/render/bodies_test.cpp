@@ -121,4 +121,11 @@ TEST(Bodies, BadBodiesNameTheField) {
   EXPECT_NE(validate(b, 0).message().find("bodies[0].height"), std::string::npos);
   b.kind = BodyShapeKind::Capsule;  // a capsule of no straight part is a sphere
   EXPECT_TRUE(validate(b, 0).ok());
+  b = BodyInstance{};
+  b.segments = 3;  // 0 (the renderer's 32) or [4, 64]
+  EXPECT_NE(validate(b, 4).message().find("bodies[4].segments"), std::string::npos) << validate(b, 4).message();
+  b.segments = 8;
+  EXPECT_TRUE(validate(b, 4).ok());
+  std::vector<BodyVertex> v;
+  EXPECT_EQ(tessellate(b, Eigen::Vector3d::Zero(), v, b.segments), 2u * 8u * 4u);  // 8 around, 4 from pole to pole, two triangles each
 }
