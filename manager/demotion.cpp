@@ -32,10 +32,7 @@ constexpr float kNoUnderside = std::numeric_limits<float>::infinity();
 std::vector<float> floor_under_body(const Slot& slot, const Carried& c, const std::vector<Vec3>& pos, const Heightfield& hf, double rw,
                                   float lowest, int i0, int j0, int ni, int nj) {
   std::vector<float> out(std::size_t(ni) * std::size_t(nj), kNoUnderside);
-  // the shell's spheres: particle ids follow the bodies' creation order
-  std::size_t first = 0;
-  for (int b = 0; b < c.shell.index; ++b) first += std::size_t(slot.sim->body_particle_count(BodyId{b}));
-  const std::size_t n = std::size_t(slot.sim->body_particle_count(c.shell));
+  const auto [first, n] = particle_range(*slot.sim, c.shell);  // the shell's spheres
   if (n == 0 || first + n > pos.size()) return out;
   const double sp = hf.spacing();
   const double r2 = rw * rw;

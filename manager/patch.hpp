@@ -13,6 +13,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <memory>
+#include <utility>
 #include <vector>
 
 #include "heightfield/heightfield.hpp"
@@ -45,6 +46,14 @@ struct Carried {
   Eigen::Vector3d f_sum = Eigen::Vector3d::Zero(), t_sum = Eigen::Vector3d::Zero();
   Eigen::Vector3f force = Eigen::Vector3f::Zero(), torque = Eigen::Vector3f::Zero();  // N, N m world: the last frame's mean
 };
+
+// The particle ids [first, first + count) of body b's spheres in a simulation: ids follow the
+// bodies' creation order (a patch's granules first, then the shells).
+inline std::pair<std::size_t, std::size_t> particle_range(const DemBackend& sim, BodyId b) {
+  std::size_t first = 0;
+  for (int k = 0; k < b.index; ++k) first += std::size_t(sim.body_particle_count(BodyId{k}));
+  return {first, std::size_t(sim.body_particle_count(b))};
+}
 
 // Volume of the patch's soil (m³): the heightfield's before promotion, the granules' while
 // it lives, the heightfield's after demotion.

@@ -388,10 +388,7 @@ void TerrainManager::shell_spheres(std::vector<double>& xyzr) const {
     for (const Carried& c : s.carried) {
       if (!c.enabled) continue;
       if (pos.empty()) pos = s.sim->particle_positions();
-      // a shell's spheres follow the bodies made before it (particle ids in creation order)
-      std::size_t first = 0;
-      for (int b = 0; b < c.shell.index; ++b) first += std::size_t(s.sim->body_particle_count(BodyId{b}));
-      const std::size_t n = std::size_t(s.sim->body_particle_count(c.shell));
+      const auto [first, n] = particle_range(*s.sim, c.shell);
       for (std::size_t k = first; k < first + n && k < pos.size(); ++k) {
         const auto w = s.sim->def().scale.position_to_world(pos[k]);
         xyzr.insert(xyzr.end(), {w[0], w[1], w[2], rw});

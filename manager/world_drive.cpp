@@ -159,8 +159,8 @@ void World::apply_scene_loads(double t) {
         l.given = true;
         const Eigen::Vector3f j = l.body_frame ? Eigen::Vector3f(R * l.impulse) : l.impulse;
         const Eigen::Vector3d p = st.position + (R * l.at).cast<double>();  // m, world
-        // (validated by the scene parser: finite, |J| <= kMaxLoad, `at` within 1e4 m, which
-        // the arm check below kMaxArm may still refuse; then it is not given)
+        // (the scene parser refused what apply_impulse would: J finite and at most kMaxLoad,
+        // |at| at most kMaxArm; the body is dynamic and alive)
         (void)apply_impulse(id, j, l.at_centre ? nullptr : &p);
         continue;
       }
