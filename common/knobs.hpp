@@ -144,7 +144,7 @@ inline constexpr std::array<Field, 35> kOtherFields = {{
     {"bodies[].linear_velocity", "BodyDef.linear_velocity", ""},
     {"bodies[].angular_velocity", "BodyDef.angular_velocity", ""},
     {"bodies[].spawn_time", "", "a game adds a body when it is due (Terrain::add_body)"},
-    {"bodies[].loads", "Terrain::apply_force, apply_torque, apply_impulse", "a game calls these before each step; a scene lists forces and torques with the times they act"},
+    {"bodies[].loads", "Terrain::apply_force, apply_torque, apply_impulse", "a game calls these before each step; a scene lists forces and torques with the times they act, and impulses with the time each is given"},
     {"vehicles", "VehicleDef, Terrain::add_vehicle, drive_vehicle", "the same fields, one expansion (scene/vehicle.hpp); a scene gives throttle and steering phases over time, a game calls drive_vehicle before each step"},
     {"joints", "JointDef, Terrain::add_joint, set_joint_motor", "bodies by name in a scene, by handle in the library; a scene's motor is a list of phases over time (joints[].motor), a game calls set_joint_motor before each step"},
     {"simulation.dt", "Terrain::step(dt, substeps)", "the step's arguments"},
