@@ -270,15 +270,14 @@ TEST(SceneFrames, GlBackendShowsTheBodiesNotTheirShells) {
 // centre. Off (the default): none in the whole image; on: more than 15 around each body at
 // 320 x 180 (measured 33 around the ball, sunk among granules of 12 cm, and 162 around the crate).
 TEST(SceneFrames, ShellOverlayDrawsTheCarriedBodiesShells) {
-  SceneDef scene;
-  std::unique_ptr<World> world;
-  default_scene_at(0.01, 2.0, scene, world);
-  ASSERT_TRUE(world);
-  scene.cameras.front().width = 320;
-  scene.cameras.front().height = 180;
-  struct { SceneDef scene; std::unique_ptr<World> world; } r{scene, std::move(world)};
-  FrameWriter images(*r.world);
-  const render::CameraView cam = camera_at(r.scene.cameras.front(), r.world->time());
+  SceneDef s;
+  std::unique_ptr<World> w;
+  ASSERT_NO_FATAL_FAILURE(default_scene_at(0.01, 2.0, s, w));
+  World& world = *w;
+  s.cameras.front().width = 320;
+  s.cameras.front().height = 180;
+  FrameWriter images(world);
+  const render::CameraView cam = camera_at(s.cameras.front(), world.time());
   auto off = images.render(cam);
   ASSERT_TRUE(off.ok()) << off.message();
   if (images.unavailable()) GTEST_SKIP() << "no GL context: " << images.why();
@@ -291,7 +290,7 @@ TEST(SceneFrames, ShellOverlayDrawsTheCarriedBodiesShells) {
   for (int y = 0; y < cam.height; ++y)
     for (int x = 0; x < cam.width; ++x) off_count += magenta(off->pixel(x, y));
   EXPECT_EQ(off_count, 0);
-  const auto report = r.world->report();
+  const auto report = world.report();
   ASSERT_EQ(report["bodies"].size(), 2u);
   for (const auto& b : report["bodies"]) {
     EXPECT_TRUE(b["carried_by_patch"].get<bool>()) << b.dump();
