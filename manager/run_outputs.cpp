@@ -229,6 +229,7 @@ Status FrameWriter::set_particles_cpu(std::unique_ptr<render::ParticleBuffer>& b
       src.footprint = footprint(patches[g], hf_);
       src.footprint_band = footprint_band(patches[g]);
       src.shading_scale = shading_scale(patches[g]);
+      src.sphere_radius = float(patches[g].granule_radius_world);
     }
     first += count;
     if (count > 0) sources.push_back(src);
@@ -260,6 +261,7 @@ Status FrameWriter::set_particles_gpu() {
         src.footprint = footprint(p, hf_);
         src.footprint_band = footprint_band(p);
         src.shading_scale = shading_scale(p);
+        src.sphere_radius = float(p.granule_radius_world);
       }
     if (src.count > 0) sources.push_back(src);
   }

@@ -4,6 +4,7 @@
 #include <GL/glcorearb.h>
 
 #include <Eigen/LU>
+#include <algorithm>
 #include <cmath>
 #include <string>
 
@@ -29,6 +30,8 @@ Status validate(const ParticleSource& s, int index) {
   if (!(s.fade >= 0 && s.fade <= 1)) es.push_back(Error{"", f + "fade", std::to_string(s.fade), "must be in [0, 1]"});
   if (!(s.shading_scale >= 1 && s.shading_scale <= 64))
     es.push_back(Error{"", f + "shading_scale", std::to_string(s.shading_scale), "must be in [1, 64]"});
+  if (!(s.sphere_radius >= 0 && std::isfinite(s.sphere_radius)))
+    es.push_back(Error{"", f + "sphere_radius", std::to_string(s.sphere_radius), "must be >= 0 m (0: unknown)"});
   if (!s.origin.allFinite()) es.push_back(Error{"", f + "origin", "non-finite", "must be finite (m)"});
   if (!s.footprint.allFinite()) es.push_back(Error{"", f + "footprint", "non-finite", "must be finite (m) or empty"});
   if (s.id_offset < -1) es.push_back(Error{"", f + "id_offset", std::to_string(s.id_offset), "must be -1 (no ids) or >= 0 bytes"});
@@ -43,6 +46,8 @@ Status validate(const ParticleSource& s, int index) {
 }
 
 ParticleBuffer::ParticleBuffer(const std::vector<Eigen::Vector4f>& xyzr) : count_(std::int64_t(xyzr.size())) {
+  for (const Eigen::Vector4f& p : xyzr)
+    if (p.w() > 0 && std::isfinite(p.w())) min_radius_ = min_radius_ > 0 ? std::min(min_radius_, p.w()) : p.w();
   glGenBuffers(1, &id_);
   glBindBuffer(GL_ARRAY_BUFFER, id_);
   glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(xyzr.size() * sizeof(Eigen::Vector4f)), xyzr.data(), GL_STATIC_DRAW);
@@ -58,6 +63,7 @@ ParticleSource ParticleBuffer::source(const Eigen::Vector3d& origin, float scale
   s.stride = 16;
   s.position_offset = 0;
   s.radius_offset = 12;
+  s.sphere_radius = scale * min_radius_;
   s.origin = origin;
   s.scale = scale;
   s.fade = fade;

@@ -44,6 +44,10 @@ struct ParticleSource {
   // over (1 + shading_scale) / 2 times the usual span, so a coarse patch reads as sand rather
   // than as a heap of pebbles (docs/rendering.md "Particles"). 1 = as drawn.
   float shading_scale = 1.0f;
+  // m, world: the radius the spheres are drawn at when they share one (scale x radius), or 0
+  // (unknown; with radius_offset < 0, scale x radius is taken). The renderer smooths the granules' bed over the finest such radius of a frame
+  // before it takes the bed's normal from it (docs/rendering.md "Particles").
+  float sphere_radius = 0.0f;
   // The patch's footprint on the ground, world (x0, z0, x1, z1) in m, or empty (x1 <= x0, the
   // default). When set, the second terrain pass (Leach & Marais §5.1) leaves the terrain out
   // of it: there the granules are the surface, so a crater or heap carved into the bed shows
@@ -73,12 +77,14 @@ class ParticleBuffer {
   ParticleBuffer& operator=(const ParticleBuffer&) = delete;
   unsigned id() const { return id_; }
   std::int64_t count() const { return count_; }
-  // A source over the whole buffer (stride 16, radius in w).
+  // A source over the whole buffer (stride 16, radius in w; its sphere_radius the smallest
+  // radius in the buffer times scale).
   ParticleSource source(const Eigen::Vector3d& origin, float scale = 1.0f, float fade = 1.0f) const;
 
  private:
   unsigned id_ = 0;
   std::int64_t count_ = 0;
+  float min_radius_ = 0;  // m, unit scale: the smallest sphere radius (0: none)
 };
 
 class ParticleRenderer {

@@ -184,12 +184,18 @@ class SceneRenderer {
   std::unique_ptr<ParticleRenderer> particle_renderer_;
   std::unique_ptr<BodyRenderer> body_renderer_;
   gl::Program ao_program_;
+  gl::Program bed_blur_program_;
   std::vector<ParticleSource> particles_;
   std::vector<BodyInstance> bodies_;
   // The scene renders into fbo_ (colour and depth textures); the ambient-occlusion pass reads
   // them and writes ao_fbo_ (colour renderbuffer), which is read back.
   unsigned fbo_ = 0, color_tex_ = 0, depth_tex_ = 0, bed_tex_ = 0, ao_fbo_ = 0, ao_rb_ = 0, empty_vao_ = 0;
   unsigned shadow_fbo_ = 0, shadow_tex_ = 0;
+  // The granule bed smoothed (bed_blur.frag): bed_tex_ blurred across into bed_mid_tex_, then
+  // down into bed_smooth_tex_ (R32F window depths), through bed_fbo_.
+  unsigned bed_fbo_ = 0, bed_mid_tex_ = 0, bed_smooth_tex_ = 0;
+  // Smooths bed_tex_ into bed_smooth_tex_ (w x h pixels); radius: m, the drawn sphere radius.
+  void smooth_bed(const Eigen::Matrix4f& proj, int w, int h, float radius);
   int fb_w_ = 0, fb_h_ = 0;
   std::int64_t pending_texels_ = 0;  // written by heightfield_changed() since the last frame
   RenderStats stats_;

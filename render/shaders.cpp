@@ -66,6 +66,10 @@ Result<gl::Program> build_ao_program() {
   return gl::Program::graphics("shaders/render/ao.{vert,frag}", with_common("render/ao.vert"),
                                with_common("render/ao.frag"));
 }
+Result<gl::Program> build_bed_blur_program() {
+  return gl::Program::graphics("shaders/render/{ao.vert,bed_blur.frag}", with_common("render/ao.vert"),
+                               with_common("render/bed_blur.frag"));
+}
 Result<gl::Program> build_full_grid_program() {
   return gl::Program::graphics("shaders/render/full_grid.{vert,frag}", with_common("render/full_grid.vert"),
                                with_common("render/full_grid.frag"));

@@ -15,5 +15,7 @@ Result<gl::Program> build_particle_program();
 Result<gl::Program> build_full_grid_program();
 Result<gl::Program> build_body_program();
 Result<gl::Program> build_ao_program();
+// The granule bed's smoothing, one direction a pass (shaders/render/bed_blur.frag).
+Result<gl::Program> build_bed_blur_program();
 
 }  // namespace sandpatch::render

@@ -52,6 +52,7 @@ void main() {
   // packed bed's caps then light like the surface they make up (docs/rendering.md).
   vec3 n_sphere = normalize(mat3(u_view_inv) * n_eye);
   vec3 n_bed = normalize(v_ground_normal);
+  vec4 c = vec4(0.0);  // the bed's eye position under this pixel (w = 0: none)
   if (u_bed_on) {
     // The bed's normal from the pre-pass, (1 + s) / 2 times further out at particle scale s: a
     // coarse patch's bed is as smooth as the sand it stands for, over as many granules. Eight
@@ -67,7 +68,7 @@ void main() {
     // the terrain's normal.
     float l_px = max(u_bed_scale * 0.5 * (1.0 + u_shading_scale) * v_radius * u_proj[1][1] * 0.5 * u_viewport.y /
                      max(-v_center_eye.z, 1e-4), 1.5);
-    vec4 c = bed_eye(gl_FragCoord.xy);
+    c = bed_eye(gl_FragCoord.xy);
     const float kSteep = 3.0;
     vec3 sum = vec3(0.0);
     for (int k = 0; k < 8 && c.w > 0.0; ++k) {
@@ -96,7 +97,12 @@ void main() {
   // equator (factor 0.8 facing into the bed to 1 facing out of it), so each granule reads as a
   // ball; u_gain brings the bed's mean brightness back to the terrain's.
   float occ = u_gain * mix(0.9, mix(0.8, 1.0, clamp(0.5 + 0.5 * dot(n_sphere, n_bed), 0.0, 1.0)), detail);
-  float tint = mix(1.0, v_tint, 0.5 + 0.5 * detail);
-  float vis = min(sp_sun_visibility(p), v_terrain_vis);  // the bodies' shadows and the terrain's
+  float tint = mix(1.0, v_tint, 0.25 + 0.75 * detail);
+  // The bodies' shadows, looked up where the light falls: on a fine bed (little detail of its
+  // own) the smoothed bed under the pixel, so a shadow's edge crosses the bed as it crosses
+  // sand, not cap by cap (looked up on the caps, a body's shadow edge left specks of 1.5 px
+  // granules half lit); on granules large on screen their own surface.
+  vec3 p_lit = c.w > 0.0 ? mix((u_view_inv * vec4(c.xyz, 1.0)).xyz, p, detail) : p;
+  float vis = min(sp_sun_visibility(p_lit), v_terrain_vis);  // the bodies' shadows and the terrain's
   o_color = vec4(sp_shade_gain(tint * sp_blend_materials(v_weights, p.xz), n, vis, occ), u_fade);
 }
