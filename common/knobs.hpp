@@ -123,7 +123,7 @@ struct Field {
   const char* api;    // "" = scene files only
   const char* note;
 };
-inline constexpr std::array<Field, 35> kOtherFields = {{
+inline constexpr std::array<Field, 36> kOtherFields = {{
     {"terrain.source", "TerrainDef.file + file_type, TerrainDef.procedural (+ noise_seed)", "a heightmap file or a generator (its numbers are limits above); the scene's source.type is file_type (the library may leave it to the extension)"},
     {"", "TerrainDef.heights", "an array from the game; scene files name a heightmap file instead"},
     {"", "TerrainDef.spacing_overrides_file", "with an esri_ascii source, a scene's terrain.spacing given overrides the file's cellsize"},
@@ -153,6 +153,7 @@ inline constexpr std::array<Field, 35> kOtherFields = {{
     {"simulation.backend", "TerrainDef.backend", "cpu or gl"},
     {"simulation.granular_patches", "TerrainDef.granular_patches", ""},
     {"simulation.sleep.regions", "TerrainDef.sleep_regions", ""},
+    {"simulation.lod.travel", "TerrainDef.lod_travel", ""},
     {"simulation.gravity", "TerrainDef.gravity", ""},
     {"simulation.seed", "TerrainDef.seed", ""},
     {"simulation.preset", "", "a named set of knobs; a game sets the knobs themselves"},

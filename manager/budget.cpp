@@ -403,4 +403,31 @@ TerrainManager::Impl::BudgetChoice TerrainManager::Impl::choose(const PatchReque
   return c;
 }
 
+TerrainManager::Impl::BudgetChoice TerrainManager::Impl::choose_successor(const PatchRequest& r, const Slot& pred, double dt,
+                                                                          double live_ms) const {
+  BudgetChoice c;
+  c.requested_scale = c.scale = pred.scale;
+  c.req = r;
+  c.req.particle_scale = pred.scale;
+  c.granules = predict_granules(r, pred.scale);
+  c.budget_ms = budget_ms(dt);
+  const int own = pred.steps_per_contact > 0 ? pred.steps_per_contact : def.steps_per_contact;
+  // (its predecessor's cost leaves with it)
+  const double pred_ms = predict_ms(slot_spheres(pred, record(pred).granules), dt, pred.steps_per_contact);
+  c.available_ms = 0.8 * c.budget_ms - std::max(0.0, live_ms - pred_ms);
+  c.steps_per_contact = pred.steps_per_contact;
+  c.predicted_ms = predict_ms(4.0 * c.granules, dt, own);
+  c.fits = !budget_on() || c.predicted_ms <= c.available_ms;
+  const int n_half = std::max(kMinStepsPerContact, def.steps_per_contact / 2);
+  if (!c.fits && own > n_half) {
+    c.traded.push_back("substeps");
+    c.rung = kTradeSubstepsRung;
+    c.steps_per_contact = n_half;
+    c.predicted_ms = predict_ms(4.0 * c.granules, dt, n_half);
+    c.fits = c.predicted_ms <= c.available_ms;
+  }
+  c.req.steps_per_contact = c.steps_per_contact;
+  return c;
+}
+
 }  // namespace sandpatch

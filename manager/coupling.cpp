@@ -354,7 +354,12 @@ Status TerrainManager::Impl::couple_before(Slot& slot, double dt) {
     // (lift_to_clear, at most 2 r; none for a body coming down from above, nor for one in a
     // hollow the fill left for it, clear_bodies, until it moves into the hollow's side). A body
     // joined to others is not moved alone (its joints would pull it back): left to the DEM.
-    if (touch && (fresh || !it->enabled) && world->motion(b) == RigidMotion::Dynamic && groups[std::size_t(b.index)] == 0) {
+    // (A body this patch took over from its predecessor rests in the granules it took over:
+    // it is not lifted; take_over.)
+    const auto inherited = std::find(slot.inherited.begin(), slot.inherited.end(), std::pair<int, int>{b.index, b.generation});
+    const bool taken_over = inherited != slot.inherited.end();
+    if (taken_over && touch) slot.inherited.erase(inherited);
+    if (touch && !taken_over && (fresh || !it->enabled) && world->motion(b) == RigidMotion::Dynamic && groups[std::size_t(b.index)] == 0) {
       auto pts = shell_points(b, s);
       if (!pts) return pts.errors();
       const Vec3 c = slot.sim->def().scale.position_to_sim({st.position.x(), st.position.y(), st.position.z()});

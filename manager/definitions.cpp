@@ -230,6 +230,7 @@ TerrainManagerDef manager_def(const api::TerrainDef& def) {
   m.lod.horizon = def.lod_horizon;
   m.lod.margin = def.lod_margin;
   m.lod.apron = def.lod_apron;
+  m.lod.travel = def.lod_travel;
   // The frame budget: unset = half of each frame's dt; +infinity = none.
   if (!def.frame_budget_ms) m.frame_budget_fraction = 0.5;
   else m.frame_budget_ms = *def.frame_budget_ms;

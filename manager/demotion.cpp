@@ -69,7 +69,8 @@ Status TerrainManager::Impl::demote_idle(double time) {
   if (work.conversion_parts > 0) return Ok{};
   Slot* next = nullptr;
   for (auto& s : slots)
-    if (s.state == SlotState::Asleep && !s.demotion.releasing && s.asleep_for >= def.idle_timeout &&
+    if (s.state == SlotState::Asleep && !s.demotion.releasing && s.successor < 0 && s.rebase_from < 0 &&
+        s.asleep_for >= def.idle_timeout &&
         (!next || s.demotion.stage > next->demotion.stage))
       next = &s;
   if (next) return demote(*next, time, true, /*staged=*/true);
@@ -80,7 +81,8 @@ Status TerrainManager::Impl::demote_idle(double time) {
   for (const Slot& s : slots)
     if (s.state == SlotState::Free || s.demotion.releasing) return Ok{};  // (a slot free, or one being released)
   for (Slot& s : slots) {
-    if (!s.ready() || s.carried.empty() || wanted(s) || wanted_for_release(s)) continue;  // (not reached yet: kept)
+    if (!s.ready() || s.carried.empty() || wanted(s) || wanted_for_release(s) || s.successor >= 0 || s.rebase_from >= 0)
+      continue;  // (not reached yet, or travelling: kept)
     ++early_releases;
     return release(s, time);
   }
@@ -88,15 +90,18 @@ Status TerrainManager::Impl::demote_idle(double time) {
 }
 
 Status TerrainManager::Impl::demote_every(double time) {
-  for (auto& s : slots) {
+  // Fills first (a successor's takes its predecessor over), then the patches taken over (their
+  // heights are their successors' heights before), then the rest.
+  for (auto& s : slots)
     if (s.state == SlotState::Filling) {
       if (!s.cut)
         if (Status st = cut(s, time, kWhole); !st) return st;
       if (Status st = upload(s, s.pending.size(), time); !st) return st;
     }
-    if (s.state != SlotState::Free)
-      if (Status st = demote(s, time); !st) return st;
-  }
+  for (int pass = 0; pass < 2; ++pass)
+    for (auto& s : slots)
+      if (s.state != SlotState::Free && s.superseded == (pass == 0))
+        if (Status st = demote(s, time); !st) return st;
   return Ok{};
 }
 
@@ -209,6 +214,8 @@ Status TerrainManager::Impl::demote(Slot& slot, double time, bool gl_ok, bool st
   dirty.push_back(d);
   ++w.parts;
   close_ledger(slot, rec, w.on_gl, xyzr, steps, box);
+  for (Slot& b : slots)
+    if (b.rebase_from == int(&slot - slots.data())) rebase(b);
   for (const Carried& c : slot.carried)
     if (c.enabled && world->alive(c.body)) world->set_terrain_collision(c.body, true);
   events.push_back({PatchEventKind::Demoted, slot.patch, time, w.ms + ms_since(t2), rec.granules});
@@ -220,7 +227,31 @@ Status TerrainManager::Impl::demote(Slot& slot, double time, bool gl_ok, bool st
   slot.carried.clear();
   slot.patch = -1;
   slot.demotion = {};
+  slot.superseded = false;
+  slot.successor = slot.predecessor = slot.rebase_from = -1;
+  slot.inherited.clear();
   return Ok{};
+}
+
+// A successor whose predecessor's demotion has just written its apron (take_over): its
+// heights at promotion there become the written ones (the surface of the granules it took
+// over, as the heightfield now holds it, and the predecessor's stitches around them), and its
+// ledger's volume before is taken again from them over its region.
+void TerrainManager::Impl::rebase(Slot& b) {
+  b.rebase_from = -1;
+  PatchRecord& rb = record(b);
+  const GridRegion& ap = b.apron;
+  if (rb.before_heights.size() != std::size_t(ap.ni) * ap.nj) return;
+  hf->read(ap, rb.before_heights.data());
+  const GridRegion& g = b.region;
+  const double sp = hf->spacing();
+  double v = 0;
+  for (int j = g.j0; j < g.j0 + g.nj; ++j)
+    for (int i = g.i0; i < g.i0 + g.ni; ++i) {
+      const double wi = (i == g.i0 || i == g.i0 + g.ni - 1) ? 0.5 : 1.0, wj = (j == g.j0 || j == g.j0 + g.nj - 1) ? 0.5 : 1.0;
+      v += wi * wj * (rb.before_heights[std::size_t(j - ap.j0) * ap.ni + std::size_t(i - ap.i0)] - b.floor_local);
+    }
+  rb.ledger.before = v * sp * sp;
 }
 
 // Texels a side of a slot's depth render: depth_texels_per_radius over its box, at least 64,

@@ -30,13 +30,22 @@ Status TerrainManager::Impl::activate(double time, double dt) {
     for (auto& s : slots) {
       if (s.state != SlotState::Filling) continue;
       bool due = false;
+      // (a successor covers its bodies from the start, carried meanwhile by the patch it will
+      // take over: it is due when a body would leave that patch's region within two frames)
+      const Slot* pred = s.predecessor >= 0 ? &slots[std::size_t(s.predecessor)] : nullptr;
       for (RigidBodyId b : world->bodies()) {
         Eigen::Vector3d lo, hi;
         world->bounds(b, &lo, &hi);
         bool inside = false;
         const Eigen::Vector3d v = world->state(b).linear_velocity.cast<double>();
         const Eigen::Vector3d ahead = 2.0 * dt * v;
-        due = due || engages(s, lo + ahead.cwiseMin(0.0), hi + ahead.cwiseMax(0.0), &inside);
+        const Eigen::Vector3d a = lo + ahead.cwiseMin(0.0), z = hi + ahead.cwiseMax(0.0);
+        if (!engages(s, a, z, &inside)) continue;
+        if (pred) {
+          const PatchRequest p = rect(*pred);
+          if (a.x() >= p.x0 && z.x() <= p.x1 && a.z() >= p.z0 && z.z() <= p.z1) continue;
+        }
+        due = true;
       }
       if (!due) continue;
       ++work.urgent_fills;
@@ -62,7 +71,7 @@ Status TerrainManager::Impl::activate(double time, double dt) {
   // A release under way: its next part, or none if a body came back to it.
   for (auto& s : slots) {
     if (!s.demotion.releasing) continue;
-    if (wanted_for_release(s)) {
+    if (!s.superseded && wanted_for_release(s)) {  // (a patch taken over is demoted whatever is over it)
       s.demotion = {};
       break;
     }
@@ -83,11 +92,24 @@ Status TerrainManager::Impl::activate(double time, double dt) {
       if (!r) return r.errors();
       break;
     }
-    if (overlaps_patch(*it) || !has_soil(*it)) {
+    // A successor (planning.cpp ask_successor) overlaps the patch it will take over, and only
+    // that one; it takes that patch's scale and N, and replaces its cost rather than adding to it.
+    Slot* pred = nullptr;
+    if (it->successor_of >= 0) {
+      for (Slot& sl : slots)
+        if (sl.ready() && sl.patch == it->successor_of && !sl.superseded && !sl.demotion.releasing) pred = &sl;
+      bool clear = pred != nullptr;
+      for (const Slot& sl : slots)
+        if (clear && sl.live() && &sl != pred && rect(sl).overlaps(*it)) clear = false;
+      if (!clear) {
+        it = queue.erase(it);
+        continue;
+      }
+    } else if (overlaps_patch(*it) || !has_soil(*it)) {
       it = queue.erase(it);
       continue;
     }
-    const BudgetChoice c = choose(*it, dt, live_ms);
+    const BudgetChoice c = pred ? choose_successor(*it, *pred, dt, live_ms) : choose(*it, dt, live_ms);
     // (a live patch no body wants any more is being wound down: it does not make a request
     // wait, as it does not take a new patch's room; budget.cpp wanted)
     const bool others = std::any_of(slots.begin(), slots.end(), [&](const Slot& s) {
@@ -103,11 +125,15 @@ Status TerrainManager::Impl::activate(double time, double dt) {
       ++it;
       continue;
     }
-    if (!has_soil(c.req)) {
+    if (!pred && !has_soil(c.req)) {
       it = queue.erase(it);
       continue;
     }
     if (Status s = promote(*free, c.req, time); !s) return s;
+    if (pred) {
+      free->predecessor = int(pred - slots.data());
+      pred->successor = int(free - slots.begin());
+    }
     free->predicted_granules = c.granules;
     free->budget_entry = -1;
     budget_overruns += !c.fits;
@@ -349,7 +375,14 @@ Status TerrainManager::Impl::promote(Slot& slot, const PatchRequest& req, double
   const GridRegion region = *reg;
   const float sp = hf->spacing();
   float lo = 0, hi = 0;
-  const double floor_local = floor_of(region, s, &lo, &hi);
+  double floor_local = floor_of(region, s, &lo, &hi);
+  // (a successor keeps its predecessor's floor and frame height: the granules it takes over
+  // keep their heights; ask_successor made sure the floors agree)
+  for (const Slot& p : slots)
+    if (req.successor_of >= 0 && p.live() && p.patch == req.successor_of) {
+      floor_local = p.floor_local;
+      hi = std::max(hi, float(p.top_local));
+    }
   if (!(floor_local < hi)) return Error{"", "patch request", "", "no soil above the bedrock there"};
   slot.patch = next_patch++;
   slot.scale = s;
@@ -404,6 +437,9 @@ Status TerrainManager::Impl::promote(Slot& slot, const PatchRequest& req, double
   slot.held = 0;
   slot.demotion = {};
   slot.carried.clear();
+  slot.predecessor = slot.successor = slot.rebase_from = -1;
+  slot.superseded = false;
+  slot.inherited.clear();
   slot.state = SlotState::Filling;
   rec.fill_ms = ms_since(t0);
   ++work.conversion_parts;
@@ -450,6 +486,19 @@ Status TerrainManager::Impl::cut(Slot& slot, double time, std::size_t units) {
   }
   slot.pending = slot.cutter->take();
   slot.cutter.reset();
+  if (slot.predecessor >= 0) {
+    // A successor's fill only where it reaches past its predecessor (whose granules it takes
+    // over, take_over): granules centred inside that patch's region are not placed. The region
+    // is its own moved by whole tile periods, so the line between them is a tile wall.
+    const PatchRequest p = rect(slots[std::size_t(slot.predecessor)]);
+    std::size_t kept = 0;
+    for (const PlacedGranule& g : slot.pending) {
+      const auto w = sc->position_to_world(g.position);
+      if (w[0] >= p.x0 && w[0] <= p.x1 && w[2] >= p.z0 && w[2] <= p.z1) continue;
+      slot.pending[kept++] = g;
+    }
+    slot.pending.resize(kept);
+  }
   struct {
     const GranuleShape& shape;
     float rebound, packing_fraction;
@@ -610,10 +659,76 @@ Status TerrainManager::Impl::upload(Slot& slot, std::size_t budget, double time)
   if (slot.uploaded == slot.pending.size()) {
     slot.pending.clear();
     slot.pending.shrink_to_fit();
+    if (slot.predecessor >= 0)
+      if (Status st = take_over(slot, time); !st) return st;
     slot.state = SlotState::Active;
     events.push_back({PatchEventKind::Ready, slot.patch, time, rec.fill_ms, rec.granules});
     ++work.ready;
   }
+  return Ok{};
+}
+
+// A successor's fill is in (docs/manager.md "A patch that travels with its body"): it takes
+// over its predecessor's granules that lie inside its own walls (each sphere at least half a
+// radius inside: a granule that strayed across the line between them stays with the
+// predecessor, whose demotion writes it), with their velocities, and the bodies the
+// predecessor carried (their shells are made in this patch at its first coupling and not
+// lifted clear of the granules they rest in, couple_before). The predecessor is then held and
+// demoted one part a frame (activate), writing its whole apron; this patch's heights at
+// promotion over that apron wait for it (rebase) before its own demotion may start.
+Status TerrainManager::Impl::take_over(Slot& b, double time) {
+  Slot& a = slots[std::size_t(b.predecessor)];
+  b.predecessor = -1;
+  a.successor = -1;
+  if (!a.ready() || a.superseded) return Ok{};
+  PatchRecord& ra = record(a);
+  PatchRecord& rb = record(b);
+  const double s = b.scale;
+  const float sp = hf->spacing();
+  const float r = def.material.radius;  // sim units
+  const float W = float((b.region.ni - 1) * double(sp) / s), D = float((b.region.nj - 1) * double(sp) / s);
+  const Eigen::Vector3d d = (a.origin - b.origin) / s;  // sim units: a's frame in b's
+  const Vec3 shift{float(d.x()), float(d.y()), float(d.z())};
+  const GranuleShape& shape = a.sim->granule_shape();
+  const float rw = radius_world(s);
+  int taken = 0;
+  for (int k = 0; k < ra.granules; ++k) {
+    const BodyId g{k};
+    const Vec3 p = a.sim->body_position(g) + shift;
+    const Quat q = a.sim->body_orientation(g);
+    bool inside = std::isfinite(p.x + p.y + p.z);
+    for (const Vec3& o : shape.offsets) {
+      const Vec3 x = p + rotate(q, o);
+      inside = inside && x.x >= 0.5f * r && x.x <= W - 0.5f * r && x.z >= 0.5f * r && x.z <= D - 0.5f * r;
+    }
+    if (!inside) continue;
+    if (rb.granules >= def.granules_per_slot) break;
+    auto id = b.sim->add_granule(p, q);
+    if (!id) return id.errors();
+    if (Status st = b.sim->set_body_state(*id, p, q, a.sim->body_velocity(g), a.sim->body_angular_velocity(g)); !st) return st;
+    ++rb.granules;
+    ++taken;
+    for (const Vec3& o : shape.offsets) {
+      const auto w = b.sim->def().scale.position_to_world(p + rotate(q, o));
+      rb.fill_spheres.insert(rb.fill_spheres.end(), {float(w[0] - hf->origin_x()), float(w[1] - hf->origin_y()),
+                                                     float(w[2] - hf->origin_z()), rw});
+    }
+  }
+  rb.ledger.active = double(rb.granules) * granule_volume(s) / (rb.ledger.packing_fraction > 0 ? rb.ledger.packing_fraction : 0.6);
+  // The bodies: a's shells parked, its carried list handed on.
+  for (const Carried& c : a.carried) {
+    if (c.enabled)
+      if (Status st = a.sim->set_body_enabled(c.shell, false); !st) return st;
+    if (c.enabled && world->alive(c.body)) b.inherited.push_back({c.body.index, c.body.generation});
+  }
+  a.carried.clear();
+  a.superseded = true;
+  a.demotion = {};
+  a.demotion.releasing = true;
+  b.rebase_from = int(&a - slots.data());
+  ++travels;
+  work.granules_uploaded += taken;
+  (void)time;
   return Ok{};
 }
 

@@ -27,6 +27,9 @@ struct LodDef {
   int samples = 16;       // samples of the path over the horizon (>= 1)
   double margin = knobs::kLodMargin.def;    // m, clearance that already counts as contact
   double apron = knobs::kLodApron.def;      // m, added around the contact footprint on every side
+  // A body carried toward its patch's edge takes its patch along (a successor moved by whole
+  // tile periods, planning.cpp ask_successor) instead of a patch abutting it ahead.
+  bool travel = true;
 };
 
 struct BodyMotion {
@@ -58,6 +61,14 @@ struct PatchRequest {
   // wait (filling.cpp; the body would meet the patch's edge first).
   bool ahead_of_carried = false;
   int waited_frames = 0;  // frames it waited in the queue because it did not fit the frame budget
+  // A successor (planning.cpp extend, docs/manager.md "A patch that travels with its body"): the
+  // live patch `successor_of` (a patch id) moved by whole tile periods ahead of the bodies it
+  // carries, over exactly the heightfield samples [region_i0, region_i0 + region_ni) x
+  // [region_j0, region_j0 + region_nj). It is filled from the tile only where it reaches past
+  // that patch, takes that patch's granules over the rest when its fill is in, and that patch
+  // is then demoted: one patch steps at a time. -1: an ordinary request.
+  int successor_of = -1;
+  int region_i0 = 0, region_j0 = 0, region_ni = 0, region_nj = 0;
   double width() const { return x1 - x0; }
   double depth() const { return z1 - z0; }
   bool overlaps(const PatchRequest& o) const { return x0 < o.x1 && o.x0 < x1 && z0 < o.z1 && o.z0 < z1; }

@@ -104,6 +104,16 @@ struct Slot {
     double ms = 0;  // wall, the parts so far
   } demotion;
   std::vector<Carried> carried;
+  // Travelling (planning.cpp extend, filling.cpp take_over): a successor filling, the slot
+  // index of the patch it will take over (-1: none); that patch, the slot index of its
+  // successor while it fills (it is kept, not demoted, until then); a successor whose heights
+  // at promotion over its predecessor's apron wait for the predecessor's demotion (rebase), and
+  // the bodies it took over (their shells are not lifted clear of the granules they rest in).
+  int predecessor = -1;
+  int successor = -1;
+  bool superseded = false;  // taken over: held and demoted, one part a frame
+  int rebase_from = -1;     // the predecessor's slot index until its demotion wrote its heights
+  std::vector<std::pair<int, int>> inherited;  // (index, generation) of the bodies taken over
   bool live() const { return state != SlotState::Free; }
   bool ready() const { return state == SlotState::Active || state == SlotState::Asleep; }
   explicit Slot(std::unique_ptr<DemBackend> s) : sim(std::move(s)) {}

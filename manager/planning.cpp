@@ -241,6 +241,7 @@ bool TerrainManager::Impl::has_soil(const PatchRequest& r) const {
 // clear of the live patches' regions where the rounding pushed it into one (a patch asked for
 // ahead of another abuts it: they share the boundary's samples, not cells).
 Result<GridRegion> TerrainManager::Impl::region_for(const PatchRequest& r, double s) const {
+  if (r.successor_of >= 0) return GridRegion{r.region_i0, r.region_j0, r.region_ni, r.region_nj};  // (overlaps its predecessor)
   auto reg = patch_region(*hf, r, set_for(s).cells);
   if (!reg) return reg;
   GridRegion g = *reg;
@@ -295,6 +296,7 @@ bool TerrainManager::Impl::overlaps_patch(const PatchRequest& r) const {
 Result<bool> TerrainManager::Impl::extend(const PatchRequest& r, double time, const std::vector<RigidBodyId>& ids) {
   for (Slot& s : slots) {
     if ((s.state != SlotState::Active && s.state != SlotState::Asleep) || !rect(s).overlaps(r)) continue;
+    if (s.superseded) continue;  // (its successor carries the bodies now)
     const PatchRequest a = rect(s);
     // Only when the predicted contact itself (the request without its apron) comes within
     // two granule diameters of the patch's edge: a body settling near the middle whose
@@ -321,6 +323,7 @@ Result<bool> TerrainManager::Impl::extend(const PatchRequest& r, double time, co
                             a.z0 <= t.z0 + e ? -1.0 : (a.z0 + mm[2]) - (r.z0 + ap), a.z1 >= t.z1 - e ? -1.0 : (r.z1 - ap) - (a.z1 - mm[3])};
     const int side = int(std::max_element(past, past + 4) - past);
     if (!(past[side] > 0)) continue;  // (another patch it overlaps may be the one it passes)
+    if (ask_successor(s, r, side, time)) return true;
     // The part ahead, at least one tile period deep (patch_region rounds it to whole periods,
     // and promote() moves it clear of the patch it abuts).
     const double period = set_for(s.scale).cells * double(hf->spacing());
@@ -359,6 +362,94 @@ Result<bool> TerrainManager::Impl::extend(const PatchRequest& r, double time, co
     return true;
   }
   return false;
+}
+
+// A patch that travels with its bodies (docs/manager.md "A patch that travels with its body"):
+// instead of a patch abutting s ahead (two patches stepping while the bodies straddle their
+// edge), s itself moved by the fewest whole tile periods toward `side` that cover the request
+// r, if every body s carries then lies inside it (4 granule radii from its trailing side) and
+// it keeps part of s. Its fill is cut from the tile only where it reaches past s (whole tile
+// periods: the seam is the tiles' own), it takes s's granules over at once when that fill is
+// in (take_over), and s is demoted. Not when s has a successor coming already, carries
+// nothing, is being released, or when the moved region has another floor (sloping ground:
+// the granules taken over keep their heights) or leaves the terrain. Returns whether one was
+// asked (now or before).
+bool TerrainManager::Impl::ask_successor(Slot& s, const PatchRequest& r, int side, double time) {
+  if (!def.lod.travel) return false;
+  if (s.successor >= 0) return true;
+  for (const PatchRequest& q : queue)
+    if (q.successor_of == s.patch) return true;
+  if (s.rebase_from >= 0) return true;  // (its own predecessor's demotion first: asked again next frame)
+  if (s.superseded || s.demotion.releasing) return false;
+  const int axis = side / 2, dir = side % 2 == 0 ? -1 : 1, c3 = axis == 0 ? 0 : 2;
+  const double sp = hf->spacing();
+  const int cells = set_for(s.scale).cells;
+  const GridRegion& R = s.region;
+  const int lo0 = axis == 0 ? R.i0 : R.j0, n = axis == 0 ? R.ni : R.nj;  // samples along the axis
+  const int samples = axis == 0 ? hf->samples_x() : hf->samples_z();
+  const double o = axis == 0 ? hf->origin_x() : hf->origin_z();
+  // (a region cut at the terrain's edge to other than whole tile periods has no tile wall where
+  // the successor's own fill would meet the granules it takes over)
+  if ((n - 1) % cells != 0) return false;
+  // Leading side: the fewest whole periods that reach the request's far edge (at least one).
+  const double far = dir > 0 ? (axis == 0 ? r.x1 : r.z1) : (axis == 0 ? r.x0 : r.z0);
+  const double reach = dir > 0 ? std::ceil((far - o) / sp) - (lo0 + n - 1) : lo0 - std::floor((far - o) / sp);
+  const int k = std::max(1, int(std::ceil(std::max(0.0, reach) / cells)));
+  // Trailing side: the most whole periods (at most k) that keep every body s carries on its
+  // ground (lowest point within a granule diameter of the surface under it) 4 granule radii
+  // inside, and the centre of every other body it carries (a vehicle's chassis, a body falling
+  // onto it).
+  const GranuleShape& shape = s.sim->granule_shape();  // (sim units)
+  const double m = 4.0 * radius_world(s), diameter = 2.0 * double(shape.centre_distance + shape.radius) * s.scale;
+  double behind = dir > 0 ? std::numeric_limits<double>::max() : -std::numeric_limits<double>::max();  // trailing-most point (m, along the axis)
+  bool carries_any = false, moving = false;  // (a body it carries moving toward the side: bodies landing on it do not make it travel)
+  for (const Carried& c : s.carried) {
+    if (!c.enabled || !world->alive(c.body)) continue;
+    carries_any = true;
+    moving = moving || double(dir) * double(world->state(c.body).linear_velocity[c3]) > def.sleep_speed;
+    Eigen::Vector3d blo, bhi;
+    world->bounds(c.body, &blo, &bhi);
+    const double ground = hf->origin_y() + hf->sample(float(0.5 * (blo.x() + bhi.x()) - hf->origin_x()), float(0.5 * (blo.z() + bhi.z()) - hf->origin_z()));
+    const double centre = 0.5 * (blo[c3] + bhi[c3]);
+    const bool on_ground = blo.y() <= ground + diameter;
+    behind = dir > 0 ? std::min(behind, on_ground ? blo[c3] : centre) : std::max(behind, on_ground ? bhi[c3] : centre);
+  }
+  if (!carries_any || !moving) return false;
+  int t = k;
+  auto trailing_edge = [&](int tt) { return o + (dir > 0 ? lo0 + tt * cells : lo0 + n - 1 - tt * cells) * sp; };
+  while (t > 0 && (dir > 0 ? behind < trailing_edge(t) + m : behind > trailing_edge(t) - m)) --t;
+  if ((n - 1) - t * cells < cells) return false;  // (it keeps at least a tile period of s)
+  GridRegion g = R;
+  int& g_lo = axis == 0 ? g.i0 : g.j0;
+  int& g_n = axis == 0 ? g.ni : g.nj;
+  if (dir > 0) g_lo += t * cells, g_n += (k - t) * cells;
+  else g_lo -= k * cells, g_n += (k - t) * cells;
+  if (g_lo < 0 || g_lo + g_n - 1 > samples - 1) return false;
+  float flo = 0, fhi = 0;
+  // (ground lower than where s was promoted, a rut its predecessor wrote, is filled from s's
+  // floor as well; higher ground, whose floor would be higher, is not travelled onto)
+  if (floor_of(g, s.scale, &flo, &fhi) > s.floor_local + 1e-6 || !(s.floor_local < fhi)) return false;
+  PatchRequest u = r;
+  u.x0 = hf->origin_x() + g.i0 * sp, u.x1 = hf->origin_x() + (g.i0 + g.ni - 1) * sp;
+  u.z0 = hf->origin_z() + g.j0 * sp, u.z1 = hf->origin_z() + (g.j0 + g.nj - 1) * sp;
+  for (const Slot& o2 : slots)  // (it may overlap s only: another live patch there, and a patch abuts ahead instead)
+    if (&o2 != &s && o2.live() && rect(o2).overlaps(u)) return false;
+  u.successor_of = s.patch;
+  u.region_i0 = g.i0, u.region_j0 = g.j0, u.region_ni = g.ni, u.region_nj = g.nj;
+  // (no more granules than a slot holds: else a patch ahead abuts it, as before)
+  const TileSet& set = set_for(s.scale);
+  const double pf = set.tiles.empty() ? 0.6 : set.tiles.front().packing_fraction;
+  if (soil_volume(*hf, g, s.floor_local) * pf / granule_volume(s.scale) > 0.9 * def.granules_per_slot) return false;
+  u.particle_scale = s.scale;
+  u.steps_per_contact = s.steps_per_contact;
+  u.apron = 0;
+  u.abuts = -1;
+  u.ahead_of_carried = true;
+  u.time_to_contact = 0;
+  queue.insert(queue.begin(), u);
+  events.push_back({PatchEventKind::Requested, -1, time, 0, 0});
+  ++extensions;
+  return true;
 }
 
 // Whether a body is over a patch, or near it (within half lod.apron of its region, below

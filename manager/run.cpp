@@ -41,6 +41,13 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
     o.frame_budget_ms.reset();
     return run_scene(s, o);
   }
+  if (opt.travel) {  // the same way
+    SceneDef s = scene;
+    s.terrain.lod_travel = *opt.travel;
+    RunOptions o = opt;
+    o.travel.reset();
+    return run_scene(s, o);
+  }
   if (opt.sleep_regions) {  // the same way
     SceneDef s = scene;
     s.terrain.sleep_regions = *opt.sleep_regions;

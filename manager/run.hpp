@@ -39,6 +39,7 @@ struct RunOptions {
   std::optional<double> frame_budget_ms;
   // Overrides simulation.sleep.regions.
   std::optional<bool> sleep_regions;
+  std::optional<bool> travel;  // overrides simulation.lod.travel
   ProgressStyle progress = ProgressStyle::Auto;  // Auto: a bar on a terminal, plain lines otherwise
   std::string command_line;   // recorded in the report
   std::string final_image;    // when set: after the last frame, render this PNG (`sandpatch render`)

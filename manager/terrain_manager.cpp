@@ -533,6 +533,7 @@ nlohmann::ordered_json TerrainManager::report() const {
                {"peak_queued_requests", I.peak_queue},
                {"lapsed_requests", I.lapsed_requests},
                {"extensions", I.extensions},
+               {"travels", I.travels},
                {"released", I.released},
                {"released_early", I.early_releases}};
   nlohmann::ordered_json tiles = nlohmann::ordered_json::array();

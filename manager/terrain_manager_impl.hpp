@@ -64,6 +64,7 @@ struct TerrainManager::Impl {
   std::unordered_map<std::int64_t, int> still_frames;  // frames each body (body_key) has been at rest
   int lapsed_requests = 0;  // queued requests dropped because no body predicted contact there any more
   int extensions = 0;       // patches asked for ahead of a body heading past its patch's edge
+  int travels = 0;          // of those, successors that took their patch's granules over (take_over)
   int released = 0;         // patches no body was over, demoted for a request waiting for a slot or to keep one ready
   int early_releases = 0;   // of which released with the pool full before a request needed the slot (demotion.cpp)
 
@@ -251,6 +252,10 @@ struct TerrainManager::Impl {
     std::vector<std::string> traded;
     int steps_per_contact = 0;  // the DEM's N it runs at when it traded substeps (else 0)
   };
+  // A successor's (planning.cpp ask_successor): its predecessor's scale (it takes their
+  // granules over), its cost in place of its predecessor's; half the substeps when it does not
+  // fit and its predecessor ran at the full N.
+  BudgetChoice choose_successor(const PatchRequest& r, const Slot& pred, double dt, double live_ms) const;
   std::vector<nlohmann::ordered_json> budget_log;  // one entry per promotion (the report's budget.patches)
   std::vector<nlohmann::ordered_json> budget_log_lapsed;  // requests that waited for the budget and lapsed (at most 256)
   long long budget_waits = 0;      // request-frames a request waited in the queue because it did not fit
@@ -347,6 +352,15 @@ struct TerrainManager::Impl {
   bool overlaps_patch(const PatchRequest& r) const;
   // `ids`: the bodies of the requests' BodyMotion indices (PatchRequest::bodies).
   Result<bool> extend(const PatchRequest& r, double time, const std::vector<RigidBodyId>& ids);
+  // A successor of slot s moved by whole tile periods toward `side` (0: -x, 1: +x, 2: -z,
+  // 3: +z) over the request r; whether it was asked (or had been).
+  bool ask_successor(Slot& s, const PatchRequest& r, int side, double time);
+  // A successor's fill is in: it takes its predecessor's granules over where it covers them,
+  // the bodies with them, and the predecessor is demoted (filling.cpp).
+  Status take_over(Slot& successor, double time);
+  // The predecessor's demotion has written its heights: the successor's heights at promotion
+  // over that apron, and its ledger's volume before, become those (demotion.cpp).
+  void rebase(Slot& successor);
   Status trade_live_substeps(const Slot& to, double time);  // filling.cpp
   // A patch no body is over given up: held, demoted one part a frame (planning.cpp).
   Status release(Slot& s, double time);

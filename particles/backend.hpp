@@ -35,6 +35,8 @@ class DemBackend {
   virtual bool asleep() const = 0;
   virtual void wake() = 0;
 
+  virtual Vec3 body_position(BodyId b) const = 0;     // m (sim units): its centre of mass
+  virtual Quat body_orientation(BodyId b) const = 0;
   virtual Vec3 body_velocity(BodyId b) const = 0;
   virtual Vec3 body_angular_velocity(BodyId b) const = 0;
   // Contact force (N) and torque about the centre of mass (N m) on body b in the last substep.
@@ -80,6 +82,8 @@ class DemBackendOf final : public DemBackend {
   Result<int> substeps_for(double dt) const override { return sim_.substeps_for(dt); }
   bool asleep() const override { return sim_.asleep(); }
   void wake() override { sim_.wake(); }
+  Vec3 body_position(BodyId b) const override { return sim_.body_position(b); }
+  Quat body_orientation(BodyId b) const override { return sim_.body_orientation(b); }
   Vec3 body_velocity(BodyId b) const override { return sim_.body_velocity(b); }
   Vec3 body_angular_velocity(BodyId b) const override { return sim_.body_angular_velocity(b); }
   Vec3 body_force(BodyId b) const override { return sim_.body_force(b); }

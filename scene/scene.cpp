@@ -395,6 +395,7 @@ void parse_simulation(Ctx& c, const json& j, TerrainDef& t, SceneSimulationDef& 
     p.knob("horizon", t.lod_horizon, knobs::kLodHorizon);
     p.knob("margin", t.lod_margin, knobs::kLodMargin);
     p.knob("apron", t.lod_apron, knobs::kLodApron);
+    p.boolean("travel", t.lod_travel);
     p.finish();
   }
   if (const json* bj = o.get("scale_by_distance")) {

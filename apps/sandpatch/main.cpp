@@ -100,6 +100,7 @@ struct RunCli {
   int threads = -1;
   std::string frame_budget;
   std::string sleep_regions;
+  std::string travel;
   bool quiet = false;
   bool shells = false;
 };
@@ -118,6 +119,9 @@ void add_run(CLI::App& app, RunCli& a) {
                   "Wall-clock ms a frame's patches may take, or off (overrides simulation.frame_budget_ms)");
   run->add_option("--sleep-regions", a.sleep_regions,
                   "Whether the still parts of an awake patch sleep (overrides simulation.sleep.regions)")
+      ->check(CLI::IsMember({"on", "off"}));
+  run->add_option("--travel", a.travel,
+                  "Whether a patch travels with the body it carries (overrides simulation.lod.travel)")
       ->check(CLI::IsMember({"on", "off"}));
   run->add_flag("--quiet", a.quiet, "No progress output");
   run->add_flag("--shells", a.shells, "Images and video also draw the bodies' particle shells (a debug overlay)");
@@ -214,6 +218,7 @@ int cmd_run(const RunCli& a, int argc, char** argv) {
     if (a.frame_budget == "off") opt.frame_budget_ms = std::numeric_limits<double>::infinity();
     else if (!a.frame_budget.empty()) opt.frame_budget_ms = parse_budget(a.frame_budget);
     if (!a.sleep_regions.empty()) opt.sleep_regions = a.sleep_regions == "on";
+    if (!a.travel.empty()) opt.travel = a.travel == "on";
     opt.progress = a.quiet ? ProgressStyle::None : ProgressStyle::Auto;
     opt.video = a.video;
     opt.video_fps = a.video_fps;

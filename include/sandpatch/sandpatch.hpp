@@ -182,6 +182,9 @@ struct TerrainDef {
   double lod_horizon = 0.5;                    // s, how far ahead, (0, 10]
   double lod_margin = 0.05;                    // m, clearance that already counts as contact, [0, 100]
   double lod_apron = 1.0;                      // m, added around the contact footprint on every side, [0, 1000]
+  bool lod_travel = true;                      // a body carried toward its patch's edge takes the patch along (the
+                                               //   patch moved ahead by whole tile periods, its granules kept; docs/manager.md
+                                               //   "A patch that travels with its body"); false: a patch abutting it ahead
   // -- the frame budget (docs/manager.md "Frame budget"): wall-clock ms a step's patches may
   //    take; new patches are promoted coarser or smaller, or wait, to keep within it (the
   //    report's "budget" says what it chose). Unset: half of each step's dt. +infinity: none

@@ -658,6 +658,75 @@ TEST(TerrainManager, BodyDrivenAcrossPatchEdgeStaysOnParticles) {
               rep["pool"]["extensions"].get<int>(), off_particles, driven, rep["ledger"]["total"]["error_pct"].get<double>());
 }
 
+// A patch that travels with its body (docs/manager.md "A patch that travels with its body"):
+// the sphere of the test above, driven at 0.4 m/s for 3 s, takes its patch along. The patch is
+// moved ahead by whole tile periods, its granules kept where the moved patch still covers them,
+// the rest demoted: only one patch steps in any frame (two stepped while the sphere crossed an
+// abutting patch's edge), the sphere is on particles in every frame, it does not hop when a
+// patch takes it over (its height changes by less than 0.1 granule diameters in that frame),
+// and every patch's volume ledger closes within 1 %.
+TEST(TerrainManager, APatchTravelsWithTheBodyItCarries) {
+  struct Outcome {
+    int two_stepping = 0, off_particles = 0, driven = 0, travels = 0, extensions = 0;
+    double worst_patch_error = 0, hop = 0, x = 0;
+  };
+  auto run = [](bool travel, Outcome& o) {
+    test::Rig rig(test::terrain_8m("flat"));
+    ASSERT_TRUE(rig.ok()) << rig.error;
+    BulletWorld& world = *rig.world;
+    auto id = rig.add_sphere(0.1f, 5.0f, {3.0, 1.25, 4.0});
+    ASSERT_TRUE(id.ok());
+    auto def = test::small_manager_def();
+    def.slots = 2;
+    def.granules_per_slot = 12000;
+    def.patch_depth = 0.2;
+    def.depth_resolution = 256;
+    def.lod.apron = 0.2;
+    def.lod.travel = travel;
+    ASSERT_TRUE(rig.start(def).ok()) << rig.error;
+    const double d = 2.0 * def.material.radius;
+    int travels = 0;
+    for (int f = 0; f < 240; ++f) {
+      const double y0 = world.state(*id).position.y();
+      if (rig.t() >= 1.0) {  // landed and settled: drive it
+        BodyState st = world.state(*id);
+        st.linear_velocity = {0.4f, st.linear_velocity.y(), 0.0f};
+        world.set_state(*id, st);
+        ++o.driven;
+        o.off_particles += world.terrain_collision(*id);
+      }
+      ASSERT_TRUE(rig.frame().ok()) << rig.error;
+      o.two_stepping += rig.t() > 1.0 && rig.manager->last_frame_work().patches_stepped > 1;
+      const int now = rig.manager->report()["pool"]["travels"].get<int>();
+      if (now > travels) {  // a patch took the sphere over in this frame (or the one before: its shell comes in at the next coupling)
+        o.hop = std::max(o.hop, std::abs(world.state(*id).position.y() - y0) / d);
+        travels = now;
+      }
+    }
+    o.x = world.state(*id).position.x();
+    ASSERT_TRUE(rig.demote_all().ok()) << rig.error;
+    const auto rep = rig.manager->report();
+    o.travels = rep["pool"]["travels"].get<int>();
+    o.extensions = rep["pool"]["extensions"].get<int>();
+    for (const auto& p : rep["ledger"]["patches"]) o.worst_patch_error = std::max(o.worst_patch_error, std::abs(p["error_pct"].get<double>()));
+  };
+  Outcome on, off;
+  ASSERT_NO_FATAL_FAILURE(run(true, on));
+  ASSERT_NO_FATAL_FAILURE(run(false, off));
+  std::printf("travel on: x %.2f m, %d travels of %d extensions, %d frames with two patches stepping, %d of %d frames off "
+              "particles, hop %.3f d, worst patch ledger %.3f %%\n",
+              on.x, on.travels, on.extensions, on.two_stepping, on.off_particles, on.driven, on.hop, on.worst_patch_error);
+  std::printf("travel off: x %.2f m, %d extensions, %d frames with two patches stepping, %d of %d frames off particles\n", off.x,
+              off.extensions, off.two_stepping, off.off_particles, off.driven);
+  EXPECT_GT(on.x, 3.0 + 0.8) << "the sphere was driven past the first patch's edge";
+  EXPECT_GE(on.travels, 1);
+  EXPECT_EQ(on.two_stepping, 0) << "frames in which two patches stepped";
+  EXPECT_GT(off.two_stepping, 0) << "the abutting patch ahead steps beside the one the sphere is in";
+  EXPECT_EQ(on.off_particles, 0) << "frames on the heightfield, of " << on.driven;
+  EXPECT_LT(on.hop, 0.1) << "granule diameters the sphere's height changed in a take-over frame";
+  EXPECT_LT(on.worst_patch_error, 1.0) << "% of a patch's volume";
+}
+
 // No frame does a whole patch's work (docs/manager.md "No frame does a whole patch's work"):
 // two spheres dropped side by side ask for two patches in the same frame; each is promoted
 // over several frames (its slot's reset, its fill cut 4096 units a frame, uploads of

@@ -149,11 +149,14 @@ PatchLook patch_look(World& world, FrameWriter& images, const render::CameraView
 
 // The default scene with frame_budget_ms `budget` (ms; infinity: off), two threads, stepped to
 // `t` s, for the patch-look tests below.
-void default_scene_at(double budget, double t, SceneDef& s, std::unique_ptr<World>& world) {
+// `travel` false: the patch a body drives toward the edge of gets a patch abutting it ahead
+// (simulation.lod.travel off), the fixture the coarse-patch tests' bounds were measured on.
+void default_scene_at(double budget, double t, SceneDef& s, std::unique_ptr<World>& world, bool travel = true) {
   auto scene = load_default_scene();
   ASSERT_TRUE(scene.ok()) << scene.message();
   s = scene.value();
   s.terrain.frame_budget_ms = budget;
+  s.terrain.lod_travel = travel;
   auto w = make_world(s, 2, "cpu");
   ASSERT_TRUE(w.ok()) << w.message();
   world = std::move(w.value());
@@ -335,7 +338,7 @@ TEST(SceneFrames, ShellOverlayDrawsTheCarriedBodiesShells) {
 TEST(SceneFrames, CoarsePatchReadsAsSandWithoutSpecks) {
   SceneDef s;
   std::unique_ptr<World> w;
-  ASSERT_NO_FATAL_FAILURE(default_scene_at(0.01, 2.0, s, w));
+  ASSERT_NO_FATAL_FAILURE(default_scene_at(0.01, 2.0, s, w, /*travel=*/false));
   World& world = *w;
   // The first patch, at scale 3 (the budget fits nothing finer). A patch asked for ahead of a
   // body it carries does not wait for the budget, so a second one may abut it: its footprint
@@ -373,7 +376,7 @@ TEST(SceneFrames, CoarsePatchReadsAsSandWithoutSpecks) {
 TEST(SceneFrames, TroughInACoarsePatchIsNotShadowedByTheOldSurface) {
   SceneDef s;
   std::unique_ptr<World> w;
-  ASSERT_NO_FATAL_FAILURE(default_scene_at(0.01, 3.0, s, w));
+  ASSERT_NO_FATAL_FAILURE(default_scene_at(0.01, 3.0, s, w, /*travel=*/false));
   World& world = *w;
   const auto patches = world.manager()->patches();
   ASSERT_GE(patches.size(), 1u);
