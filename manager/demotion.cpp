@@ -55,9 +55,11 @@ std::vector<float> floor_under_body(const Slot& slot, const Carried& c, const st
 
 }  // namespace
 
-// Rows of a demotion's CPU depth render done in one part (a 480-texel render of a scale-2
-// patch of 1,500 granules, probe-grown spheres, was about 6.7 ms whole on two cores).
-constexpr int kDepthRowsPerPart = 128;
+// Rows of a demotion's CPU depth render done in one part. A band's cost grows with the spheres
+// it crosses: a 676-texel render of a scale-2 patch of 2,233 granules took 1–6 ms a band of 128
+// rows on two cores, the bands through the patch's middle the most, beside the 7–11 ms of the
+// patch stepping in the same frame (docs/BENCHMARKS.md "A patch that travels with its body").
+constexpr int kDepthRowsPerPart = 64;
 
 // One part a frame, of one patch: a demotion is three renders' and writes' worth of work (the
 // fill's surface, the surface now, the heights written), and doing it all in one frame was

@@ -471,11 +471,11 @@ TEST(Api, UntouchedPatchSleepsAndIsDemoted) {
   for (std::size_t k = 0; k < want.size(); ++k) EXPECT_EQ(events[k].kind, want[k]) << seq;
   // Asleep after at least sleep_time of simulation; demoted idle_timeout (0.1 s) later, within
   // a frame, plus the frames its demotion is spread over (one part a frame: the two renders,
-  // on the CPU in bands of 128 rows of at most depth_resolution = 1024, and the write).
+  // on the CPU in bands of 64 rows of at most depth_resolution = 1024, and the write).
   EXPECT_GE(events[3].time, 0.2 - 1e-9) << seq;
   const double spread = events[4].time - events[3].time - 0.1;
   EXPECT_GE(spread, 1.0 / 60.0 - 1e-9) << seq;
-  EXPECT_LE(spread, (2 * 1024 / 128 + 1) / 60.0 + 1e-9) << seq;
+  EXPECT_LE(spread, (2 * 1024 / 64 + 1) / 60.0 + 1e-9) << seq;
   EXPECT_EQ(t->active_patches(), 0);
   EXPECT_EQ(t->take_dirty_regions().size(), 1u);
 }

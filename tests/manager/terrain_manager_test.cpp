@@ -771,7 +771,7 @@ TEST(TerrainManager, NoFrameDoesMoreThanOneConversionPart) {
   int parts = 0;
   const auto report = m.report();  // named: a loop over a temporary's member would dangle
   for (const auto& p : report["ledger"]["patches"]) {
-    const int texels = p["depth_texels"].get<int>(), bands = (texels + 127) / 128;
+    const int texels = p["depth_texels"].get<int>(), bands = (texels + 63) / 64;
     EXPECT_EQ(p["demotion_parts"].get<int>(), 2 * bands + 1) << texels << " texels a side";
     parts += p["demotion_parts"].get<int>();
   }
