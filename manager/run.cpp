@@ -27,8 +27,10 @@ using ojson = nlohmann::ordered_json;
 }  // namespace
 
 RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
-  if (opt.frame_budget_ms) {  // the scene as if it said so (its hash in the report follows)
-    if (!(*opt.frame_budget_ms > 0)) {
+  // The options that override a scene's settings: the scene as if it said so (its hash in the
+  // report follows).
+  if (opt.frame_budget_ms || opt.travel || opt.sleep_regions) {
+    if (opt.frame_budget_ms && !(*opt.frame_budget_ms > 0)) {
       RunResult r;
       r.code = ExitCode::BadInput;
       r.stage = "options";
@@ -36,22 +38,12 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
       return r;
     }
     SceneDef s = scene;
-    s.terrain.frame_budget_ms = opt.frame_budget_ms;
+    if (opt.frame_budget_ms) s.terrain.frame_budget_ms = opt.frame_budget_ms;
+    if (opt.travel) s.terrain.lod_travel = *opt.travel;
+    if (opt.sleep_regions) s.terrain.sleep_regions = *opt.sleep_regions;
     RunOptions o = opt;
     o.frame_budget_ms.reset();
-    return run_scene(s, o);
-  }
-  if (opt.travel) {  // the same way
-    SceneDef s = scene;
-    s.terrain.lod_travel = *opt.travel;
-    RunOptions o = opt;
     o.travel.reset();
-    return run_scene(s, o);
-  }
-  if (opt.sleep_regions) {  // the same way
-    SceneDef s = scene;
-    s.terrain.sleep_regions = *opt.sleep_regions;
-    RunOptions o = opt;
     o.sleep_regions.reset();
     return run_scene(s, o);
   }

@@ -605,6 +605,18 @@ TEST(TerrainManager, PatchPromotedUnderARestingBoxLeavesItWhereItIs) {
   EXPECT_LT(moved, 0.1 * 2.0 * def.material.radius) << "m";
 }
 
+// The manager of the driven-sphere tests below: two slots (the patch the sphere is in and the
+// one ahead or its successor), a shallow fill, a 0.2 m apron.
+static TerrainManagerDef driven_sphere_def() {
+  auto def = test::small_manager_def();
+  def.slots = 2;
+  def.granules_per_slot = 12000;
+  def.patch_depth = 0.2;
+  def.depth_resolution = 256;
+  def.lod.apron = 0.2;
+  return def;
+}
+
 // A body driven across a patch's edge (Leach & Marais left it open): a sphere
 // resting in the sand is pushed sideways at 0.4 m/s for 3 s, 1.2 m, past the edge of the
 // patch it landed on. A patch is asked for ahead of it, filled while it comes, and takes it
@@ -617,12 +629,7 @@ TEST(TerrainManager, BodyDrivenAcrossPatchEdgeStaysOnParticles) {
   BulletWorld& world = *rig.world;
   auto id = rig.add_sphere(0.1f, 5.0f, {3.0, 1.25, 4.0});
   ASSERT_TRUE(id.ok());
-  auto def = test::small_manager_def();
-  def.slots = 2;  // the patch it is in and the one ahead
-  def.granules_per_slot = 12000;
-  def.patch_depth = 0.2;
-  def.depth_resolution = 256;
-  def.lod.apron = 0.2;
+  auto def = driven_sphere_def();
   ASSERT_TRUE(rig.start(def).ok()) << rig.error;
   int off_particles = 0, driven = 0;
   for (int f = 0; f < 240; ++f) {
@@ -676,12 +683,7 @@ TEST(TerrainManager, APatchTravelsWithTheBodyItCarries) {
     BulletWorld& world = *rig.world;
     auto id = rig.add_sphere(0.1f, 5.0f, {3.0, 1.25, 4.0});
     ASSERT_TRUE(id.ok());
-    auto def = test::small_manager_def();
-    def.slots = 2;
-    def.granules_per_slot = 12000;
-    def.patch_depth = 0.2;
-    def.depth_resolution = 256;
-    def.lod.apron = 0.2;
+    auto def = driven_sphere_def();
     def.lod.travel = travel;
     ASSERT_TRUE(rig.start(def).ok()) << rig.error;
     const double d = 2.0 * def.material.radius;
