@@ -402,11 +402,16 @@ bool TerrainManager::Impl::ask_successor(Slot& s, const PatchRequest& r, int sid
   const GranuleShape& shape = s.sim->granule_shape();  // (sim units)
   const double m = 4.0 * radius_world(s), diameter = 2.0 * double(shape.centre_distance + shape.radius) * s.scale;
   double behind = dir > 0 ? std::numeric_limits<double>::max() : -std::numeric_limits<double>::max();  // trailing-most point (m, along the axis)
-  bool carries_any = false, moving = false;  // (a body it carries moving toward the side: bodies landing on it do not make it travel)
+  // (a body it carries moving toward the side faster than a body settling creeps, 10
+  // sleep_speed as in `lying`: bodies landing on it, or a parked car's wheels jostling as they
+  // settle, do not make it travel; a successor grown sideways under a car settling at rest cut
+  // room for the wheels where the terrain grid had held them, and they sank a granule deep)
+  const double toward = 10.0 * def.sleep_speed;  // m/s
+  bool carries_any = false, moving = false;
   for (const Carried& c : s.carried) {
     if (!c.enabled || !world->alive(c.body)) continue;
     carries_any = true;
-    moving = moving || double(dir) * double(world->state(c.body).linear_velocity[c3]) > def.sleep_speed;
+    moving = moving || double(dir) * double(world->state(c.body).linear_velocity[c3]) >= toward;
     Eigen::Vector3d blo, bhi;
     world->bounds(c.body, &blo, &bhi);
     const double ground = hf->origin_y() + hf->sample(float(0.5 * (blo.x() + bhi.x()) - hf->origin_x()), float(0.5 * (blo.z() + bhi.z()) - hf->origin_z()));
