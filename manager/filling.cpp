@@ -660,7 +660,7 @@ Status TerrainManager::Impl::upload(Slot& slot, std::size_t budget, double time)
     slot.pending.clear();
     slot.pending.shrink_to_fit();
     if (slot.predecessor >= 0)
-      if (Status st = take_over(slot, time); !st) return st;
+      if (Status st = take_over(slot); !st) return st;
     slot.state = SlotState::Active;
     events.push_back({PatchEventKind::Ready, slot.patch, time, rec.fill_ms, rec.granules});
     ++work.ready;
@@ -676,7 +676,7 @@ Status TerrainManager::Impl::upload(Slot& slot, std::size_t budget, double time)
 // lifted clear of the granules they rest in, couple_before). The predecessor is then held and
 // demoted one part a frame (activate), writing its whole apron; this patch's heights at
 // promotion over that apron wait for it (rebase) before its own demotion may start.
-Status TerrainManager::Impl::take_over(Slot& b, double time) {
+Status TerrainManager::Impl::take_over(Slot& b) {
   Slot& a = slots[std::size_t(b.predecessor)];
   b.predecessor = -1;
   a.successor = -1;
@@ -728,7 +728,6 @@ Status TerrainManager::Impl::take_over(Slot& b, double time) {
   b.rebase_from = int(&a - slots.data());
   ++travels;
   work.granules_uploaded += taken;
-  (void)time;
   return Ok{};
 }
 

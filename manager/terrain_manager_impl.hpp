@@ -357,7 +357,7 @@ struct TerrainManager::Impl {
   bool ask_successor(Slot& s, const PatchRequest& r, int side, double time);
   // A successor's fill is in: it takes its predecessor's granules over where it covers them,
   // the bodies with them, and the predecessor is demoted (filling.cpp).
-  Status take_over(Slot& successor, double time);
+  Status take_over(Slot& successor);
   // The predecessor's demotion has written its heights: the successor's heights at promotion
   // over that apron, and its ledger's volume before, become those (demotion.cpp).
   void rebase(Slot& successor);

@@ -617,6 +617,16 @@ static TerrainManagerDef driven_sphere_def() {
   return def;
 }
 
+// The rig of those tests: the 8 m flat terrain and a 5 kg, 0.1 m sphere at (3, 1.25, 4) that
+// lands in the sand; the manager started with `def`.
+static Result<RigidBodyId> start_driven_sphere(test::Rig& rig, const TerrainManagerDef& def) {
+  if (!rig.ok()) return Error{"", "rig", "", rig.error};
+  auto id = rig.add_sphere(0.1f, 5.0f, {3.0, 1.25, 4.0});
+  if (!id) return id;
+  if (!rig.start(def).ok()) return Error{"", "rig.start", "", rig.error};
+  return id;
+}
+
 // A body driven across a patch's edge (Leach & Marais left it open): a sphere
 // resting in the sand is pushed sideways at 0.4 m/s for 3 s, 1.2 m, past the edge of the
 // patch it landed on. A patch is asked for ahead of it, filled while it comes, and takes it
@@ -625,12 +635,9 @@ static TerrainManagerDef driven_sphere_def() {
 // closes.
 TEST(TerrainManager, BodyDrivenAcrossPatchEdgeStaysOnParticles) {
   test::Rig rig(test::terrain_8m("flat"));
-  ASSERT_TRUE(rig.ok()) << rig.error;
+  auto id = start_driven_sphere(rig, driven_sphere_def());
+  ASSERT_TRUE(id.ok()) << id.message();
   BulletWorld& world = *rig.world;
-  auto id = rig.add_sphere(0.1f, 5.0f, {3.0, 1.25, 4.0});
-  ASSERT_TRUE(id.ok());
-  auto def = driven_sphere_def();
-  ASSERT_TRUE(rig.start(def).ok()) << rig.error;
   int off_particles = 0, driven = 0;
   for (int f = 0; f < 240; ++f) {
     if (rig.t() >= 1.0) {  // landed and settled: drive it
@@ -679,13 +686,11 @@ TEST(TerrainManager, APatchTravelsWithTheBodyItCarries) {
   };
   auto run = [](bool travel, Outcome& o) {
     test::Rig rig(test::terrain_8m("flat"));
-    ASSERT_TRUE(rig.ok()) << rig.error;
-    BulletWorld& world = *rig.world;
-    auto id = rig.add_sphere(0.1f, 5.0f, {3.0, 1.25, 4.0});
-    ASSERT_TRUE(id.ok());
     auto def = driven_sphere_def();
     def.lod.travel = travel;
-    ASSERT_TRUE(rig.start(def).ok()) << rig.error;
+    auto id = start_driven_sphere(rig, def);
+    ASSERT_TRUE(id.ok()) << id.message();
+    BulletWorld& world = *rig.world;
     const double d = 2.0 * def.material.radius;
     int travels = 0;
     for (int f = 0; f < 240; ++f) {
