@@ -159,25 +159,36 @@ HeightImage render_heights_cpu(const float* s, std::size_t n, int res, float x0,
   return img;
 }
 
-void render_heights_cpu_rows(const float* s, std::size_t n, HeightImage& img, int row0, int row1) {
+void render_heights_cpu_rows(const float* s, std::size_t n, HeightImage& img, int rows0, int rows1) {
   const int res = img.width;
   const float x0 = img.x0, z0 = img.z0;
   const float du = (img.x1 - x0) / float(res), dv = (img.z1 - z0) / float(img.height);
-  row0 = std::max(row0, 0), row1 = std::min(row1, img.height);
-  for (std::size_t k = 0; k < n; ++k) {
-    const float cx = s[4 * k], cy = s[4 * k + 1], cz = s[4 * k + 2], r = s[4 * k + 3];
-    const int u0 = std::max(0, int(std::ceil((cx - r - x0) / du - 0.5f)));
-    const int u1 = std::min(res - 1, int(std::floor((cx + r - x0) / du - 0.5f)));
-    const int v0 = std::max(row0, int(std::ceil((cz - r - z0) / dv - 0.5f)));
-    const int v1 = std::min(row1 - 1, int(std::floor((cz + r - z0) / dv - 0.5f)));
-    for (int v = v0; v <= v1; ++v)
-      for (int u = u0; u <= u1; ++u) {
-        const float x = x0 + (u + 0.5f) * du - cx, z = z0 + (v + 0.5f) * dv - cz;
-        const float d2 = x * x + z * z;
-        if (d2 > r * r) continue;
-        float& h = img.h[std::size_t(v) * res + u];
-        h = std::max(h, cy + std::sqrt(r * r - d2));
-      }
+  rows0 = std::max(rows0, 0), rows1 = std::min(rows1, img.height);
+  // Bands of 16 rows in parallel, each drawing every sphere that reaches it: a texel keeps the
+  // highest top whichever order the spheres come in, so the image does not depend on the
+  // threads.
+  constexpr int kBand = 16;
+  const int bands = (rows1 - rows0 + kBand - 1) / kBand;
+#pragma omp parallel for schedule(dynamic, 1) if (bands > 1 && n * std::size_t(rows1 - rows0) >= 65536)
+  for (int band = 0; band < bands; ++band) {
+    const int row0 = rows0 + band * kBand, row1 = std::min(rows1, row0 + kBand);
+    const float zb0 = z0 + float(row0) * dv, zb1 = z0 + float(row1) * dv;
+    for (std::size_t k = 0; k < n; ++k) {
+      if (s[4 * k + 2] + s[4 * k + 3] < zb0 || s[4 * k + 2] - s[4 * k + 3] > zb1) continue;
+      const float cx = s[4 * k], cy = s[4 * k + 1], cz = s[4 * k + 2], r = s[4 * k + 3];
+      const int u0 = std::max(0, int(std::ceil((cx - r - x0) / du - 0.5f)));
+      const int u1 = std::min(res - 1, int(std::floor((cx + r - x0) / du - 0.5f)));
+      const int v0 = std::max(row0, int(std::ceil((cz - r - z0) / dv - 0.5f)));
+      const int v1 = std::min(row1 - 1, int(std::floor((cz + r - z0) / dv - 0.5f)));
+      for (int v = v0; v <= v1; ++v)
+        for (int u = u0; u <= u1; ++u) {
+          const float x = x0 + (u + 0.5f) * du - cx, z = z0 + (v + 0.5f) * dv - cz;
+          const float d2 = x * x + z * z;
+          if (d2 > r * r) continue;
+          float& h = img.h[std::size_t(v) * res + u];
+          h = std::max(h, cy + std::sqrt(r * r - d2));
+        }
+    }
   }
 }
 
@@ -185,24 +196,27 @@ void lower_by_probe(HeightImage& image, float floor_y, float probe) {
   for (float& h : image.h) h = probe_lowered(h, floor_y, probe);
 }
 
+std::vector<float> hat_means(const HeightImage& img, GridRegion r, float sp) {
+  const std::size_t n = std::size_t(std::max(0, r.ni)) * std::size_t(std::max(0, r.nj));
+  std::vector<float> h(n);
+  // (rows in parallel: each sample is its own sum, so the heights do not depend on the threads)
+#pragma omp parallel for schedule(static) if (n >= 64)
+  for (int j = 0; j < r.nj; ++j)
+    for (int i = 0; i < r.ni; ++i) h[std::size_t(j) * r.ni + i] = img.hat_mean(float(r.i0 + i) * sp, float(r.j0 + j) * sp, sp);
+  return h;
+}
+
 void write_to_heightfield(const HeightImage& image, GridRegion r, Heightfield& hf, int border_width,
-                          const RenderBaseline* base, WriteStages* stages) {
+                          const RenderBaseline* base, WriteStages* stages, HatMeans means) {
   const float sp = hf.spacing();
   const std::size_t n = std::size_t(r.ni) * r.nj;
-  // (rows in parallel: each sample is its own sum, so the heights do not depend on the threads)
-  auto samples = [&](const HeightImage& img) {
-    std::vector<float> h(n);
-#pragma omp parallel for schedule(static) if (n >= 64)
-    for (int j = 0; j < r.nj; ++j)
-      for (int i = 0; i < r.ni; ++i) h[std::size_t(j) * r.ni + i] = img.hat_mean(float(r.i0 + i) * sp, float(r.j0 + j) * sp, sp);
-    return h;
-  };
-  const std::vector<float> p = samples(image);
+  const std::vector<float> p = means.image && means.image->size() == n ? *means.image : hat_means(image, r, sp);
   hf.write(r, p.data());
   if (stages) stages->hat = p;
   if (base && base->image && base->heights && base->heights->size() == n) {
     std::vector<float> a = gaussian3x3_values(hf, r);
-    const std::vector<float> p0 = samples(*base->image);
+    const std::vector<float> p0 =
+        means.baseline && means.baseline->size() == n ? *means.baseline : hat_means(*base->image, r, sp);
     if (stages) stages->hat_baseline = p0, stages->weight.assign(n, 0.0f);
     // G(P − P₀) with the change zero outside the region: [1 2 1]/4 along x, then along z.
     std::vector<float> d(n), dx(n), gd(n);

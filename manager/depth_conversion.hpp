@@ -122,7 +122,17 @@ struct WriteStages {
   std::vector<float> hat, hat_baseline, blended, weight;
 };
 
+// The hat means write_to_heightfield takes of an image over a region (ni × nj, i fastest; m,
+// heightfield-local): computed apart (hat_means) they let a demotion spread that work over a
+// frame of its own (docs/manager.md "No frame does a whole patch's work").
+std::vector<float> hat_means(const HeightImage& image, GridRegion region, float spacing);
+struct HatMeans {
+  const std::vector<float>* image = nullptr;     // of the image (hat_means), or null: computed here
+  const std::vector<float>* baseline = nullptr;  // of the baseline's image, or null: computed here
+};
+
 void write_to_heightfield(const HeightImage& image, GridRegion region, Heightfield& hf, int border_width = 1,
-                          const RenderBaseline* baseline = nullptr, WriteStages* stages = nullptr);
+                          const RenderBaseline* baseline = nullptr, WriteStages* stages = nullptr,
+                          HatMeans means = {});
 
 }  // namespace sandpatch

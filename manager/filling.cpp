@@ -65,8 +65,11 @@ Status TerrainManager::Impl::activate(double time, double dt) {
   for (auto& s : slots)
     if (s.state == SlotState::Filling && (!filling || s.patch < filling->patch)) filling = &s;
   if (filling) {
-    if (!filling->cut) return cut(*filling, time, kCutUnitsPerFrame);
-    return upload(*filling, std::size_t(def.fill_granules_per_frame), time);
+    const auto t0 = Clock::now();
+    const bool cutting = !filling->cut;
+    const Status st = cutting ? cut(*filling, time, kCutUnitsPerFrame) : upload(*filling, std::size_t(def.fill_granules_per_frame), time);
+    time_part(cutting ? Part::Cut : Part::Upload, ms_since(t0));
+    return st;
   }
   // A release under way: its next part, or none if a body came back to it.
   for (auto& s : slots) {
@@ -129,7 +132,9 @@ Status TerrainManager::Impl::activate(double time, double dt) {
       it = queue.erase(it);
       continue;
     }
+    const auto t0 = Clock::now();
     if (Status s = promote(*free, c.req, time); !s) return s;
+    time_part(Part::Reset, ms_since(t0));
     if (pred) {
       free->predecessor = int(pred - slots.data());
       pred->successor = int(free - slots.begin());
@@ -706,6 +711,11 @@ Status TerrainManager::Impl::take_over(Slot& b) {
     auto id = b.sim->add_granule(p, q);
     if (!id) return id.errors();
     if (Status st = b.sim->set_body_state(*id, p, q, a.sim->body_velocity(g), a.sim->body_angular_velocity(g)); !st) return st;
+    // (still as long as it was: the part of a's bed at rest sleeps on in b, docs/dem.md
+    // "Sleeping regions", rather than stepping another sleep_time after every move)
+    Simulation::StillTime still = a.sim->still_time(g);
+    still.anchor = still.anchor + shift;
+    if (Status st = b.sim->set_still_time(*id, still); !st) return st;
     ++rb.granules;
     ++taken;
     for (const Vec3& o : shape.offsets) {

@@ -90,8 +90,8 @@ std::vector<PlacedGranule> fill_from_tile(const GranuleTile& tile, float width, 
 
 // The same fill cut in steps, for a promotion spread over frames (docs/manager.md "No frame
 // does a whole patch's work"): step(work) goes on for at most about `work` units (a unit is
-// one granule of a tile copy made a candidate, or one candidate cut; the sort of the
-// candidates counts one unit each and is done whole) and returns whether the cut is done;
+// one granule of a tile copy made a candidate; a candidate cut counts 4, the sort of the
+// candidates one each and is done whole) and returns whether the cut is done;
 // take() then gives the granules fill_from_tile gives, in its order. `surface` is called
 // during the steps (what it reads must not change between them).
 class FillCut {

@@ -100,6 +100,7 @@ struct Slot {
     int parts = 0;  // parts done so far (report: ledger.patches[].demotion_parts)
     bool releasing = false;  // released for a request (planning.cpp release_idle): held, not stepped
     HeightImage was, now;
+    std::vector<float> hat_was, hat_now;  // their hat means over the apron (a staged part of its own)
     bool on_gl = false;
     double ms = 0;  // wall, the parts so far
   } demotion;
@@ -133,6 +134,7 @@ struct DemCost {
   std::int64_t last_frame = -1;      // the manager's frame (step_patches call) of the last step call
   int last_substeps = 0;             // the last step call's (0 if it found the DEM asleep)
   int last_spheres = 0;              // spheres of the last step call
+  int last_rebuilds = 0;             // grid sorts + neighbour-list rebuilds of the last step call
   double substep_dt = 0;             // s (simulation time), the last substep length
   double contacts_per_sphere = 0;    // 2 x sphere-sphere pairs touching / spheres, at the last substep
   int patch = -1;                    // the patch these are for (a slot's record keeps the last
@@ -170,6 +172,7 @@ struct DemCost {
     last_wall_ms = ms;
     last_substeps = st.substeps;
     last_spheres = spheres;
+    last_rebuilds = st.resorts;
     contact_sphere_steps += 2.0 * double(st.contacts) * st.substeps;
     grid_rebuilds += st.resorts;
     shell_lists += st.shell_lists;

@@ -395,7 +395,7 @@ const char* RunCsv::body_header() {
   return "t,body,x,y,z,qw,qx,qy,qz,vx,vy,vz,wx,wy,wz,granular_fx,granular_fy,granular_fz,granular_tx,granular_ty,"
          "granular_tz,heightfield_fx,heightfield_fy,heightfield_fz,sinkage,on_particles";
 }
-const char* RunCsv::patch_header() { return "t,patch,state,granules,spheres,substeps,step_ms"; }
+const char* RunCsv::patch_header() { return "t,patch,state,granules,spheres,substeps,step_ms,rebuilds"; }
 
 Status RunCsv::open(const std::filesystem::path& bodies) {
   discard();
@@ -437,9 +437,9 @@ Status RunCsv::frame(const World& world, double t) {
   }
   if (const TerrainManager* m = world.manager())
     for (const auto& p : m->patches())
-      std::fprintf(patch_rows_, "%.9g,%d,%s,%d,%d,%d,%.6g\n", t, p.patch,
+      std::fprintf(patch_rows_, "%.9g,%d,%s,%d,%d,%d,%.6g,%d\n", t, p.patch,
                    !p.ready ? "filling" : p.asleep ? "asleep" : p.stepped ? "active" : "held", p.granules, p.last_spheres,
-                   p.stepped ? p.last_substeps : 0, p.stepped ? p.last_step_ms : 0.0);
+                   p.stepped ? p.last_substeps : 0, p.stepped ? p.last_step_ms : 0.0, p.stepped ? p.last_rebuilds : 0);
   if (std::ferror(bodies_) || std::ferror(patch_rows_)) return Error{path_.string(), "", "", "must be writable", "write failed"};
   return Ok{};
 }

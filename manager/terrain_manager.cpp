@@ -361,6 +361,7 @@ std::vector<TerrainManager::PatchInfo> TerrainManager::patches() const {
     if (const DemCost& c = impl_->record(s).cost; c.patch == s.patch) {
       p.last_substeps = c.last_substeps;
       p.last_spheres = c.last_spheres;
+      p.last_rebuilds = c.last_rebuilds;
       p.last_step_ms = c.last_wall_ms;
       p.stepped = c.last_frame == impl_->frame;
     }
@@ -521,6 +522,12 @@ nlohmann::ordered_json TerrainManager::report() const {
       conv.push_back({{"kind", to_string(e.kind)}, {"patch", e.patch}, {"time_s", e.time}, {"wall_ms", e.wall_ms},
                       {"granules", e.granules}});
   r["conversions"] = conv;
+  ojson parts = ojson::object();
+  for (std::size_t k = 0; k < I.part_times.size(); ++k) {
+    const Impl::PartTime& t = I.part_times[k];
+    parts[Impl::kPartNames[k]] = {{"count", t.count}, {"mean_ms", t.count > 0 ? t.total_ms / double(t.count) : 0.0}, {"max_ms", t.max_ms}};
+  }
+  r["conversion_parts"] = parts;
   int used = 0;
   for (const auto& s : I.slots) used += s.live();
   r["pool"] = {{"slots", int(I.slots.size())},

@@ -247,6 +247,7 @@ class TerrainManager {
     // spheres (granules' and enabled shells') and wall ms; `stepped`: that call was in the last
     // frame (false for a patch asleep, filling, or held by the frame budget).
     int last_substeps = 0, last_spheres = 0;
+    int last_rebuilds = 0;  // its grid sorts + neighbour-list rebuilds in that call
     double last_step_ms = 0;
     bool stepped = false;
   };

@@ -14,6 +14,7 @@
 
 #include <Eigen/Core>
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cstdint>
 #include <deque>
@@ -83,6 +84,21 @@ struct TerrainManager::Impl {
   std::vector<GridRegion> dirty;                // written by demotions, not yet taken
   std::vector<DemCost> earlier_costs;           // DEM costs of demoted patches whose slot took another
   TerrainManager::FrameWork work;               // this frame's work (reset by before_bodies)
+  // Wall time of the conversion parts run one a frame, by kind (report: conversion_parts):
+  // what a frame that runs one pays (docs/manager.md "No frame does a whole patch's work").
+  enum class Part { Reset, Cut, Upload, Render, HatMeans, Write };
+  static constexpr std::array<const char*, 6> kPartNames{"reset", "cut", "upload", "render", "hat_means", "write"};
+  struct PartTime {
+    long long count = 0;
+    double total_ms = 0, max_ms = 0;
+  };
+  std::array<PartTime, 6> part_times{};
+  void time_part(Part p, double ms) {
+    PartTime& t = part_times[std::size_t(p)];
+    ++t.count;
+    t.total_ms += ms;
+    t.max_ms = std::max(t.max_ms, ms);
+  }
 
   // The demotion's GL depth render (create(): when use_gl and a context could be made; else
   // null, gl_note says why, and demotions render on the CPU).

@@ -53,6 +53,10 @@ class DemBackend {
   // The last step's substeps, substep dt (s), sphere-sphere contacts and grid rebuilds
   // (StepStats; substeps = 0 when the step found the simulation asleep).
   virtual const StepStats& last_step() const = 0;
+  // A granule's still time for sleeping regions (Simulation::still_time, set_still_time):
+  // {0, its position} and nothing to set on a backend without them (GL).
+  virtual Simulation::StillTime still_time(BodyId b) const { return {0.0f, body_position(b)}; }
+  virtual Status set_still_time(BodyId, Simulation::StillTime) { return Ok{}; }
   // GL backend: the buffer whose first member is vec4 pos[] (xyz, radius) of every sphere, for
   // drawing without a copy to the CPU; 0 on the CPU backend.
   virtual unsigned gpu_particle_buffer() const { return 0; }
@@ -95,6 +99,14 @@ class DemBackendOf final : public DemBackend {
   int particle_count() const override { return sim_.particle_count(); }
   int body_particle_count(BodyId b) const override { return sim_.body_particle_count(b); }
   const StepStats& last_step() const override { return sim_.last_step(); }
+  Simulation::StillTime still_time(BodyId b) const override {
+    if constexpr (requires(const Sim& s) { s.still_time(b); }) return sim_.still_time(b);
+    return DemBackend::still_time(b);
+  }
+  Status set_still_time(BodyId b, Simulation::StillTime t) override {
+    if constexpr (requires(Sim& s) { s.set_still_time(b, t); }) return sim_.set_still_time(b, t);
+    return Ok{};
+  }
   unsigned gpu_particle_buffer() const override {
     if constexpr (requires(const Sim& s) { s.particle_buffer(); }) return sim_.particle_buffer();
     return 0;

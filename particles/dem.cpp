@@ -142,11 +142,18 @@ Result<Simulation> Simulation::make(const SimulationDef& d, Impl* reuse) {
 
   auto im = std::make_unique<Impl>();
   Impl& s = *im;
+  // The particles and bodies the reused simulation held: only those entries of its
+  // capacity-sized arrays were written (a life's ids only grow), so only those are set back.
+  int used_p = 0, used_b = 0;
   if (reuse) {
-    // The capacity-sized arrays keep their memory; every value is written again below, so
-    // the simulation is the one create() makes. (A fresh allocation of the pool's capacity,
-    // tens of MB, page-faulted at every promotion: 5 of a 6 ms promotion in the default scene.)
+    // The capacity-sized arrays keep their memory, and the simulation is the one create()
+    // makes: the entries the last life wrote are set back to create()'s values below. (A
+    // fresh allocation of the pool's capacity, tens of MB, page-faulted at every promotion: 5
+    // of a 6 ms promotion in the default scene; writing the whole capacity again, 16 MB for a
+    // slot of 65,536 granules, still took 3.9 ms of each promotion of scenes/vehicle_drive.json.)
     Impl& o = *reuse;
+    used_p = o.np;
+    used_b = o.nb;
     s.b = std::move(o.b);
     s.p = std::move(o.p);
     s.slot_of = std::move(o.slot_of);
@@ -157,6 +164,12 @@ Result<Simulation> Simulation::make(const SimulationDef& d, Impl* reuse) {
     s.guard_arm = std::move(o.guard_arm);
     s.guard_rmin = std::move(o.guard_rmin);
     s.cell_start = std::move(o.cell_start);
+    if (d.sleep_regions && o.def.sleep_regions) {
+      s.still_for = std::move(o.still_for);
+      s.anchor = std::move(o.anchor);
+      s.dozing = std::move(o.dozing);
+      s.sphere_dozing = std::move(o.sphere_dozing);
+    }
   }
   s.def = d;
   s.shape = make_granule_shape(d.particle_radius, d.granule_edge_factor, d.material.density);
@@ -183,21 +196,23 @@ Result<Simulation> Simulation::make(const SimulationDef& d, Impl* reuse) {
                    "the grid (cell = 2 particle_radius + cell_skin) must have <= 2^26 cells",
                    "shrink the bounds or raise particle_radius"};
   }
-  s.b.resize(d.max_bodies);
-  s.p.resize(d.max_particles);
-  s.slot_of.assign(d.max_particles, -1);
-  s.cell.assign(d.max_particles, 0);
-  s.pos_at_sort.assign(std::size_t(d.max_particles) * 4, 0.0f);
-  s.acc.assign(std::size_t(d.max_particles), Impl::SphereSums{});
-  s.guard_pt_mass.assign(d.max_bodies, 0.0f);
-  s.guard_arm.assign(d.max_bodies, 0.0f);
-  s.guard_rmin.assign(d.max_bodies, 0.0f);
+  const std::size_t mp = std::size_t(d.max_particles), mb = std::size_t(d.max_bodies);
+  const std::size_t up = std::size_t(used_p), ub = std::size_t(used_b);
+  s.b.resize(mb, ub);
+  s.p.resize(mp, up);
+  refill(s.slot_of, mp, std::int32_t(-1), up);
+  if (!reuse) s.cell.assign(mp, 0);  // (reused: the sort sizes it to the spheres it holds)
+  refill(s.pos_at_sort, 4 * mp, 0.0f, 4 * up);
+  refill(s.acc, mp, Impl::SphereSums{}, up);
+  refill(s.guard_pt_mass, mb, 0.0f, ub);
+  refill(s.guard_arm, mb, 0.0f, ub);
+  refill(s.guard_rmin, mb, 0.0f, ub);
   s.still_drift = Impl::kStillDrift * d.particle_radius;
   if (d.sleep_regions) {
-    s.still_for.assign(d.max_bodies, 0.0f);
-    s.anchor.assign(std::size_t(d.max_bodies) * 4, 0.0f);
-    s.dozing.assign(d.max_bodies, 0);
-    s.sphere_dozing.assign(d.max_particles, 0);
+    refill(s.still_for, mb, 0.0f, ub);
+    refill(s.anchor, 4 * mb, 0.0f, 4 * ub);
+    refill(s.dozing, mb, std::uint8_t(0), ub);
+    refill(s.sphere_dozing, mp, std::uint8_t(0), up);
   }
   s.size_grid();
   // OpenMP's worker threads are made on the first parallel region with this many threads:
@@ -353,6 +368,28 @@ void Simulation::wake() { wake_up(*impl_); }
 bool Simulation::region_asleep(BodyId b) const {
   const Impl& s = *impl_;
   return s.def.sleep_regions && b.index >= 0 && b.index < s.nb && s.dozing[std::size_t(b.index)] != 0;
+}
+Simulation::StillTime Simulation::still_time(BodyId b) const {
+  const Impl& s = *impl_;
+  if (b.index < 0 || b.index >= s.nb) return {};
+  const std::size_t i = std::size_t(b.index);
+  if (!s.def.sleep_regions || !(s.b.flags[i] & kBodyGranule)) return {0.0f, ld3(s.b.pos, b.index)};
+  return {s.still_for[i], Vec3{s.anchor[4 * i], s.anchor[4 * i + 1], s.anchor[4 * i + 2]}};
+}
+Status Simulation::set_still_time(BodyId id, StillTime still) {
+  Impl& s = *impl_;
+  if (Status st = check_body_index(id.index, s.nb, "set_still_time"); !st) return st;
+  const std::size_t i = std::size_t(id.index);
+  if (!(s.b.flags[i] & kBodyGranule))
+    return Error{"", "set_still_time.body", std::to_string(id.index), "must be a granule", ""};
+  if (!(std::isfinite(still.seconds) && still.seconds >= 0.0f))
+    return Error{"", "set_still_time.seconds", format_number(still.seconds), "must be finite and >= 0", ""};
+  if (!std::isfinite(still.anchor.x + still.anchor.y + still.anchor.z))
+    return Error{"", "set_still_time.anchor", "non-finite", "must be finite", ""};
+  if (!s.def.sleep_regions) return Ok{};
+  s.still_for[i] = still.seconds;
+  s.anchor[4 * i] = still.anchor.x, s.anchor[4 * i + 1] = still.anchor.y, s.anchor[4 * i + 2] = still.anchor.z;
+  return Ok{};
 }
 int Simulation::body_count() const { return impl_->nb; }
 int Simulation::particle_count() const { return impl_->np; }

@@ -35,6 +35,14 @@ constexpr int kWallSlots = physics::kPlaneSlots;
 // the sum of n x f_t (N) in 4-6 (the torque about the centre is -r times it); 3 and 7 stay 0.
 constexpr std::size_t kAcc = 8;
 
+// v as `size` copies of x: when it holds `size` already, only its first `used` entries are
+// set (a reused simulation's arrays, Simulation::reset: the rest were never written since).
+template <class T>
+inline void refill(std::vector<T>& v, std::size_t size, T x, std::size_t used) {
+  if (v.size() == size) std::fill(v.begin(), v.begin() + std::min(used, size), x);
+  else v.assign(size, x);
+}
+
 // Structure-of-arrays generated from fields.hpp, the CPU's fields only (the GL backend's
 // per-sphere force sums are neither allocated nor sorted here): a field of n components is
 // (cap x n). The particle arrays include the per-sphere contact history (the boundary-plane
@@ -44,8 +52,10 @@ struct ParticleArrays {
   SANDPATCH_PARTICLE_FIELDS(SP_DECL)
   SANDPATCH_SPHERE_CONTACT_FIELDS(SP_DECL)
 #undef SP_DECL
-  void resize(std::size_t cap) {
-#define SP_RESIZE(type, name, n, hashed, backend, unit) SANDPATCH_FIELD_ON(CPU, backend, name.assign(cap * (n), type{});)
+  // Every field cap entries of zeros, writing only the first `used` of a field that holds cap
+  // (refill).
+  void resize(std::size_t cap, std::size_t used = 0) {
+#define SP_RESIZE(type, name, n, hashed, backend, unit) SANDPATCH_FIELD_ON(CPU, backend, refill(name, cap * (n), type{}, used * (n));)
     SANDPATCH_PARTICLE_FIELDS(SP_RESIZE)
     SANDPATCH_SPHERE_CONTACT_FIELDS(SP_RESIZE)
 #undef SP_RESIZE
@@ -56,8 +66,8 @@ struct BodyArrays {
 #define SP_DECL(type, name, n, hashed, backend, unit) SANDPATCH_FIELD_ON(CPU, backend, std::vector<type> name;)
   SANDPATCH_BODY_FIELDS(SP_DECL)
 #undef SP_DECL
-  void resize(std::size_t cap) {
-#define SP_RESIZE(type, name, n, hashed, backend, unit) SANDPATCH_FIELD_ON(CPU, backend, name.assign(cap * (n), type{});)
+  void resize(std::size_t cap, std::size_t used = 0) {  // (as ParticleArrays::resize)
+#define SP_RESIZE(type, name, n, hashed, backend, unit) SANDPATCH_FIELD_ON(CPU, backend, refill(name, cap * (n), type{}, used * (n));)
     SANDPATCH_BODY_FIELDS(SP_RESIZE)
 #undef SP_RESIZE
   }

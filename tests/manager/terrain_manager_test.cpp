@@ -738,7 +738,8 @@ TEST(TerrainManager, APatchTravelsWithTheBodyItCarries) {
 // two spheres dropped side by side ask for two patches in the same frame; each is promoted
 // over several frames (its slot's reset, its fill cut 4096 units a frame, uploads of
 // fill_granules_per_frame, 64 here), one part a frame for both, and both are ready before the spheres
-// land (no part forced). Asleep and idle, they are demoted one part a frame, three each.
+// land (no part forced). Asleep and idle, they are demoted one part a frame: their renders in
+// bands, the hat means, the write. The report's conversion_parts counts each kind.
 TEST(TerrainManager, NoFrameDoesMoreThanOneConversionPart) {
   test::Rig rig(test::terrain_8m("flat"));
   ASSERT_TRUE(rig.ok()) << rig.error;
@@ -773,16 +774,23 @@ TEST(TerrainManager, NoFrameDoesMoreThanOneConversionPart) {
   EXPECT_EQ(promotions, 2);
   EXPECT_EQ(demotions, 2) << "both idle patches demoted";
   EXPECT_EQ(urgent, 0) << "both patches were ready before the spheres reached them";
-  // Each demotion: its two renders in bands of rows (demotion.cpp kDepthRowsPerPart) and the
-  // write, each part in its own frame.
+  // Each demotion: its two renders in bands of rows (demotion.cpp kDepthRowsPerPart), the
+  // images' hat means and the write, each part in its own frame.
   int parts = 0;
   const auto report = m.report();  // named: a loop over a temporary's member would dangle
   for (const auto& p : report["ledger"]["patches"]) {
     const int texels = p["depth_texels"].get<int>(), bands = (texels + 63) / 64;
-    EXPECT_EQ(p["demotion_parts"].get<int>(), 2 * bands + 1) << texels << " texels a side";
+    EXPECT_EQ(p["demotion_parts"].get<int>(), 2 * bands + 2) << texels << " texels a side";
     parts += p["demotion_parts"].get<int>();
   }
   EXPECT_EQ(demotion_frames, parts) << "each part of each demotion in its own frame";
+  const auto& kinds = report["conversion_parts"];
+  EXPECT_EQ(kinds["reset"]["count"].get<int>(), 2);
+  EXPECT_EQ(kinds["hat_means"]["count"].get<int>(), 2);
+  EXPECT_EQ(kinds["write"]["count"].get<int>(), 2);
+  EXPECT_EQ(kinds["render"]["count"].get<int>(), parts - 4);
+  EXPECT_EQ(kinds["cut"]["count"].get<int>() + kinds["upload"]["count"].get<int>() + 2, promotion_frames);
+  for (const auto& [kind, t] : kinds.items()) EXPECT_LE(t["mean_ms"].get<double>(), t["max_ms"].get<double>()) << kind;
   // Each promotion: a reset, at least one part of the cut, and its uploads (at most 64 a frame).
   int granules = 0, uploads = 0;
   for (const PatchEvent& e : m.events())

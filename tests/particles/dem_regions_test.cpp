@@ -191,5 +191,97 @@ TEST(SleepingRegions, AGranuleSetFromOutsideWakes) {
   EXPECT_LT(s->body_velocity(b).y, 0.0f) << "m/s: falling";
 }
 
+// A granule handed over from another simulation (the travelling patch, manager/filling.cpp
+// take_over) keeps its still time: set after set_body_state, it sleeps at the next step
+// instead of after another sleep_time. Bad values are refused naming the field.
+TEST(SleepingRegions, AGranuleKeepsTheStillTimeItIsGiven) {
+  SimulationDef d;
+  d.side_walls = true;
+  d.sleep_time = 0.05f;
+  d.sleep_regions = true;
+  d.bounds_min = {0, 0, 0};
+  d.bounds_max = {0.2f, 0.1f, 0.2f};
+  d.max_bodies = 64;
+  d.max_particles = 256;
+  LatticeBedDef bed;
+  bed.nx = bed.nz = 4;
+  bed.layers = 1;
+  bed.min = {0.02f, 0.0075f, 0.02f};
+  auto a = Simulation::create(d);
+  ASSERT_TRUE(a.ok()) << a.message();
+  ASSERT_TRUE(add_lattice_bed(*a, bed).ok());
+  int asleep = 0;
+  for (int k = 0; k < 200 && asleep == 0; ++k) {
+    ASSERT_TRUE(a->step(kFrame).ok());
+    asleep = a->last_step().sleeping_granules;
+  }
+  ASSERT_GT(asleep, 0) << "granules at rest on the floor sleep";
+  // the same granules, where they lie, in two other simulations: b is given their still
+  // times, c is not
+  auto b = Simulation::create(d), c = Simulation::create(d);
+  ASSERT_TRUE(b.ok() && c.ok());
+  const Vec3 shift{0, 0, 0};
+  for (int i = 0; i < a->body_count(); ++i) {
+    const BodyId g{i};
+    for (Simulation* s : {&*b, &*c}) {
+      auto id = s->add_granule(a->body_position(g) + shift, a->body_orientation(g));
+      ASSERT_TRUE(id.ok());
+      ASSERT_TRUE(s->set_body_state(*id, a->body_position(g) + shift, a->body_orientation(g), {}, {}).ok());
+      EXPECT_EQ(s->still_time(*id).seconds, 0.0f) << "set from outside: not still";
+    }
+    Simulation::StillTime t = a->still_time(g);
+    t.anchor = t.anchor + shift;
+    ASSERT_TRUE(b->set_still_time(BodyId{i}, t).ok());
+    EXPECT_EQ(b->still_time(BodyId{i}).seconds, t.seconds);
+  }
+  ASSERT_TRUE(b->step(kFrame).ok());
+  ASSERT_TRUE(c->step(kFrame).ok());
+  EXPECT_GE(b->last_step().sleeping_granules, asleep) << "those asleep in a sleep at b's first step";
+  EXPECT_EQ(c->last_step().sleeping_granules, 0) << "not given their still times, none sleeps yet";
+  // refused, naming the field
+  auto field = [&](Status st) { return st.ok() ? std::string("ok") : st.errors().front().field; };
+  EXPECT_EQ(field(b->set_still_time(BodyId{0}, {-1.0f, {}})), "set_still_time.seconds");
+  EXPECT_EQ(field(b->set_still_time(BodyId{0}, {NAN, {}})), "set_still_time.seconds");
+  EXPECT_EQ(field(b->set_still_time(BodyId{0}, {0.1f, {INFINITY, 0, 0}})), "set_still_time.anchor");
+  EXPECT_EQ(field(b->set_still_time(BodyId{9999}, {0.1f, {}})), "set_still_time.body");
+}
+
+// A simulation reset for another patch (Simulation::reset, a pool slot reused) is the one
+// create() makes for that definition: the same state after the same steps, after a larger and
+// after a smaller life in the slot (reset sets back only the entries the last life wrote).
+TEST(SleepingRegions, AResetSimulationStepsAsAFreshOne) {
+  SimulationDef d;
+  d.side_walls = true;
+  d.sleep_time = 0.05f;
+  d.sleep_regions = true;
+  d.bounds_min = {0, 0, 0};
+  d.bounds_max = {0.2f, 0.1f, 0.2f};
+  d.max_bodies = 64;
+  d.max_particles = 256;
+  auto fill = [](Simulation& s, int n, std::uint64_t seed) {
+    LatticeBedDef bed;
+    bed.nx = bed.nz = n;
+    bed.layers = 1;
+    bed.min = {0.02f, 0.0075f, 0.02f};
+    bed.seed = seed;
+    ASSERT_TRUE(add_lattice_bed(s, bed).ok());
+    for (int k = 0; k < 60; ++k) ASSERT_TRUE(s.step(kFrame).ok());
+  };
+  auto fresh = Simulation::create(d);
+  ASSERT_TRUE(fresh.ok()) << fresh.message();
+  fill(*fresh, 3, 2);
+  auto slot = Simulation::create(d);
+  ASSERT_TRUE(slot.ok()) << slot.message();
+  fill(*slot, 5, 7);  // a larger life first
+  ASSERT_TRUE(slot->reset(d).ok());
+  fill(*slot, 3, 2);
+  EXPECT_EQ(slot->state_hash(), fresh->state_hash()) << "after a larger life";
+  ASSERT_TRUE(slot->reset(d).ok());
+  fill(*slot, 2, 9);  // a smaller one
+  ASSERT_TRUE(slot->reset(d).ok());
+  fill(*slot, 3, 2);
+  EXPECT_EQ(slot->state_hash(), fresh->state_hash()) << "after a smaller life";
+}
+
 }  // namespace
 }  // namespace sandpatch
