@@ -80,14 +80,31 @@ Status TerrainManager::Impl::demote_idle(double time) {
   // carried by it, over or near it, or heading for it) is released now, one part a frame, not
   // when a request needs its slot. Waiting for that, a car turning across a corner of its
   // patches drove on the heightfield while the patch it had left behind was demoted.
-  for (const Slot& s : slots)
-    if (s.state == SlotState::Free || s.demotion.releasing) return Ok{};  // (a slot free, or one being released)
-  for (Slot& s : slots) {
-    if (!s.ready() || s.carried.empty() || wanted(s) || wanted_for_release(s) || s.successor >= 0 || s.rebase_from >= 0)
-      continue;  // (not reached yet, or travelling: kept)
-    ++early_releases;
-    return release(s, time);
-  }
+  bool full = true;
+  for (const Slot& s : slots) full = full && s.state != SlotState::Free && !s.demotion.releasing;
+  if (full)  // (else a slot is free, or one is being released)
+    for (Slot& s : slots) {
+      if (!s.ready() || s.carried.empty() || wanted(s) || wanted_for_release(s) || s.successor >= 0 || s.rebase_from >= 0)
+        continue;  // (not reached yet, or travelling: kept)
+      ++early_releases;
+      return release(s, time);
+    }
+  return render_baselines(time, /*whole=*/false);
+}
+
+// Ahead of any demotion: the render of a live patch's fill (the demotion's first stage, the
+// baseline of "Round trip"), which depends on the fill alone: one band a frame in frames no
+// other part takes (demote_idle), or all of them (`whole`: prepare, before the first frame).
+// On the CPU only (a GL render is one part, at the demotion). A patch taken over by its
+// successor then waits that many frames less for its demotion to write the heights the
+// successor is rebased on, and a request waits less for a released slot.
+Status TerrainManager::Impl::render_baselines(double time, bool whole) {
+  if (depth) return Ok{};
+  for (Slot& s : slots)
+    while (s.ready() && !s.demotion.releasing && !s.superseded && s.demotion.stage == 0 && !record(s).fill_spheres.empty()) {
+      if (Status st = demote(s, time, false, /*staged=*/true); !st) return st;
+      if (!whole) return Ok{};
+    }
   return Ok{};
 }
 

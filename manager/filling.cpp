@@ -733,7 +733,9 @@ Status TerrainManager::Impl::take_over(Slot& b) {
   }
   a.carried.clear();
   a.superseded = true;
-  a.demotion = {};
+  // (its fill's render, done ahead while it lived (demote_idle), is kept; a render of its
+  // granules begun before they last moved is not)
+  if (a.demotion.stage > 1 || (a.demotion.stage == 1 && a.demotion.row > 0)) a.demotion = {};
   a.demotion.releasing = true;
   b.rebase_from = int(&a - slots.data());
   ++travels;

@@ -219,6 +219,10 @@ Status TerrainManager::prepare(double time, double dt, Profile& profile) {
     if (Status st = I.activate(time, dt); !st) return st;
     if (I.work.urgent_fills == 0) break;
   }
+  {
+    auto timer = profile.time(Stage::Demotion);  // (the fills' renders, ahead of their demotions)
+    if (Status st = I.render_baselines(time, /*whole=*/true); !st) return st;
+  }
   I.work = {};
   return Ok{};
 }

@@ -425,6 +425,7 @@ struct TerrainManager::Impl {
   // ---- demotion (demotion.cpp): Stage::Demotion ----
   // Demotes the patches asleep for idle_timeout, one part of one patch a frame.
   Status demote_idle(double time);
+  Status render_baselines(double time, bool whole);
   // Demotes every live patch (filling ones after uploading the rest).
   Status demote_every(double time);
   // `staged`: one part (of three) this call, the slot's Slot::demotion keeping the rest;
