@@ -156,8 +156,9 @@ TEST(SleepingRegions, TheStillPartOfABedSleepsAndWakesAheadOfABlade) {
   EXPECT_NEAR(drag_on, drag_off, 0.2 * drag_off) << "N: the blade's drag, summed over the five beds";
 }
 
-// What a granule set from outside (Simulation::set_body_state) is: awake, and not still.
-TEST(SleepingRegions, AGranuleSetFromOutsideWakes) {
+// A 20 cm box with side walls, room for 64 granules, regions sleeping after 0.05 s still, and
+// one layer of n x n granules on its floor (the small beds of the tests below).
+SimulationDef small_box() {
   SimulationDef d;
   d.side_walls = true;
   d.sleep_time = 0.05f;
@@ -166,19 +167,32 @@ TEST(SleepingRegions, AGranuleSetFromOutsideWakes) {
   d.bounds_max = {0.2f, 0.1f, 0.2f};
   d.max_bodies = 64;
   d.max_particles = 256;
-  auto s = Simulation::create(d);
-  ASSERT_TRUE(s.ok()) << s.message();
+  return d;
+}
+LatticeBedDef floor_layer(int n, std::uint64_t seed = 1) {
   LatticeBedDef bed;
-  bed.nx = bed.nz = 4;
+  bed.nx = bed.nz = n;
   bed.layers = 1;
   bed.min = {0.02f, 0.0075f, 0.02f};
-  ASSERT_TRUE(add_lattice_bed(*s, bed).ok());
+  bed.seed = seed;
+  return bed;
+}
+// Steps s until granules sleep (at most 200 frames); how many.
+int step_until_asleep(Simulation& s) {
   int asleep = 0;
   for (int k = 0; k < 200 && asleep == 0; ++k) {
-    ASSERT_TRUE(s->step(kFrame).ok());
-    asleep = s->last_step().sleeping_granules;
+    EXPECT_TRUE(s.step(kFrame).ok());
+    asleep = s.last_step().sleeping_granules;
   }
-  ASSERT_GT(asleep, 0) << "granules at rest on the floor sleep";
+  return asleep;
+}
+
+// What a granule set from outside (Simulation::set_body_state) is: awake, and not still.
+TEST(SleepingRegions, AGranuleSetFromOutsideWakes) {
+  auto s = Simulation::create(small_box());
+  ASSERT_TRUE(s.ok()) << s.message();
+  ASSERT_TRUE(add_lattice_bed(*s, floor_layer(4)).ok());
+  ASSERT_GT(step_until_asleep(*s), 0) << "granules at rest on the floor sleep";
   int which = -1;
   for (int i = 0; i < s->body_count() && which < 0; ++i)
     if (s->region_asleep(BodyId{i})) which = i;
@@ -195,26 +209,11 @@ TEST(SleepingRegions, AGranuleSetFromOutsideWakes) {
 // take_over) keeps its still time: set after set_body_state, it sleeps at the next step
 // instead of after another sleep_time. Bad values are refused naming the field.
 TEST(SleepingRegions, AGranuleKeepsTheStillTimeItIsGiven) {
-  SimulationDef d;
-  d.side_walls = true;
-  d.sleep_time = 0.05f;
-  d.sleep_regions = true;
-  d.bounds_min = {0, 0, 0};
-  d.bounds_max = {0.2f, 0.1f, 0.2f};
-  d.max_bodies = 64;
-  d.max_particles = 256;
-  LatticeBedDef bed;
-  bed.nx = bed.nz = 4;
-  bed.layers = 1;
-  bed.min = {0.02f, 0.0075f, 0.02f};
+  const SimulationDef d = small_box();
   auto a = Simulation::create(d);
   ASSERT_TRUE(a.ok()) << a.message();
-  ASSERT_TRUE(add_lattice_bed(*a, bed).ok());
-  int asleep = 0;
-  for (int k = 0; k < 200 && asleep == 0; ++k) {
-    ASSERT_TRUE(a->step(kFrame).ok());
-    asleep = a->last_step().sleeping_granules;
-  }
+  ASSERT_TRUE(add_lattice_bed(*a, floor_layer(4)).ok());
+  const int asleep = step_until_asleep(*a);
   ASSERT_GT(asleep, 0) << "granules at rest on the floor sleep";
   // the same granules, where they lie, in two other simulations: b is given their still
   // times, c is not
@@ -250,21 +249,9 @@ TEST(SleepingRegions, AGranuleKeepsTheStillTimeItIsGiven) {
 // create() makes for that definition: the same state after the same steps, after a larger and
 // after a smaller life in the slot (reset sets back only the entries the last life wrote).
 TEST(SleepingRegions, AResetSimulationStepsAsAFreshOne) {
-  SimulationDef d;
-  d.side_walls = true;
-  d.sleep_time = 0.05f;
-  d.sleep_regions = true;
-  d.bounds_min = {0, 0, 0};
-  d.bounds_max = {0.2f, 0.1f, 0.2f};
-  d.max_bodies = 64;
-  d.max_particles = 256;
+  const SimulationDef d = small_box();
   auto fill = [](Simulation& s, int n, std::uint64_t seed) {
-    LatticeBedDef bed;
-    bed.nx = bed.nz = n;
-    bed.layers = 1;
-    bed.min = {0.02f, 0.0075f, 0.02f};
-    bed.seed = seed;
-    ASSERT_TRUE(add_lattice_bed(s, bed).ok());
+    ASSERT_TRUE(add_lattice_bed(s, floor_layer(n, seed)).ok());
     for (int k = 0; k < 60; ++k) ASSERT_TRUE(s.step(kFrame).ok());
   };
   auto fresh = Simulation::create(d);
