@@ -161,9 +161,10 @@ Status TerrainManager::Impl::demote(Slot& slot, double time, bool gl_ok, bool st
     time_part(Part::HatMeans, ms_since(t0));
     return Ok{};
   }
-  // Granule spheres in heightfield-local coordinates (m), now and as filled.
+  // Granule spheres in heightfield-local coordinates (m), now and as filled. (A staged part of
+  // the fill's CPU render needs only the fill: the box's top is the GL render's depth range.)
   std::vector<float> xyzr;
-  granule_spheres(slot, xyzr);
+  if (!(staged && w.stage == 0 && !(depth && gl_ok))) granule_spheres(slot, xyzr);
   std::vector<float> filled = rec.fill_spheres;
   // Spheres grown by the probe radius, tops lowered by it after the render (lower_by_probe).
   const float rw = radius_world(slot);

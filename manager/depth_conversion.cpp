@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 
 #include "gl/context.hpp"
 #include "gl/program.hpp"
@@ -164,17 +165,24 @@ void render_heights_cpu_rows(const float* s, std::size_t n, HeightImage& img, in
   const float x0 = img.x0, z0 = img.z0;
   const float du = (img.x1 - x0) / float(res), dv = (img.z1 - z0) / float(img.height);
   rows0 = std::max(rows0, 0), rows1 = std::min(rows1, img.height);
-  // Bands of 16 rows in parallel, each drawing every sphere that reaches it: a texel keeps the
-  // highest top whichever order the spheres come in, so the image does not depend on the
-  // threads.
-  constexpr int kBand = 16;
-  const int bands = (rows1 - rows0 + kBand - 1) / kBand;
-#pragma omp parallel for schedule(dynamic, 1) if (bands > 1 && n * std::size_t(rows1 - rows0) >= 65536)
-  for (int band = 0; band < bands; ++band) {
-    const int row0 = rows0 + band * kBand, row1 = std::min(rows1, row0 + kBand);
-    const float zb0 = z0 + float(row0) * dv, zb1 = z0 + float(row1) * dv;
-    for (std::size_t k = 0; k < n; ++k) {
-      if (s[4 * k + 2] + s[4 * k + 3] < zb0 || s[4 * k + 2] - s[4 * k + 3] > zb1) continue;
+  if (rows1 <= rows0) return;
+  // The rows in strips of 16, drawn in parallel: each strip draws the spheres that reach it
+  // (listed first, in sphere order). A texel keeps the highest top whichever order the spheres
+  // come in, so the image does not depend on the threads.
+  constexpr int kStrip = 16;
+  const int strips = (rows1 - rows0 + kStrip - 1) / kStrip;
+  std::vector<std::vector<std::uint32_t>> reach(static_cast<std::size_t>(strips));
+  for (std::size_t k = 0; k < n; ++k) {
+    const float cz = s[4 * k + 2], r = s[4 * k + 3];
+    const int v0 = std::max(rows0, int(std::ceil((cz - r - z0) / dv - 0.5f)));
+    const int v1 = std::min(rows1 - 1, int(std::floor((cz + r - z0) / dv - 0.5f)));
+    if (v1 < v0) continue;
+    for (int b = (v0 - rows0) / kStrip; b <= (v1 - rows0) / kStrip; ++b) reach[std::size_t(b)].push_back(std::uint32_t(k));
+  }
+#pragma omp parallel for schedule(dynamic, 1) if (strips > 1 && n * std::size_t(rows1 - rows0) >= 65536)
+  for (int b = 0; b < strips; ++b) {
+    const int row0 = rows0 + b * kStrip, row1 = std::min(rows1, row0 + kStrip);
+    for (const std::uint32_t k : reach[std::size_t(b)]) {
       const float cx = s[4 * k], cy = s[4 * k + 1], cz = s[4 * k + 2], r = s[4 * k + 3];
       const int u0 = std::max(0, int(std::ceil((cx - r - x0) / du - 0.5f)));
       const int u1 = std::min(res - 1, int(std::floor((cx + r - x0) / du - 0.5f)));
