@@ -93,15 +93,23 @@ Status TerrainManager::Impl::demote_idle(double time) {
 }
 
 // Ahead of any demotion: the render of a live patch's fill (the demotion's first stage, the
-// baseline of "Round trip"), which depends on the fill alone: one band a frame in frames no
-// other part takes (demote_idle), or all of them (`whole`: prepare, before the first frame).
+// baseline of "Round trip") and its hat means, which depend on the fill alone: one part a
+// frame in frames no other part takes (demote_idle), or all of them (`whole`: prepare, before
+// the first frame).
 // On the CPU only (a GL render is one part, at the demotion). A patch taken over by its
 // successor then waits that many frames less for its demotion to write the heights the
 // successor is rebased on, and a request waits less for a released slot.
 Status TerrainManager::Impl::render_baselines(double time, bool whole) {
   if (depth) return Ok{};
+  // (the render, then its hat means: demote's parts for stage 0 and the hat of the fill)
+  auto pending = [&](const Slot& s) {
+    const PatchRecord& rec = record(s);
+    const Slot::Demotion& w = s.demotion;
+    const bool have_base = rec.before_heights.size() == std::size_t(s.apron.ni) * s.apron.nj;
+    return w.stage == 0 || (w.stage == 1 && w.row == 0 && have_base && w.hat_was.empty());
+  };
   for (Slot& s : slots)
-    while (s.ready() && !s.demotion.releasing && !s.superseded && s.demotion.stage == 0 && !record(s).fill_spheres.empty()) {
+    while (s.ready() && !s.demotion.releasing && !s.superseded && !record(s).fill_spheres.empty() && pending(s)) {
       if (Status st = demote(s, time, false, /*staged=*/true); !st) return st;
       if (!whole) return Ok{};
     }
@@ -146,14 +154,19 @@ Status TerrainManager::Impl::demote(Slot& slot, double time, bool gl_ok, bool st
   Slot::Demotion& w = slot.demotion;
   const double sp = hf->spacing();
   const bool have_base = !rec.fill_spheres.empty() && rec.before_heights.size() == std::size_t(slot.apron.ni) * slot.apron.nj;
-  // Part 3 (after the two renders below): the two images' hat means over the apron, the
-  // write's costliest sums (about half of the write's 3-6 ms on a car's patch), in a part of
-  // their own when staged.
-  if (w.stage == 2 && staged) {
+  // The hat means of each image over the apron, the write's costliest sums (about half of the
+  // write's 3-6 ms on a car's patch), each in a part of its own when staged: the fill's once
+  // its render is done (before the render of the surface now; ahead of the demotion, with
+  // that render, render_baselines), the surface's after its render.
+  const bool hat_of_fill = w.stage == 1 && w.row == 0 && have_base && w.hat_was.empty();
+  if (staged && (hat_of_fill || w.stage == 2)) {
     const auto t = Clock::now();
-    w.hat_now = hat_means(w.now, slot.apron, float(sp));
-    if (have_base) w.hat_was = hat_means(w.was, slot.apron, float(sp));
-    ++w.stage;
+    if (hat_of_fill) {
+      w.hat_was = hat_means(w.was, slot.apron, float(sp));
+    } else {
+      w.hat_now = hat_means(w.now, slot.apron, float(sp));
+      ++w.stage;
+    }
     ++w.parts;
     ++work.demotion_parts;
     ++work.conversion_parts;
