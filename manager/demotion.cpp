@@ -101,15 +101,9 @@ Status TerrainManager::Impl::demote_idle(double time) {
 // successor is rebased on, and a request waits less for a released slot.
 Status TerrainManager::Impl::render_baselines(double time, bool whole) {
   if (depth) return Ok{};
-  // (the render, then its hat means: demote's parts for stage 0 and the hat of the fill)
-  auto pending = [&](const Slot& s) {
-    const PatchRecord& rec = record(s);
-    const Slot::Demotion& w = s.demotion;
-    const bool have_base = rec.before_heights.size() == std::size_t(s.apron.ni) * s.apron.nj;
-    return w.stage == 0 || (w.stage == 1 && w.row == 0 && have_base && w.hat_was.empty());
-  };
   for (Slot& s : slots)
-    while (s.ready() && !s.demotion.releasing && !s.superseded && !record(s).fill_spheres.empty() && pending(s)) {
+    while (s.ready() && !s.demotion.releasing && !s.superseded && !record(s).fill_spheres.empty() &&
+           (s.demotion.stage == 0 || fill_hat_pending(s))) {
       if (Status st = demote(s, time, false, /*staged=*/true); !st) return st;
       if (!whole) return Ok{};
     }
@@ -153,12 +147,12 @@ Status TerrainManager::Impl::demote(Slot& slot, double time, bool gl_ok, bool st
   PatchRecord& rec = record(slot);
   Slot::Demotion& w = slot.demotion;
   const double sp = hf->spacing();
-  const bool have_base = !rec.fill_spheres.empty() && rec.before_heights.size() == std::size_t(slot.apron.ni) * slot.apron.nj;
+  const bool have_base = has_baseline(slot);
   // The hat means of each image over the apron, the write's costliest sums (about half of the
   // write's 3-6 ms on a car's patch), each in a part of its own when staged: the fill's once
   // its render is done (before the render of the surface now; ahead of the demotion, with
   // that render, render_baselines), the surface's after its render.
-  const bool hat_of_fill = w.stage == 1 && w.row == 0 && have_base && w.hat_was.empty();
+  const bool hat_of_fill = fill_hat_pending(slot);
   if (staged && (hat_of_fill || w.stage == 2)) {
     const auto t = Clock::now();
     if (hat_of_fill) {
@@ -233,7 +227,7 @@ Status TerrainManager::Impl::demote(Slot& slot, double time, bool gl_ok, bool st
     if (Status st = render_part(&xyzr, w.now, Clock::now()); !st) return st;
     if (staged) return Ok{};
   }
-  // Part 4: the heights written. Where the surface did not move, the heights of before the
+  // The last part: the heights written. Where the surface did not move, the heights of before the
   // promotion come back exactly (write_to_heightfield's RenderBaseline; docs/manager.md
   // "Round trip").
   const auto t2 = Clock::now();

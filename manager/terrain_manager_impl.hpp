@@ -92,7 +92,7 @@ struct TerrainManager::Impl {
     long long count = 0;
     double total_ms = 0, max_ms = 0;
   };
-  std::array<PartTime, 6> part_times{};
+  std::array<PartTime, kPartNames.size()> part_times{};
   void time_part(Part p, double ms) {
     PartTime& t = part_times[std::size_t(p)];
     ++t.count;
@@ -426,11 +426,21 @@ struct TerrainManager::Impl {
   // ---- demotion (demotion.cpp): Stage::Demotion ----
   // Demotes the patches asleep for idle_timeout, one part of one patch a frame.
   Status demote_idle(double time);
+  // The parts of a live patch's demotion that depend on its fill alone, done ahead (demotion.cpp).
   Status render_baselines(double time, bool whole);
+  // Whether the slot's fill has a render baseline (its heights at promotion over the apron),
+  // and whether that render's hat means are still to take (its render done, they not yet).
+  bool has_baseline(const Slot& s) const {
+    const PatchRecord& rec = record(s);
+    return !rec.fill_spheres.empty() && rec.before_heights.size() == std::size_t(s.apron.ni) * s.apron.nj;
+  }
+  bool fill_hat_pending(const Slot& s) const {
+    return s.demotion.stage == 1 && s.demotion.row == 0 && s.demotion.hat_was.empty() && has_baseline(s);
+  }
   // Demotes every live patch (filling ones after uploading the rest).
   Status demote_every(double time);
-  // `staged`: one part (of three) this call, the slot's Slot::demotion keeping the rest;
-  // otherwise all that is left of it now.
+  // `staged`: one part this call (a band of a render, an image's hat means, or the write), the
+  // slot's Slot::demotion keeping the rest; otherwise all that is left of it now.
   Status demote(Slot& slot, double time, bool gl_ok = true, bool staged = false);
   void granule_spheres(const Slot& slot, std::vector<float>& xyzr) const;
   // The box a demotion renders: the slot's apron (m, heightfield-local), from the floor to
