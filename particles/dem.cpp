@@ -414,7 +414,8 @@ double Simulation::tangential_spring_energy() const {
   const Impl& s = *impl_;
   const double kt = double(s.def.material.normal_stiffness) * s.def.material.tangential_stiffness_ratio;
   double e = 0;
-  const std::size_t entries = s.nstart.empty() ? 0 : std::size_t(s.nstart[s.np]);
+  // the list's entries (nstart has the spheres of its last build: a body added since is not in it)
+  const std::size_t entries = s.nstart.empty() ? 0 : std::size_t(s.nstart.back());
   for (std::size_t k = 0; k < entries; ++k) {
     const float* x = &s.pairs.xi[3 * k];
     e += 0.5 * kt * (double(x[0]) * x[0] + double(x[1]) * x[1] + double(x[2]) * x[2]);
@@ -551,7 +552,7 @@ std::uint64_t Simulation::state_hash() const {
   SANDPATCH_SPHERE_CONTACT_FIELDS(SP_HASH_P)
 #undef SP_HASH_P
   // the pairs' contact history, in list order (the list is the same for any thread count)
-  const std::size_t entries = s.nstart.empty() ? 0 : std::size_t(s.nstart[s.np]);
+  const std::size_t entries = s.nstart.empty() ? 0 : std::size_t(s.nstart.back());  // the last build's spheres
 #define SP_HASH_C(type, name, n, hashed, backend, unit) \
   SANDPATCH_FIELD_ON(CPU, backend, if (hashed) h.bytes(s.pairs.name.data(), sizeof(type) * std::size_t(n) * entries);)
   SANDPATCH_PAIR_CONTACT_FIELDS(SP_HASH_C)

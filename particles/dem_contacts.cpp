@@ -234,7 +234,7 @@ void Simulation::Impl::contacts(float dt) {
   ledger_friction += led_f;
   if (led) ledger_spring_pairs = led_u;
   stats.contacts = npairs;
-  stats.neighbour_entries = (nstart.empty() ? 0 : nstart[np]) + std::int64_t(snbr.size());
+  stats.neighbour_entries = (nstart.empty() ? 0 : nstart.back()) + std::int64_t(snbr.size());
 }
 
 }  // namespace sandpatch
