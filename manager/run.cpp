@@ -189,6 +189,7 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
   if (Status s = world.prepare(dt); !s) return fail(ExitCode::RuntimeFailure, "prepare", s.message());
   const auto t_start = Clock::now();
   if (Status s = write_outputs(0, 0.0); !s) return fail(ExitCode::RuntimeFailure, "outputs", s.message());
+  double frames_wall_s = 0;  // s, the frames alone (World::step), without the outputs written between them
   for (long long frame = 0; frame < frames; ++frame) {
     const double t = double(frame) * dt;  // s, simulated time at the start of this frame
     if (sim.scale_by_distance)
@@ -196,6 +197,7 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
     const double dem_ms_before = world.profile().timer(Stage::Dem).total_ms;
     if (Status st = world.step(dt, sim.substeps); !st)
       return fail(ExitCode::RuntimeFailure, world.failed_stage(), st.message());
+    frames_wall_s += world.last_frame().wall_ms * 1e-3;
     if (Status s = write_outputs(frame + 1, world.time()); !s) return fail(ExitCode::RuntimeFailure, "outputs", s.message());
     if (Status s = csv.frame(world, world.time()); !s) return fail(ExitCode::RuntimeFailure, "outputs", s.message());
     if (opt.on_frame) {
@@ -290,6 +292,10 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
   r["frame_count"] = frames;
   r["wall_s"] = wall_s;
   r["real_time_factor"] = wall_s > 0 ? t_end / wall_s : 0.0;
+  // what a game's loop pays for the terrain: the frames without the images, heightfields and
+  // CSV rows a scene run writes between them
+  r["frames_wall_s"] = frames_wall_s;
+  r["frames_real_time_factor"] = frames_wall_s > 0 ? t_end / frames_wall_s : 0.0;
   const ojson w = world.report();
   for (const auto& [key, value] : w.items()) r[key] = value;
   r["counts"]["patches_live_at_end"] = live_patches;
