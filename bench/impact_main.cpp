@@ -113,6 +113,8 @@ int run_series(const DropDef& d, const TradeoffKnobs& k) {
     j["rebound_ratio"] = p.drop.rebound_ratio;
     j["rebound_bottom"] = p.drop.rebound_bottom;
     j["crater_depth"] = p.drop.depth;
+    j["stop_time_ratio"] = p.drop.stop_time_ratio;
+    j["peak_force_at"] = p.drop.peak_force_at;
     j["wall_s"] = p.drop.wall_seconds;
     std::cout << j.dump() << "\n";
   };
@@ -141,6 +143,27 @@ int run_series(const DropDef& d, const TradeoffKnobs& k) {
                        {"prefactor", r->depth_vs_density.prefactor}, {"n", r->depth_vs_density.points}};
   f["uehara_prefactor"] = {{"mean", a_mean}, {"sd", std::sqrt(a_var)}, {"n", A.size()}, {"experiments", 0.14}};
   f["worst_rebound"] = r->worst_rebound;
+  // the stop's dynamics over the distinct points (Ambroso et al. 2005: t_stop v0 / d about 3,
+  // the force largest at impact)
+  {
+    std::vector<double> ratio, peak;
+    for (const auto* v : {&r->by_height, &r->by_density})
+      for (const ImpactPoint& p : *v) {
+        if (v == &r->by_density && p.density == d.sphere_density) continue;  // (the height series has it)
+        if (p.drop.stop_time_ratio > 0) ratio.push_back(p.drop.stop_time_ratio), peak.push_back(p.drop.peak_force_at);
+      }
+    auto mean_sd = [](const std::vector<double>& x) {
+      double m = 0, v = 0;
+      for (double a : x) m += a / double(x.size());
+      for (double a : x) v += (a - m) * (a - m) / double(x.size() > 1 ? x.size() - 1 : 1);
+      return nlohmann::ordered_json{{"mean", m}, {"sd", std::sqrt(v)}, {"n", x.size()}};
+    };
+    if (!ratio.empty()) {
+      f["stop_time_ratio"] = mean_sd(ratio);
+      f["stop_time_ratio"]["experiments"] = 3.0;
+      f["peak_force_at"] = mean_sd(peak);
+    }
+  }
   std::cout << f.dump() << "\n";
   return 0;
 }
@@ -230,6 +253,10 @@ int main(int argc, char** argv) {
   j["rebound_bottom"] = r->rebound_bottom;
   j["settle_time"] = r->settle_time;
   j["deepest"] = r->deepest;
+  j["stop_time"] = r->stop_time;
+  j["stop_penetration"] = r->stop_penetration;
+  j["stop_time_ratio"] = r->stop_time_ratio;
+  j["peak_force_at"] = r->peak_force_at;
   j["sphere_sink"] = r->sphere_sink;
   j["crater_depth"] = r->depth;
   j["axis_depth_after"] = r->axis_depth_after;

@@ -178,6 +178,27 @@ Result<DropResult> measure_drop(const DropDef& d, const TradeoffKnobs& k) {
       if (fr.fy > 0.1 * weight) { t_hit = fr.t - dt; break; }
     out.rebound_ratio = out.impact_speed > 0 ? out.rebound_speed / out.impact_speed : 0;
     out.settle_time = last_still - t_hit;
+    // the stop (stop_time ...): frame k0 the first with the soil's force, k the first not going down
+    std::size_t k0 = 0;
+    while (k0 < out.frames.size() && !(out.frames[k0].fy > 0.1 * weight)) ++k0;
+    // (stopped: going down at less than 1 % of the impact speed, the precision of a speed read
+    // from frame ends; a light ball's last millimetres creep)
+    const double v_stop = -0.01 * out.impact_speed;
+    std::size_t k = k0;
+    while (k < out.frames.size() && out.frames[k].vy < v_stop) ++k;
+    if (k0 > 0 && k < out.frames.size() && out.frames[k - 1].vy < v_stop) {  // (k = k0: it stopped in the first frame)
+      const DropFrame &a = out.frames[k - 1], &b = out.frames[k];
+      const double u = (a.vy - v_stop) / (a.vy - b.vy);  // in [0, 1): where vy crosses v_stop
+      const double t_stop = a.t + u * (b.t - a.t), bottom_stop = a.bottom + u * (b.bottom - a.bottom);
+      const DropFrame& before = out.frames[k0 - 1];
+      out.stop_time = t_stop - before.t;
+      out.stop_penetration = before.bottom - bottom_stop;
+      if (out.stop_penetration > 0) out.stop_time_ratio = out.stop_time * out.impact_speed / out.stop_penetration;
+      std::size_t peak = k0;
+      for (std::size_t i = k0; i <= k; ++i)
+        if (out.frames[i].fy > out.frames[peak].fy) peak = i;
+      out.peak_force_at = out.stop_time > 0 ? std::clamp((out.frames[peak].t - before.t) / out.stop_time, 0.0, 1.0) : 0.0;
+    }
   }
   if (!d.trace) out.frames.clear();
   bool asleep = m.active_patches() > 0;

@@ -106,6 +106,17 @@ struct DropResult {
   double rebound_bottom = 0;
   double settle_time = 0;
   double deepest = 0;          // m, deepest point of the sphere's bottom below the surface during the run
+  // The penetration's dynamics (Ambroso et al., Phys. Rev. E 72, 041305 (2005): spheres into
+  // glass beads stop after about 3 d / v0, their deceleration largest at impact and falling
+  // throughout): from the first soil force (the frame before the one in which it passed 10 % of
+  // the weight) until the sphere first goes down slower than 1 % of the impact speed
+  // (interpolated between frame ends): that time (s), the lowest point's travel over it (m), stop_time × impact_speed /
+  // stop_penetration, and when the soil's upward force on the sphere was largest, as a
+  // fraction of stop_time (0: at impact). 0 when the sphere never hit or never stopped.
+  double stop_time = 0;
+  double stop_penetration = 0;
+  double stop_time_ratio = 0;
+  double peak_force_at = 0;
   std::vector<DropFrame> frames;  // def.trace
   // After demote_all: the heightfield's depth at the drop axis below the original surface (m;
   // the crater written under the body), and how far the sphere moved over after_demotion
