@@ -120,20 +120,26 @@ int run_series(const DropDef& d, const TradeoffKnobs& k) {
   };
   for (const ImpactPoint& p : r->by_height) point(p);
   for (const ImpactPoint& p : r->by_density) point(p);
+  // The series' distinct points (the density series' point at the height series' density is
+  // one of the height series').
+  std::vector<const ImpactPoint*> distinct;
+  for (const ImpactPoint& p : r->by_height) distinct.push_back(&p);
+  for (const ImpactPoint& p : r->by_density)
+    if (std::none_of(r->by_height.begin(), r->by_height.end(),
+                     [&](const ImpactPoint& q) { return q.drop_height == p.drop_height && q.density == p.density; }))
+      distinct.push_back(&p);
   // Uehara's prefactor (0.14 in the experiments) each distinct point gives with the law's
   // exponents held: mean and standard deviation over the points.
   std::vector<double> A;
-  for (const auto* v : {&r->by_height, &r->by_density})
-    for (const ImpactPoint& p : *v) {
-      if (v == &r->by_density && std::any_of(r->by_height.begin(), r->by_height.end(), [&](const ImpactPoint& q) {
-            return q.drop_height == p.drop_height && q.density == p.density;
-          }))
-        continue;  // (the density series' point at the height series' density)
-      A.push_back(uehara_prefactor(mu, p.density, r->bulk_density, Db, p.depth, p.total_drop));
-    }
-  double a_mean = 0, a_var = 0;
-  for (double a : A) a_mean += a / double(A.size());
-  for (double a : A) a_var += (a - a_mean) * (a - a_mean) / double(A.size() > 1 ? A.size() - 1 : 1);
+  for (const ImpactPoint* p : distinct)
+    A.push_back(uehara_prefactor(mu, p->density, r->bulk_density, Db, p->depth, p->total_drop));
+  // mean, standard deviation and count of a set of points' values
+  auto mean_sd = [](const std::vector<double>& x) {
+    double m = 0, v = 0;
+    for (double a : x) m += a / double(x.size());
+    for (double a : x) v += (a - m) * (a - m) / double(x.size() > 1 ? x.size() - 1 : 1);
+    return nlohmann::ordered_json{{"mean", m}, {"sd", std::sqrt(v)}, {"n", x.size()}};
+  };
   nlohmann::ordered_json f;
   f["bulk_density"] = r->bulk_density;
   f["ball_diameter_soil"] = Db;
@@ -141,23 +147,15 @@ int run_series(const DropDef& d, const TradeoffKnobs& k) {
                      {"prefactor", r->depth_vs_total_drop.prefactor}, {"n", r->depth_vs_total_drop.points}};
   f["depth_vs_rho"] = {{"exponent", r->depth_vs_density.exponent}, {"se", r->depth_vs_density.exponent_se},
                        {"prefactor", r->depth_vs_density.prefactor}, {"n", r->depth_vs_density.points}};
-  f["uehara_prefactor"] = {{"mean", a_mean}, {"sd", std::sqrt(a_var)}, {"n", A.size()}, {"experiments", 0.14}};
+  f["uehara_prefactor"] = mean_sd(A);
+  f["uehara_prefactor"]["experiments"] = 0.14;
   f["worst_rebound"] = r->worst_rebound;
   // the stop's dynamics over the distinct points (Ambroso et al. 2005: t_stop v0 / d about 3,
   // the force largest at impact)
   {
     std::vector<double> ratio, peak;
-    for (const auto* v : {&r->by_height, &r->by_density})
-      for (const ImpactPoint& p : *v) {
-        if (v == &r->by_density && p.density == d.sphere_density) continue;  // (the height series has it)
-        if (p.drop.stop_time_ratio > 0) ratio.push_back(p.drop.stop_time_ratio), peak.push_back(p.drop.peak_force_at);
-      }
-    auto mean_sd = [](const std::vector<double>& x) {
-      double m = 0, v = 0;
-      for (double a : x) m += a / double(x.size());
-      for (double a : x) v += (a - m) * (a - m) / double(x.size() > 1 ? x.size() - 1 : 1);
-      return nlohmann::ordered_json{{"mean", m}, {"sd", std::sqrt(v)}, {"n", x.size()}};
-    };
+    for (const ImpactPoint* p : distinct)
+      if (p->drop.stop_time_ratio > 0) ratio.push_back(p->drop.stop_time_ratio), peak.push_back(p->drop.peak_force_at);
     if (!ratio.empty()) {
       f["stop_time_ratio"] = mean_sd(ratio);
       f["stop_time_ratio"]["experiments"] = 3.0;

@@ -173,14 +173,13 @@ Result<DropResult> measure_drop(const DropDef& d, const TradeoffKnobs& k) {
     out.frames.push_back(fr);
   }
   if (hit) {
-    double t_hit = 0;
-    for (const DropFrame& fr : out.frames)
-      if (fr.fy > 0.1 * weight) { t_hit = fr.t - dt; break; }
-    out.rebound_ratio = out.impact_speed > 0 ? out.rebound_speed / out.impact_speed : 0;
-    out.settle_time = last_still - t_hit;
-    // the stop (stop_time ...): frame k0 the first with the soil's force, k the first not going down
+    // frame k0: the first in which the soil pushed the sphere (the hit)
     std::size_t k0 = 0;
     while (k0 < out.frames.size() && !(out.frames[k0].fy > 0.1 * weight)) ++k0;
+    const double t_hit = k0 < out.frames.size() ? out.frames[k0].t - dt : 0.0;
+    out.rebound_ratio = out.impact_speed > 0 ? out.rebound_speed / out.impact_speed : 0;
+    out.settle_time = last_still - t_hit;
+    // the stop (stop_time ...): frame k the first no longer going down
     // (stopped: going down at less than 1 % of the impact speed, the precision of a speed read
     // from frame ends; a light ball's last millimetres creep)
     const double v_stop = -0.01 * out.impact_speed;
