@@ -92,7 +92,7 @@ TEST(ImpactHeavy, SeriesAgainstUehara) {
 // speed (measured at most 0.4 %), the exponent of H between the two heights within 0.15 of 1/3
 // (measured 0.41; 0.54-0.71 over the three seeds at 4.5 diameters), and the light ball's
 // stopping time within 35 % of Ambroso et al.'s 3 d / v0 (measured 3.04; docs/validation.md
-// "Penetration dynamics"). About 8 minutes on one core.
+// "Penetration dynamics"). About 11 minutes on one core.
 TEST(ImpactHeavy, AtEightGranuleDiametersTheDepthsFollowUehara) {
   ImpactSeriesDef sd = series(1.0f / (0.3f * 0.3f), 1.0f);
   sd.base.granule_radius = 0.01405f;
