@@ -160,9 +160,10 @@ void default_scene_at(double budget, double t, SceneDef& s, std::unique_ptr<Worl
   auto scene = load_default_scene();
   ASSERT_TRUE(scene.ok()) << scene.message();
   s = scene.value();
-  if (former_sand) {
-    for (auto& m : s.materials) m.restitution = 0.3, m.unloading_stiffness_ratio = 1.0, m.stiffness = 2.0e4;
-    s.terrain.material.restitution = 0.3, s.terrain.material.unloading_stiffness_ratio = 1.0, s.terrain.material.stiffness = 2.0e4;
+  if (former_sand) {  // (the terrain's material is what the world is made with)
+    s.terrain.material.restitution = 0.3;
+    s.terrain.material.unloading_stiffness_ratio = 1.0;
+    s.terrain.material.stiffness = 2.0e4;
   }
   s.terrain.frame_budget_ms = budget;
   s.terrain.lod_travel = travel;
