@@ -115,12 +115,13 @@ TEST(Budget, NothingFitsIsReportedWithTheCostItNeeded) {
 }
 
 // The particle-scale cap: a body of smallest dimension D never gets a patch whose granules
-// (bounding diameter 2 (1 + sqrt(3/2)) r s) are wider than D / 0.8, however tight the budget,
+// (bounding diameter 2 (1 + sqrt(3/2)) r s) are wider than D / 0.9, however tight the budget,
 // unless it asked for that scale itself; the report names the body and its size.
 TEST(Budget, ABodyCapsTheParticleScale) {
   const double r = 0.025;                                   // m, the rig's granule radius
   const double diameter1 = 2.0 * (1.0 + std::sqrt(1.5)) * r;  // m, a granule at scale 1
-  for (float radius : {0.05f, 0.1f, 0.2f}) {
+  const double n = 0.9;                                     // granule diameters a body keeps across
+  for (float radius : {0.05f, 0.11f, 0.2f}) {
     const Drop on = drop(budget_def(0.001), 2, radius);  // nothing fits: the coarsest it may
     ASSERT_TRUE(on.error.empty()) << on.error;
     const auto& b = on.report["budget"];
@@ -129,16 +130,16 @@ TEST(Budget, ABodyCapsTheParticleScale) {
     const double size = 2.0 * radius, s = p["particle_scale"].get<double>();
     EXPECT_NEAR(p["capped_by"]["smallest_dimension_m"].get<double>(), size, 1e-6) << p.dump();
     EXPECT_EQ(p["capped_by"]["body"].get<std::string>(), "sphere");
-    EXPECT_NEAR(p["body_cap_scale"].get<double>(), size / (0.8 * diameter1), 1e-4) << p.dump();
-    EXPECT_TRUE(s == 1.0 || diameter1 * s <= size / 0.8 + 1e-9)
+    EXPECT_NEAR(p["body_cap_scale"].get<double>(), size / (n * diameter1), 1e-4) << p.dump();
+    EXPECT_TRUE(s == 1.0 || diameter1 * s <= size / n + 1e-9)
         << "a " << size << " m body on granules " << diameter1 * s << " m across (scale " << s << ")";
     std::printf("sphere %.2f m across: scale %g (cap %.2f), rung %d, traded %s\n", size, s, p["body_cap_scale"].get<double>(),
                 p["rung"].get<int>(), p["traded"].dump().c_str());
   }
-  // 0.1 m across: scale 1 only (cap 1.12); 0.2 m: scale 2 (cap 2.25); 0.4 m: scale 3, the
+  // 0.1 m across: scale 1 only (cap 1.00); 0.22 m: scale 2 (cap 2.20); 0.4 m: scale 3, the
   // coarsest rung, the cap not binding.
   EXPECT_EQ(drop(budget_def(0.001), 2, 0.05f).report["budget"]["patches"][0]["particle_scale"].get<double>(), 1.0);
-  EXPECT_EQ(drop(budget_def(0.001), 2, 0.1f).report["budget"]["patches"][0]["particle_scale"].get<double>(), 2.0);
+  EXPECT_EQ(drop(budget_def(0.001), 2, 0.11f).report["budget"]["patches"][0]["particle_scale"].get<double>(), 2.0);
   const ojson big = drop(budget_def(0.001), 2, 0.2f).report["budget"]["patches"][0];
   EXPECT_EQ(big["particle_scale"].get<double>(), 3.0);
   EXPECT_FALSE(big["cap_bound"].get<bool>());
@@ -150,7 +151,7 @@ TEST(Budget, ABodyCapsTheParticleScale) {
 // says so: `traded`, the rung, the apron used and the N the patch runs at, which its DEM report
 // shows as half the substeps of the same patch without the trades.
 TEST(Budget, WhatTheCapBarsTheBudgetTradesAndReports) {
-  const Drop on = drop(budget_def(0.001), 2, 0.1f);
+  const Drop on = drop(budget_def(0.001), 2, 0.11f);
   ASSERT_TRUE(on.error.empty()) << on.error;
   const auto& p = on.report["budget"]["patches"][0];
   EXPECT_TRUE(p["cap_bound"].get<bool>()) << p.dump();
@@ -161,7 +162,7 @@ TEST(Budget, WhatTheCapBarsTheBudgetTradesAndReports) {
   EXPECT_EQ(p["steps_per_contact"].get<int>(), 10);
   EXPECT_FALSE(p["fits"].get<bool>());  // (nothing fits 1 µs: promoted anyway, counted)
   // The same sphere with room for everything: N = 20, the whole apron, nothing traded.
-  const Drop wide = drop(budget_def(1e5), 2, 0.1f);
+  const Drop wide = drop(budget_def(1e5), 2, 0.11f);
   ASSERT_TRUE(wide.error.empty()) << wide.error;
   const auto& q = wide.report["budget"]["patches"][0];
   EXPECT_EQ(q["steps_per_contact"].get<int>(), 20);
