@@ -115,8 +115,8 @@ static double smallest_dimension(const RigidShape& sh) {
 // scale 2), started from six places 0.4 m apart (scripts/vehicle_starts.py; docs/BENCHMARKS.md
 // "The particle-scale cap from six starts"): on r = 4 cm granules (wheel width 0.84 granule
 // diameters) it dug itself in from three starts of six (0.5-1.0 m driven in 12 s; 18.9-24.6 m
-// from the others); on r = 3.59 cm (0.94 diameters) it drove from all six (17.6-32.9 m); at
-// scale 1 (1.69 diameters) 33.9-34.7 m from three of three. (Without a budget, one start each:
+// from the others); on r = 3.59 cm (0.94 diameters) it drove from all six (17.6-32.9 m), at
+// scale 1.5 (1.12) and at scale 1 (1.69) too (29.6-34.9 m). (Without a budget, one start each:
 // scale 3, 0.56 diameters, its wheels sank 0.27 m at the start and it did not move.)
 // So a body keeps at least kBodyGranules granule diameters (the granule's bounding diameter,
 // 2 (1 + sqrt(3/2)) r s = 4.45 r s) across its smallest dimension.
@@ -296,17 +296,21 @@ namespace {
 struct Rung {
   double scale, apron;
 };
-// Whole multiples, so a coarser rung's tiles are its base scale's (derive_tile_set).
-constexpr Rung kLadder[] = {{1, 1}, {1, 0.5}, {2, 0.5}, {3, 0.5}};
+// The whole multiples take their base scale's tiles (derive_tile_set); ×1.5 settles its own
+// at creation. (×1.5, 1.5³ = 3.4 times fewer granules than scale 1, sits where the cap often
+// binds: a car's 0.3 m wide wheels on 4 cm granules allow at most 1.87, and the car then runs
+// at about 0.7 times real time on two cores against 0.3 at scale 1; docs/BENCHMARKS.md "A rung
+// at particle scale 1.5".)
+constexpr Rung kLadder[] = {{1, 1}, {1, 0.5}, {1.5, 0.5}, {2, 0.5}, {3, 0.5}};
 // The rung the budget takes when a body's size barred the coarser scales: the coarsest scale
 // the cap allows, without the apron (body_scale_cap).
-constexpr int kTradeApronRung = 4;
+constexpr int kTradeApronRung = 5;
 // Then half the substeps (dt_sub <= t_c / N with N halved, at least kMinStepsPerContact).
 // Measured on scenes/vehicle_drive.json at scale 2 without a budget (docs/BENCHMARKS.md
 // "Wheels and the particle-scale cap"): N = 10 against 20 steps 0.44 times the sphere-steps
 // and the car drives as far in three pairs of runs of four (10.7 / 12.9, 20.7 / 18.9,
 // 18.1 / 18.8 m in 8 s; 8.7 / 8.5 m in 4 s), deepest wheel sinkage 0.12-0.20 m either way.
-constexpr int kTradeSubstepsRung = 5;
+constexpr int kTradeSubstepsRung = 6;
 constexpr int kMinStepsPerContact = 10;
 }  // namespace
 

@@ -260,9 +260,15 @@ Status TerrainManager::Impl::add_tile_set(double scale) {
       }
   }
   // (At most the patch depth again of relief: steeper terrain settles deeper tiles when a
-  // patch there needs one, rather than making every start-up slow.)
+  // patch there needs one, rather than making every start-up slow. A budget's coarser rung that
+  // settles its own tiles (budget.cpp kLadder) takes the patch depth again whatever the relief:
+  // its patches travel under vehicles whose ruts and rims raise the surface a successor is cut
+  // to, and a tile settled in a frame took 1.9 s of it.)
   const double depth0 = patch_depth_at(scale);
-  if (auto t = tile_for(set, (depth0 + std::min(relief, depth0)) / scale); !t) return t.errors();
+  const std::vector<double> own = scales();
+  const bool rung = std::find(own.begin(), own.end(), scale) == own.end();
+  const double above = rung ? depth0 : std::min(relief, depth0);
+  if (auto t = tile_for(set, (depth0 + above) / scale); !t) return t.errors();
   return Ok{};
 }
 
@@ -271,7 +277,7 @@ Status TerrainManager::Impl::add_tile_set(double scale) {
 // g / s, not g / (m s): at the coarser scale the fill rises by less than the tile's rebound
 // (GranuleTile::rebound, a few per cent of a radius). A deeper tile it needs is settled
 // under its own gravity.
-void TerrainManager::Impl::derive_tile_set(double scale) {
+bool TerrainManager::Impl::derive_tile_set(double scale) {
   for (const TileSet& base : tile_sets) {
     const double m = scale / base.scale;
     if (std::abs(m - std::round(m)) > 1e-9 || m < 2) continue;
@@ -280,8 +286,9 @@ void TerrainManager::Impl::derive_tile_set(double scale) {
     set.cells = base.cells * int(std::round(m));
     set.def.gravity = v3(Eigen::Vector3f((def.gravity / scale).cast<float>()));
     tile_sets.push_back(std::move(set));
-    return;
+    return true;
   }
+  return false;
 }
 
 // Lattice layers that settle into a tile of at least `depth` (m, sim units) of period_y: a

@@ -107,12 +107,14 @@ Result<std::unique_ptr<TerrainManager>> TerrainManager::create(const TerrainMana
   I.world = &world;
   I.camera = def.camera;
   // The first pre-settled tile of every scale (filling.cpp); with a budget, the coarser scales
-  // it may choose (budget.cpp) take their base scale's tiles.
+  // it may choose (budget.cpp) take their base scale's tiles where they are whole multiples of
+  // it, and settle their own otherwise.
   for (double scale : I.scales())
     if (Status st = I.add_tile_set(scale); !st) return st.errors();
   for (double scale : I.all_scales())
     if (std::none_of(I.tile_sets.begin(), I.tile_sets.end(), [&](const TileSet& t) { return t.scale == scale; }))
-      I.derive_tile_set(scale);
+      if (!I.derive_tile_set(scale))
+        if (Status st = I.add_tile_set(scale); !st) return st.errors();
   // The pool: every slot allocated now at full capacity, on the chosen backend.
   if (def.backend == "gl") {
     auto ctx = gl::Context::create();

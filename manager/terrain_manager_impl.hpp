@@ -387,7 +387,7 @@ struct TerrainManager::Impl {
   // Serves the queue while slots are free, then uploads a chunk of every filling patch.
   Status activate(double time, double dt);
   Status add_tile_set(double scale);
-  void derive_tile_set(double scale);
+  bool derive_tile_set(double scale);  // false: no set it is a whole multiple (>= 2) of
   int tile_layers(const GranuleTileDef& td, double fill_depth) const;
   Result<const GranuleTile*> tile_for(TileSet& set, double fill_depth);
   SimulationDef sim_def(double scale) const;

@@ -19,7 +19,7 @@ using ojson = nlohmann::ordered_json;
 TerrainManagerDef budget_def(double budget_ms) {
   TerrainManagerDef d = test::sphere_patch_def();
   d.granules_per_slot = 12000;
-  d.lod.apron = 0.6;  // a patch of some size: the coarser rungs' tile periods are 2 and 3 times wider
+  d.lod.apron = 0.6;  // a patch of some size: the coarser rungs' tile periods are wider
   d.frame_budget_ms = budget_ms;
   d.budget_substep_ms = 0.01;  // pinned: 10 µs a substep ...
   d.budget_sphere_ns = 100;    // ... and 100 ns a sphere-substep
@@ -111,7 +111,7 @@ TEST(Budget, NothingFitsIsReportedWithTheCostItNeeded) {
   EXPECT_FALSE(b["patches"][0]["fits"].get<bool>());
   EXPECT_EQ(b["overruns"].get<int>(), 1);
   EXPECT_GT(b["patches"][0]["predicted_ms"].get<double>(), b["patches"][0]["available_ms"].get<double>());
-  EXPECT_EQ(b["patches"][0]["rung"].get<int>(), 3) << "the coarsest rung";
+  EXPECT_EQ(b["patches"][0]["rung"].get<int>(), 4) << "the coarsest rung";
 }
 
 // The particle-scale cap: a body of smallest dimension D never gets a patch whose granules
@@ -121,7 +121,7 @@ TEST(Budget, ABodyCapsTheParticleScale) {
   const double r = 0.025;                                   // m, the rig's granule radius
   const double diameter1 = 2.0 * (1.0 + std::sqrt(1.5)) * r;  // m, a granule at scale 1
   const double n = 0.9;                                     // granule diameters a body keeps across
-  for (float radius : {0.05f, 0.11f, 0.2f}) {
+  for (float radius : {0.05f, 0.08f, 0.11f, 0.2f}) {
     const Drop on = drop(budget_def(0.001), 2, radius);  // nothing fits: the coarsest it may
     ASSERT_TRUE(on.error.empty()) << on.error;
     const auto& b = on.report["budget"];
@@ -136,9 +136,10 @@ TEST(Budget, ABodyCapsTheParticleScale) {
     std::printf("sphere %.2f m across: scale %g (cap %.2f), rung %d, traded %s\n", size, s, p["body_cap_scale"].get<double>(),
                 p["rung"].get<int>(), p["traded"].dump().c_str());
   }
-  // 0.1 m across: scale 1 only (cap 1.00); 0.22 m: scale 2 (cap 2.20); 0.4 m: scale 3, the
-  // coarsest rung, the cap not binding.
+  // 0.1 m across: scale 1 only (cap 1.00); 0.16 m: scale 1.5 (cap 1.60); 0.22 m: scale 2 (cap
+  // 2.20); 0.4 m: scale 3, the coarsest rung, the cap not binding.
   EXPECT_EQ(drop(budget_def(0.001), 2, 0.05f).report["budget"]["patches"][0]["particle_scale"].get<double>(), 1.0);
+  EXPECT_EQ(drop(budget_def(0.001), 2, 0.08f).report["budget"]["patches"][0]["particle_scale"].get<double>(), 1.5);
   EXPECT_EQ(drop(budget_def(0.001), 2, 0.11f).report["budget"]["patches"][0]["particle_scale"].get<double>(), 2.0);
   const ojson big = drop(budget_def(0.001), 2, 0.2f).report["budget"]["patches"][0];
   EXPECT_EQ(big["particle_scale"].get<double>(), 3.0);
@@ -157,7 +158,7 @@ TEST(Budget, WhatTheCapBarsTheBudgetTradesAndReports) {
   EXPECT_TRUE(p["cap_bound"].get<bool>()) << p.dump();
   EXPECT_EQ(p["particle_scale"].get<double>(), 2.0);
   EXPECT_EQ(p["traded"], ojson::array({"apron", "substeps"})) << p.dump();
-  EXPECT_EQ(p["rung"].get<int>(), 5);
+  EXPECT_EQ(p["rung"].get<int>(), 6);
   EXPECT_NEAR(p["apron_used_m"].get<double>(), 4.0 * 0.025 * 2.0, 1e-6) << "apron 0.6 m trimmed to 4 r s";
   EXPECT_EQ(p["steps_per_contact"].get<int>(), 10);
   EXPECT_FALSE(p["fits"].get<bool>());  // (nothing fits 1 µs: promoted anyway, counted)
@@ -257,7 +258,7 @@ TEST(Budget, FramesOverBudgetAreCounted) {
   EXPECT_LE(f["patch_awake_frames"].get<long long>(), 20);
 }
 
-// A patch asked for ahead of a body that does not fit even at half the substeps (rung 5) is
+// A patch asked for ahead of a body that does not fit even at half the substeps (rung 6) is
 // promoted anyway (the body must not reach its patch's edge first) and counted as an overrun;
 // the patch the body is leaving, made when it fitted at the full N = 20, then takes N = 10 as
 // well, so the frames in which the two step together cost what the last rung assumed. A
@@ -306,7 +307,7 @@ TEST(Budget, ALivePatchTakesTheHalvedSubstepsOfAnOverrunningPatchAhead) {
   EXPECT_EQ(first["rung"].get<int>(), 0) << first.dump();
   EXPECT_TRUE(first["fits"].get<bool>());
   EXPECT_FALSE(ahead["fits"].get<bool>()) << ahead.dump();
-  EXPECT_EQ(ahead["rung"].get<int>(), 5);
+  EXPECT_EQ(ahead["rung"].get<int>(), 6);
   EXPECT_EQ(ahead["steps_per_contact"].get<int>(), 10);
   EXPECT_EQ(b["live_substeps_traded"].get<int>(), 1);
   EXPECT_EQ(first["traded"], ojson::array({"substeps (live)"})) << first.dump();

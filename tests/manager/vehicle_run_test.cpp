@@ -191,12 +191,13 @@ TEST(SceneVehicles, ShippedVehicleDriveIsAFourWheeledVehicle) {
 }
 
 // The shipped vehicle under a frame budget nothing fits (0.5 ms: every patch at the budget's
-// last rung, whatever the machine: the scale its 0.3 m wide wheels allow, 1 (manager/budget.cpp
-// kBodyGranules), with a trimmed apron and half the substeps): its wheels are on the patches'
-// granules in every frame after the first 0.1 s, and it drives off. Before the fill kept the
-// granules that hold a resting body up (manager/filling.cpp clear_bodies), its first patch left
-// granule-deep hollows under the parked wheels and it moved 0.66 m in 4 s; then 4.5 m at scale
-// 2 (from this start; from three of six starts 0.4 m apart it dug itself in); now 9.2 m.
+// last rung, whatever the machine: the coarsest scale its 0.3 m wide wheels allow, 1.5
+// (manager/budget.cpp kBodyGranules, kLadder), with a trimmed apron and half the substeps): its
+// wheels are on the patches' granules in every frame after the first 0.1 s, and it drives off.
+// Before the fill kept the granules that hold a resting body up (manager/filling.cpp
+// clear_bodies), its first patch left granule-deep hollows under the parked wheels and it moved
+// 0.66 m in 4 s; then 4.5 m at scale 2 (from this start; from three of six starts 0.4 m apart
+// it dug itself in); now 10.7 m.
 TEST(SceneVehicles, ShippedVehicleDrivesOffUnderABudgetNothingFits) {
   CarRun run;
   ASSERT_NO_FATAL_FAILURE(start_car("vehicle_drive.json", 0.5, run));
@@ -229,7 +230,7 @@ TEST(SceneVehicles, ShippedVehicleDrivesOffUnderABudgetNothingFits) {
 // 2 or 3 instead of 1 it was 95 or 498, and with the still parts of the patches asleep
 // (simulation.sleep.regions, the default) 435, 74 and 412 for seeds 1-3 (docs/BENCHMARKS.md
 // "Sleeping regions"). The test follows the path it was measured on: seed 1, every granule
-// stepped. At particle scale 1, the coarsest the wheels allow since the cap is 0.9 granule
+// stepped. At particle scale 1.5, the coarsest the wheels allow since the cap is 0.9 granule
 // diameters (manager/budget.cpp kBodyGranules), 0.
 TEST(SceneVehicles, ShippedVehicleTurningAcrossPatchCorners) {
   CarRun run;
