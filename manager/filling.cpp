@@ -265,9 +265,7 @@ Status TerrainManager::Impl::add_tile_set(double scale) {
   // its patches travel under vehicles whose ruts and rims raise the surface a successor is cut
   // to, and a tile settled in a frame took 1.9 s of it.)
   const double depth0 = patch_depth_at(scale);
-  const std::vector<double> own = scales();
-  const bool rung = std::find(own.begin(), own.end(), scale) == own.end();
-  const double above = rung ? depth0 : std::min(relief, depth0);
+  const double above = coarser_rung(scale) ? depth0 : std::min(relief, depth0);
   if (auto t = tile_for(set, (depth0 + above) / scale); !t) return t.errors();
   return Ok{};
 }

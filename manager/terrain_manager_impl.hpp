@@ -348,13 +348,17 @@ struct TerrainManager::Impl {
   };
   std::map<std::int64_t, PathLog> path_log;
   double scale_for(const PatchRequest& r) const;
+  // Whether s is one of the coarser scales only a frame budget chooses (budget.cpp kLadder),
+  // not one the terrain asked for (scales()).
+  bool coarser_rung(double s) const {
+    const std::vector<double> own = scales();
+    return std::find(own.begin(), own.end(), s) == own.end();
+  }
   // m: the granules under a patch's lowest surface point at particle scale s: patch_depth; at
   // the coarser scales a frame budget may choose, at least two granules (4 bounding radii,
   // 2.22 r each, world); at most soil_depth.
   double patch_depth_at(double s) const {
-    const std::vector<double> own = scales();
-    const bool coarser_rung = std::find(own.begin(), own.end(), s) == own.end();
-    const double two_granules = coarser_rung ? 4.0 * 2.22 * double(def.material.radius) * s : 0.0;
+    const double two_granules = coarser_rung(s) ? 4.0 * 2.22 * double(def.material.radius) * s : 0.0;
     return std::min(def.soil_depth, std::max(def.patch_depth, two_granules));
   }
   // The floor of a patch over `region` at scale s (planning.hpp patch_floor, with def's depths).

@@ -45,6 +45,8 @@ def run_one(args, scene, offset, workdir):
     with open(os.path.join(out, "bodies.csv"), newline="") as f:
         rows = list(csv.DictReader(f))
     chassis = [x for x in rows if x["body"] == name + ".chassis"]
+    if not chassis:
+        sys.exit(f"{path}: no rows for {name}.chassis in the run's bodies CSV")
     sink = [float(x["sinkage"]) for x in rows
             if x["body"].startswith(name + ".wheel") and x["on_particles"] == "1" and float(x["t"]) > 1.0]
     with open(os.path.join(out, "report.json")) as f:
@@ -69,11 +71,21 @@ def main():
     p.add_argument("--seconds", type=float)
     p.add_argument("--sandpatch", default=os.path.join(os.path.dirname(__file__), "..", "build", "sandpatch"))
     args = p.parse_args()
-    with open(args.scene) as f:
-        scene = json.load(f)
-    if not scene.get("vehicles"):
+    try:
+        with open(args.scene) as f:
+            scene = json.load(f)
+    except (OSError, ValueError) as e:
+        sys.exit(f"{args.scene}: cannot read the scene: {e}")
+    if not isinstance(scene, dict) or not scene.get("vehicles"):
         sys.exit(f"{args.scene}: field vehicles: the scene has no vehicle")
-    offsets = [float(x) for x in args.offsets.split(",")]
+    try:
+        offsets = [float(x) for x in args.offsets.split(",")]
+    except ValueError:
+        sys.exit(f"--offsets {args.offsets}: must be numbers (m) separated by commas, e.g. 0,0.4,0.8")
+    if not offsets or len(offsets) > 100 or not all(abs(o) < 1e4 for o in offsets):
+        sys.exit(f"--offsets {args.offsets}: 1 to 100 offsets, each within 10 km")
+    if not os.path.exists(args.sandpatch):
+        sys.exit(f"--sandpatch {args.sandpatch}: no such program (build it: cmake --build build)")
     with tempfile.TemporaryDirectory() as workdir:
         for o in offsets:
             r = run_one(args, scene, o, workdir)
