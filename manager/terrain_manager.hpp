@@ -52,7 +52,8 @@ struct GranularMaterial {
   float stiffness = float(knobs::kStiffness.def);  // k_n, N/m
   float tangential_stiffness_ratio = float(knobs::kTangentialRatio.def);  // k_t / k_n
   // Hysteretic normal spring of the patches (Material::unloading_stiffness_ratio; 1 = linear;
-  // CPU backend only; its tiles are settled with it, under their own cache keys).
+  // both backends; its tiles are poured with the linear spring, filling.cpp, under their own
+  // cache keys).
   float unloading_stiffness_ratio = float(knobs::kUnloadingRatio.def);
 };
 

@@ -39,7 +39,7 @@ struct Material {
   float tangential_damping_ratio = 0.5f;           // c_t / c_n (SpringHistory)
   // kn2 / k_n >= 1: the hysteretic normal spring (Walton & Braun 1986; physics_common.glsl
   // contact_force_h) unloads along kn2 = this x k_n, so a contact gives back 1/this of the
-  // energy its loading stored (on top of the dashpot). 1 = the linear spring. CPU backend only.
+  // energy its loading stored (on top of the dashpot). 1 = the linear spring. Both backends.
   float unloading_stiffness_ratio = 1.0f;
 };
 

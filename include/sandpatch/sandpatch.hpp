@@ -122,7 +122,7 @@ struct MaterialDef {
   double tangential_stiffness_ratio = 2.0 / 7.0;  // k_t / k_n, [0, 1]
   // Hysteretic normal spring (Walton & Braun 1986): contacts unload along this many times
   // k_n, so a bed loses energy however slowly it moves (a ball dropped into it stays down;
-  // docs/validation.md). 1 = the linear spring; above 1 the CPU backend only. [1, 100]
+  // docs/validation.md). 1 = the linear spring. Both backends. [1, 100]
   double unloading_stiffness_ratio = 1.0;
 };
 
