@@ -238,8 +238,18 @@ bool TerrainManager::Impl::engages(const Slot& s, const Eigen::Vector3d& lo, con
 
 double TerrainManager::Impl::engage_limit(const Slot& s, RigidBodyId b) const {
   for (const Carried& c : s.carried)
-    if (c.body.index == b.index && c.body.generation == b.generation) return c.enabled && c.tool ? carry_height : 0.5 * engage_height;
-  return 0.5 * engage_height;
+    if (c.body.index == b.index && c.body.generation == b.generation && c.enabled)
+      return c.tool ? carry_height : 0.5 * engage_height;
+  return join_height(s, b);
+}
+
+double TerrainManager::Impl::join_height(const Slot& s, RigidBodyId b) const {
+  const BodyState st = world->state(b);
+  Eigen::Vector3d lo, hi;
+  world->bounds(b, &lo, &hi);
+  const double reach = 0.5 * (hi - lo).norm();  // m, the farthest point of the body from its centre, at most
+  const double approach = std::max(0.0, -double(st.linear_velocity.y())) + double(st.angular_velocity.norm()) * reach;  // m/s
+  return std::min(0.5 * engage_height, 4.0 * double(radius_world(s)) + approach * join_lookahead);
 }
 
 int TerrainManager::Impl::granules_within(const Slot& s, const Eigen::Vector3d& lo, const Eigen::Vector3d& hi) const {
@@ -338,9 +348,18 @@ Status TerrainManager::Impl::couple_before(Slot& slot, double dt) {
     Eigen::Vector3d lo, hi;
     world->bounds(b, &lo, &hi);
     bool inside = false;
-    const bool touch = engages(slot, lo, hi, &inside, engage_limit(slot, b)) && carries(self, b);
+    bool touch = engages(slot, lo, hi, &inside, engage_limit(slot, b)) && carries(self, b);
     auto it = std::find_if(slot.carried.begin(), slot.carried.end(),
                            [&](const Carried& c) { return c.body.index == b.index && c.body.generation == b.generation; });
+    // A dynamic body on joints whose shell felt no granule over the last frame and that is a
+    // sphere diameter above its join height leaves the patch (a vehicle's chassis that dipped
+    // toward the sand over a bump; a tool with soil in it feels the soil); the diameter keeps
+    // it from joining and leaving frame after frame. (A free body keeps its shell up to
+    // engage_height / 2: a ball bouncing in its crater stays in the patch.)
+    if (touch && it != slot.carried.end() && it->enabled && !it->prescribed && !it->felt_soil &&
+        groups[std::size_t(b.index)] > 0 &&
+        lo.y() > hf->origin_y() + slot.top_local + join_height(slot, b) + 2.0 * double(radius_world(slot)))
+      touch = false;
     if (!touch && it == slot.carried.end()) continue;
     BodyState st = world->state(b);
     const bool fresh = it == slot.carried.end();
@@ -407,6 +426,7 @@ Status TerrainManager::Impl::couple_before(Slot& slot, double dt) {
     if (const std::int32_t g = groups[std::size_t(b.index)]; !fresh && slot.sim->body_group(c.shell) != g)
       if (Status e = slot.sim->set_body_group(c.shell, g); !e) return e.errors();  // a joint added or removed
     const bool reenabled = touch && !c.enabled;  // parked until now: its state must be set
+    if (reenabled || fresh) c.felt_soil = true;  // (until its first frame says)
     if (touch != c.enabled) {
       // A tool let go of with granules in it (lifted above carry_height, or out over the
       // patch's side): they fall. Reported with its height and what it held.
@@ -521,6 +541,7 @@ void TerrainManager::Impl::couple_after(Slot& slot, double dt, bool stepped) {
     const Eigen::Vector3f w1 = eig(slot.sim->body_angular_velocity(c.shell));
     const float m = world->mass(c.body);
     const Eigen::Vector3f f = m * ((v1 - c.v0) / float(dt) - def.gravity.cast<float>());
+    c.felt_soil = f.norm() > 1e-3f * m * def.gravity.cast<float>().norm();
     const Eigen::Matrix3f R = world->state(c.body).orientation.toRotationMatrix();
     const Eigen::Matrix3f I = R * world->principal_inertia(c.body).asDiagonal() * R.transpose();
     const Eigen::Vector3f t = I * (w1 - c.w0) / float(dt);

@@ -45,6 +45,10 @@ struct Carried {
   Eigen::Quaternionf set_orientation = Eigen::Quaternionf::Identity();
   Eigen::Vector3d f_sum = Eigen::Vector3d::Zero(), t_sum = Eigen::Vector3d::Zero();
   Eigen::Vector3f force = Eigen::Vector3f::Zero(), torque = Eigen::Vector3f::Zero();  // N, N m world: the last frame's mean
+  // A dynamic body: the granules pushed its shell over the last frame (more than a thousandth
+  // of its weight); one on joints that felt none and rose clear of its join height leaves the
+  // patch (coupling.cpp couple_before).
+  bool felt_soil = true;
 };
 
 // The particle ids [first, first + count) of body b's spheres in a simulation: ids follow the

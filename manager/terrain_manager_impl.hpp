@@ -150,8 +150,19 @@ struct TerrainManager::Impl {
   // the drop is reported (soil_dropped, PatchEventKind::SoilDropped).
   static constexpr double carry_height = engage_height;
   // The height (m above the patch's highest surface point) up to which a body engages slot s:
-  // carry_height for a kinematic or static body whose shell s has enabled, else engage_height / 2.
+  // for a body whose shell s has enabled, carry_height if it is a tool, else engage_height / 2;
+  // for the others join_height.
   double engage_limit(const Slot& s, RigidBodyId b) const;
+  // s, how far ahead join_height looks at a body's approach.
+  static constexpr double join_lookahead = 0.1;
+  // The height (m above the patch's highest surface point) within which body b's lowest point
+  // joins slot s: two sphere diameters at the patch's scale (a shell sphere is centred on the
+  // body's surface, the top granules reach about a sphere radius above the cut surface; the rest
+  // is margin), plus the distance the body can approach in join_lookahead (its downward speed
+  // and its rotation's at its reach), at most engage_height / 2. Once joined, it is kept up to
+  // engage_limit's larger heights. A body that only passes over the sand (a vehicle's chassis
+  // above its wheels) stays out of the DEM and costs it nothing.
+  double join_height(const Slot& s, RigidBodyId b) const;
   // Soil a tool took out of a patch (coupling.cpp couple_before): the report's soil_dropped.
   struct SoilDrop {
     std::string name;

@@ -195,12 +195,12 @@ TEST(SceneJoints, AJointWaitsForItsBodiesToSpawn) {
 // more than 15 cm below the original surface (24.1 cm); while the stick drags it toward the
 // machine (+x, t in [2.5, 4] s) the soil pushes it back (mean x force < -500 N; -2.1 kN);
 // lifted 0.55-1 m above the surface, higher than a free body's shell engages, it still carries
-// what it scooped (mean weight of the soil on it > 30 kg; 68.7 kg, and 7.4 kg when only
+// what it scooped (mean weight of the soil on it > 30 kg; 85.5 kg, and 7.4 kg when only
 // kinematic tools kept their shells that high); after pouring, held still in the air, it holds
 // under 5 kg (0.0 kg; 31.5 kg while the shell of a body at rest was left falling in the DEM);
 // the servos end at their targets against the soil (within 0.01 rad); the heightfield holds the
-// trench (more than 0.02 m³ below the surface between x = -0.15 and 0.7 m; 0.034) and the pile
-// poured behind it (more than 0.005 m³ above it at x < -0.15 m; 0.013); the ledger closes
+// trench (more than 0.02 m³ below the surface between x = -0.15 and 0.7 m; 0.038) and the pile
+// poured behind it (more than 0.005 m³ above it at x < -0.15 m; 0.018); the ledger closes
 // within 1 %.
 TEST(SceneJoints, ShippedExcavatorArmDigsCarriesAndPours) {
   auto s = load_scene_file(std::string(SANDPATCH_SOURCE_DIR) + "/scenes/excavator_arm.json");
