@@ -6,6 +6,7 @@
 //                    [--granule-density RHO_G] [--friction MU] [--restitution E] [--depth D]
 //                    [--unloading LAMBDA] [--side L] [--spacing S] [--frame-dt DT] [--seconds T] [--scale s]
 //                    [--steps-per-contact N] [--substeps K] [--seed N] [--threads N] [--trace]
+//                    [--series [--repose-deg DEG]]
 // Units: m, kg/m^3, N/m, s. Exit 0 ok, 1 runtime failure, 2 bad arguments.
 #include <algorithm>
 #include <cmath>
@@ -85,10 +86,21 @@ int run_dem(const DropDef& d, const TradeoffKnobs& k) {
   return 0;
 }
 
+// The angle of repose (deg) of the granules at friction mu: the poured piles of
+// docs/calibration.md "Friction" (800 granules, three seeds each), linear between the measured
+// frictions 0.2 ... 1.0; outside them none (--repose-deg must say).
+double repose_deg_for_friction(double mu) {
+  static constexpr double kMu[] = {0.2, 0.35, 0.5, 0.7, 1.0}, kDeg[] = {29.0, 33.8, 35.9, 38.0, 36.7};
+  if (!(mu >= kMu[0] && mu <= kMu[4])) return 0;
+  int i = 0;
+  while (i < 3 && mu > kMu[i + 1]) ++i;
+  return kDeg[i] + (kDeg[i + 1] - kDeg[i]) * (mu - kMu[i]) / (kMu[i + 1] - kMu[i]);
+}
+
 // --series: docs/validation.md's series (drop heights 0.05 ... 0.8 m at the given density, and
 // densities 800, 2500, 7800 kg/m^3 from 0.2 m), one JSON line per point, then the fits against
-// Uehara et al. (2003) (mu = tan 35.9 deg, the repose angle measured at friction 0.5).
-int run_series(const DropDef& d, const TradeoffKnobs& k) {
+// Uehara et al. (2003), with mu = tan(repose_deg), the bed's angle of repose.
+int run_series(const DropDef& d, const TradeoffKnobs& k, double repose_deg) {
   ImpactSeriesDef sd;
   sd.base = d;
   sd.knobs = k;
@@ -100,7 +112,7 @@ int run_series(const DropDef& d, const TradeoffKnobs& k) {
     std::cerr << "sandpatch_impact: " << r.message() << "\n";
     return 1;
   }
-  const double mu = std::tan(35.9 * 3.14159265358979 / 180.0);
+  const double mu = std::tan(repose_deg * 3.14159265358979 / 180.0);
   const double Db = 2 * (d.sphere_radius + double(d.granule_radius) * k.particle_scale);
   auto point = [&](const ImpactPoint& p) {
     nlohmann::ordered_json j;
@@ -142,6 +154,7 @@ int run_series(const DropDef& d, const TradeoffKnobs& k) {
   };
   nlohmann::ordered_json f;
   f["bulk_density"] = r->bulk_density;
+  f["repose_deg"] = repose_deg;  // the angle of repose Uehara's mu is taken from
   f["ball_diameter_soil"] = Db;
   f["depth_vs_H"] = {{"exponent", r->depth_vs_total_drop.exponent}, {"se", r->depth_vs_total_drop.exponent_se},
                      {"prefactor", r->depth_vs_total_drop.prefactor}, {"n", r->depth_vs_total_drop.points}};
@@ -177,6 +190,7 @@ int main(int argc, char** argv) {
   d.threads = 1;
   d.max_substeps = 100000;
   bool dem = false, series = false;
+  double repose_deg = 0;  // 0: from the friction (repose_deg_for_friction)
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--trace") {
@@ -222,13 +236,28 @@ int main(int argc, char** argv) {
     else if (a == "--threads") d.threads = int(v);
     else if (a == "--slot") k.granules_per_slot = int(v);
     else if (a == "--after") d.after_demotion = v;
+    else if (a == "--repose-deg") {
+      if (!(v > 0 && v < 90)) {
+        std::cerr << "sandpatch_impact: --repose-deg = " << argv[i] << ": must be an angle in (0, 90) degrees\n";
+        return 2;
+      }
+      repose_deg = v;
+    }
     else {
       std::cerr << "sandpatch_impact: unknown option " << a << "\n";
       return 2;
     }
   }
   if (dem) return run_dem(d, k);
-  if (series) return run_series(d, k);
+  if (series) {
+    if (repose_deg == 0) repose_deg = repose_deg_for_friction(d.friction);
+    if (repose_deg == 0) {
+      std::cerr << "sandpatch_impact: --friction = " << d.friction
+                << ": no measured angle of repose (docs/calibration.md measures 0.2 to 1): give --repose-deg\n";
+      return 2;
+    }
+    return run_series(d, k, repose_deg);
+  }
   auto r = measure_drop(d, k);
   if (!r) {
     std::cerr << "sandpatch_impact: " << r.message() << "\n";
