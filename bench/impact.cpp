@@ -6,6 +6,21 @@
 
 namespace sandpatch {
 
+double repose_deg(double friction) {
+  static constexpr double kMu[] = {0.2, 0.35, 0.5, 0.7, 1.0}, kDeg[] = {29.0, 33.8, 35.9, 38.0, 36.7};
+  if (!(friction >= kMu[0] && friction <= kMu[4])) return 0;
+  for (int j = 0; j < 5; ++j)
+    if (friction == kMu[j]) return kDeg[j];  // (a measured friction: its angle exactly)
+  int i = 0;
+  while (i < 3 && friction > kMu[i + 1]) ++i;
+  return kDeg[i] + (kDeg[i + 1] - kDeg[i]) * (friction - kMu[i]) / (kMu[i + 1] - kMu[i]);
+}
+
+double repose_mu(double friction) {
+  const double deg = repose_deg(friction);
+  return deg > 0 ? std::tan(deg * 3.14159265358979 / 180.0) : 0;
+}
+
 double uehara_depth(double mu, double rho_b, double rho_g, double diameter, double h) {
   if (!(mu > 0) || !(rho_b > 0) || !(rho_g > 0) || !(diameter > 0) || !(h >= 0)) return 0;
   const double c = 0.14 / mu * std::sqrt(rho_b / rho_g) * std::cbrt(diameter * diameter);

@@ -27,6 +27,12 @@ double uehara_depth(double mu, double rho_b, double rho_g, double diameter, doub
 // the exponents held at theirs: d = (A / mu) (rho_b / rho_g)^(1/2) D^(2/3) H^(1/3); the
 // experiments' A is 0.14. 0 for arguments out of range.
 double uehara_prefactor(double mu, double rho_b, double rho_g, double diameter, double depth, double total_drop);
+// The angle of repose (deg) of poured piles of the granules at Coulomb friction `friction`
+// (docs/calibration.md "Friction": 800 granules, three seeds each, 29.0 / 33.8 / 35.9 / 38.0 /
+// 36.7 deg at 0.2 / 0.35 / 0.5 / 0.7 / 1.0), linear between them; 0 outside 0.2 ... 1.0.
+double repose_deg(double friction);
+// Uehara's mu for granules of that friction: tan(repose_deg); 0 outside 0.2 ... 1.0.
+double repose_mu(double friction);
 
 // One impact of a series: the drop's result and the penetration depth the comparison uses:
 // the Bullet sphere's lowest point below the original surface at the end plus the shell

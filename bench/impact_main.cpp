@@ -86,17 +86,6 @@ int run_dem(const DropDef& d, const TradeoffKnobs& k) {
   return 0;
 }
 
-// The angle of repose (deg) of the granules at friction mu: the poured piles of
-// docs/calibration.md "Friction" (800 granules, three seeds each), linear between the measured
-// frictions 0.2 ... 1.0; outside them none (--repose-deg must say).
-double repose_deg_for_friction(double mu) {
-  static constexpr double kMu[] = {0.2, 0.35, 0.5, 0.7, 1.0}, kDeg[] = {29.0, 33.8, 35.9, 38.0, 36.7};
-  if (!(mu >= kMu[0] && mu <= kMu[4])) return 0;
-  int i = 0;
-  while (i < 3 && mu > kMu[i + 1]) ++i;
-  return kDeg[i] + (kDeg[i + 1] - kDeg[i]) * (mu - kMu[i]) / (kMu[i + 1] - kMu[i]);
-}
-
 // --series: docs/validation.md's series (drop heights 0.05 ... 0.8 m at the given density, and
 // densities 800, 2500, 7800 kg/m^3 from 0.2 m), one JSON line per point, then the fits against
 // Uehara et al. (2003), with mu = tan(repose_deg), the bed's angle of repose.
@@ -190,7 +179,7 @@ int main(int argc, char** argv) {
   d.threads = 1;
   d.max_substeps = 100000;
   bool dem = false, series = false;
-  double repose_deg = 0;  // 0: from the friction (repose_deg_for_friction)
+  double repose_deg = 0;  // 0: from the friction (bench/impact.hpp repose_deg)
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--trace") {
@@ -250,7 +239,7 @@ int main(int argc, char** argv) {
   }
   if (dem) return run_dem(d, k);
   if (series) {
-    if (repose_deg == 0) repose_deg = repose_deg_for_friction(d.friction);
+    if (repose_deg == 0) repose_deg = sandpatch::repose_deg(d.friction);
     if (repose_deg == 0) {
       std::cerr << "sandpatch_impact: --friction = " << d.friction
                 << ": no measured angle of repose (docs/calibration.md measures 0.2 to 1): give --repose-deg\n";

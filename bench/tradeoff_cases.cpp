@@ -78,7 +78,7 @@ int run_drop(Row& row, const RunContext& ctx) {
     // and the repose angle measured at friction 0.5 (35.9 deg, docs/dem.md); the ball as the soil
     // sees it (the shell spheres, r x scale, on its surface).
     const double rw = double(dd.granule_radius) * k.particle_scale;
-    const double mu = std::tan(35.9 * 3.14159265358979 / 180.0);
+    const double mu = repose_mu(0.5);  // (the tradeoff's sand, bench/tradeoff_sweep.cpp)
     const double d_exp = uehara_depth(mu, dd.sphere_density, 0.527 * dd.granule_density, 2 * (dd.sphere_radius + rw),
                                       dd.drop_height);
     if (d_exp > 0) row.error_experiment = std::abs(res->sphere_sink + rw - d_exp) / d_exp;
@@ -128,7 +128,7 @@ int run_crater(Row& row, RunContext& ctx) {
     // tiles) and the repose angle measured at friction 0.5 (35.9 deg, docs/dem.md), against the
     // sphere's final penetration.
     const double rw = double(d.granule_radius) * k.particle_scale;
-    const double mu = std::tan(35.9 * 3.14159265358979 / 180.0);
+    const double mu = repose_mu(0.5);  // (the tradeoff's sand, bench/tradeoff_sweep.cpp)
     const double d_exp = uehara_depth(mu, d.sphere_density, 0.527 * double(d.material.density),
                                       2 * (d.sphere_radius + rw), d.drop_height);
     if (d_exp > 0) row.error_experiment = std::abs(res->sphere_sink + rw - d_exp) / d_exp;

@@ -37,7 +37,7 @@ ImpactSeriesDef series(float unloading, float restitution) {
 }
 
 void print(const char* name, const ImpactSeries& r, const ImpactSeriesDef& sd) {
-  const double mu = std::tan(35.9 * 3.14159265358979 / 180.0);
+  const double mu = repose_mu(0.5);
   const double Db = 2 * (sd.base.sphere_radius + sd.base.granule_radius);
   std::printf("%s: bulk density %.0f kg/m^3\n", name, r.bulk_density);
   for (const auto* v : {&r.by_height, &r.by_density})
@@ -69,7 +69,7 @@ TEST(ImpactHeavy, SeriesAgainstUehara) {
   EXPECT_LE(r->worst_rebound, 0.05);
   EXPECT_NEAR(r->depth_vs_total_drop.exponent, 1.0 / 3.0, 0.35);
   EXPECT_NEAR(r->depth_vs_density.exponent, 0.5, 0.2);
-  const double mu = std::tan(35.9 * 3.14159265358979 / 180.0);
+  const double mu = repose_mu(0.5);
   const double Db = 2 * (wb.base.sphere_radius + wb.base.granule_radius);
   for (const ImpactPoint& p : r->by_height) {
     const double u = uehara_depth(mu, p.density, r->bulk_density, Db, p.drop_height);
@@ -103,7 +103,7 @@ TEST(ImpactHeavy, AtEightGranuleDiametersTheDepthsFollowUehara) {
   ASSERT_TRUE(r.ok()) << r.message();
   print("hysteretic at 8 granule diameters", *r, sd);
   EXPECT_LE(r->worst_rebound, 0.02);
-  const double mu = std::tan(35.9 * 3.14159265358979 / 180.0);
+  const double mu = repose_mu(0.5);
   const double Db = 2 * (sd.base.sphere_radius + sd.base.granule_radius);
   for (const auto* v : {&r->by_height, &r->by_density})
     for (const ImpactPoint& p : *v) {
