@@ -41,13 +41,12 @@ inline float clamp(float v, float lo, float hi) { return std::clamp(v, lo, hi); 
 #undef SP_TERRAIN_AT
 
 // The std430 layout of the status block (all members 4-byte scalars: offsets 4 apart, no
-// padding), as the GL backend reads it back and dispatches from it.
-static_assert(sizeof(DemStatus) == 26 * 4, "DemStatus: 8 status words + 6 x 3 dispatch arguments (104 bytes)");
+// padding), as the GL backend reads it back.
+static_assert(sizeof(DemStatus) == 8 * 4, "DemStatus: 8 status words (32 bytes)");
 static_assert(offsetof(DemStatus, max_granule_speed) == 0 && offsetof(DemStatus, nonfinite_bodies) == 4 &&
               offsetof(DemStatus, max_partners) == 8 && offsetof(DemStatus, contacts) == 12 &&
               offsetof(DemStatus, plane_contacts) == 16 && offsetof(DemStatus, resort) == 20 &&
-              offsetof(DemStatus, grid_rebuilds) == 24 && offsetof(DemStatus, kinematic_touch) == 28 &&
-              offsetof(DemStatus, grid_dispatch) == 32,
+              offsetof(DemStatus, grid_rebuilds) == 24 && offsetof(DemStatus, kinematic_touch) == 28,
               "DemStatus: std430 offsets of shaders/dem/physics_common.glsl");
 constexpr int kPlaneSlots = SP_PLANE_SLOTS;
 constexpr int kGridKernels = SP_GRID_KERNELS;

@@ -1,14 +1,16 @@
 #!/usr/bin/env bash
 # The GL backend's checks on a machine with a GPU, in one run (docs/BENCHMARKS.md "GL backend on a
 # GPU"): the GPU's name and the renderer EGL finds, the GL tests (context, GL-against-CPU
-# cross-checks, pool, a scene on the GL backend, rendering), the DEM throughput of both backends
+# cross-checks, a scene on the GL backend, rendering), the DEM throughput of both backends
 # on the same settled beds, the default and Leach scenes on each backend and the car scene on GL.
 #
 #   bash scripts/gpu_check.sh BIN_DIR OUT_DIR
 #
 # BIN_DIR holds `sandpatch` and the test programs (build/sandpatch and, from build/tests/,
-# gl_context_test, particles_gpu_gl_{simulation,pool,repose_heavy}_test, manager_run_test and the
-# render_{render,scene_frames,particle_renderer,body_renderer}_test programs, copied flat); run it
+# gl_context_test, particles_gpu_gl_{simulation,repose_heavy}_test, manager_run_test and the
+# render_{render,scene_frames,particle_renderer,body_renderer}_test programs, copied flat) and,
+# optionally, libgl_call_times.so (scripts/gl_call_times.c: then the scenes on the GL backend
+# also report each GL call's host time); run it
 # from the repository root with SANDPATCH_TILE_CACHE pointing at the build's tile_cache. Each step has its own time limit and the whole
 # run GPU_CHECK_SECONDS (default 400); a failing step is logged and the next one runs. Writes
 # OUT_DIR/summary.txt and OUT_DIR/logs.tar.gz (every step's output, the scenes' reports).
@@ -59,9 +61,16 @@ bench() {  # bench GRANULES SUBSTEPS: the DEM bench on both backends; its JSON l
 }
 
 scene() {  # scene NAME BACKEND: a shipped scene for 4 simulated seconds
-  step "run_$1_$2" 90 "$BIN/sandpatch" run "scenes/$1.json" --backend "$2" --seconds 4 --quiet \
-    --out "$OUT/logs/run_$1_$2"
+  local times="$OUT/logs/gl_call_times_$1_$2.txt"
+  if [ "$2" = gl ] && [ -f "$BIN/libgl_call_times.so" ]; then
+    GLTIME_OUT="$times" LD_PRELOAD="$BIN/libgl_call_times.so" step "run_$1_$2" 90 "$BIN/sandpatch" run "scenes/$1.json" \
+      --backend "$2" --seconds 4 --quiet --out "$OUT/logs/run_$1_$2"
+  else
+    step "run_$1_$2" 90 "$BIN/sandpatch" run "scenes/$1.json" --backend "$2" --seconds 4 --quiet \
+      --out "$OUT/logs/run_$1_$2"
+  fi
   report "$OUT/logs/run_$1_$2/report.json"
+  [ -f "$times" ] && head -8 "$times" >>"$SUM"
 }
 
 { nvidia-smi -L; echo "cores: $(nproc)"; } >>"$SUM" 2>&1
@@ -84,7 +93,6 @@ tail -n 1 "$OUT/logs/bench_dem_1000_k11_idle0.log" >>"$SUM"
 # ... or the size of its own buffers? the same bed in a simulation sized as the car scene's slots
 step "bench_dem_1000_k11_cap65536" 120 "$BIN/sandpatch" bench dem --backend gl --granules 1000 --steps 100 --substeps 11 --capacity 65536 --json
 tail -n 1 "$OUT/logs/bench_dem_1000_k11_cap65536.log" >>"$SUM"
-step gl_pool 60 "$BIN/particles_gpu_gl_pool_test"
 step run_gl_test 60 "$BIN/manager_run_test" --gtest_filter='Run.GlBackend*'
 scene leach_3_ten_bodies gl
 scene leach_3_ten_bodies cpu

@@ -28,27 +28,34 @@
 namespace sandpatch::gpu {
 
 // Buffer bindings (shaders/dem/common.glsl lists the same).
-enum Binding : GLuint { kBindP = 0, kBindPn = 1, kBindB = 2, kBindG = 3, kBindSIn = 4, kBindSOut = 5, kBindW = 6, kBindS = 7 };
+enum Binding : GLuint {
+  kBindP = 0, kBindPn = 1, kBindB = 2, kBindG = 3, kBindSIn = 4, kBindSOut = 5, kBindW = 6, kBindS = 7,
+  kBindArgs = 8, kBindCopySrc = 9, kBindCopyDst = 10
+};
+// Storage blocks a DEM kernel declares (bindings 0-8, common.glsl; copy_words.comp declares its
+// own two alone): one more than GL 4.3's minimum per compute shader, 8; drivers offer 16 or
+// more (NVIDIA, Mesa). create() checks GL_MAX_COMPUTE_SHADER_STORAGE_BLOCKS.
+constexpr int kStorageBlocks = 9;
 
 constexpr int kWallSlots = physics::kPlaneSlots;  // per sphere: floor, walls x0, x1, z0, z1, terrain
 constexpr int kScanBlock = 1024;  // cells per workgroup of scan_blocks.comp
 
 // The kernels, in the order of a frame (rebuild is bodies.comp in mode 1): grid_decide.comp
 // once, then per substep the grid kernels kGridCount..kGridCopyBack by glDispatchComputeIndirect
-// with the arguments of DemStatus::grid_dispatch[3 (k - kGridCount) ..] (shaders/dem/common.glsl
-// write_grid_dispatch), the contact and the body stage.
+// with the arguments of A.grid_dispatch[3 (k - kGridCount) ..] (shaders/dem/common.glsl
+// write_grid_dispatch; args_buf), the contact and the body stage. kCopyWords: the host's writes.
 enum Kernel {
   kGridDecide, kGridCount, kScanBlocks, kScanTop, kGridScatter, kGridGather, kGridCopyBack,
-  kForce, kBodies, kBodiesWide, kKinematicTouch, kKernelCount
+  kForce, kBodies, kBodiesWide, kKinematicTouch, kCopyWords, kKernelCount
 };
 inline constexpr const char* kKernelFile[kKernelCount] = {
     "dem/grid_decide.comp",  "dem/grid_count.comp",    "dem/scan_blocks.comp", "dem/scan_top.comp",
     "dem/grid_scatter.comp", "dem/grid_gather.comp",   "dem/grid_copyback.comp", "dem/force.comp",
-    "dem/bodies.comp",       "dem/bodies.comp",        "dem/kinematic_touch.comp"};
+    "dem/bodies.comp",       "dem/bodies.comp",        "dem/kinematic_touch.comp", "dem/copy_words.comp"};
 // A macro defined before a kernel's source (nullptr: none): kBodiesWide is bodies.comp's
 // workgroup-per-body pass.
 inline constexpr const char* kKernelDefine[kKernelCount] = {nullptr, nullptr, nullptr, nullptr, nullptr, nullptr, nullptr,
-                                                           nullptr, nullptr, "SP_WIDE_PASS", nullptr};
+                                                           nullptr, nullptr, "SP_WIDE_PASS", nullptr, nullptr};
 
 // A body of more spheres than this (a shell) is summed, integrated and rebuilt by a workgroup
 // of its own this size (bodies.comp's SP_WIDE_PASS); the others, granules first, by one
@@ -158,6 +165,7 @@ struct GlSimulation::Impl {
   // ignores a write to -1), looked up once after linking rather than by name every substep.
   struct Uniforms {
     GLint dt = -1, first_law = -1, pred = -1, mode = -1, first_body = -1, np = -1, nb = -1;
+    GLint src_word = -1, dst_word = -1, words = -1;  // copy_words.comp
   } u[kKernelCount];
 
   Status configure(const SimulationDef& d, const char* cap_prefix);
@@ -212,6 +220,7 @@ struct GlSimulation::Impl {
     glBindBufferBase(GL_SHADER_STORAGE_BUFFER, kBindSOut, buf[kS0 + 1 - cur_s]);
     glBindBufferBase(GL_SHADER_STORAGE_BUFFER, kBindW, buf[kW]);
     glBindBufferBase(GL_SHADER_STORAGE_BUFFER, kBindS, buf[kSort]);
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, kBindArgs, args_buf);
   }
 
   // Uniforms that change only with the grid or never: set on every program.
@@ -271,14 +280,8 @@ struct GlSimulation::Impl {
     glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
   }
 
-  // The buffer targets every substep's argument copy and indirect dispatches use, bound once
-  // per frame (step): the status block as the copy's source, args_buf as its destination and
-  // as the indirect-dispatch buffer. write() and read() rebind the copy targets.
-  void bind_substep_targets() {
-    glBindBuffer(GL_COPY_READ_BUFFER, buf[kG]);
-    glBindBuffer(GL_COPY_WRITE_BUFFER, args_buf);
-    glBindBuffer(GL_DISPATCH_INDIRECT_BUFFER, args_buf);
-  }
+  // The indirect-dispatch buffer of the substeps' grid kernels, bound once per frame (step).
+  void bind_substep_targets() { glBindBuffer(GL_DISPATCH_INDIRECT_BUFFER, args_buf); }
 
   // GlOptions::profile: a GL_TIME_ELAPSED query around one dispatch, read at the end of the
   // step (no stall between kernels, so the step runs as it does unprofiled).
@@ -300,17 +303,31 @@ struct GlSimulation::Impl {
     glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
     write(kG, offset, 4, &v);
   }
-  // Bytes into buffer b at offset: copied into `staging` (a fresh allocation each time) and
-  // from there by the GPU (glCopyBufferSubData), in command order. A glBufferSubData straight
-  // into a buffer the GPU was still using took about 1 ms a call on NVIDIA's driver
-  // (docs/BENCHMARKS.md "The GL backend's host time in scenes").
+  // Bytes (whole 32-bit words) into buffer b at offset, in command order: into `staging` (a
+  // fresh allocation each time), and from there by copy_words.comp, between storage barriers
+  // (the kernels before have read and written b; the ones after read the words). On NVIDIA's
+  // driver a glBufferSubData straight into a buffer the GPU was still using took about 1 ms a
+  // call, and a glCopyBufferSubData into a large block 50-450 us (docs/BENCHMARKS.md "The GL
+  // backend's host time in scenes", "GL backend on a GPU").
   void write(Buf b, std::size_t offset, std::size_t bytes, const void* data) {
     if (bytes == 0) return;
     if (staging == 0) glGenBuffers(1, &staging);
-    glBindBuffer(GL_COPY_READ_BUFFER, staging);
-    glBufferData(GL_COPY_READ_BUFFER, GLsizeiptr(bytes), data, GL_STREAM_DRAW);
-    glBindBuffer(GL_COPY_WRITE_BUFFER, buf[b]);
-    glCopyBufferSubData(GL_COPY_READ_BUFFER, GL_COPY_WRITE_BUFFER, 0, GLintptr(offset), GLsizeiptr(bytes));
+    glBindBuffer(GL_SHADER_STORAGE_BUFFER, staging);
+    glBufferData(GL_SHADER_STORAGE_BUFFER, GLsizeiptr(bytes), data, GL_STREAM_DRAW);
+    glBindBuffer(GL_SHADER_STORAGE_BUFFER, 0);
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, kBindCopySrc, staging);
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, kBindCopyDst, buf[b]);
+    glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
+    const GLuint id = prog[kCopyWords].id();
+    const Uniforms& cu = u[kCopyWords];
+    const std::size_t words = bytes / 4, chunk = std::size_t(wg) * 65535;  // the dispatch's x limit
+    for (std::size_t done = 0; done < words; done += chunk) {
+      const std::size_t n = std::min(chunk, words - done);
+      glProgramUniform1ui(id, cu.src_word, GLuint(done));
+      glProgramUniform1ui(id, cu.dst_word, GLuint(offset / 4 + done));
+      glProgramUniform1ui(id, cu.words, GLuint(n));
+      dispatch(kCopyWords, int(n), wg);  // and the storage barrier
+    }
   }
   void read(Buf b, std::size_t offset, std::size_t bytes, void* out) const {
     if (bytes == 0) return;

@@ -44,14 +44,17 @@ Status GlSimulation::Impl::build_programs() {
     std::string_view src = shaders::source(kKernelFile[k]);
     if (src.empty()) return Error{"", std::string("shaders/") + kKernelFile[k], "missing", "must be embedded", ""};
     const std::string define = kKernelDefine[k] ? "#define " + std::string(kKernelDefine[k]) + "\n#line 1 3\n" : "";
-    auto p = gl::Program::compute(std::string("shaders/") + kKernelFile[k], pre + define + std::string(src));
+    // copy_words.comp touches no DEM block: its own two only
+    const std::string head = k == kCopyWords ? "#version 430\n#define SP_WG " + std::to_string(wg) + "\n#line 1 3\n" : pre;
+    auto p = gl::Program::compute(std::string("shaders/") + kKernelFile[k], head + define + std::string(src));
     if (!p) return p.errors();
     prog[k] = std::move(*p);
     const GLuint id = prog[k].id();
     u[k] = Uniforms{glGetUniformLocation(id, "u_dt"),         glGetUniformLocation(id, "u_first_law"),
                     glGetUniformLocation(id, "u_pred"),       glGetUniformLocation(id, "u_mode"),
                     glGetUniformLocation(id, "u_first_body"), glGetUniformLocation(id, "u_np"),
-                    glGetUniformLocation(id, "u_nb")};
+                    glGetUniformLocation(id, "u_nb"),         glGetUniformLocation(id, "u_src_word"),
+                    glGetUniformLocation(id, "u_dst_word"),   glGetUniformLocation(id, "u_words")};
   }
   return check_layout();
 }

@@ -19,21 +19,15 @@
 namespace sandpatch::gpu {
 
 // One substep: its whole command sequence, recorded here only. The caller (step) bound the
-// storage buffers (bind_all) and the copy and indirect targets (bind_substep_targets), set the
+// storage buffers (bind_all) and the indirect-dispatch buffer (bind_substep_targets), set the
 // frame's uniforms (u_dt, u_first_law, u_pred: the same for every substep of a frame) and ran
 // grid_decide.comp, which wrote the grid kernels' arguments from the re-sort flag. Per
-// substep: 1 buffer copy, 8 dispatches (6 of them indirect; 9 with a body of more than
-// kWideSpheres spheres), 8 program switches (9), 8 barriers and 2 storage-buffer bindings; no
-// uniform.
+// substep: 8 dispatches (6 of them indirect; 9 with a body of more than kWideSpheres spheres),
+// 8 program switches (9), 7 barriers and 2 storage-buffer bindings; no copy, no uniform.
 void GlSimulation::Impl::substep() {
-  // The grid kernels' arguments into args_buf. Read in place, from the grid block that the
-  // grid kernels write, every indirect dispatch after a kernel that wrote the block cost on
-  // NVIDIA's driver about as much as the force kernel (docs/BENCHMARKS.md "GL backend on a
-  // GPU"). The barrier before (the body stage's of the last substep, or grid_decide's) has
-  // GL_BUFFER_UPDATE_BARRIER_BIT: the copy sees the arguments the shaders wrote. The indirect
-  // dispatches read args_buf after the copy in command order: a GL write, no barrier needed.
-  glCopyBufferSubData(GL_COPY_READ_BUFFER, GL_COPY_WRITE_BUFFER, GLintptr(offsetof(physics::DemStatus, grid_dispatch)), 0,
-                      GLsizeiptr(12 * physics::kGridKernels));
+  // The grid kernels read their arguments from args_buf (A.grid_dispatch), which the kernels
+  // write; the barrier before (the body stage's of the last substep, or grid_decide's) has
+  // GL_COMMAND_BARRIER_BIT.
   // the counting sort (0 workgroups each when no re-sort is needed); a storage barrier after
   // each: every stage reads what the one before wrote, the contact stage the cells and order
   for (int k = kGridCount; k <= kGridCopyBack; ++k) dispatch_indirect(Kernel(k));
@@ -43,11 +37,10 @@ void GlSimulation::Impl::substep() {
   glBindBufferBase(GL_SHADER_STORAGE_BUFFER, kBindSIn, buf[kS0 + cur_s]);
   glBindBufferBase(GL_SHADER_STORAGE_BUFFER, kBindSOut, buf[kS0 + 1 - cur_s]);
   // bodies; storage barrier: the next substep's kernels read the spheres and the re-sort flag;
-  // buffer-update barrier: its argument copy (and step's status writes and read-back) see the
-  // arguments request_resort wrote and the counters
+  // command barrier: its indirect dispatches read the arguments request_resort wrote
   // (the shells: a workgroup each, on other bodies and spheres than kBodies: one barrier after both)
   dispatch_groups(kBodiesWide, int(wide.size()));
-  dispatch(kBodies, nb_gpu, wg, GL_SHADER_STORAGE_BARRIER_BIT | GL_BUFFER_UPDATE_BARRIER_BIT);
+  dispatch(kBodies, nb_gpu, wg, GL_SHADER_STORAGE_BARRIER_BIT | GL_COMMAND_BARRIER_BIT);
 }
 
 void GlSimulation::Impl::resolve_queries() {
@@ -185,6 +178,12 @@ Result<GlSimulation> GlSimulation::create(const SimulationDef& d, const GlOption
   GLint64 max_block = 0;
   glGetInteger64v(GL_MAX_SHADER_STORAGE_BLOCK_SIZE, &max_block);
   if (max_block <= 0) return Error{"", "GlSimulation", "no GL context", "a current OpenGL 4.3+ context is needed", ""};
+  GLint max_blocks = 0;
+  glGetIntegerv(GL_MAX_COMPUTE_SHADER_STORAGE_BLOCKS, &max_blocks);
+  if (max_blocks < kStorageBlocks)
+    return Error{"", "GL_MAX_COMPUTE_SHADER_STORAGE_BLOCKS", std::to_string(max_blocks),
+                 "must be at least " + std::to_string(kStorageBlocks) + " (the DEM kernels' storage blocks)",
+                 "use the CPU backend on this driver"};
   const char* what[Impl::kBufCount] = {"particles (SimulationDef.max_particles)", "particles (SimulationDef.max_particles)",
                                        "bodies (SimulationDef.max_bodies)", "grid cells (SimulationDef.bounds_max / particle_radius)",
                                        "springs (SimulationDef.max_particles x GlOptions.max_contacts_per_sphere)",
@@ -405,19 +404,16 @@ Status GlSimulation::step(double dt_frame) {
     glProgramUniform1f(s.prog[k].id(), s.u[k].pred, float(s.guard->velocity_predictor_gain(dt)));
   }
   // the grid kernels' arguments from the re-sort flag (which an upload or a moved body may have
-  // raised); storage barrier: the grid kernels write the same words after it; buffer-update
-  // barrier: the first substep's copy reads them
-  s.dispatch(kGridDecide, 1, 1, GL_SHADER_STORAGE_BARRIER_BIT | GL_BUFFER_UPDATE_BARRIER_BIT);
+  // raised); storage barrier: the grid kernels write the same words after it; command barrier:
+  // the first substep's indirect dispatches read them
+  s.dispatch(kGridDecide, 1, 1, GL_SHADER_STORAGE_BARRIER_BIT | GL_COMMAND_BARRIER_BIT);
   s.bind_substep_targets();
   const auto t_submit = std::chrono::steady_clock::now();
   for (int k = 0; k < *ns; ++k) {
     if (k + 1 == *ns) {  // the counters describe the last substep, as on the CPU
-      // (no barrier of its own: the one after the last body stage, or grid_decide's, has
-      // GL_BUFFER_UPDATE_BARRIER_BIT, so these writes follow the shaders' writes)
       constexpr std::size_t first = offsetof(physics::DemStatus, max_partners);
       s.write(Impl::kG, first, offsetof(physics::DemStatus, resort) - first, &status.max_partners);
       s.write(Impl::kG, offsetof(physics::DemStatus, max_granule_speed), 4, &status.max_granule_speed);
-      s.bind_substep_targets();  // write() bound the status block there
     }
     s.substep();
     s.time += dt;
@@ -425,7 +421,7 @@ Status GlSimulation::step(double dt_frame) {
   glBindBuffer(GL_DISPATCH_INDIRECT_BUFFER, 0);
   glUseProgram(0);
   const auto t_read = std::chrono::steady_clock::now();
-  s.read(Impl::kG, 0, offsetof(physics::DemStatus, grid_dispatch), &status);
+  s.read(Impl::kG, 0, sizeof(physics::DemStatus), &status);
   s.stats.submit_seconds = std::chrono::duration<double>(t_read - t_submit).count();
   s.stats.readback_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_read).count();
   if (s.opt.profile) s.resolve_queries();

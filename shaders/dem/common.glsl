@@ -16,6 +16,8 @@
 //   6 W    boundary-plane springs (by particle id, 6 planes each): xi in xyz, the plane
 //          contact's largest overlap (m, as dmax) in w
 //   7 S    sort bookkeeping: slot_of (id -> sorted index), cell_of, order; terrain heights
+//   8 A    the grid kernels' dispatch-indirect arguments (also the GL_DISPATCH_INDIRECT_BUFFER)
+//   9, 10  copy_words.comp's source and destination (the host's writes into any block)
 // Math follows particles/math.hpp operation by operation; the contact law, terrain and
 // boundary planes are physics_common.glsl's, the CPU backend's own source.
 
@@ -49,6 +51,12 @@ layout(std430, binding = 7) buffer Sort {
 
 float terrain_sample(int k) { return S.terrain[k]; }  // physics_common.glsl's SP_TERRAIN_AT
 
+// (x, y, z) workgroups of each grid kernel, kGridCount.. of particles/gpu/gl_impl.hpp. Its own
+// small buffer: NVIDIA's driver made every glCopyBufferSubData out of the large grid block cost
+// 50-450 us of host time, and indirect dispatches read from that block cost GPU time
+// (docs/BENCHMARKS.md "GL backend on a GPU").
+layout(std430, binding = 8) buffer Args { uint grid_dispatch[SP_GRID_KERNELS * 3]; } A;
+
 uniform uint u_np;          // live particles
 uniform uint u_nb;          // live bodies
 uniform uint u_cells;       // gx * gy * gz (<= SP_CELLS)
@@ -69,12 +77,12 @@ ivec3 cell3(vec3 x) {
 uint cell_index(ivec3 c) { return uint((c.z * u_grid.y + c.y) * u_grid.x + c.x); }
 
 // ---- re-sort requests and the grid kernels' dispatch-indirect arguments ----
-// Invariant inside a frame's substeps: status.resort != 0 exactly when status.grid_dispatch
-// holds the grid kernels' workgroup counts (else their x counts are 0). grid_decide.comp
-// establishes it once per frame (the host may have raised the flag: an upload, a body moved);
+// Invariant inside a frame's substeps: status.resort != 0 exactly when A.grid_dispatch holds
+// the grid kernels' workgroup counts (else their x counts are 0). grid_decide.comp establishes
+// it once per frame (the host may have raised the flag: an upload, a body moved);
 // request_resort keeps it when a kernel raises the flag; grid_copyback.comp, the last grid
-// kernel, lowers both. The host copies the arguments to their own buffer before the grid
-// kernels of every substep (particles/gpu/gl_simulation.cpp substep()).
+// kernel, lowers both. The grid kernels of the next substep read the arguments after a
+// command barrier (particles/gpu/gl_simulation.cpp substep()).
 void write_grid_dispatch(bool resort) {
   const uint per_sphere = (u_np + uint(SP_WG) - 1u) / uint(SP_WG);
   const uint per_cell = (u_cells + uint(SP_WG) - 1u) / uint(SP_WG);
@@ -82,9 +90,9 @@ void write_grid_dispatch(bool resort) {
   uint groups[SP_GRID_KERNELS] = uint[SP_GRID_KERNELS](per_sphere, (u_cells + 1023u) / 1024u, 1u, per_sphere,
                                                        per_sphere, max(per_sphere, per_cell));
   for (int k = 0; k < SP_GRID_KERNELS; ++k) {
-    G.status.grid_dispatch[3 * k] = resort ? groups[k] : 0u;
-    G.status.grid_dispatch[3 * k + 1] = 1u;
-    G.status.grid_dispatch[3 * k + 2] = 1u;
+    A.grid_dispatch[3 * k] = resort ? groups[k] : 0u;
+    A.grid_dispatch[3 * k + 1] = 1u;
+    A.grid_dispatch[3 * k + 2] = 1u;
   }
 }
 // Raises the re-sort flag; the one invocation that raises it first writes the arguments.

@@ -12,7 +12,7 @@ void main() {
   if (i == 0u) {  // the re-sort is done: lower the flag and zero the arguments (common.glsl)
     G.status.resort = 0u;
     G.status.grid_rebuilds += 1u;
-    for (int k = 0; k < SP_GRID_KERNELS; ++k) G.status.grid_dispatch[3 * k] = 0u;
+    for (int k = 0; k < SP_GRID_KERNELS; ++k) A.grid_dispatch[3 * k] = 0u;  // read at this dispatch's launch
   }
   if (i < u_cells) {
     G.cell_start[i] += G.block_sum[i / 1024u];

@@ -56,7 +56,6 @@ struct DemStatus {
   uint resort;             // 1: re-sort needed (a sphere moved > skin/2 since the sort, or an upload)
   uint grid_rebuilds;      // grid rebuilds this frame
   uint kinematic_touch;    // asleep frame: 1 if a moving kinematic sphere reaches a dynamic one
-  uint grid_dispatch[SP_GRID_KERNELS * 3];  // dispatch-indirect arguments (x, y, z) per grid kernel
 };
 
 // ---- Which spheres touch ----

@@ -518,6 +518,24 @@ TEST(GlSimulation, RefusesSleepingRegions) {
   EXPECT_NE(gpu.message().find("SimulationDef.sleep_regions"), std::string::npos) << gpu.message();
 }
 
+// The DEM kernels declare kStorageBlocks storage blocks (common.glsl), which create() checks
+// against the driver's limit; the write kernel its own two alone.
+TEST(GlSimulation, KernelsUseTheStorageBlocksCreateChecks) {
+  auto ctx = context();
+  ASSERT_TRUE(ctx);
+  auto gpu = GlSimulation::create(box_def(ShearLaw::SpringHistory));
+  ASSERT_TRUE(gpu.ok()) << gpu.message();
+  const std::vector<unsigned> progs = gpu->gl_programs();  // in Kernel order
+  ASSERT_EQ(progs.size(), std::size_t(kKernelCount));
+  for (int k = 0; k < kKernelCount; ++k) {
+    GLint blocks = -1;
+    glGetProgramInterfaceiv(progs[std::size_t(k)], GL_SHADER_STORAGE_BLOCK, GL_ACTIVE_RESOURCES, &blocks);
+    EXPECT_GE(blocks, 1) << kKernelFile[k];
+    EXPECT_LE(blocks, k == kCopyWords ? 2 : kStorageBlocks) << kKernelFile[k];
+    std::printf("%-26s %s: %d storage blocks\n", kKernelFile[k], kKernelDefine[k] ? kKernelDefine[k] : "", blocks);
+  }
+}
+
 TEST(GlSimulation, GeneratedLayoutMatchesTheDriver) {
   auto ctx = context();
   ASSERT_TRUE(ctx);
