@@ -278,6 +278,65 @@ TEST(GlSimulation, TerrainForcesMatchCpu) {
   EXPECT_LT(dev, 1e-6);
 }
 
+// A host write longer than one dispatch of copy_words.comp (65,535 workgroups): at workgroup
+// size 1 a 300 x 300 terrain's 90,000 heights go in two dispatches. Spheres on its last rows,
+// whose heights the second dispatch wrote, feel the same terrain as on the CPU.
+TEST(GlSimulation, WriteLongerThanOneDispatchMatchesCpu) {
+  auto ctx = context();
+  ASSERT_TRUE(ctx);
+  SimulationDef d = box_def(ShearLaw::SpringHistory);
+  d.side_walls = false;
+  TerrainGrid& t = d.terrain;
+  t.nx = t.nz = 300;
+  t.x0 = t.z0 = 0.0f;
+  t.spacing = 0.08f / 299.0f;
+  for (int iz = 0; iz < t.nz; ++iz)
+    for (int ix = 0; ix < t.nx; ++ix)
+      t.heights.push_back(0.006f + 0.002f * std::sin(40.0f * ix * t.spacing) * std::cos(50.0f * iz * t.spacing));
+  t.fill_min_x = t.fill_min_z = 0.002f;  // a small filled corner, away from the spheres
+  t.fill_max_x = t.fill_max_z = 0.004f;
+  GlOptions o;
+  o.workgroup_size = 1;
+  ASSERT_GT(t.heights.size(), std::size_t(65535) * std::size_t(o.workgroup_size));
+  auto cpu = Simulation::create(d);
+  auto gpu = GlSimulation::create(d, o);
+  ASSERT_TRUE(cpu.ok() && gpu.ok()) << gpu.message();
+  const float r = d.particle_radius;
+  const float ms = d.material.density * 4.0f / 3.0f * 3.14159265f * r * r * r;
+  std::uint64_t seed = 9;
+  int n = 0;
+  for (int k = 0; k < 2; ++k)
+    for (int i = 0; i < 6; ++i, ++n) {
+      const float x = 0.006f + 0.0125f * i, z = 0.062f + 0.012f * k;  // rows 231-278 of 300
+      ShellDef sh;
+      sh.offsets = {Vec3{}};
+      sh.radii = {r};
+      sh.motion = MotionType::Dynamic;
+      sh.mass = ms;
+      sh.inertia = {0.4f * ms * r * r, 0.4f * ms * r * r, 0.4f * ms * r * r};
+      sh.position = {x, t.height(x, z) + (0.9f + 0.05f * urand(seed)) * r, z};
+      ASSERT_TRUE(cpu->add_shell(sh).ok());
+      ASSERT_TRUE(gpu->add_shell(sh).ok());
+    }
+  const double dt = 0.9 * cpu->max_substep_dt();
+  ASSERT_TRUE(cpu->step(dt).ok());
+  ASSERT_TRUE(gpu->step(dt).ok());
+  EXPECT_EQ(gpu->last_step().wall_contacts, cpu->last_step().wall_contacts);
+  EXPECT_GE(cpu->last_step().wall_contacts, n);
+  Compare cmp;
+  for (int b = 0; b < cpu->body_count(); ++b) cmp.check(gpu->body_force({b}), cpu->body_force({b}), "force", b);
+  std::printf("%d spheres on the terrain's last rows: worst relative force difference %.3g, absolute %.3g\n", n,
+              cmp.worst_rel, cmp.worst_abs);
+  EXPECT_EQ(cmp.failures, 0);
+  for (int s = 0; s < 20; ++s) {
+    ASSERT_TRUE(cpu->step(dt).ok());
+    ASSERT_TRUE(gpu->step(dt).ok());
+  }
+  const double dev = max_dev(*gpu, *cpu);
+  std::printf("after 20 more substeps: max position difference %.3g m\n", dev);
+  EXPECT_LT(dev, 1e-6);
+}
+
 // A small granule bed dropped into the box: 150 granules (600 spheres) on a loose lattice
 // with random orientations and velocities, so they fall, collide and pile up over the run.
 template <class Sim>
