@@ -420,6 +420,9 @@ Status GlSimulation::step(double dt_frame) {
   }
   glBindBuffer(GL_DISPATCH_INDIRECT_BUFFER, 0);
   glUseProgram(0);
+  // the renderers draw the particle block as vertex arrays (TerrainManager::gpu_particles):
+  // they see the frame's positions
+  glMemoryBarrier(GL_VERTEX_ATTRIB_ARRAY_BARRIER_BIT);
   const auto t_read = std::chrono::steady_clock::now();
   s.read(Impl::kG, 0, sizeof(physics::DemStatus), &status);
   s.stats.submit_seconds = std::chrono::duration<double>(t_read - t_submit).count();
