@@ -95,14 +95,23 @@ def main():
     if len(sys.argv) != 2 or not os.path.isdir(sys.argv[1]):
         sys.exit("usage: kd_fit.py DIR (DIR holds the JSON output of sandpatch_impact --trace, one drop a file)")
     by_density = {}
-    for path in sorted(glob.glob(os.path.join(sys.argv[1], "*"))):
+    paths = sorted(glob.glob(os.path.join(sys.argv[1], "*")))
+    if not paths:
+        sys.exit(f"{sys.argv[1]}: no files (one sandpatch_impact --trace output a file)")
+    for path in paths:
         try:
             with open(path) as f:
                 run = json.loads(f.read().strip().splitlines()[-1])
         except (OSError, ValueError, IndexError) as e:
             sys.exit(f"{path}: not the JSON line of sandpatch_impact --trace ({e})")
-        if not run.get("frames"):
+        if not isinstance(run, dict) or not run.get("frames"):
             sys.exit(f"{path}: no frames (run sandpatch_impact with --trace)")
+        for key in ("radius", "density", "height", "impact_speed"):
+            if not isinstance(run.get(key), (int, float)) or not run[key] > 0:
+                sys.exit(f"{path}: {key} = {run.get(key)!r}: must be a positive number (sandpatch_impact's JSON line)")
+        if not all(isinstance(fr, list) and len(fr) == 4 and all(isinstance(x, (int, float)) for x in fr)
+                   for fr in run["frames"]):
+            sys.exit(f"{path}: frames must be [t, bottom, vy, fy] numbers (sandpatch_impact --trace)")
         m, rows, peak = stop_frames(run)
         a, k, r2 = fit(rows)
         a2, k2, r22 = fit(rows[peak:])

@@ -10,6 +10,7 @@
 
 #include <nlohmann/json.hpp>
 #include <sys/wait.h>
+#include <unistd.h>
 
 #include <cmath>
 #include <cstdio>
@@ -127,7 +128,7 @@ namespace sandpatch {
 // frame's end instead of its middle was 2.5 % off).
 TEST(Impact, KatsuragiDurianFitRecoversTheLawsConstants) {
   namespace fs = std::filesystem;
-  const fs::path dir = fs::temp_directory_path() / "sandpatch_kd_fit_test";
+  const fs::path dir = fs::temp_directory_path() / ("sandpatch_kd_fit_test_" + std::to_string(getpid()));
   fs::remove_all(dir);
   fs::create_directories(dir);
   const double R = 0.25, g = 9.81;
@@ -174,6 +175,14 @@ TEST(Impact, KatsuragiDurianFitRecoversTheLawsConstants) {
   EXPECT_NEAR(kb, 4.0e4, 400);
   EXPECT_NEAR(pd, 1.0, 0.01);
   EXPECT_NEAR(pk, 0.5, 0.01);
+  // what is not a trace is refused, naming the file
+  std::ofstream(dir / "zz_not_a_trace.json") << "{\"radius\": 0.25}\n";
+  std::string refused;
+  p = popen(cmd.c_str(), "r");
+  ASSERT_NE(p, nullptr);
+  while (std::fgets(buf, sizeof buf, p)) refused += buf;
+  EXPECT_NE(WEXITSTATUS(pclose(p)), 0) << refused;
+  EXPECT_NE(refused.find("zz_not_a_trace.json: no frames (run sandpatch_impact with --trace)"), std::string::npos) << refused;
   fs::remove_all(dir);
 }
 
