@@ -152,7 +152,10 @@ TEST(Impact, KatsuragiDurianFitRecoversTheLawsConstants) {
       }
       frames.push_back({t, -z, -std::max(v, 0.0), n > 0 ? fsum / n : 0.0});
     }
-    std::ofstream(dir / ("d" + std::to_string(int(rho)) + ".json")) << j.dump() << "\n";
+    std::string name = "d";  // (not "d" + to_string(): GCC 12's -Wrestrict misfires on it)
+    name += std::to_string(int(rho));
+    name += ".json";
+    std::ofstream(dir / name) << j.dump() << "\n";
   }
   const std::string cmd = "python3 " + std::string(SANDPATCH_SOURCE_DIR) + "/scripts/kd_fit.py " + dir.string() + " 2>&1";
   std::string out;
