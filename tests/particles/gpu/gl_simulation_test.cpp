@@ -220,6 +220,50 @@ double max_dev(const A& a, const B& b) {
 // Terrain outside the filled rectangle (TerrainGrid): single spheres pressed into a bumpy
 // height grid around the fill, plus granules resting on it; forces within the same
 // tolerance, then 100 steps on the terrain stay within 1e-6 m of the CPU.
+// A single sphere (a dynamic shell of the granules' radius) pressed 0.05-0.1 r into the terrain
+// at (x, z); moving: with a random velocity and spin.
+ShellDef sphere_on_terrain(const SimulationDef& d, float x, float z, bool moving, std::uint64_t& seed) {
+  const float r = d.particle_radius;
+  const float ms = d.material.density * 4.0f / 3.0f * 3.14159265f * r * r * r;
+  ShellDef sh;
+  sh.offsets = {Vec3{}};
+  sh.radii = {r};
+  sh.motion = MotionType::Dynamic;
+  sh.mass = ms;
+  sh.inertia = {0.4f * ms * r * r, 0.4f * ms * r * r, 0.4f * ms * r * r};
+  sh.position = {x, d.terrain.height(x, z) + (0.9f + 0.05f * urand(seed)) * r, z};
+  if (moving) {
+    sh.velocity = {0.1f * srand1(seed), 0.0f, 0.1f * srand1(seed)};
+    sh.angular_velocity = {10.0f * srand1(seed), 0, 10.0f * srand1(seed)};
+  }
+  return sh;
+}
+
+// One substep on both backends: the same plane-contact count (at least `spheres`), every body's
+// force and torque within Compare's tolerance; then `more` substeps: positions within 1e-6 m.
+void expect_terrain_contacts_agree(Simulation& cpu, GlSimulation& gpu, int spheres, int more) {
+  const double dt = 0.9 * cpu.max_substep_dt();
+  ASSERT_TRUE(cpu.step(dt).ok());
+  ASSERT_TRUE(gpu.step(dt).ok());
+  EXPECT_EQ(gpu.last_step().wall_contacts, cpu.last_step().wall_contacts);
+  EXPECT_GE(cpu.last_step().wall_contacts, spheres);
+  Compare cmp;
+  for (int b = 0; b < cpu.body_count(); ++b) {
+    cmp.check(gpu.body_force({b}), cpu.body_force({b}), "force", b);
+    cmp.check(gpu.body_torque({b}), cpu.body_torque({b}), "torque", b);
+  }
+  std::printf("%d spheres on the terrain, %lld plane contacts: worst relative difference %.3g, absolute %.3g\n",
+              spheres, (long long)cpu.last_step().wall_contacts, cmp.worst_rel, cmp.worst_abs);
+  EXPECT_EQ(cmp.failures, 0);
+  for (int s = 0; s < more; ++s) {
+    ASSERT_TRUE(cpu.step(dt).ok());
+    ASSERT_TRUE(gpu.step(dt).ok());
+  }
+  const double dev = max_dev(gpu, cpu);
+  std::printf("after %d more substeps on the terrain: max position difference %.3g m\n", more, dev);
+  EXPECT_LT(dev, 1e-6);
+}
+
 TEST(GlSimulation, TerrainForcesMatchCpu) {
   auto ctx = context();
   ASSERT_TRUE(ctx);
@@ -236,46 +280,17 @@ TEST(GlSimulation, TerrainForcesMatchCpu) {
   auto cpu = Simulation::create(d);
   auto gpu = GlSimulation::create(d);
   ASSERT_TRUE(cpu.ok() && gpu.ok()) << gpu.message();
-  const float r = d.particle_radius;
-  const float ms = d.material.density * 4.0f / 3.0f * 3.14159265f * r * r * r;
   int on_terrain = 0;
   for (int k = 0; k < 8; ++k)
     for (int i = 0; i < 8; ++i) {
       const float x = 0.005f + i * 0.01f, z = 0.005f + k * 0.01f;
       if (x > t.fill_min_x && x < t.fill_max_x && z > t.fill_min_z && z < t.fill_max_z) continue;
-      ShellDef sh;
-      sh.offsets = {Vec3{}};
-      sh.radii = {r};
-      sh.motion = MotionType::Dynamic;
-      sh.mass = ms;
-      sh.inertia = {0.4f * ms * r * r, 0.4f * ms * r * r, 0.4f * ms * r * r};
-      sh.position = {x, t.height(x, z) + (0.9f + 0.05f * urand(seed)) * r, z};
-      sh.velocity = {0.1f * srand1(seed), 0.0f, 0.1f * srand1(seed)};
-      sh.angular_velocity = {10.0f * srand1(seed), 0, 10.0f * srand1(seed)};
+      const ShellDef sh = sphere_on_terrain(d, x, z, true, seed);
       ASSERT_TRUE(cpu->add_shell(sh).ok());
       ASSERT_TRUE(gpu->add_shell(sh).ok());
       ++on_terrain;
     }
-  const double dt = 0.9 * cpu->max_substep_dt();
-  ASSERT_TRUE(cpu->step(dt).ok());
-  ASSERT_TRUE(gpu->step(dt).ok());
-  EXPECT_EQ(gpu->last_step().wall_contacts, cpu->last_step().wall_contacts);
-  EXPECT_GE(cpu->last_step().wall_contacts, on_terrain);
-  Compare cmp;
-  for (int b = 0; b < cpu->body_count(); ++b) {
-    cmp.check(gpu->body_force({b}), cpu->body_force({b}), "force", b);
-    cmp.check(gpu->body_torque({b}), cpu->body_torque({b}), "torque", b);
-  }
-  std::printf("%d spheres on the terrain, %lld plane contacts: worst relative difference %.3g, absolute %.3g\n",
-              on_terrain, (long long)cpu->last_step().wall_contacts, cmp.worst_rel, cmp.worst_abs);
-  EXPECT_EQ(cmp.failures, 0);
-  for (int s = 0; s < 100; ++s) {
-    ASSERT_TRUE(cpu->step(dt).ok());
-    ASSERT_TRUE(gpu->step(dt).ok());
-  }
-  const double dev = max_dev(*gpu, *cpu);
-  std::printf("after 100 more substeps on the terrain: max position difference %.3g m\n", dev);
-  EXPECT_LT(dev, 1e-6);
+  expect_terrain_contacts_agree(*cpu, *gpu, on_terrain, 100);
 }
 
 // A host write longer than one dispatch of copy_words.comp (65,535 workgroups): at workgroup
@@ -301,40 +316,16 @@ TEST(GlSimulation, WriteLongerThanOneDispatchMatchesCpu) {
   auto cpu = Simulation::create(d);
   auto gpu = GlSimulation::create(d, o);
   ASSERT_TRUE(cpu.ok() && gpu.ok()) << gpu.message();
-  const float r = d.particle_radius;
-  const float ms = d.material.density * 4.0f / 3.0f * 3.14159265f * r * r * r;
   std::uint64_t seed = 9;
   int n = 0;
   for (int k = 0; k < 2; ++k)
     for (int i = 0; i < 6; ++i, ++n) {
       const float x = 0.006f + 0.0125f * i, z = 0.062f + 0.012f * k;  // rows 231-278 of 300
-      ShellDef sh;
-      sh.offsets = {Vec3{}};
-      sh.radii = {r};
-      sh.motion = MotionType::Dynamic;
-      sh.mass = ms;
-      sh.inertia = {0.4f * ms * r * r, 0.4f * ms * r * r, 0.4f * ms * r * r};
-      sh.position = {x, t.height(x, z) + (0.9f + 0.05f * urand(seed)) * r, z};
+      const ShellDef sh = sphere_on_terrain(d, x, z, false, seed);
       ASSERT_TRUE(cpu->add_shell(sh).ok());
       ASSERT_TRUE(gpu->add_shell(sh).ok());
     }
-  const double dt = 0.9 * cpu->max_substep_dt();
-  ASSERT_TRUE(cpu->step(dt).ok());
-  ASSERT_TRUE(gpu->step(dt).ok());
-  EXPECT_EQ(gpu->last_step().wall_contacts, cpu->last_step().wall_contacts);
-  EXPECT_GE(cpu->last_step().wall_contacts, n);
-  Compare cmp;
-  for (int b = 0; b < cpu->body_count(); ++b) cmp.check(gpu->body_force({b}), cpu->body_force({b}), "force", b);
-  std::printf("%d spheres on the terrain's last rows: worst relative force difference %.3g, absolute %.3g\n", n,
-              cmp.worst_rel, cmp.worst_abs);
-  EXPECT_EQ(cmp.failures, 0);
-  for (int s = 0; s < 20; ++s) {
-    ASSERT_TRUE(cpu->step(dt).ok());
-    ASSERT_TRUE(gpu->step(dt).ok());
-  }
-  const double dev = max_dev(*gpu, *cpu);
-  std::printf("after 20 more substeps: max position difference %.3g m\n", dev);
-  EXPECT_LT(dev, 1e-6);
+  expect_terrain_contacts_agree(*cpu, *gpu, n, 20);
 }
 
 // A small granule bed dropped into the box: 150 granules (600 spheres) on a loose lattice
