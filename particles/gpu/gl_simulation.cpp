@@ -23,7 +23,7 @@ namespace sandpatch::gpu {
 // frame's uniforms (u_dt, u_first_law, u_pred: the same for every substep of a frame) and ran
 // grid_decide.comp, which wrote the grid kernels' arguments from the re-sort flag. Per
 // substep: 8 dispatches (6 of them indirect; 9 with a body of more than kWideSpheres spheres),
-// 8 program switches (9), 7 barriers and 2 storage-buffer bindings; no copy, no uniform.
+// 8 program switches (9), 8 barriers and 2 storage-buffer bindings; no copy, no uniform.
 void GlSimulation::Impl::substep() {
   // The grid kernels read their arguments from args_buf (A.grid_dispatch), which the kernels
   // write; the barrier before (the body stage's of the last substep, or grid_decide's) has
