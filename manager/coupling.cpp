@@ -4,6 +4,9 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <functional>
+
+#include <omp.h>
 
 #include "manager/shell.hpp"
 #include "particles/granule.hpp"
@@ -101,7 +104,8 @@ Status TerrainManager::Impl::step_patches(double time, double dt) {
     awake.push_back(&s);
   }
   // (with a frame budget, a patch carrying no body may be held this frame: budget.cpp)
-  for (Slot* sp : stepping_order(awake, dt)) {
+  const std::vector<Slot*> order = stepping_order(awake, dt);
+  for (Slot* sp : order) {
     Slot& s = *sp;
     if (s.state == SlotState::Asleep) {
       s.state = SlotState::Active;
@@ -110,72 +114,156 @@ Status TerrainManager::Impl::step_patches(double time, double dt) {
       events.push_back({PatchEventKind::Woke, s.patch, time, 0, record(s).granules});
       ++work.wakes;
     }
-    const auto t_step = manager_detail::Clock::now();
-    // The DEM names its own definition; say which knob of the terrain's trades it.
-    auto name_knobs = [](Status st) {
-      std::vector<Error> es = st.errors();
-      for (Error& e : es)
-        if (e.field == "step.dt_frame")
-          e.detail = "lower the frame's dt, raise simulation.max_substeps (TerrainDef.max_substeps), lower "
-                     "simulation.steps_per_contact (TerrainDef.steps_per_contact) or the material's stiffness";
-      return es;
+  }
+  // The steps: each touches its own slot only (its DEM and the sums of the bodies it carries),
+  // so patches may step side by side, one thread each (concurrent_patches); the results do
+  // not depend on it (the DEM's do not depend on its threads). Then, in the same order either
+  // way, each patch's coupling hands its forces to Bullet.
+  std::vector<PatchStep> done(order.size());
+  const int teams = concurrent_patches(order, dt);
+  if (teams > 1) {
+    for (Slot* sp : order)
+      if (Status st = sp->sim->set_threads(1); !st) return st;
+    std::vector<int> by_cost(order.size());
+    for (std::size_t k = 0; k < order.size(); ++k) by_cost[k] = int(k);
+    auto awake_of = [&](int k) {
+      const DemBackend& sim = *order[std::size_t(k)]->sim;
+      return sim.particle_count() - 4 * sim.last_step().sleeping_granules;
     };
-    bool prescribed = false;
-    for (Carried& c : s.carried) {
-      c.f_sum.setZero();
-      c.t_sum.setZero();
-      prescribed = prescribed || (c.enabled && c.prescribed);
+    std::stable_sort(by_cost.begin(), by_cost.end(), [&](int a, int b) { return awake_of(a) > awake_of(b); });
+    const auto t0 = manager_detail::Clock::now();
+#pragma omp parallel for num_threads(teams) schedule(dynamic, 1)
+    for (int k = 0; k < int(order.size()); ++k) {
+      const std::size_t i = std::size_t(by_cost[std::size_t(k)]);
+      done[i] = step_patch(*order[i], dt);
     }
-    StepStats frame_stats;
-    bool frame_stepped = true;
-    if (!prescribed) {
-      if (Status st = s.sim->step(dt); !st) return name_knobs(st);
-    } else {
-      // A kinematic or static shell gets no momentum from the granules, so the soil's force on
-      // it is summed from the DEM's contact force substep by substep: the frame runs as its n
-      // substeps one DEM step each (the same substep dt, float(dt / n), the same state).
-      auto n = s.sim->substeps_for(dt);
-      if (!n) return name_knobs(n.errors());
-      int stepped = 0;
-      for (int k = 0; k < *n; ++k) {
-        if (Status st = s.sim->step(dt / *n); !st) return name_knobs(st);
-        const StepStats& one = s.sim->last_step();
-        frame_stats.substeps += one.substeps;
-        frame_stats.substep_dt = one.substeps > 0 ? one.substep_dt : frame_stats.substep_dt;
-        frame_stats.contacts = one.contacts;
-        frame_stats.wall_contacts = one.wall_contacts;
-        frame_stats.neighbour_entries = one.neighbour_entries;
-        frame_stats.resorts += one.resorts;
-        frame_stats.shell_lists += one.shell_lists;
-        frame_stats.slept = one.slept;
-        frame_stats.guard_seconds += one.guard_seconds;
-        frame_stats.pair_seconds += one.pair_seconds;
-        frame_stats.body_seconds += one.body_seconds;
-        frame_stats.sort_seconds += one.sort_seconds;
-        frame_stats.submit_seconds += one.submit_seconds;
-        frame_stats.readback_seconds += one.readback_seconds;
-        stepped += one.substeps > 0;
-        for (Carried& c : s.carried)
-          if (c.enabled && c.prescribed && one.substeps > 0) {
-            c.f_sum += eig(s.sim->body_force(c.shell)).cast<double>();
-            c.t_sum += eig(s.sim->body_torque(c.shell)).cast<double>();
-          }
-      }
-      // The mean over the substeps that ran (the DEM may fall asleep within the frame; none
-      // ran: the force of before stands, couple_after keeps it).
-      for (Carried& c : s.carried) {
-        c.f_sum /= double(std::max(stepped, 1));
-        c.t_sum /= double(std::max(stepped, 1));
-      }
-      frame_stepped = stepped > 0;
+    const double wall = manager_detail::ms_since(t0);
+    for (Slot* sp : order)
+      if (Status st = sp->sim->set_threads(def.threads); !st) return st;
+    // Each patch's share of the section's wall time: its thread's time scaled so that the
+    // shares add up to the wall time (the report's DEM time is the frame's, not the threads').
+    double threads_ms = 0;
+    for (const PatchStep& d : done) threads_ms += d.ms;
+    const double share = threads_ms > 0 ? wall / threads_ms : 1.0;
+    for (PatchStep& d : done) d.share = share, d.ms *= share;
+    work.side_by_side = int(order.size());
+    ++side_by_side_frames;
+  } else {
+    for (std::size_t i = 0; i < order.size(); ++i) {
+      done[i] = step_patch(*order[i], dt);
+      if (!done[i].status) break;
     }
-    const double step_ms = manager_detail::ms_since(t_step);
-    account_step(s, step_ms, prescribed ? &frame_stats : nullptr);
-    observe_cost(s, step_ms, dt);
-    couple_after(s, dt, frame_stepped);
+  }
+  for (std::size_t i = 0; i < order.size(); ++i) {
+    Slot& s = *order[i];
+    PatchStep& d = done[i];
+    if (!d.status) return d.status;
+    account_step(s, d.ms, d.prescribed ? &d.stats : nullptr, d.share);
+    observe_cost(s, d.ms, dt);
+    couple_after(s, dt, d.stepped);
     s.fade = std::min(s.fade + 1, def.fade_frames);
   }
   return Ok{};
+}
+
+// How many patches step side by side this frame, one thread each (1: one after another, each
+// on all the DEM's threads). Side by side, the frame's DEM takes about the longest thread's
+// share (patches handed to the first free thread, the largest first); one after another, the
+// sum of the patches' steps, each over the threads at the parallel gain measured for patches
+// of 1,000-4,000 granules (two threads 1.31-1.62 times one; docs/BENCHMARKS.md "Patches side
+// by side"). Side by side only where that is the shorter, on the CPU backend (the GL
+// backend's steps share one context and queue).
+int TerrainManager::Impl::concurrent_patches(const std::vector<Slot*>& order, double dt) const {
+  if (order.size() < 2 || def.backend != "cpu") return 1;
+  const int threads = def.threads > 0 ? def.threads : omp_get_max_threads();
+  if (threads < 2 || omp_in_parallel()) return 1;
+  const int teams = std::min(threads, int(order.size()));
+  std::vector<double> cost;
+  double sum = 0;
+  for (const Slot* s : order) {
+    // (the spheres awake at its last step: granules asleep in still regions cost next to nothing)
+    const int awake = s->sim->particle_count() - 4 * s->sim->last_step().sleeping_granules;
+    const double c = predict_ms(awake, dt, s->steps_per_contact);
+    cost.push_back(c);
+    sum += c;
+  }
+  std::sort(cost.begin(), cost.end(), std::greater<>());
+  std::vector<double> busy(std::size_t(teams), 0.0);
+  for (double c : cost) *std::min_element(busy.begin(), busy.end()) += c;
+  const double side_by_side = *std::max_element(busy.begin(), busy.end());
+  constexpr double kGainPerThread = 0.45;  // a patch on n threads: 1 + 0.45 (n - 1) times one
+  const double one_after_another = sum / (1.0 + kGainPerThread * (threads - 1));
+  return side_by_side < one_after_another ? teams : 1;
+}
+
+// One patch's DEM step of the frame (slot-local: its simulation and its carried bodies' sums).
+TerrainManager::Impl::PatchStep TerrainManager::Impl::step_patch(Slot& s, double dt) {
+  PatchStep out;
+  const auto t_step = manager_detail::Clock::now();
+  // The DEM names its own definition; say which knob of the terrain's trades it.
+  auto name_knobs = [](Status st) {
+    std::vector<Error> es = st.errors();
+    for (Error& e : es)
+      if (e.field == "step.dt_frame")
+        e.detail = "lower the frame's dt, raise simulation.max_substeps (TerrainDef.max_substeps), lower "
+                   "simulation.steps_per_contact (TerrainDef.steps_per_contact) or the material's stiffness";
+    return Status(es);
+  };
+  for (Carried& c : s.carried) {
+    c.f_sum.setZero();
+    c.t_sum.setZero();
+    out.prescribed = out.prescribed || (c.enabled && c.prescribed);
+  }
+  if (!out.prescribed) {
+    if (Status st = s.sim->step(dt); !st) out.status = name_knobs(st);
+  } else {
+    // A kinematic or static shell gets no momentum from the granules, so the soil's force on
+    // it is summed from the DEM's contact force substep by substep: the frame runs as its n
+    // substeps one DEM step each (the same substep dt, float(dt / n), the same state).
+    auto n = s.sim->substeps_for(dt);
+    if (!n) {
+      out.status = name_knobs(n.errors());
+      return out;
+    }
+    StepStats& fs = out.stats;
+    int stepped = 0;
+    for (int k = 0; k < *n; ++k) {
+      if (Status st = s.sim->step(dt / *n); !st) {
+        out.status = name_knobs(st);
+        return out;
+      }
+      const StepStats& one = s.sim->last_step();
+      fs.substeps += one.substeps;
+      fs.substep_dt = one.substeps > 0 ? one.substep_dt : fs.substep_dt;
+      fs.contacts = one.contacts;
+      fs.wall_contacts = one.wall_contacts;
+      fs.neighbour_entries = one.neighbour_entries;
+      fs.resorts += one.resorts;
+      fs.shell_lists += one.shell_lists;
+      fs.slept = one.slept;
+      fs.guard_seconds += one.guard_seconds;
+      fs.pair_seconds += one.pair_seconds;
+      fs.body_seconds += one.body_seconds;
+      fs.sort_seconds += one.sort_seconds;
+      fs.submit_seconds += one.submit_seconds;
+      fs.readback_seconds += one.readback_seconds;
+      stepped += one.substeps > 0;
+      for (Carried& c : s.carried)
+        if (c.enabled && c.prescribed && one.substeps > 0) {
+          c.f_sum += eig(s.sim->body_force(c.shell)).cast<double>();
+          c.t_sum += eig(s.sim->body_torque(c.shell)).cast<double>();
+        }
+    }
+    // The mean over the substeps that ran (the DEM may fall asleep within the frame; none
+    // ran: the force of before stands, couple_after keeps it).
+    for (Carried& c : s.carried) {
+      c.f_sum /= double(std::max(stepped, 1));
+      c.t_sum /= double(std::max(stepped, 1));
+    }
+    out.stepped = stepped > 0;
+  }
+  out.ms = manager_detail::ms_since(t_step);
+  return out;
 }
 
 void TerrainManager::Impl::update_sleep(double time, double dt) {

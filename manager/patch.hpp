@@ -167,8 +167,10 @@ struct DemCost {
   double awake_sphere_steps_per_s() const {
     return wall_ms > 0 ? double(sphere_steps - sleeping_sphere_steps) / (1e-3 * wall_ms) : 0.0;
   }
-  // One step call of `spheres` spheres that took wall_ms and ran st.substeps substeps.
-  void add(double ms, const StepStats& st, int spheres) {
+  // One step call of `spheres` spheres that took wall_ms and ran st.substeps substeps; its
+  // stages' times are scaled by `share` (patches stepped side by side: the call's share of
+  // the section's wall time over its own thread's time).
+  void add(double ms, const StepStats& st, int spheres, double share = 1) {
     wall_ms += ms;
     substeps += st.substeps;
     sphere_steps += std::int64_t(spheres) * st.substeps;
@@ -182,9 +184,9 @@ struct DemCost {
     shell_lists += st.shell_lists;
     entry_sphere_steps += double(st.neighbour_entries) * st.substeps;
     sleeping_sphere_steps += 4 * std::int64_t(st.sleeping_granules) * st.substeps;
-    sort_ms += 1e3 * st.sort_seconds;
-    pair_ms += 1e3 * st.pair_seconds;
-    body_ms += 1e3 * st.body_seconds;
+    sort_ms += 1e3 * share * st.sort_seconds;
+    pair_ms += 1e3 * share * st.pair_seconds;
+    body_ms += 1e3 * share * st.body_seconds;
     submit_ms += 1e3 * st.submit_seconds;
     readback_ms += 1e3 * st.readback_seconds;
     if (st.substeps > 0) {

@@ -526,10 +526,15 @@ void clip_to_terrain(const Heightfield& hf, PatchRequest& r) {
 }
 
 Result<GridRegion> patch_region(const Heightfield& hf, const PatchRequest& r, int tile_cells) {
-  auto sample_i = [&](double x) { return int(std::floor((x - hf.origin_x()) / hf.spacing())); };
-  auto sample_j = [&](double z) { return int(std::floor((z - hf.origin_z()) / hf.spacing())); };
-  int i0 = std::max(0, sample_i(r.x0)), j0 = std::max(0, sample_j(r.z0));
-  int i1 = std::min(hf.samples_x() - 1, sample_i(r.x1) + 1), j1 = std::min(hf.samples_z() - 1, sample_j(r.z1) + 1);
+  // The samples around the rectangle: the last at or below its low side, the first at or
+  // above its high side (a side on a sample, as a patch asked for ahead of another has, to
+  // round-off: that sample; before, one more, and a rectangle of exactly one tile period
+  // took two).
+  const double tol = 1e-6;
+  auto below = [&](double x, double o) { return int(std::floor((x - o) / hf.spacing() + tol)); };
+  auto above = [&](double x, double o) { return int(std::ceil((x - o) / hf.spacing() - tol)); };
+  int i0 = std::max(0, below(r.x0, hf.origin_x())), j0 = std::max(0, below(r.z0, hf.origin_z()));
+  int i1 = std::min(hf.samples_x() - 1, above(r.x1, hf.origin_x())), j1 = std::min(hf.samples_z() - 1, above(r.z1, hf.origin_z()));
   if (i1 - i0 < 2 || j1 - j0 < 2) return Error{"", "patch request", "", "off the terrain"};
   auto align = [&](int& a, int& b, int samples) {
     const int cells = b - a, whole = ((cells + tile_cells - 1) / tile_cells) * tile_cells;

@@ -497,6 +497,7 @@ nlohmann::ordered_json TerrainManager::Impl::dem_report() const {
                  {"mean_list_entries_per_sphere", t.mean_list_entries_per_sphere()},
                  {"grid_rebuilds", t.grid_rebuilds},
                  {"shell_list_rebuilds", t.shell_lists},
+                 {"side_by_side_frames", side_by_side_frames},
                  {"stage_ms", {{"sort", t.sort_ms}, {"pairs", t.pair_ms}, {"bodies", t.body_ms},
                                {"gl_submit", t.submit_ms}, {"gl_readback", t.readback_ms}}}};
   // GL backend with SANDPATCH_GL_PROFILE: each kernel's GPU time over the run, all slots

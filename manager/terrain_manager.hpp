@@ -269,6 +269,7 @@ class TerrainManager {
     int demotions = 0;          // patches demoted (slot freed)
     int wakes = 0;              // patches that woke
     int patches_stepped = 0;    // DEM step calls
+    int side_by_side = 0;       // of those, stepped side by side, one thread each (0: one after another)
     std::int64_t substeps = 0;      // DEM substeps, all patches
     std::int64_t sphere_steps = 0;  // spheres × substeps, all patches
   };

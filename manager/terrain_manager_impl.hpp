@@ -193,7 +193,7 @@ struct TerrainManager::Impl {
   const PatchRecord& record(const Slot& s) const { return records[std::size_t(&s - slots.data())]; }
   // Books one DEM step call of slot s that took wall_ms (DemCost): the granules' spheres and
   // the enabled shells'. A new patch in the slot starts its record's cost afresh.
-  void account_step(const Slot& s, double wall_ms, const StepStats* stats = nullptr) {
+  void account_step(const Slot& s, double wall_ms, const StepStats* stats = nullptr, double share = 1) {
     DemCost& c = record(s).cost;
     if (c.patch != s.patch) {
       if (c.patch >= 0) earlier_costs.push_back(c);
@@ -205,7 +205,7 @@ struct TerrainManager::Impl {
     for (const Carried& k : s.carried)
       if (k.enabled) spheres += s.sim->body_particle_count(k.shell);
     const StepStats& st = stats ? *stats : s.sim->last_step();
-    c.add(wall_ms, st, spheres);
+    c.add(wall_ms, st, spheres, share);
     c.last_frame = frame;
     ++work.patches_stepped;
     work.substeps += st.substeps;
@@ -423,6 +423,18 @@ struct TerrainManager::Impl {
   // Chooses carriers, hands every ready patch its bodies, steps the awake ones and hands the
   // contact forces back to Bullet.
   Status step_patches(double time, double dt);
+  // One patch's DEM step of a frame (coupling.cpp step_patch): its status, wall ms (its share
+  // of the section's when patches stepped side by side, `share` the factor), whether a
+  // substep ran, and for a prescribed shell's frame the summed stats.
+  struct PatchStep {
+    Status status = Ok{};
+    double ms = 0, share = 1;
+    bool prescribed = false, stepped = true;
+    StepStats stats;
+  };
+  PatchStep step_patch(Slot& s, double dt);
+  int concurrent_patches(const std::vector<Slot*>& order, double dt) const;
+  std::int64_t side_by_side_frames = 0;  // frames whose patches stepped side by side
   std::int64_t frame = 0;  // step_patches calls so far (DemCost::last_frame)
   // After the Bullet step: patches whose DEM came to rest fall asleep (their bodies stop).
   void update_sleep(double time, double dt);

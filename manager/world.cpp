@@ -472,6 +472,7 @@ nlohmann::ordered_json World::report() const {
                                {"demotions", k.demotions},
                                {"wakes", k.wakes},
                                {"patches_stepped", k.patches_stepped},
+                               {"side_by_side", k.side_by_side},
                                {"substeps", k.substeps},
                                {"sphere_steps", k.sphere_steps}}}});
   }

@@ -28,6 +28,9 @@ class DemBackend {
   virtual Status set_body_group(BodyId b, std::int32_t group) = 0;
   // The substep bound N of the following steps (Simulation::set_steps_per_contact).
   virtual Status set_steps_per_contact(int n) = 0;
+  // OpenMP threads of the following steps (0 = OpenMP's default); the results do not depend
+  // on it. Backends that do not run on the CPU's threads ignore it.
+  virtual Status set_threads(int) { return Ok{}; }
   virtual std::int32_t body_group(BodyId b) const = 0;
   virtual Status step(double dt_frame) = 0;
   // DEM substeps a frame of dt_frame seconds takes (dt_sub <= t_c / N), or the error step() gives.
@@ -81,6 +84,10 @@ class DemBackendOf final : public DemBackend {
   Status set_body_enabled(BodyId b, bool e) override { return sim_.set_body_enabled(b, e); }
   Status set_body_group(BodyId b, std::int32_t g) override { return sim_.set_body_group(b, g); }
   Status set_steps_per_contact(int n) override { return sim_.set_steps_per_contact(n); }
+  Status set_threads(int n) override {
+    if constexpr (requires(Sim& s) { s.set_threads(n); }) return sim_.set_threads(n);
+    return Ok{};
+  }
   std::int32_t body_group(BodyId b) const override { return sim_.body_group(b); }
   Status step(double dt) override { return sim_.step(dt); }
   Result<int> substeps_for(double dt) const override { return sim_.substeps_for(dt); }

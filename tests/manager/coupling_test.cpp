@@ -226,5 +226,49 @@ TEST(Coupling, FastBoxMeetingPatchesDoesNotHop) {
   }
 }
 
+
+// Two spheres landing on two patches at once: with two threads the patches step side by side,
+// one thread each (coupling.cpp concurrent_patches), and the world ends in the same state, bit
+// for bit, as with one thread stepping them one after the other (the DEM's results do not
+// depend on its threads, and the coupling runs in the same order either way).
+struct SideBySide {
+  std::uint64_t hash = 0;
+  int frames_side_by_side = 0, frames_two_patches = 0;
+  double step_share = 0;
+};
+SideBySide two_landings(int threads) {
+  SideBySide out;
+  test::Rig rig(test::terrain_8m("flat"));
+  EXPECT_TRUE(rig.ok()) << rig.error;
+  for (double x : {2.5, 5.5}) EXPECT_TRUE(rig.add_sphere(0.1f, 5.0f, {x, 1.4, x}).ok());
+  TerrainManagerDef def = test::sphere_patch_def();
+  def.slots = 2;
+  def.threads = threads;
+  EXPECT_TRUE(rig.start(def).ok()) << rig.error;
+  for (int f = 0; f < 45; ++f) {
+    EXPECT_TRUE(rig.frame().ok()) << rig.error;
+    const TerrainManager::FrameWork& w = rig.manager->last_frame_work();
+    out.frames_two_patches += w.patches_stepped == 2;
+    out.frames_side_by_side += w.side_by_side == 2;
+    EXPECT_TRUE(w.side_by_side == 0 || w.side_by_side == w.patches_stepped) << "frame " << f;
+  }
+  out.hash = rig.core->state_hash();
+  out.step_share = rig.core->report()["dem"]["total"]["step_share_of_frame_stage"].get<double>();
+  return out;
+}
+
+TEST(Coupling, TwoPatchesStepSideBySideToTheSameState) {
+  const SideBySide one = two_landings(1), two = two_landings(2);
+  std::printf("frames stepping two patches %d; side by side with two threads %d, with one %d; share of the dem stage %.3f / %.3f\n",
+              two.frames_two_patches, two.frames_side_by_side, one.frames_side_by_side, two.step_share, one.step_share);
+  EXPECT_GT(two.frames_two_patches, 20) << "both patches live for most of the run";
+  EXPECT_EQ(two.frames_side_by_side, two.frames_two_patches) << "two equal patches on two threads step side by side";
+  EXPECT_EQ(one.frames_side_by_side, 0) << "one thread steps them one after the other";
+  EXPECT_EQ(one.hash, two.hash);
+  // the patches' shares of the section add up to its wall time: within the frame's dem stage
+  EXPECT_GT(two.step_share, 0.0);
+  EXPECT_LE(two.step_share, 1.0);
+}
+
 }  // namespace
 }  // namespace sandpatch

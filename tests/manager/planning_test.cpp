@@ -35,6 +35,24 @@ TEST(Planning, RegionIsWholeTilePeriodsAroundTheRequest) {
   EXPECT_EQ(reg->nj, 15);
 }
 
+// A rectangle whose sides lie on samples (a patch asked for ahead of another abuts it on a
+// sample line) and spans exactly one tile period takes one period, not two: its high side's
+// sample is the last of the region, not one beyond it (a car's second wheel track got 4 m of
+// sand for 2 m that way, docs/BENCHMARKS.md "Patches side by side").
+TEST(Planning, ARectangleOfOnePeriodOnSamplesTakesOnePeriod) {
+  const Heightfield hf = test::terrain_8m("flat");  // 81 × 81 samples, 0.1 m
+  auto reg = patch_region(hf, rect(3.0, 2.0, 3.7, 2.7), 7);
+  ASSERT_TRUE(reg.ok()) << reg.message();
+  EXPECT_EQ(reg->i0, 30);
+  EXPECT_EQ(reg->ni, 8) << "samples 30..37: 7 cells, one period";
+  EXPECT_EQ(reg->j0, 20);
+  EXPECT_EQ(reg->nj, 8);
+  // a hair past the sample still rounds out to the next period
+  auto more = patch_region(hf, rect(3.0, 2.0, 3.71, 2.7), 7);
+  ASSERT_TRUE(more.ok()) << more.message();
+  EXPECT_EQ(more->ni, 15);
+}
+
 // At the terrain's edge the rounded region shifts onto the terrain; where the terrain is
 // narrower than the rounded region, the cut sides stay; off the terrain there is no region.
 TEST(Planning, RegionStaysOnTheTerrain) {
