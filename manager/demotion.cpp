@@ -200,13 +200,14 @@ Status TerrainManager::Impl::demote(Slot& slot, double time, bool gl_ok, bool st
       ++work.depth_renders;
       into = std::move(*img);
     } else if (spheres) {
-      const int res = render_resolution(slot, box);
-      const int rows = staged ? kDepthRowsPerPart : res;
-      if (w.row == 0) into = render_heights_cpu(nullptr, 0, res, box.x0, box.z0, box.x1, box.z1, box.floor);
-      const int v0 = w.row, v1 = std::min(res, v0 + rows);
+      const DepthSize size = render_size(slot, box);
+      const int rows = staged ? kDepthRowsPerPart : size.height;
+      if (w.row == 0)
+        into = render_heights_cpu(nullptr, 0, size.width, size.height, box.x0, box.z0, box.x1, box.z1, box.floor);
+      const int v0 = w.row, v1 = std::min(size.height, v0 + rows);
       render_heights_cpu_rows(spheres->data(), spheres->size() / 4, into, v0, v1);
       finish_surface_rows(slot, box, into, v0, v1);
-      done = v1 >= res;
+      done = v1 >= size.height;
       w.row = done ? 0 : v1;
       work.depth_renders += done;
     }
@@ -298,13 +299,16 @@ void TerrainManager::Impl::rebase(Slot& b) {
   rb.ledger.before = v * sp * sp;
 }
 
-// Texels a side of a slot's depth render: depth_texels_per_radius over its box, at least 64,
-// at most depth_resolution.
-int TerrainManager::Impl::render_resolution(const Slot& slot, const RenderBox& box) const {
-  if (!(def.depth_texels_per_radius > 0)) return def.depth_resolution;
+// Texels along x and z (rows) of a slot's depth render: square texels of a
+// depth_texels_per_radius-th of a granule sphere's radius over its box, each side at least 64
+// and at most depth_resolution (depth_texels_per_radius 0: depth_resolution a side). Before,
+// both sides took the longer side's count: a car's patch 9 m by 3 m rendered its 3 m in as
+// many rows as its 9 m, three times the rows its texels needed.
+TerrainManager::Impl::DepthSize TerrainManager::Impl::render_size(const Slot& slot, const RenderBox& box) const {
+  if (!(def.depth_texels_per_radius > 0)) return {def.depth_resolution, def.depth_resolution};
   const double texel = radius_world(slot) / def.depth_texels_per_radius;  // m
-  const double side = std::max(box.x1 - box.x0, box.z1 - box.z0);
-  return int(std::clamp(std::ceil(side / texel), 64.0, double(def.depth_resolution)));
+  auto side = [&](double m) { return int(std::clamp(std::ceil(m / texel), 64.0, double(def.depth_resolution))); };
+  return {side(box.x1 - box.x0), side(box.z1 - box.z0)};
 }
 
 // The surface of a set of (grown) spheres over the slot's apron, as the heightfield will take
@@ -312,19 +316,20 @@ int TerrainManager::Impl::render_resolution(const Slot& slot, const RenderBox& b
 // the CPU.
 Result<HeightImage> TerrainManager::Impl::render_surface(const Slot& slot, const RenderBox& box, const std::vector<float>& spheres,
                                                          bool gl_ok, bool* on_gl) const {
-  const int res = render_resolution(slot, box);
+  const DepthSize size = render_size(slot, box);
   const float x0 = box.x0, z0 = box.z0, x1 = box.x1, z1 = box.z1;
   HeightImage img;
   if (depth && gl_ok) {
     if (Status st = gl->make_current(); !st) return st.errors();
-    auto r = depth->render(spheres.data(), spheres.size() / 4, x0, z0, x1, z1, box.floor, box.top + 1.0f, res);
+    auto r = depth->render(spheres.data(), spheres.size() / 4, x0, z0, x1, z1, box.floor, box.top + 1.0f, size.width,
+                           size.height);
     if (!r) return r.errors();
     img = std::move(*r);
     *on_gl = true;
   } else {
-    img = render_heights_cpu(spheres.data(), spheres.size() / 4, res, x0, z0, x1, z1, box.floor);
+    img = render_heights_cpu(spheres.data(), spheres.size() / 4, size.width, size.height, x0, z0, x1, z1, box.floor);
   }
-  finish_surface_rows(slot, box, img, 0, res);
+  finish_surface_rows(slot, box, img, 0, img.height);
   return img;
 }
 
@@ -337,7 +342,7 @@ void TerrainManager::Impl::finish_surface_rows(const Slot& slot, const RenderBox
   const double sp = hf->spacing();
   const int res = img.width;
   const float x0 = box.x0, z0 = box.z0, x1 = box.x1, z1 = box.z1;
-  const float du = (x1 - x0) / float(res), dv = (z1 - z0) / float(res);
+  const float du = (x1 - x0) / float(res), dv = (z1 - z0) / float(img.height);
   const double rx0 = slot.region.i0 * sp, rx1 = (slot.region.i0 + slot.region.ni - 1) * sp;
   const double rz0 = slot.region.j0 * sp, rz1 = (slot.region.j0 + slot.region.nj - 1) * sp;
   for (int v = v0; v < v1; ++v)

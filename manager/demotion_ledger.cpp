@@ -273,7 +273,8 @@ void TerrainManager::Impl::close_ledger(const Slot& slot, PatchRecord& rec, bool
                      {"dilation_m3", dilation},
                      {"error_less_dilation_pct", less},
                      {"depth_render", on_gl ? "gl" : "cpu"},
-                     {"depth_texels", render_resolution(slot, box)},
+                     {"depth_texels", render_size(slot, box).width},
+                     {"depth_rows", render_size(slot, box).height},
                      {"demotion_parts", slot.demotion.parts},
                      {"terms", terms}});
 }

@@ -15,15 +15,16 @@
 namespace sandpatch {
 
 namespace {
-// A res × res height image over [x0, x1] × [z0, z1] (m), every texel `fill` (m).
-HeightImage blank_image(int res, float x0, float z0, float x1, float z1, float fill) {
+// A width × height image over [x0, x1] × [z0, z1] (m), every texel `fill` (m).
+HeightImage blank_image(int width, int height, float x0, float z0, float x1, float z1, float fill) {
   HeightImage img;
-  img.width = img.height = res;
+  img.width = width;
+  img.height = height;
   img.x0 = x0;
   img.z0 = z0;
   img.x1 = x1;
   img.z1 = z1;
-  img.h.assign(std::size_t(res) * res, fill);
+  img.h.assign(std::size_t(width) * std::size_t(height), fill);
   return img;
 }
 }  // namespace
@@ -110,7 +111,13 @@ ParticleDepthRenderer::~ParticleDepthRenderer() {
 
 Result<HeightImage> ParticleDepthRenderer::render(const float* s, std::size_t n, float x0, float z0, float x1, float z1,
                                                   float floor_y, float top_y, int resolution) {
-  const int res = resolution > 0 ? std::min(resolution, resolution_) : resolution_;
+  return render(s, n, x0, z0, x1, z1, floor_y, top_y, resolution, resolution);
+}
+
+Result<HeightImage> ParticleDepthRenderer::render(const float* s, std::size_t n, float x0, float z0, float x1, float z1,
+                                                  float floor_y, float top_y, int width, int height) {
+  const int w = width > 0 ? std::min(width, resolution_) : resolution_;
+  const int h = height > 0 ? std::min(height, resolution_) : resolution_;
   if (!(x1 > x0) || !(z1 > z0) || !(top_y > floor_y) || !std::isfinite(x0 + x1 + z0 + z1 + floor_y + top_y)) {
     return Error{"", "depth render rectangle", "", "needs finite x1 > x0, z1 > z0, top_y > floor_y"};
   }
@@ -126,7 +133,7 @@ Result<HeightImage> ParticleDepthRenderer::render(const float* s, std::size_t n,
   glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, ssbo_);
 
   glBindFramebuffer(GL_FRAMEBUFFER, fbo_);
-  glViewport(0, 0, res, res);
+  glViewport(0, 0, w, h);
   glEnable(GL_DEPTH_TEST);
   glDepthFunc(GL_LESS);
   glDepthMask(GL_TRUE);
@@ -142,9 +149,9 @@ Result<HeightImage> ParticleDepthRenderer::render(const float* s, std::size_t n,
     glBindVertexArray(0);
     glUseProgram(0);
   }
-  HeightImage img = blank_image(res, x0, z0, x1, z1, 0.0f);
+  HeightImage img = blank_image(w, h, x0, z0, x1, z1, 0.0f);
   glPixelStorei(GL_PACK_ALIGNMENT, 4);
-  glReadPixels(0, 0, res, res, GL_DEPTH_COMPONENT, GL_FLOAT, img.h.data());
+  glReadPixels(0, 0, w, h, GL_DEPTH_COMPONENT, GL_FLOAT, img.h.data());
   glBindFramebuffer(GL_FRAMEBUFFER, 0);
   const std::string errs = gl::Context::drain_errors();
   if (!errs.empty()) return Error{"", "depth render", "", "OpenGL error " + errs};
@@ -155,8 +162,13 @@ Result<HeightImage> ParticleDepthRenderer::render(const float* s, std::size_t n,
 
 HeightImage render_heights_cpu(const float* s, std::size_t n, int res, float x0, float z0, float x1, float z1,
                                float floor_y) {
-  HeightImage img = blank_image(res, x0, z0, x1, z1, floor_y);
-  render_heights_cpu_rows(s, n, img, 0, res);
+  return render_heights_cpu(s, n, res, res, x0, z0, x1, z1, floor_y);
+}
+
+HeightImage render_heights_cpu(const float* s, std::size_t n, int width, int height, float x0, float z0, float x1,
+                               float z1, float floor_y) {
+  HeightImage img = blank_image(width, height, x0, z0, x1, z1, floor_y);
+  render_heights_cpu_rows(s, n, img, 0, height);
   return img;
 }
 

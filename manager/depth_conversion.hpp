@@ -57,6 +57,10 @@ class ParticleDepthRenderer {
   // `resolution` texels a side, at most resolution() (0: resolution()).
   Result<HeightImage> render(const float* spheres_xyzr, std::size_t n, float x0, float z0, float x1, float z1,
                              float floor_y, float top_y, int resolution = 0);
+  // The same with `width` texels along x and `height` along z (rows), each at most
+  // resolution() (0: resolution()).
+  Result<HeightImage> render(const float* spheres_xyzr, std::size_t n, float x0, float z0, float x1, float z1,
+                             float floor_y, float top_y, int width, int height);
 
   int resolution() const { return resolution_; }
 
@@ -73,6 +77,9 @@ class ParticleDepthRenderer {
 // the GL path is tested against.
 HeightImage render_heights_cpu(const float* spheres_xyzr, std::size_t n, int resolution, float x0, float z0, float x1,
                                float z1, float floor_y);
+// The same with `width` texels along x and `height` along z (rows).
+HeightImage render_heights_cpu(const float* spheres_xyzr, std::size_t n, int width, int height, float x0, float z0,
+                               float x1, float z1, float floor_y);
 // Rows [v0, v1) of that image into `image` (made by render_heights_cpu's caller with every
 // texel at the floor, or by an earlier band): a render spread over frames, band by band,
 // gives the image of one whole render.

@@ -479,7 +479,10 @@ struct TerrainManager::Impl {
   };
   Result<HeightImage> render_surface(const Slot& slot, const RenderBox& box, const std::vector<float>& spheres, bool gl_ok,
                                      bool* on_gl) const;
-  int render_resolution(const Slot& slot, const RenderBox& box) const;
+  struct DepthSize {
+    int width = 0, height = 0;  // texels along x, along z (rows)
+  };
+  DepthSize render_size(const Slot& slot, const RenderBox& box) const;
   void finish_surface_rows(const Slot& slot, const RenderBox& box, HeightImage& img, int v0, int v1) const;
   void set_bodies_down(const Slot& slot, double time);
   // The heights a demotion wrote, step by step, for the ledger's terms (close_ledger): over

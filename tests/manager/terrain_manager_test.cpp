@@ -782,8 +782,8 @@ TEST(TerrainManager, NoFrameDoesMoreThanOneConversionPart) {
   int parts = 0;
   const auto report = m.report();  // named: a loop over a temporary's member would dangle
   for (const auto& p : report["ledger"]["patches"]) {
-    const int texels = p["depth_texels"].get<int>(), bands = (texels + 63) / 64;
-    EXPECT_EQ(p["demotion_parts"].get<int>(), 2 * bands + 3) << texels << " texels a side";
+    const int rows = p["depth_rows"].get<int>(), bands = (rows + 63) / 64;
+    EXPECT_EQ(p["demotion_parts"].get<int>(), 2 * bands + 3) << rows << " rows of " << p["depth_texels"].get<int>();
     parts += p["demotion_parts"].get<int>();
   }
   EXPECT_EQ(demotion_frames, parts) << "each part of each demotion in its own frame";
