@@ -44,11 +44,29 @@ Status TerrainManager::Impl::activate(double time, double dt) {
         if (pred) {
           const PatchRequest p = rect(*pred);
           if (a.x() >= p.x0 && z.x() <= p.x1 && a.z() >= p.z0 && z.z() <= p.z1) continue;
+          // A body the predecessor carries is due only when it would pass one of the sides the
+          // successor reaches beyond (a wheel straddling the side between a car's two track
+          // patches, or its chassis riding above them, made every successor due at once).
+          bool carried = false;
+          for (const Carried& c : pred->carried)
+            carried = carried || (c.enabled && c.body.index == b.index && c.body.generation == b.generation);
+          if (carried) {
+            const PatchRequest q = rect(s);
+            const double e = 1e-6;
+            const bool leaving = (q.x0 < p.x0 - e && a.x() < p.x0) || (q.x1 > p.x1 + e && z.x() > p.x1) ||
+                                 (q.z0 < p.z0 - e && a.z() < p.z0) || (q.z1 > p.z1 + e && z.z() > p.z1);
+            if (!leaving) continue;
+          } else if (carried_anywhere(b) || !engages(s, a, z, &inside, join_height(s, b))) {
+            // (one another patch carries, or one that would not join a patch within these two
+            // frames: a chassis riding above the sand)
+            continue;
+          }
         }
         due = true;
       }
       if (!due) continue;
       ++work.urgent_fills;
+      ++urgent_fills;
       if (!s.cut)
         if (Status st = cut(s, time, kWhole); !st) return st;
       if (Status st = upload(s, s.pending.size(), time); !st) return st;
@@ -71,8 +89,15 @@ Status TerrainManager::Impl::activate(double time, double dt) {
     time_part(cutting ? Part::Cut : Part::Upload, ms_since(t0));
     return st;
   }
-  // A release under way: its next part, or none if a body came back to it.
+  // A release under way: its next part, or none if a body came back to it. Not while a
+  // patch asked for ahead of a carried body (a successor, or one abutting ahead) waits and a
+  // slot is free for it: the release has no body waiting on it, that request has one coming
+  // (waiting, its fill fell whole into the frame the body reached it: `urgent_fills`).
+  const bool slot_free = std::any_of(slots.begin(), slots.end(), [](const Slot& s) { return s.state == SlotState::Free; });
+  const bool carried_waits =
+      std::any_of(queue.begin(), queue.end(), [](const PatchRequest& q) { return q.successor_of >= 0 || q.ahead_of_carried; });
   for (auto& s : slots) {
+    if (slot_free && carried_waits) break;
     if (!s.demotion.releasing) continue;
     if (!s.superseded && wanted_for_release(s)) {  // (a patch taken over is demoted whatever is over it)
       s.demotion = {};

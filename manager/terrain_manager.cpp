@@ -548,6 +548,7 @@ nlohmann::ordered_json TerrainManager::report() const {
                {"lapsed_requests", I.lapsed_requests},
                {"extensions", I.extensions},
                {"travels", I.travels},
+               {"urgent_fills", I.urgent_fills},
                {"released", I.released},
                {"released_early", I.early_releases}};
   nlohmann::ordered_json tiles = nlohmann::ordered_json::array();
