@@ -170,9 +170,10 @@ Status TerrainManager::Impl::step_patches(double time, double dt) {
 // on all the DEM's threads). Side by side, the frame's DEM takes about the longest thread's
 // share (patches handed to the first free thread, the largest first); one after another, the
 // sum of the patches' steps, each over the threads at the parallel gain measured for patches
-// of 1,000-4,000 granules (two threads 1.31-1.62 times one; docs/BENCHMARKS.md "Patches side
-// by side"). Side by side only where that is the shorter, on the CPU backend (the GL
-// backend's steps share one context and queue).
+// of 1,000-4,000 granules (two threads 1.31-1.62 times one: docs/BENCHMARKS.md "Where the car
+// scene's DEM time goes against `bench dem`"). Side by side only where that is the shorter, on
+// the CPU backend (the GL backend's steps share one context and queue); measured in "Patches
+// side by side".
 int TerrainManager::Impl::concurrent_patches(const std::vector<Slot*>& order, double dt) const {
   if (order.size() < 2 || def.backend != "cpu") return 1;
   const int threads = def.threads > 0 ? def.threads : omp_get_max_threads();

@@ -301,9 +301,8 @@ void TerrainManager::Impl::rebase(Slot& b) {
 
 // Texels along x and z (rows) of a slot's depth render: square texels of a
 // depth_texels_per_radius-th of a granule sphere's radius over its box, each side at least 64
-// and at most depth_resolution (depth_texels_per_radius 0: depth_resolution a side). Before,
-// both sides took the longer side's count: a car's patch 9 m by 3 m rendered its 3 m in as
-// many rows as its 9 m, three times the rows its texels needed.
+// and at most depth_resolution (depth_texels_per_radius 0: depth_resolution a side). (A car's
+// patch box of 12.5 m by 6.5 m takes 834 × 434 texels; the CPU render's parts go by rows.)
 TerrainManager::Impl::DepthSize TerrainManager::Impl::render_size(const Slot& slot, const RenderBox& box) const {
   if (!(def.depth_texels_per_radius > 0)) return {def.depth_resolution, def.depth_resolution};
   const double texel = radius_world(slot) / def.depth_texels_per_radius;  // m
