@@ -199,9 +199,7 @@ std::vector<Slot*> TerrainManager::Impl::stepping_order(const std::vector<Slot*>
 // and one slow frame, e.g. the machine busy elsewhere for a moment, does not throw it).
 void TerrainManager::Impl::observe_cost(const Slot& s, double wall_ms, double dt) {
   if (pinned()) return;
-  // (the spheres it stepped: those asleep in still regions cost next to nothing)
-  const int awake = s.sim->particle_count() - 4 * s.sim->last_step().sleeping_granules;
-  const double pred = predict_ms(awake, dt, s.steps_per_contact) / load;
+  const double pred = predict_ms(awake_spheres(s), dt, s.steps_per_contact) / load;
   if (!(pred > 0) || !(wall_ms > 0)) return;
   load += 0.2 * (std::clamp(wall_ms / pred, 0.1, 100.0) - load);
 }

@@ -126,11 +126,9 @@ Status TerrainManager::Impl::step_patches(double time, double dt) {
       if (Status st = sp->sim->set_threads(1); !st) return st;
     std::vector<int> by_cost(order.size());
     for (std::size_t k = 0; k < order.size(); ++k) by_cost[k] = int(k);
-    auto awake_of = [&](int k) {
-      const DemBackend& sim = *order[std::size_t(k)]->sim;
-      return sim.particle_count() - 4 * sim.last_step().sleeping_granules;
-    };
-    std::stable_sort(by_cost.begin(), by_cost.end(), [&](int a, int b) { return awake_of(a) > awake_of(b); });
+    std::stable_sort(by_cost.begin(), by_cost.end(), [&](int a, int b) {
+      return awake_spheres(*order[std::size_t(a)]) > awake_spheres(*order[std::size_t(b)]);
+    });
     const auto t0 = manager_detail::Clock::now();
 #pragma omp parallel for num_threads(teams) schedule(dynamic, 1)
     for (int k = 0; k < int(order.size()); ++k) {
@@ -182,9 +180,7 @@ int TerrainManager::Impl::concurrent_patches(const std::vector<Slot*>& order, do
   std::vector<double> cost;
   double sum = 0;
   for (const Slot* s : order) {
-    // (the spheres awake at its last step: granules asleep in still regions cost next to nothing)
-    const int awake = s->sim->particle_count() - 4 * s->sim->last_step().sleeping_granules;
-    const double c = predict_ms(awake, dt, s->steps_per_contact);
+    const double c = predict_ms(awake_spheres(*s), dt, s->steps_per_contact);
     cost.push_back(c);
     sum += c;
   }

@@ -212,6 +212,9 @@ struct TerrainManager::Impl {
     work.substeps += st.substeps;
     work.sphere_steps += std::int64_t(spheres) * st.substeps;
   }
+  // Spheres a slot's DEM stepped awake at its last step (granules asleep in still regions cost
+  // next to nothing: docs/dem.md "Sleeping regions").
+  static int awake_spheres(const Slot& s) { return s.sim->particle_count() - 4 * s.sim->last_step().sleeping_granules; }
   float radius_world(double s) const { return float(def.material.radius * s); }
   float radius_world(const Slot& slot) const { return radius_world(slot.scale); }
   // m³ (world) of one granule's solid at particle scale s.

@@ -264,15 +264,22 @@ void expect_terrain_contacts_agree(Simulation& cpu, GlSimulation& gpu, int spher
   EXPECT_LT(dev, 1e-6);
 }
 
+// The box without side walls over an n x n terrain grid at `spacing` (m) from the origin; the
+// caller gives its heights and filled rectangle.
+SimulationDef box_on_terrain(int n, float spacing) {
+  SimulationDef d = box_def(ShearLaw::SpringHistory);
+  d.side_walls = false;
+  d.terrain.nx = d.terrain.nz = n;
+  d.terrain.x0 = d.terrain.z0 = 0.0f;
+  d.terrain.spacing = spacing;
+  return d;
+}
+
 TEST(GlSimulation, TerrainForcesMatchCpu) {
   auto ctx = context();
   ASSERT_TRUE(ctx);
-  SimulationDef d = box_def(ShearLaw::SpringHistory);
-  d.side_walls = false;
+  SimulationDef d = box_on_terrain(6, 0.016f);
   TerrainGrid& t = d.terrain;
-  t.nx = t.nz = 6;
-  t.x0 = t.z0 = 0.0f;
-  t.spacing = 0.016f;
   std::uint64_t seed = 5;
   for (int k = 0; k < t.nx * t.nz; ++k) t.heights.push_back(0.004f + 0.006f * urand(seed));
   t.fill_min_x = t.fill_min_z = 0.03f;
@@ -299,12 +306,8 @@ TEST(GlSimulation, TerrainForcesMatchCpu) {
 TEST(GlSimulation, WriteLongerThanOneDispatchMatchesCpu) {
   auto ctx = context();
   ASSERT_TRUE(ctx);
-  SimulationDef d = box_def(ShearLaw::SpringHistory);
-  d.side_walls = false;
+  SimulationDef d = box_on_terrain(300, 0.08f / 299.0f);
   TerrainGrid& t = d.terrain;
-  t.nx = t.nz = 300;
-  t.x0 = t.z0 = 0.0f;
-  t.spacing = 0.08f / 299.0f;
   for (int iz = 0; iz < t.nz; ++iz)
     for (int ix = 0; ix < t.nx; ++ix)
       t.heights.push_back(0.006f + 0.002f * std::sin(40.0f * ix * t.spacing) * std::cos(50.0f * iz * t.spacing));
