@@ -727,6 +727,7 @@ Status TerrainManager::Impl::take_over(Slot& b) {
   const GranuleShape& shape = a.sim->granule_shape();
   const float rw = radius_world(s);
   int taken = 0;
+  std::vector<BodyId> moved(std::size_t(std::max(0, ra.granules)));  // a's granule -> b's body
   for (int k = 0; k < ra.granules; ++k) {
     const BodyId g{k};
     const Vec3 p = a.sim->body_position(g) + shift;
@@ -746,6 +747,7 @@ Status TerrainManager::Impl::take_over(Slot& b) {
     Simulation::StillTime still = a.sim->still_time(g);
     still.anchor = still.anchor + shift;
     if (Status st = b.sim->set_still_time(*id, still); !st) return st;
+    moved[std::size_t(k)] = *id;
     ++rb.granules;
     ++taken;
     for (const Vec3& o : shape.offsets) {
@@ -753,6 +755,22 @@ Status TerrainManager::Impl::take_over(Slot& b) {
       rb.fill_spheres.insert(rb.fill_spheres.end(), {float(w[0] - hf->origin_x()), float(w[1] - hf->origin_y()),
                                                      float(w[2] - hf->origin_z()), rw});
     }
+  }
+  {
+    // Their springs with each other (and the floor's, where the floors are one): the part of
+    // a's bed b takes over stays as it was held rather than settling again.
+    std::vector<ContactSpring> springs;
+    for (ContactSpring c : a.sim->contact_springs()) {
+      const BodyId na = c.a.index < int(moved.size()) ? moved[std::size_t(c.a.index)] : BodyId{};
+      if (!na.valid() || c.plane > 0 || (c.plane == 0 && shift.y != 0.0f)) continue;
+      if (c.plane < 0) {
+        c.b = c.b.index < int(moved.size()) ? moved[std::size_t(c.b.index)] : BodyId{};
+        if (!c.b.valid()) continue;
+      }
+      c.a = na;
+      springs.push_back(c);
+    }
+    if (Status st = b.sim->set_contact_springs(springs); !st) return st;
   }
   rb.ledger.active = double(rb.granules) * granule_volume(s) / (rb.ledger.packing_fraction > 0 ? rb.ledger.packing_fraction : 0.6);
   // The bodies: a's shells parked, its carried list handed on.

@@ -60,6 +60,9 @@ class DemBackend {
   // {0, its position} and nothing to set on a backend without them (GL).
   virtual Simulation::StillTime still_time(BodyId b) const { return {0.0f, body_position(b)}; }
   virtual Status set_still_time(BodyId, Simulation::StillTime) { return Ok{}; }
+  // Contact springs (Simulation::contact_springs, set_contact_springs).
+  virtual std::vector<ContactSpring> contact_springs() const = 0;
+  virtual Status set_contact_springs(const std::vector<ContactSpring>& springs) = 0;
   // GL backend: the buffer whose first member is vec4 pos[] (xyz, radius) of every sphere, for
   // drawing without a copy to the CPU; 0 on the CPU backend.
   virtual unsigned gpu_particle_buffer() const { return 0; }
@@ -112,6 +115,14 @@ class DemBackendOf final : public DemBackend {
   }
   Status set_still_time(BodyId b, Simulation::StillTime t) override {
     if constexpr (requires(Sim& s) { s.set_still_time(b, t); }) return sim_.set_still_time(b, t);
+    return Ok{};
+  }
+  std::vector<ContactSpring> contact_springs() const override {
+    if constexpr (requires(const Sim& s) { s.contact_springs(); }) return sim_.contact_springs();
+    return {};
+  }
+  Status set_contact_springs(const std::vector<ContactSpring>& c) override {
+    if constexpr (requires(Sim& s) { s.set_contact_springs(c); }) return sim_.set_contact_springs(c);
     return Ok{};
   }
   unsigned gpu_particle_buffer() const override {

@@ -175,6 +175,21 @@ struct StepStats {
   double submit_seconds = 0, readback_seconds = 0;
 };
 
+// What a touching contact holds that the positions do not: its tangential spring (Cundall &
+// Strack 1979) and its largest overlap (the hysteretic normal spring), by granule and sphere.
+// A bed made from another simulation's positions (a patch filled from a settled tile, a
+// patch taking over its predecessor's granules) starts its contacts with these instead of
+// zero springs, so a bed at rest stays at rest (docs/dem.md "Carried springs").
+struct ContactSpring {
+  BodyId a;             // a granule
+  int sphere_a = 0;     // which of its 4 spheres (0..3)
+  BodyId b;             // the other granule, when plane < 0
+  int sphere_b = 0;     // (0..3)
+  int plane = -1;       // >= 0: a boundary plane instead of b: 0 floor, 1..4 the walls x0, x1, z0, z1, 5 the terrain
+  Vec3 xi{};            // m, sim units: the spring of a's sphere against the other (b's against a's is -xi)
+  float dmax = 0;       // m, the contact's largest overlap (0 with the linear normal spring)
+};
+
 class Simulation {
  public:
   static Result<Simulation> create(const SimulationDef& def);
@@ -247,6 +262,16 @@ class Simulation {
   // sleeps is decided at the next step. Nothing to do without sleep_regions. Errors name the
   // field: not a granule, seconds negative or not finite, an anchor not finite.
   Status set_still_time(BodyId b, StillTime still);
+
+  // Contact springs. contact_springs(): every granule-granule and granule-plane contact that
+  // touched at the last substep, once (from the side the simulation keeps it), in sorted
+  // order; shells' contacts are not included. set_contact_springs(): those contacts start the
+  // next step with these springs and largest overlaps, and as touching (no first-substep
+  // dashpot); a pair that is not within reach then is left as it is. Errors name the entry
+  // and field (a body that is not a granule, a sphere out of 0..3, a plane out of 0..5, a
+  // non-finite xi, a dmax negative or not finite) and set nothing.
+  std::vector<ContactSpring> contact_springs() const;
+  Status set_contact_springs(const std::vector<ContactSpring>& springs);
 
   // Queries (sim units).
   int body_count() const;

@@ -80,6 +80,7 @@ void Simulation::Impl::sort() {
   need_sort = false;
   stats.resorts++;
   build_list(old_slot);
+  if (!set_pairs.empty() || !set_planes.empty()) take_set_springs();
   build_shell_list();
 }
 
@@ -329,6 +330,16 @@ void Simulation::Impl::build_list(const std::vector<std::int32_t>& old_slot) {
         const int jd = p.id[j];
         nbr[e] = j;
         nbr_id[e] = jd;
+        if (!set_pairs.empty()) {  // a spring set from outside (set_contact_springs) wins
+          const auto it = set_pairs.find(id < jd ? spring_key(id, jd) : spring_key(jd, id));
+          if (it != set_pairs.end()) {
+            const float sgn = id < jd ? 1.0f : -1.0f;  // (kept as the lower id's)
+            for (int c = 0; c < 3; ++c) pairs.xi[3 * e + c] = sgn * it->second.xi[c];
+            pairs.touch[e] = 1;
+            pairs.dmax[e] = it->second.dmax;
+            continue;
+          }
+        }
         if (old_np == 0) continue;
         const int oj = jd < int(old_slot.size()) ? old_slot[jd] : -1;
         // the old owner: the lower old sorted index

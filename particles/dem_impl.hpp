@@ -19,6 +19,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <limits>
+#include <unordered_map>
 #include <vector>
 
 #include "common/error.hpp"
@@ -237,6 +238,21 @@ struct Simulation::Impl {
   std::vector<SphereSums> acc;  // one per sphere, 32-byte aligned: one cache line holds it
   std::vector<std::int32_t> chunk_start;  // slabs + 1: sorted index where each slab begins
   // (the boundary-plane springs are particle arrays: p.wall_xi, p.wall_mask, fields.hpp)
+
+  // Springs set from outside (set_contact_springs, dem_springs.cpp), taken by the next sort:
+  // pairs by spring_key(lower id, higher id), the spring as the lower id's; plane springs by
+  // sphere id and plane.
+  struct SetSpring {
+    float xi[3];
+    float dmax;
+  };
+  std::unordered_map<std::uint64_t, SetSpring> set_pairs;
+  std::vector<std::pair<std::int64_t, SetSpring>> set_planes;  // (id * kWallSlots + plane, spring)
+  static std::uint64_t spring_key(std::int32_t lo, std::int32_t hi) {
+    return (std::uint64_t(std::uint32_t(lo)) << 32) | std::uint32_t(hi);
+  }
+  // The set plane springs written at their spheres' sorted places (after the sort); both sets emptied.
+  void take_set_springs();
 
   // grid
   float r_max = 0, h = 0, inv_h = 0, skin = 0;

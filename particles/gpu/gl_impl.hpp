@@ -6,6 +6,8 @@
 //                      compilation (with shaders/dem/physics_common.glsl), uniforms, layout check
 //   gl_transfer.cpp    host <-> GPU: staging and upload of bodies, writes of a body's state,
 //                      read-backs by id
+//   gl_springs.cpp     contact springs read and set from outside (contact_springs,
+//                      set_contact_springs)
 #pragma once
 
 #include <GL/glcorearb.h>
@@ -15,6 +17,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <limits>
+#include <map>
 #include <memory>
 #include <string>
 #include <vector>
@@ -374,6 +377,24 @@ struct GlSimulation::Impl {
   Vec3 body_vec(int field, BodyId b) const;
   // Particle field (vec4) in stable-id order.
   std::vector<Vec3> by_id(int field) const;
+
+  // Springs set from outside (set_contact_springs, gl_springs.cpp), waiting for the next step:
+  // pairs by (lower particle id << 32 | higher id), the spring as the lower id's (m); plane
+  // springs by particle id * kWallSlots + plane. take_set_springs() writes those whose spheres
+  // are uploaded into the history the next substep reads and drops them from here; step()
+  // calls it only while some wait (nothing is added to a step without them).
+  struct SetSpring {
+    float xi[3];  // m
+    float dmax;   // m
+  };
+  std::map<std::uint64_t, SetSpring> set_pairs;
+  std::map<std::int64_t, SetSpring> set_planes;
+  bool springs_waiting() const { return !set_pairs.empty() || !set_planes.empty(); }
+  void take_set_springs();
+  // Byte offset of the slots after the counts / masks in the spring and wall blocks (common.glsl
+  // SpringsIn/Out: count[P], slot[P K], dmax[P K]; Walls: mask[P], xi[P 6]).
+  std::size_t springs_head() const { return round_up(4 * std::size_t(cap_p), 16); }
+  std::size_t springs_dmax() const { return springs_head() + 16 * std::size_t(cap_p) * std::size_t(K); }
 
   // Checks the generated layout against the offsets the driver assigned.
   Status check_layout() const;

@@ -131,6 +131,8 @@ Status GlSimulation::Impl::configure(const SimulationDef& d, const char* cap_pre
   host_flags.clear();
   host_count.clear();
   host_group.clear();
+  set_pairs.clear();
+  set_planes.clear();
   if (buf[kS0] != 0) {
     std::vector<std::uint32_t> zero(std::size_t(cap_p), 0u);
     glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
@@ -358,6 +360,7 @@ Status GlSimulation::step(double dt_frame) {
   } else {
     s.flush();
   }
+  if (s.springs_waiting()) s.take_set_springs();  // set_contact_springs: into the history the first substep reads
   s.stats = StepStats{};
   s.stats.substeps = *ns;
   s.stats.substep_dt = dt_frame / *ns;

@@ -101,6 +101,19 @@ class GlSimulation {
   bool asleep() const;
   void wake();
 
+  // Contact springs, as Simulation::contact_springs / set_contact_springs (dem.hpp
+  // ContactSpring; same errors, gl_springs.cpp). contact_springs(): every granule-granule and
+  // granule-plane contact that touched at the last substep, read back from the contact history
+  // (each pair once, from its lower particle id's side unless only the higher one holds it), in
+  // particle id order, pairs first; shells' and parked bodies' contacts are not included, nor
+  // springs set and not yet taken by a step. set_contact_springs(): checked whole, then kept on
+  // the host; the next step whose uploads hold both spheres of an entry writes it into the
+  // history its first substep reads (staged writes), as a contact that touched (no
+  // first-substep dashpot); a pair not touching then is dropped. Beyond the CPU's errors: more
+  // springs on one sphere than GlOptions::max_contacts_per_sphere (names the option).
+  std::vector<ContactSpring> contact_springs() const;
+  Status set_contact_springs(const std::vector<ContactSpring>& springs);
+
   // Queries (sim units). Each reads back only what it returns.
   int body_count() const;
   int particle_count() const;

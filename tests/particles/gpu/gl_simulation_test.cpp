@@ -9,10 +9,14 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <chrono>
 #include <limits>
+#include <map>
 #include <memory>
+#include <tuple>
 
 #include "gl/context.hpp"
+#include "particles/bed.hpp"
 #include "particles/dem.hpp"
 #include "particles/gpu/gl_impl.hpp"  // the kernels' order (Kernel)
 #include "particles/gpu/layout.hpp"
@@ -1056,6 +1060,305 @@ TEST(GlSimulation, BodyStateErrorsAndStagedBodies) {
   EXPECT_LT(gpu->body_velocity(b).y, -1e-3f);
   EXPECT_LT(gpu->body_position(b).y, x.y);
   EXPECT_EQ(gl::Context::drain_errors(), "");
+}
+
+// ---- contact springs carried from another simulation (gl_springs.cpp) ----
+
+// The CPU test's bed (tests/particles/dem_springs_test.cpp): n x n x layers granules of
+// d = 1 cm in a walled box, settled on the CPU backend for `settle` s.
+constexpr float kBedRadius = 0.005f;  // m
+
+SimulationDef spring_bed_def(int n, int layers) {
+  SimulationDef d;
+  d.sleep_time = 0;
+  d.side_walls = true;
+  d.max_substeps = 1 << 16;  // frames of 1/120 s of stiff centimetre granules
+  const GranuleShape g = make_granule_shape(kBedRadius, 1.0f, 2500.0f);
+  const float a = 2.0f * (g.centre_distance + g.radius) * 1.02f;
+  const float L = n * a + 0.004f;
+  d.particle_radius = kBedRadius;
+  d.bounds_min = {0, 0, 0};
+  d.bounds_max = {L, layers * a + 0.03f, L};
+  d.max_bodies = n * n * layers;
+  d.max_particles = 4 * n * n * layers;
+  return d;
+}
+
+Simulation settled_cpu_bed(int n, int layers, double settle) {
+  auto s = Simulation::create(spring_bed_def(n, layers));
+  EXPECT_TRUE(s.ok()) << s.message();
+  const GranuleShape g = make_granule_shape(kBedRadius, 1.0f, 2500.0f);
+  const float a = 2.0f * (g.centre_distance + g.radius) * 1.02f;
+  LatticeBedDef bed;
+  bed.nx = bed.nz = n;
+  bed.layers = layers;
+  bed.spacing = a;
+  bed.min = {0.5f * a + 0.002f, g.centre_distance + g.radius + 1e-4f, 0.5f * a + 0.002f};
+  bed.seed = 3;
+  EXPECT_TRUE(add_lattice_bed(*s, bed).ok());
+  for (double t = 0; t < settle; t += 1.0 / 120.0) EXPECT_TRUE(s->step(1.0 / 120.0).ok());
+  return std::move(*s);
+}
+
+// The granules of `from` at the same places in a new simulation of the same definition (staged
+// on the GL: set_contact_springs comes before the upload, as in a terrain patch's fill).
+template <class Sim>
+void copy_bed(const Simulation& from, Sim& to, bool springs) {
+  for (int b = 0; b < from.body_count(); ++b)
+    ASSERT_TRUE(to.add_granule(from.body_position(BodyId{b}), from.body_orientation(BodyId{b})).ok());
+  if (springs) {
+    const Status st = to.set_contact_springs(from.contact_springs());
+    ASSERT_TRUE(st.ok()) << st.message();
+  }
+}
+
+// Mean displacement of the granules over `seconds` in frames of 1/120 s, in diameters.
+template <class Sim>
+double mean_motion_d(Sim& s, double seconds) {
+  std::vector<Vec3> start;
+  for (int b = 0; b < s.body_count(); ++b) start.push_back(s.body_position(BodyId{b}));
+  for (double t = 0; t < seconds; t += 1.0 / 120.0) {
+    const Status st = s.step(1.0 / 120.0);
+    EXPECT_TRUE(st.ok()) << st.message();
+  }
+  double sum = 0;
+  for (int b = 0; b < s.body_count(); ++b) sum += length(s.body_position(BodyId{b}) - start[std::size_t(b)]);
+  return sum / s.body_count() / (2.0 * kBedRadius);
+}
+
+double seconds_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+// Contacts by (a, sphere a, b, sphere b, -1) with (a, sphere a) < (b, sphere b), or (a, sphere a,
+// -1, 0, plane): (xi as the first named sphere's, m; dmax, m). Each contact once.
+using SpringKey = std::tuple<int, int, int, int, int>;
+std::map<SpringKey, std::pair<Vec3, float>> springs_by_key(const std::vector<ContactSpring>& v) {
+  std::map<SpringKey, std::pair<Vec3, float>> m;
+  for (const ContactSpring& c : v) {
+    SpringKey k{c.a.index, c.sphere_a, c.b.index, c.sphere_b, -1};
+    Vec3 xi = c.xi;
+    if (c.plane >= 0) k = SpringKey{c.a.index, c.sphere_a, -1, 0, c.plane};
+    else if (std::make_pair(c.b.index, c.sphere_b) < std::make_pair(c.a.index, c.sphere_a))
+      k = SpringKey{c.b.index, c.sphere_b, c.a.index, c.sphere_a, -1}, xi = -1.0f * xi;
+    EXPECT_TRUE(m.emplace(k, std::make_pair(xi, c.dmax)).second) << "a contact given twice";
+  }
+  return m;
+}
+
+// A bed settled on the CPU, rebuilt in a GlSimulation from its positions alone compacts (its
+// springs start at zero); rebuilt with the CPU's springs (set while the granules are still
+// staged) it stays nearly as still as the bed itself. The CPU test's bounds.
+TEST(GlSimulation, BedRebuiltWithCpuSpringsStaysAtRest) {
+  auto ctx = context();
+  ASSERT_TRUE(ctx);
+  const auto t0 = std::chrono::steady_clock::now();
+  const int n = 6, layers = 6;
+  Simulation bed = settled_cpu_bed(n, layers, 1.0);
+  const double t_settle = seconds_since(t0);
+  const std::vector<ContactSpring> springs = bed.contact_springs();
+  int pairs = 0, planes = 0;
+  for (const ContactSpring& c : springs) (c.plane < 0 ? pairs : planes)++;
+  auto without = GlSimulation::create(bed.def());
+  auto with = GlSimulation::create(bed.def());
+  ASSERT_TRUE(without.ok() && with.ok()) << with.message();
+  copy_bed(bed, *without, false);
+  copy_bed(bed, *with, true);
+  ASSERT_EQ(with->uploaded_body_count(), 0);  // staged when the springs were set
+  const auto t1 = std::chrono::steady_clock::now();
+  const double lost = mean_motion_d(*without, 0.1), kept = mean_motion_d(*with, 0.1);
+  const double t_gl = seconds_since(t1);
+  const std::vector<ContactSpring> back = with->contact_springs();
+  std::printf("GL mean motion in 0.1 s (d): rebuilt without springs %.3g, with the CPU's %.3g (%d pairs, %d planes set; "
+              "%zu springs read back); CPU settling %.1f s, GL 2 x 0.1 s %.1f s (%d substeps a frame)\n",
+              lost, kept, pairs, planes, back.size(), t_settle, t_gl, with->last_step().substeps);
+  EXPECT_GT(pairs, bed.body_count());
+  EXPECT_GT(planes, n * n);
+  EXPECT_GT(lost, 1e-3);
+  EXPECT_LT(kept, 0.1 * lost);
+  EXPECT_LT(kept, 5e-4);
+  // the rebuilt bed holds as many contacts as the bed it came from, to a few
+  EXPECT_NEAR(double(back.size()), double(springs.size()), 0.02 * double(springs.size()));
+  EXPECT_EQ(gl::Context::drain_errors(), "");
+}
+
+// The springs set on both backends (the same bed, the same springs), after one identical
+// substep, read back the same: every contact of one is a contact of the other, pair for pair
+// (whichever side each reports it from), xi within 1e-3 of its size + 1e-8 m, dmax likewise;
+// and every granule's contact force within 1e-2 of the largest (about its weight), its torque
+// within that times d, of the CPU's (the GL holds each pair on both its spheres: a side left
+// without its spring shows here: measured 3x the largest force, against 1.4e-3 of it).
+// Measured xi: 2.7e-11 m off at worst on llvmpipe, 1.6e-9 m on an H200 (one contact).
+TEST(GlSimulation, ContactSpringsRoundTripMatchesCpu) {
+  auto ctx = context();
+  ASSERT_TRUE(ctx);
+  const int n = 6, layers = 6;
+  Simulation bed = settled_cpu_bed(n, layers, 1.0);
+  auto cpu = Simulation::create(bed.def());
+  auto gpu = GlSimulation::create(bed.def());
+  ASSERT_TRUE(cpu.ok() && gpu.ok()) << gpu.message();
+  copy_bed(bed, *cpu, true);
+  copy_bed(bed, *gpu, true);
+  const double dt = 0.9 * cpu->max_substep_dt();
+  ASSERT_EQ(*gpu->substeps_for(dt), 1);
+  ASSERT_TRUE(cpu->step(dt).ok());
+  const Status st = gpu->step(dt);
+  ASSERT_TRUE(st.ok()) << st.message();
+  const auto set = springs_by_key(bed.contact_springs()), c = springs_by_key(cpu->contact_springs()),
+             g = springs_by_key(gpu->contact_springs());
+  int only_cpu = 0, only_gl = 0, bad = 0, planes = 0;
+  double worst_rel = 0, worst_abs = 0, xi_max = 0;
+  for (const auto& [k, v] : c) {
+    const auto it = g.find(k);
+    if (it == g.end()) {
+      ++only_cpu;
+      continue;
+    }
+    planes += std::get<4>(k) >= 0;
+    const double diff = norm(it->second.first - v.first), mag = norm(v.first);
+    xi_max = std::max(xi_max, mag);
+    worst_abs = std::max(worst_abs, diff);
+    if (mag > 1e-9) worst_rel = std::max(worst_rel, diff / mag);
+    if (diff > 1e-3 * mag + 1e-8 || std::abs(it->second.second - v.second) > 1e-3 * v.second + 1e-8) {
+      if (++bad < 10)
+        ADD_FAILURE() << "contact (" << std::get<0>(k) << "," << std::get<1>(k) << "," << std::get<2>(k) << ","
+                      << std::get<3>(k) << "," << std::get<4>(k) << "): gl xi (" << it->second.first.x << ", "
+                      << it->second.first.y << ", " << it->second.first.z << ") cpu (" << v.first.x << ", " << v.first.y
+                      << ", " << v.first.z << ")";
+    }
+  }
+  for (const auto& [k, v] : g) only_gl += c.count(k) == 0;
+  std::printf("round trip: %zu springs set, cpu %zu gl %zu after one substep (%d planes matched); only on the cpu %d, "
+              "only on the gl %d; xi up to %.3g m, worst difference %.3g m (%.3g relative)\n",
+              set.size(), c.size(), g.size(), planes, only_cpu, only_gl, xi_max, worst_abs, worst_rel);
+  EXPECT_GT(c.size(), std::size_t(2 * n * n * layers));
+  EXPECT_GT(planes, n * n);
+  EXPECT_EQ(only_cpu, 0);
+  EXPECT_EQ(only_gl, 0);
+  EXPECT_GT(xi_max, 1e-8);  // the springs are not all zero
+  // and the forces they gave (each pair's spring on both its spheres)
+  double fmax = 0, tmax = 0, df = 0, dtq = 0;
+  for (int b = 0; b < cpu->body_count(); ++b) {
+    fmax = std::max(fmax, double(norm(cpu->body_force({b}))));
+    tmax = std::max(tmax, double(norm(cpu->body_torque({b}))));
+    df = std::max(df, double(norm(gpu->body_force({b}) - cpu->body_force({b}))));
+    dtq = std::max(dtq, double(norm(gpu->body_torque({b}) - cpu->body_torque({b}))));
+  }
+  std::printf("granules' contact forces up to %.3g N, GL - CPU up to %.3g N; torques up to %.3g N m, GL - CPU up to %.3g N m\n",
+              fmax, df, tmax, dtq);
+  EXPECT_LT(df, 1e-2 * fmax);
+  EXPECT_LT(dtq, 1e-2 * fmax * 2 * kBedRadius);
+  EXPECT_EQ(gl::Context::drain_errors(), "");
+}
+
+// Springs set while the bodies are staged wait for both their spheres: with half the bed
+// uploaded, one substep takes the springs among the uploaded granules only (a pair with a
+// staged granule is neither read back nor dropped); after the rest is uploaded the next
+// substep takes the others. Substeps of 1e-7 s, so the upper half's absence for one of them
+// barely shows: every contact is then read back as a CPU copy given the same springs has it
+// after its two substeps, within 1e-2 of its size + 1e-8 m (a spring restarted from zero
+// would be off by its whole size, up to 1e-4 m). Measured on llvmpipe: 1.6e-9 m at worst (1.0e-3
+// relative, one pair), the same with the whole bed uploaded before the first substep: the
+// backends' round-off in that contact, not the wait; the others within 1e-5 relative. An H200:
+// the same 1.6e-9 m (1.2e-2 relative).
+TEST(GlSimulation, SpringsSetOnStagedBodiesWaitForTheirUpload) {
+  auto ctx = context();
+  ASSERT_TRUE(ctx);
+  Simulation bed = settled_cpu_bed(4, 4, 1.0);
+  GlOptions o;
+  o.upload_in_step = false;
+  auto gpu = GlSimulation::create(bed.def(), o);
+  auto cpu = Simulation::create(bed.def());
+  ASSERT_TRUE(gpu.ok() && cpu.ok()) << gpu.message();
+  copy_bed(bed, *gpu, true);
+  copy_bed(bed, *cpu, true);
+  gpu->upload(gpu->pending_upload_bytes() / 2);
+  const int half = gpu->uploaded_body_count();
+  ASSERT_GT(half, 0);
+  ASSERT_LT(half, bed.body_count());
+  const double dt = 1e-7;  // s, one substep
+  ASSERT_EQ(*gpu->substeps_for(dt), 1);
+  ASSERT_TRUE(gpu->step(dt).ok());
+  const auto set = springs_by_key(bed.contact_springs());
+  int among = 0, across = 0;
+  for (const auto& [k, v] : springs_by_key(gpu->contact_springs())) {
+    EXPECT_LT(std::get<0>(k), half);
+    EXPECT_LT(std::get<2>(k), half);
+    among += std::get<4>(k) < 0;
+  }
+  for (const auto& [k, v] : set) across += std::get<4>(k) < 0 && std::get<2>(k) >= half && std::get<0>(k) < half;
+  gpu->upload(std::numeric_limits<std::size_t>::max());
+  ASSERT_TRUE(gpu->step(dt).ok());
+  ASSERT_TRUE(cpu->step(dt).ok());
+  ASSERT_TRUE(cpu->step(dt).ok());
+  const auto back = springs_by_key(gpu->contact_springs()), want = springs_by_key(cpu->contact_springs());
+  int missing = 0, off = 0;
+  double worst_rel = 0, worst_abs = 0, xi_max = 0;
+  for (const auto& [k, v] : want) {
+    const auto it = back.find(k);
+    if (it == back.end()) {
+      ++missing;
+      continue;
+    }
+    const double diff = norm(it->second.first - v.first), mag = norm(v.first);
+    xi_max = std::max(xi_max, mag);
+    if (mag > 1e-9) worst_rel = std::max(worst_rel, diff / mag);
+    worst_abs = std::max(worst_abs, diff);
+    off += diff > 1e-2 * mag + 1e-8;
+  }
+  std::printf("staged: %d of %d granules uploaded first; %d pairs among them taken at the first substep, %d across "
+              "waited; after the rest: gl %zu, cpu %zu, set %zu contacts (%d missing, %d off); xi up to %.3g m, worst "
+              "difference %.3g m (%.3g relative)\n",
+              half, bed.body_count(), among, across, back.size(), want.size(), set.size(), missing, off, xi_max, worst_abs,
+              worst_rel);
+  EXPECT_GT(among, 0);
+  EXPECT_GT(across, 0);
+  EXPECT_EQ(back.size(), want.size());
+  EXPECT_EQ(missing, 0);
+  EXPECT_EQ(off, 0);
+  EXPECT_GT(xi_max, 1e-6);
+}
+
+// Bad entries are refused whole with the CPU's messages (set nothing); more pairs on one
+// sphere than spring slots are refused naming GlOptions.max_contacts_per_sphere.
+TEST(GlSimulation, ContactSpringsRefuseBadEntries) {
+  auto ctx = context();
+  ASSERT_TRUE(ctx);
+  const SimulationDef d = spring_bed_def(4, 4);
+  GlOptions o;
+  o.max_contacts_per_sphere = 2;
+  auto gpu = GlSimulation::create(d, o);
+  auto cpu = Simulation::create(d);
+  ASSERT_TRUE(gpu.ok() && cpu.ok()) << gpu.message();
+  ShellDef shell;
+  shell.offsets = {{0, 0, 0}};
+  shell.radii = {kBedRadius};
+  shell.position = {0.06f, 0.06f, 0.06f};
+  std::vector<BodyId> g;
+  for (int i = 0; i < 4; ++i) {
+    g.push_back(*gpu->add_granule({0.02f + 0.02f * float(i), 0.02f, 0.02f}));
+    ASSERT_TRUE(cpu->add_granule({0.02f + 0.02f * float(i), 0.02f, 0.02f}).ok());
+  }
+  const BodyId sh = *gpu->add_shell(shell);
+  ASSERT_TRUE(cpu->add_shell(shell).ok());
+  auto refused = [&](ContactSpring c, const std::string& field) {
+    const ContactSpring good{g[0], 0, g[1], 1, -1, {1e-4f, 0, 0}, 0};
+    const Status st = gpu->set_contact_springs({good, c}), sc = cpu->set_contact_springs({good, c});
+    ASSERT_FALSE(st.ok());
+    EXPECT_NE(st.message().find("set_contact_springs[1]." + field), std::string::npos) << st.message();
+    EXPECT_EQ(st.message(), sc.message());
+  };
+  refused({g[0], 0, sh, 0, -1, {}, 0}, "b");
+  refused({g[0], 0, {}, 0, 6, {}, 0}, "plane");
+  refused({g[0], 4, g[1], 0, -1, {}, 0}, "sphere_a");
+  refused({g[0], 0, g[1], 0, -1, {NAN, 0, 0}, 0}, "xi");
+  refused({g[0], 0, g[1], 0, -1, {}, -1e-3f}, "dmax");
+  const Status full = gpu->set_contact_springs(
+      {{g[0], 0, g[1], 0, -1, {}, 0}, {g[0], 0, g[2], 0, -1, {}, 0}, {g[3], 0, g[0], 0, -1, {}, 0}});
+  ASSERT_FALSE(full.ok());
+  EXPECT_NE(full.message().find("GlOptions.max_contacts_per_sphere"), std::string::npos) << full.message();
+  EXPECT_TRUE(gpu->set_contact_springs({{g[0], 0, {}, 0, 0, {1e-5f, 0, 0}, 0}}).ok());  // a floor spring
+  ASSERT_TRUE(gpu->step(1e-4).ok());
 }
 
 }  // namespace

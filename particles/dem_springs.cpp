@@ -1,0 +1,104 @@
+// Contact springs read and set from outside (dem.hpp ContactSpring; docs/dem.md "Carried
+// springs"): the tangential springs and largest overlaps of touching granule contacts, by
+// granule and sphere, so a bed rebuilt in another simulation from its positions keeps the
+// forces that held it at rest.
+#include <cmath>
+#include <string>
+
+#include "particles/dem.hpp"
+#include "particles/dem_impl.hpp"
+
+namespace sandpatch {
+
+std::vector<ContactSpring> Simulation::contact_springs() const {
+  const Impl& s = *impl_;
+  std::vector<ContactSpring> out;
+  const std::uint32_t* F = s.b.flags.data();
+  auto granule = [&](int i) { return (F[s.p.body[i]] & (kBodyGranule | kBodyParked)) == kBodyGranule; };
+  auto sphere_of = [&](int i) { return s.p.id[i] - s.b.first[s.p.body[i]]; };
+  // (spheres added since the last sort are at its end, in no list yet)
+  const int listed = s.nstart.empty() ? 0 : std::min(s.np, int(s.nstart.size()) - 1);
+  for (int i = 0; i < listed; ++i) {
+    if (!granule(i)) continue;
+    for (int e = s.nstart[i]; e < s.nstart[i + 1]; ++e) {
+      const int j = s.nbr[e];
+      if (!s.pairs.touch[e] || !granule(j)) continue;
+      ContactSpring c;
+      c.a = BodyId{s.p.body[i]}, c.sphere_a = sphere_of(i);
+      c.b = BodyId{s.p.body[j]}, c.sphere_b = sphere_of(j);
+      c.xi = {s.pairs.xi[3 * e], s.pairs.xi[3 * e + 1], s.pairs.xi[3 * e + 2]};
+      c.dmax = s.pairs.dmax[e];
+      out.push_back(c);
+    }
+  }
+  for (int i = 0; i < s.np; ++i) {
+    if (!granule(i) || !s.p.wall_mask[i]) continue;
+    for (int k = 0; k < kWallSlots; ++k) {
+      if (!(s.p.wall_mask[i] & (1u << k))) continue;
+      const float* x = &s.p.wall_xi[(std::size_t(i) * kWallSlots + k) * 3];
+      ContactSpring c;
+      c.a = BodyId{s.p.body[i]}, c.sphere_a = sphere_of(i);
+      c.plane = k;
+      c.xi = {x[0], x[1], x[2]};
+      c.dmax = s.p.wall_dmax[std::size_t(i) * kWallSlots + k];
+      out.push_back(c);
+    }
+  }
+  return out;
+}
+
+Status Simulation::set_contact_springs(const std::vector<ContactSpring>& springs) {
+  Impl& s = *impl_;
+  // Checked whole before anything is set.
+  for (std::size_t n = 0; n < springs.size(); ++n) {
+    const ContactSpring& c = springs[n];
+    const std::string at = "set_contact_springs[" + std::to_string(n) + "].";
+    auto check_sphere = [&](BodyId b, int k, const char* body, const char* sphere) -> Status {
+      if (b.index < 0 || b.index >= s.nb || !(s.b.flags[b.index] & kBodyGranule))
+        return Error{"", at + body, std::to_string(b.index), "must be a granule of this simulation", ""};
+      if (k < 0 || k >= s.b.count[b.index])
+        return Error{"", at + sphere, std::to_string(k), "must be 0..3 (the granule's spheres)", ""};
+      return Ok{};
+    };
+    if (Status st = check_sphere(c.a, c.sphere_a, "a", "sphere_a"); !st) return st;
+    if (c.plane >= kWallSlots || c.plane < -1)
+      return Error{"", at + "plane", std::to_string(c.plane), "must be -1 (a pair) or 0..5 (a boundary plane)", ""};
+    if (c.plane < 0) {
+      if (Status st = check_sphere(c.b, c.sphere_b, "b", "sphere_b"); !st) return st;
+      if (c.b.index == c.a.index) return Error{"", at + "b", std::to_string(c.b.index), "must be another granule than a", ""};
+    }
+    if (!std::isfinite(c.xi.x) || !std::isfinite(c.xi.y) || !std::isfinite(c.xi.z))
+      return Error{"", at + "xi", "not finite", "must be a finite spring (m)", ""};
+    if (!std::isfinite(c.dmax) || c.dmax < 0)
+      return Error{"", at + "dmax", std::to_string(c.dmax), "must be a finite overlap >= 0 (m)", ""};
+  }
+  for (const ContactSpring& c : springs) {
+    const std::int32_t ia = s.b.first[c.a.index] + c.sphere_a;
+    if (c.plane >= 0) {
+      s.set_planes.push_back({std::int64_t(ia) * kWallSlots + c.plane, {{c.xi.x, c.xi.y, c.xi.z}, c.dmax}});
+      continue;
+    }
+    const std::int32_t ib = s.b.first[c.b.index] + c.sphere_b;
+    const float sgn = ia < ib ? 1.0f : -1.0f;  // kept as the lower id's
+    s.set_pairs[ia < ib ? Impl::spring_key(ia, ib) : Impl::spring_key(ib, ia)] = {
+        {sgn * c.xi.x, sgn * c.xi.y, sgn * c.xi.z}, c.dmax};
+  }
+  if (!springs.empty()) s.need_sort = true;  // taken by the next sort's list (build_list)
+  return Ok{};
+}
+
+void Simulation::Impl::take_set_springs() {
+  for (const auto& [key, sp] : set_planes) {
+    const std::int64_t id = key / kWallSlots;
+    const int k = int(key % kWallSlots);
+    if (id >= np) continue;
+    const int i = slot_of[std::size_t(id)];
+    p.wall_mask[i] |= 1u << k;
+    for (int c = 0; c < 3; ++c) p.wall_xi[(std::size_t(i) * kWallSlots + k) * 3 + c] = sp.xi[c];
+    p.wall_dmax[std::size_t(i) * kWallSlots + k] = sp.dmax;
+  }
+  set_planes.clear();
+  set_pairs.clear();
+}
+
+}  // namespace sandpatch
