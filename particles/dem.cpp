@@ -622,6 +622,8 @@ Status Simulation::set_body_enabled(BodyId id, bool enabled) {
     st3(s.b.pos, id.index, parking_position(s.def));
     st3(s.b.vel, id.index, Vec3{});
     st3(s.b.omega, id.index, Vec3{});
+    // its boundary contacts end here (enabled again elsewhere, a plane it touches is a new contact)
+    for (int k = 0; k < s.b.count[id.index]; ++k) s.p.wall_mask[std::size_t(s.slot_of[std::size_t(s.b.first[id.index] + k)])] = 0;
   } else {
     f = unparked_flags(f);
   }

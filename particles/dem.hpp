@@ -214,7 +214,9 @@ class Simulation {
   // Sets a body's state (sim units): a shell that follows its Bullet body. Wakes the sim.
   Status set_body_state(BodyId b, Vec3 position, Quat orientation, Vec3 velocity, Vec3 angular_velocity);
   // A disabled body is parked: static, far above the domain, in contact with nothing, until
-  // enabled again (then set its state). For shells of bodies that left the patch.
+  // enabled again (then set its state). For shells of bodies that left the patch. Its
+  // boundary-plane contacts end when it is parked: enabled again, a plane it touches is a new
+  // contact (no spring kept from before).
   Status set_body_enabled(BodyId b, bool enabled);
   // A shell's collision group (ShellDef::group; >= 0). The neighbour list is rebuilt at the
   // next substep when it changes. Errors name the body or the group.

@@ -304,6 +304,15 @@ Status GlSimulation::set_body_enabled(BodyId id, bool enabled) {
     s.set_body_vec(kBody_pos, id.index, far, 3);
     s.set_body_vec(kBody_vel, id.index, zero, 3);
     s.set_body_vec(kBody_omega, id.index, zero, 3);
+    if (id.index < s.nb_gpu) {
+      // its boundary contacts end here (enabled again elsewhere, a plane it touches is a new
+      // contact): its spheres' plane masks (common.glsl Walls) cleared
+      std::size_t first = 0;
+      for (int b = 0; b < id.index; ++b) first += std::size_t(s.host_count[std::size_t(b)]);
+      const std::vector<std::uint32_t> none(std::size_t(s.host_count[std::size_t(id.index)]), 0u);
+      glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
+      s.write(Impl::kW, 4 * first, 4 * none.size(), none.data());
+    }
   } else {
     f = unparked_flags(f);
   }

@@ -66,8 +66,8 @@ class GlSimulation {
   Status set_kinematic_velocity(BodyId b, Vec3 velocity, Vec3 angular_velocity);
   // As Simulation (same errors, same flags): sets a body's state (sim units), or parks /
   // restores it (disabled: static | parked with its motion bits << 8, at (centre x,
-  // bounds_max.y + 1000, centre z), zero velocities; enabled: motion bits restored, then set
-  // its state). Both wake the simulation. A staged body's queued copy is changed; an uploaded
+  // bounds_max.y + 1000, centre z), zero velocities, its spheres' plane masks cleared; enabled:
+  // motion bits restored, then set its state). Both wake the simulation. A staged body's queued copy is changed; an uploaded
   // body's few words are written at its index and its spheres rebuilt at once (re-sort
   // flagged), so the next substep's contacts already see the new pose.
   Status set_body_state(BodyId b, Vec3 position, Quat orientation, Vec3 velocity, Vec3 angular_velocity);

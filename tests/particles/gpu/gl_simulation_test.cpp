@@ -1361,5 +1361,34 @@ TEST(GlSimulation, ContactSpringsRefuseBadEntries) {
   ASSERT_TRUE(gpu->step(1e-4).ok());
 }
 
+// As CarriedSprings.AParkedGranuleLeavesItsPlaneSprings on the CPU: a granule that slid on the
+// floor and was parked holds no plane spring when it is enabled again.
+TEST(GlSimulation, AParkedGranuleLeavesItsPlaneSprings) {
+  auto ctx = context();
+  ASSERT_TRUE(ctx);
+  SimulationDef d = spring_bed_def(4, 4);
+  d.side_walls = false;
+  auto s = GlSimulation::create(d);
+  ASSERT_TRUE(s.ok()) << s.message();
+  const GranuleShape g = make_granule_shape(kBedRadius, 1.0f, 2500.0f);
+  const BodyId a = *s->add_granule({0.05f, g.centre_distance + 0.5f * kBedRadius, 0.05f});
+  for (int f = 0; f < 12; ++f) ASSERT_TRUE(s->step(1.0 / 120.0).ok());
+  ASSERT_TRUE(s->set_body_state(a, s->body_position(a), s->body_orientation(a), {0.05f, 0, 0}, {}).ok());
+  ASSERT_TRUE(s->step(1.0 / 240.0).ok());
+  auto planes = [&] {
+    int n = 0;
+    for (const ContactSpring& c : s->contact_springs()) n += c.a.index == a.index && c.plane == 0;
+    return n;
+  };
+  EXPECT_GT(planes(), 0);
+  const Vec3 x = s->body_position(a);
+  const Quat q = s->body_orientation(a);
+  ASSERT_TRUE(s->set_body_enabled(a, false).ok());
+  ASSERT_TRUE(s->step(1.0 / 240.0).ok());
+  ASSERT_TRUE(s->set_body_enabled(a, true).ok());
+  ASSERT_TRUE(s->set_body_state(a, x, q, {}, {}).ok());
+  EXPECT_EQ(planes(), 0);
+}
+
 }  // namespace
 }  // namespace sandpatch::gpu
