@@ -2,6 +2,7 @@
 // into a pool slot (heightfield -> granules), and the granules' upload in chunks. See
 // terrain_manager_impl.hpp.
 #include <algorithm>
+#include <string_view>
 #include <numbers>
 #include <cmath>
 #include <cstdio>
@@ -756,9 +757,11 @@ Status TerrainManager::Impl::take_over(Slot& b) {
                                                      float(w[2] - hf->origin_z()), rw});
     }
   }
-  {
+  if (std::string_view(a.sim->name()) == "cpu") {
     // Their springs with each other (and the floor's, where the floors are one): the part of
-    // a's bed b takes over stays as it was held rather than settling again.
+    // a's bed b takes over stays as it was held rather than settling again. (Not on the GL
+    // backend: reading a patch's whole contact history back from the GPU took about 30 ms of
+    // the take-over's frame on an H200, docs/BENCHMARKS.md "Carried springs".)
     std::vector<ContactSpring> springs;
     for (ContactSpring c : a.sim->contact_springs()) {
       const BodyId na = c.a.index < int(moved.size()) ? moved[std::size_t(c.a.index)] : BodyId{};
