@@ -58,6 +58,7 @@ inline constexpr Knob kPatchDepth{"terrain.patch_depth", "TerrainDef.patch_depth
 inline constexpr Knob kSoilDepth{"terrain.soil_depth", "TerrainDef.soil_depth", 2.0, 0, 1e4, true, false, false, "m", "bedrock = surface − soil_depth"};
 inline constexpr Knob kSleepSpeed{"simulation.sleep.speed_threshold", "TerrainDef.sleep_speed", 0.01, 0, 100, false, false, false, "m/s", "a patch sleeps when every granule is slower ..."};
 inline constexpr Knob kSleepTime{"simulation.sleep.hold_time", "TerrainDef.sleep_time", 0.5, 0, 1e4, false, false, false, "s", "... for this long"};
+inline constexpr Knob kRegionSleepTime{"simulation.sleep.region_hold_time", "TerrainDef.region_sleep_time", 0, 0, 1e4, false, false, false, "s", "a still part of an awake patch sleeps once its granules have stayed within 0.1 sphere radii of one place this long (CPU backend; 0: hold_time)"};
 inline constexpr Knob kIdleTimeout{"simulation.idle_timeout", "TerrainDef.idle_timeout", 120, 0, 1e6, false, false, false, "s", "asleep and untouched this long, a patch turns back into heightfield"};
 inline constexpr Knob kThreads{"simulation.threads", "TerrainDef.threads", 0, 0, 1024, false, false, true, "", "DEM threads, 0 = all hardware threads"};
 inline constexpr Knob kLodHorizon{"simulation.lod.horizon", "TerrainDef.lod_horizon", 0.5, 0, 10, true, false, false, "s", "how far ahead a body's path (ballistic, keyframed, or a game-driven tool's motion held) is checked for contact"};
@@ -70,10 +71,10 @@ inline constexpr Knob kBodyRestitution{"bodies[].restitution", "BodyDef.restitut
 inline constexpr Knob kBodyRollingFriction{"bodies[].rolling_friction", "BodyDef.rolling_friction", 0.05, 0, 10, false, false, false, "", "rolling resistance (torque arm / radius)"};
 
 // Every entry, in the order of the docs' tables.
-inline constexpr std::array<const Knob*, 25> kAll = {
+inline constexpr std::array<const Knob*, 26> kAll = {
     &kGranuleRadius, &kDensity, &kFriction, &kRestitution, &kStiffness, &kTangentialRatio, &kUnloadingRatio,
     &kSlots, &kGranulesPerSlot, &kShellSpheresPerSlot, &kParticleScale, &kStepsPerContact, &kMaxSubsteps, &kPatchDepth,
-    &kSoilDepth, &kSleepSpeed, &kSleepTime, &kIdleTimeout, &kThreads, &kLodHorizon, &kLodMargin,
+    &kSoilDepth, &kSleepSpeed, &kSleepTime, &kRegionSleepTime, &kIdleTimeout, &kThreads, &kLodHorizon, &kLodMargin,
     &kLodApron, &kBodyFriction, &kBodyRestitution, &kBodyRollingFriction};
 
 // ---- limits: the ranges of the terrain's source, shapes, cameras and outputs ----

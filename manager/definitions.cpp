@@ -137,6 +137,7 @@ std::vector<Error> validate(const api::TerrainDef& d) {
   c.knob(knobs::kMaxSubsteps, d.max_substeps);
   c.knob(knobs::kSleepSpeed, d.sleep_speed);
   c.knob(knobs::kSleepTime, d.sleep_time);
+  c.knob(knobs::kRegionSleepTime, d.region_sleep_time);
   c.knob(knobs::kIdleTimeout, d.idle_timeout);
   if (d.backend != "cpu" && d.backend != "gl") c.add("backend", "\"" + d.backend + "\"", "must be cpu or gl");
   c.knob(knobs::kThreads, d.threads);
@@ -222,6 +223,7 @@ TerrainManagerDef manager_def(const api::TerrainDef& def) {
   m.soil_depth = def.soil_depth;
   m.sleep_speed = def.sleep_speed;
   m.sleep_time = def.sleep_time;
+  m.region_sleep_time = def.region_sleep_time;
   m.sleep_regions = def.sleep_regions;
   m.idle_timeout = def.idle_timeout;
   m.use_gl = def.gl_depth_render;

@@ -381,6 +381,7 @@ SimulationDef TerrainManager::Impl::sim_def(double scale) const {
   sd.gravity_world = v3(Eigen::Vector3f(def.gravity.cast<float>()));
   sd.sleep_speed = float(def.sleep_speed / scale);
   sd.sleep_time = float(def.sleep_time);
+  sd.region_sleep_time = float(def.region_sleep_time);
   sd.sleep_regions = def.sleep_regions && def.backend == "cpu";  // (the GL backend steps every granule)
   sd.threads = def.threads;
   // dt <= t_c / N; a frame may take as many substeps as 64 at N = 20 allowed (the same

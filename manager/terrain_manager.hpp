@@ -94,6 +94,7 @@ struct TerrainManagerDef {
   // The still parts of an awake patch sleep by the same rule, column by column of the bed (the
   // CPU backend's SimulationDef::sleep_regions; the GL backend steps every granule).
   bool sleep_regions = true;
+  double region_sleep_time = knobs::kRegionSleepTime.def;  // s, still this long a region may sleep (0: sleep_time)
   double idle_timeout = knobs::kIdleTimeout.def;  // s asleep before demotion (Leach & Marais: two minutes)
   LodDef lod;                                  // contact prediction
   // The frame budget (docs/manager.md "Frame budget"): wall-clock ms a frame's patches may

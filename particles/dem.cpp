@@ -131,6 +131,8 @@ Result<Simulation> Simulation::make(const SimulationDef& d, Impl* reuse) {
     bad("max_overlap_fraction", d.max_overlap_fraction, "must be a finite number >= 0 (0 = guard off)");
   if (!(d.sleep_speed >= 0)) bad("sleep_speed", d.sleep_speed, "must be >= 0 (m/s)");
   if (!(d.sleep_time >= 0)) bad("sleep_time", d.sleep_time, "must be >= 0 (s)");
+  if (!(d.region_sleep_time >= 0) || !std::isfinite(d.region_sleep_time))
+    bad("region_sleep_time", d.region_sleep_time, "must be >= 0 (s; 0: sleep_time)");
   if (d.threads < 0) bad("threads", d.threads, "must be >= 0 (0 = OpenMP default)");
   if (!d.terrain.empty()) {
     const TerrainGrid& t = d.terrain;

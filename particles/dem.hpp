@@ -115,11 +115,12 @@ struct SimulationDef {
   float sleep_speed = 0.005f;            // m/s (sim units): asleep when every granule is slower
   float sleep_time = 0.5f;               // s held below sleep_speed
   // Sleeping regions (CPU backend; the GL backend refuses it): a granule that has stayed within
-  // 0.1 sphere radii of one place for sleep_time, whose column of the bed and the columns
+  // 0.1 sphere radii of one place for region_sleep_time, whose column of the bed and the columns
   // around it hold no granule that has not and no moving shell near, is frozen where it lies
   // (no integration, no pairs with other frozen granules, its contact history kept) until
   // motion comes near. docs/dem.md "Sleeping regions".
   bool sleep_regions = false;
+  float region_sleep_time = 0;           // s a granule stays still before its region may sleep; 0: sleep_time
 
   int threads = 0;                       // OpenMP threads; 0 = OpenMP's default
 };

@@ -14,7 +14,9 @@ void Simulation::Impl::refresh_sphere_dozing() {
 }
 
 void Simulation::Impl::update_regions(double dt_frame) {
-  if (!def.sleep_regions || nb == 0 || !(def.sleep_time > 0)) return;  // (sleep_time 0: never)
+  // (the still time: region_sleep_time, or sleep_time where it is 0; 0 then: never)
+  const float still_time = def.region_sleep_time > 0 ? def.region_sleep_time : def.sleep_time;
+  if (!def.sleep_regions || nb == 0 || !(still_time > 0)) return;
   // columns of kRegionColumn granule reaches over the domain (x, z), sim units
   const float reach = shape.centre_distance + shape.radius;
   const float x0 = def.bounds_min.x, z0 = def.bounds_min.z;
@@ -53,7 +55,7 @@ void Simulation::Impl::update_regions(double dt_frame) {
     } else {
       still_for[bi] += float(dt_frame);
     }
-    if (still_for[bi] < def.sleep_time) col_active[c] = 1;
+    if (still_for[bi] < still_time) col_active[c] = 1;
   }
   // the moving shells (dynamic or kinematic; a static one does not move the bed): each sphere
   // makes active the columns within its radius grown by how far it can move this frame,

@@ -426,6 +426,7 @@ void parse_simulation(Ctx& c, const json& j, TerrainDef& t, SceneSimulationDef& 
     Obj p(c, *sj, o.at("sleep"));
     p.knob("speed_threshold", t.sleep_speed, knobs::kSleepSpeed);
     p.knob("hold_time", t.sleep_time, knobs::kSleepTime);
+    p.knob("region_hold_time", t.region_sleep_time, knobs::kRegionSleepTime);
     p.boolean("regions", t.sleep_regions);
     p.finish();
   }

@@ -207,7 +207,7 @@ nlohmann::json scene_to_json(const SceneDef& s) {
       {"steps_per_contact", ter.steps_per_contact},
       {"max_substeps", ter.max_substeps},
       {"lod", {{"horizon", ter.lod_horizon}, {"margin", ter.lod_margin}, {"apron", ter.lod_apron}, {"travel", ter.lod_travel}}},
-      {"sleep", {{"speed_threshold", ter.sleep_speed}, {"hold_time", ter.sleep_time}, {"regions", ter.sleep_regions}}},
+      {"sleep", {{"speed_threshold", ter.sleep_speed}, {"hold_time", ter.sleep_time}, {"region_hold_time", ter.region_sleep_time}, {"regions", ter.sleep_regions}}},
       {"idle_timeout", ter.idle_timeout},
       {"granular_patches", ter.granular_patches},
       {"gravity", ter.gravity},

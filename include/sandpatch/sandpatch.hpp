@@ -172,6 +172,7 @@ struct TerrainDef {
   double sleep_time = 0.5;                     // s ... for this long, [0, 1e4]
   bool sleep_regions = true;                   // the still parts of an awake patch sleep too (CPU backend;
                                                //   docs/dem.md "Sleeping regions")
+  double region_sleep_time = 0.0;              // s a part's granules stay still before it sleeps; 0: sleep_time, [0, 1e4]
   double idle_timeout = 120.0;                 // s asleep before it is turned back into heightfield, [0, 1e6]
   std::string backend = "cpu";                 // DEM backend: "cpu" (OpenMP) | "gl" (compute shaders)
   bool gl_depth_render = false;                // demotion renders on GL (true) or ray casts on the CPU (false)
