@@ -775,6 +775,7 @@ Status TerrainManager::Impl::take_over(Slot& b) {
       springs.push_back(c);
     }
     if (Status st = b.sim->set_contact_springs(springs); !st) return st;
+    springs_handed_over += (long long)springs.size();
   }
   rb.ledger.active = double(rb.granules) * granule_volume(s) / (rb.ledger.packing_fraction > 0 ? rb.ledger.packing_fraction : 0.6);
   // The bodies: a's shells parked, its carried list handed on.

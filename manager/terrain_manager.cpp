@@ -548,6 +548,7 @@ nlohmann::ordered_json TerrainManager::report() const {
                {"lapsed_requests", I.lapsed_requests},
                {"extensions", I.extensions},
                {"travels", I.travels},
+               {"springs_handed_over", I.springs_handed_over},
                {"urgent_fills", I.urgent_fills},
                {"released", I.released},
                {"released_early", I.early_releases}};

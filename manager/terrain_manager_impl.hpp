@@ -66,6 +66,7 @@ struct TerrainManager::Impl {
   int lapsed_requests = 0;  // queued requests dropped because no body predicted contact there any more
   int extensions = 0;       // patches asked for ahead of a body heading past its patch's edge
   int travels = 0;          // of those, successors that took their patch's granules over (take_over)
+  long long springs_handed_over = 0;  // contact springs those successors took with the granules (CPU backend)
   int urgent_fills = 0;     // fills finished at once because a body would reach them within two frames (activate)
   int released = 0;         // patches no body was over, demoted for a request waiting for a slot or to keep one ready
   int early_releases = 0;   // of which released with the pool full before a request needed the slot (demotion.cpp)

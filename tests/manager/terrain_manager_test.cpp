@@ -685,6 +685,7 @@ TEST(TerrainManager, BodyDrivenAcrossPatchEdgeStaysOnParticles) {
 TEST(TerrainManager, APatchTravelsWithTheBodyItCarries) {
   struct Outcome {
     int two_stepping = 0, off_particles = 0, driven = 0, travels = 0, extensions = 0;
+    long long springs = 0;  // contact springs handed over with the granules taken
     double worst_patch_error = 0, hop = 0, x = 0;
   };
   auto run = [](bool travel, Outcome& o) {
@@ -717,19 +718,23 @@ TEST(TerrainManager, APatchTravelsWithTheBodyItCarries) {
     ASSERT_TRUE(rig.demote_all().ok()) << rig.error;
     const auto rep = rig.manager->report();
     o.travels = rep["pool"]["travels"].get<int>();
+    o.springs = rep["pool"]["springs_handed_over"].get<long long>();
     o.extensions = rep["pool"]["extensions"].get<int>();
     for (const auto& p : rep["ledger"]["patches"]) o.worst_patch_error = std::max(o.worst_patch_error, std::abs(p["error_pct"].get<double>()));
   };
   Outcome on, off;
   ASSERT_NO_FATAL_FAILURE(run(true, on));
   ASSERT_NO_FATAL_FAILURE(run(false, off));
-  std::printf("travel on: x %.2f m, %d travels of %d extensions, %d frames with two patches stepping, %d of %d frames off "
+  std::printf("travel on: x %.2f m, %d travels of %d extensions (%lld springs handed over), %d frames with two patches stepping, %d of %d frames off "
               "particles, hop %.3f d, worst patch ledger %.3f %%\n",
-              on.x, on.travels, on.extensions, on.two_stepping, on.off_particles, on.driven, on.hop, on.worst_patch_error);
+              on.x, on.travels, on.extensions, on.springs, on.two_stepping, on.off_particles, on.driven, on.hop, on.worst_patch_error);
   std::printf("travel off: x %.2f m, %d extensions, %d frames with two patches stepping, %d of %d frames off particles\n", off.x,
               off.extensions, off.two_stepping, off.off_particles, off.driven);
   EXPECT_GT(on.x, 3.0 + 0.8) << "the sphere was driven past the first patch's edge";
   EXPECT_GE(on.travels, 1);
+  // The granules taken over keep their contacts' springs (docs/dem.md "Carried springs"): a
+  // settled bed holds a few per granule.
+  EXPECT_GT(on.springs, 100 * on.travels) << "springs handed over in " << on.travels << " take-overs";
   EXPECT_EQ(on.two_stepping, 0) << "frames in which two patches stepped";
   EXPECT_GT(off.two_stepping, 0) << "the abutting patch ahead steps beside the one the sphere is in";
   EXPECT_EQ(on.off_particles, 0) << "frames on the heightfield, of " << on.driven;
