@@ -99,9 +99,12 @@ __attribute__((always_inline)) inline __m128 Simulation::Impl::gather_sphere4(co
   // boundaries, for dynamic spheres near one (the rest only clear a mask left set)
   if (g.V[4 * i + 3] > 0.0f) {
     const float px = P[4 * i], py = P[4 * i + 1], pz = P[4 * i + 2];
-    if (py - g.floor_y < ri || px - g.x0 < ri || g.x1 - px < ri || pz - g.z0 < ri || g.z1 - pz < ri) {
+    const std::uint32_t sides = (px - g.x0 < ri ? 2u : 0u) | (g.x1 - px < ri ? 4u : 0u) | (pz - g.z0 < ri ? 8u : 0u) |
+                                (g.z1 - pz < ri ? 16u : 0u);
+    const std::uint32_t slots = (py - g.floor_y < ri ? 1u : 0u) | sides | (sides ? 32u : 0u);
+    if (slots) {
       Vec3 F = to_vec3(F4), T = to_vec3(T4);
-      boundary_contacts(g, i, dt, F, T, nwall);
+      boundary_contacts(g, i, dt, slots, F, T, nwall);
       F4 = from_vec3(F), T4 = from_vec3(T);
     } else if (g.WM[i] != 0) {
       g.WM[i] = 0;

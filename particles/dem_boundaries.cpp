@@ -19,7 +19,8 @@ Vec3 TerrainGrid::normal(float x, float z) const { return physics::terrain_norma
 // a plane contact that was not in the mask starts with a fresh spring. Out of line: 4 % of
 // sphere-steps reach it in a bed.
 __attribute__((noinline)) void Simulation::Impl::boundary_contacts(const GatherCtx& g, const int i, const float dt,
-                                                                   Vec3& F, Vec3& T, std::int64_t& nwall) {
+                                                                   const std::uint32_t slots, Vec3& F, Vec3& T,
+                                                                   std::int64_t& nwall) {
   const float kn = g.law.kn, cn0 = g.law.cn0, kt = g.law.kt, ctr = g.law.ctr, mu = g.law.mu;
   const float* P = g.P;
   const float* V = g.V;
@@ -33,6 +34,7 @@ __attribute__((noinline)) void Simulation::Impl::boundary_contacts(const GatherC
   const std::uint32_t old_mask = g.WM[i];
   std::uint32_t mask = 0;
   for (int slot = 0; slot < kWallSlots; ++slot) {
+    if (!(slots & (1u << slot))) continue;  // (out of its reach: boundary_plane would say so)
     Vec3 nrm;
     float dist;
     if (!physics::boundary_plane(g.bounds, def.terrain, slot, pi, ri, nrm, dist)) continue;

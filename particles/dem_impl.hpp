@@ -466,8 +466,11 @@ struct Simulation::Impl {
   // with the GL force kernel) in slot order; adds their force and torque (about the sphere
   // centre) to F, T. WM[i] has bit k set while plane k touched the sphere at the last substep;
   // a plane contact that was not in the mask starts with a fresh spring. Out of line: 4 % of
-  // sphere-steps reach it in a bed.
-  void boundary_contacts(const GatherCtx& g, const int i, const float dt, Vec3& F, Vec3& T, std::int64_t& nwall);
+  // sphere-steps reach it in a bed. `slots`: bit k for each plane the sphere may touch (the
+  // floor when within r of it, a side when within r of it, the terrain outside the fill when
+  // within r of a side: gather_sphere4); the others cannot, and are not tested.
+  void boundary_contacts(const GatherCtx& g, const int i, const float dt, std::uint32_t slots, Vec3& F, Vec3& T,
+                         std::int64_t& nwall);
 
   // The body stage for granule i (dynamic, isotropic inertia): the formulas of the general
   // path below in 4-wide SSE2 registers, each lane doing the scalar code's float operations in
