@@ -1,6 +1,6 @@
 // Host-side rules both DEM backends apply identically (particles/dem.cpp, the CPU reference;
 // particles/gpu/gl_simulation.cpp, the GL backend): adding a granule or a shell (the checks
-// and the record pushed), parking a disabled body, the sleep timer and an asleep frame. The physics they share with the GL kernels is shaders/dem/physics_common.glsl
+// and the record pushed), parking a disabled body, the checks of contact springs set from outside, the sleep timer and an asleep frame. The physics they share with the GL kernels is shaders/dem/physics_common.glsl
 // (particles/dem_physics.hpp).
 //
 // Not shared, and why:
@@ -20,6 +20,7 @@
 #include <vector>
 
 #include "particles/dem.hpp"
+#include "particles/dem_physics.hpp"
 #include "particles/fields.hpp"
 
 namespace sandpatch {
@@ -135,6 +136,34 @@ int push_shell(Impl& s, const ShellDef& sh, const ShellPlan& p) {
 }
 
 // Whether `index` names one of the simulation's `bodies` bodies; the error names `call`.body.
+// set_contact_springs' entries (dem.hpp ContactSpring), checked whole before either backend
+// sets anything: `flags(b)` and `count(b)` give body b's BodyFlags and sphere count (b in
+// [0, bodies)). Errors name the entry and field.
+template <class Flags, class Count>
+Status check_contact_springs(const std::vector<ContactSpring>& springs, int bodies, Flags flags, Count count) {
+  for (std::size_t n = 0; n < springs.size(); ++n) {
+    const ContactSpring& c = springs[n];
+    const std::string at = "set_contact_springs[" + std::to_string(n) + "].";
+    auto check_sphere = [&](BodyId b, int k, const char* body, const char* sphere) -> Status {
+      if (b.index < 0 || b.index >= bodies || !(flags(b.index) & kBodyGranule))
+        return Error{"", at + body, std::to_string(b.index), "must be a granule of this simulation", ""};
+      if (k < 0 || k >= count(b.index)) return Error{"", at + sphere, std::to_string(k), "must be 0..3 (the granule's spheres)", ""};
+      return Ok{};
+    };
+    if (Status st = check_sphere(c.a, c.sphere_a, "a", "sphere_a"); !st) return st;
+    if (c.plane >= physics::kPlaneSlots || c.plane < -1)
+      return Error{"", at + "plane", std::to_string(c.plane), "must be -1 (a pair) or 0..5 (a boundary plane)", ""};
+    if (c.plane < 0) {
+      if (Status st = check_sphere(c.b, c.sphere_b, "b", "sphere_b"); !st) return st;
+      if (c.b.index == c.a.index) return Error{"", at + "b", std::to_string(c.b.index), "must be another granule than a", ""};
+    }
+    if (!std::isfinite(c.xi.x) || !std::isfinite(c.xi.y) || !std::isfinite(c.xi.z))
+      return Error{"", at + "xi", "not finite", "must be a finite spring (m)", ""};
+    if (!std::isfinite(c.dmax) || c.dmax < 0) return Error{"", at + "dmax", std::to_string(c.dmax), "must be a finite overlap >= 0 (m)", ""};
+  }
+  return Ok{};
+}
+
 inline Status check_body_index(int index, int bodies, const std::string& call) {
   if (index < 0 || index >= bodies)
     return Error{"", call + ".body", std::to_string(index), "must be a body of this simulation", ""};

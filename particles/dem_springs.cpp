@@ -6,6 +6,7 @@
 #include <string>
 
 #include "particles/dem.hpp"
+#include "particles/dem_control.hpp"
 #include "particles/dem_impl.hpp"
 
 namespace sandpatch {
@@ -49,29 +50,9 @@ std::vector<ContactSpring> Simulation::contact_springs() const {
 
 Status Simulation::set_contact_springs(const std::vector<ContactSpring>& springs) {
   Impl& s = *impl_;
-  // Checked whole before anything is set.
-  for (std::size_t n = 0; n < springs.size(); ++n) {
-    const ContactSpring& c = springs[n];
-    const std::string at = "set_contact_springs[" + std::to_string(n) + "].";
-    auto check_sphere = [&](BodyId b, int k, const char* body, const char* sphere) -> Status {
-      if (b.index < 0 || b.index >= s.nb || !(s.b.flags[b.index] & kBodyGranule))
-        return Error{"", at + body, std::to_string(b.index), "must be a granule of this simulation", ""};
-      if (k < 0 || k >= s.b.count[b.index])
-        return Error{"", at + sphere, std::to_string(k), "must be 0..3 (the granule's spheres)", ""};
-      return Ok{};
-    };
-    if (Status st = check_sphere(c.a, c.sphere_a, "a", "sphere_a"); !st) return st;
-    if (c.plane >= kWallSlots || c.plane < -1)
-      return Error{"", at + "plane", std::to_string(c.plane), "must be -1 (a pair) or 0..5 (a boundary plane)", ""};
-    if (c.plane < 0) {
-      if (Status st = check_sphere(c.b, c.sphere_b, "b", "sphere_b"); !st) return st;
-      if (c.b.index == c.a.index) return Error{"", at + "b", std::to_string(c.b.index), "must be another granule than a", ""};
-    }
-    if (!std::isfinite(c.xi.x) || !std::isfinite(c.xi.y) || !std::isfinite(c.xi.z))
-      return Error{"", at + "xi", "not finite", "must be a finite spring (m)", ""};
-    if (!std::isfinite(c.dmax) || c.dmax < 0)
-      return Error{"", at + "dmax", std::to_string(c.dmax), "must be a finite overlap >= 0 (m)", ""};
-  }
+  // Checked whole before anything is set (dem_control.hpp, as the GL backend).
+  if (Status st = check_contact_springs(springs, s.nb, [&](int b) { return s.b.flags[b]; }, [&](int b) { return s.b.count[b]; }); !st)
+    return st;
   for (const ContactSpring& c : springs) {
     const std::int32_t ia = s.b.first[c.a.index] + c.sphere_a;
     if (c.plane >= 0) {

@@ -12,6 +12,24 @@
 
 namespace sandpatch::bedtest {
 
+// The lattice of n x n x layers granules of d = 0.01 m spheres (seed 3) in a walled box of
+// side n a + 4 mm: run_bed's, and the bed of the contact springs' tests (springs_common.hpp).
+inline float box_spacing() {
+  const GranuleShape g = make_granule_shape(0.005f, 1.0f, 2500.0f);
+  return 2.0f * (g.centre_distance + g.radius) * 1.02f;
+}
+inline LatticeBedDef box_lattice(int n, int layers) {
+  const GranuleShape g = make_granule_shape(0.005f, 1.0f, 2500.0f);
+  const float a = box_spacing();
+  LatticeBedDef bed;
+  bed.nx = bed.nz = n;
+  bed.layers = layers;
+  bed.spacing = a;
+  bed.min = {0.5f * a + 0.002f, g.centre_distance + g.radius + 1e-4f, 0.5f * a + 0.002f};
+  bed.seed = 3;
+  return bed;
+}
+
 struct BedResult {
   double settled_speed = 0;   // max granule speed after settling, m/s
   double final_speed = 0;     // max granule speed at the end, m/s
@@ -29,8 +47,7 @@ inline BedResult run_bed(ShearLaw law, int n, int layers, double settle, double 
   d.sleep_time = 0;
   d.threads = threads;
   d.side_walls = true;
-  const GranuleShape g = make_granule_shape(0.005f, 1.0f, 2500.0f);
-  const float a = 2.0f * (g.centre_distance + g.radius) * 1.02f;
+  const float a = box_spacing();
   const float L = n * a + 0.004f;
   d.bounds_min = {0, 0, 0};
   d.bounds_max = {L, layers * a + 0.03f, L};
@@ -38,13 +55,7 @@ inline BedResult run_bed(ShearLaw law, int n, int layers, double settle, double 
   d.max_particles = 4 * n * n * layers;
   auto s = Simulation::create(d);
   EXPECT_TRUE(s.ok()) << s.message();
-  LatticeBedDef bed;
-  bed.nx = bed.nz = n;
-  bed.layers = layers;
-  bed.spacing = a;
-  bed.min = {0.5f * a + 0.002f, g.centre_distance + g.radius + 1e-4f, 0.5f * a + 0.002f};
-  bed.seed = 3;
-  EXPECT_TRUE(add_lattice_bed(*s, bed).ok());
+  EXPECT_TRUE(add_lattice_bed(*s, box_lattice(n, layers)).ok());
   const double dt = 5e-5;
   for (int k = 0; k < int(settle / dt); ++k) EXPECT_TRUE(s->step(dt).ok());
   BedResult r;

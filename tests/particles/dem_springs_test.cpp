@@ -4,67 +4,24 @@
 #include <cmath>
 #include <cstdio>
 
-#include "particles/bed.hpp"
 #include "particles/dem.hpp"
+#include "tests/particles/springs_common.hpp"
 
 namespace sandpatch {
 namespace {
 
-constexpr float kRadius = 0.005f;  // m: d = 1 cm spheres, the DEM's default material
-
-SimulationDef bed_def(int n, int layers) {
-  SimulationDef d;
-  d.sleep_time = 0;
-  d.side_walls = true;
-  d.max_substeps = 1 << 16;  // frames of 1/120 s of stiff centimetre granules
-  const GranuleShape g = make_granule_shape(kRadius, 1.0f, 2500.0f);
-  const float a = 2.0f * (g.centre_distance + g.radius) * 1.02f;
-  const float L = n * a + 0.004f;
-  d.particle_radius = kRadius;
-  d.bounds_min = {0, 0, 0};
-  d.bounds_max = {L, layers * a + 0.03f, L};
-  d.max_bodies = n * n * layers;
-  d.max_particles = 4 * n * n * layers;
-  return d;
-}
-
-// A bed of n x n x layers granules settled in a walled box for `settle` s.
-Simulation settled_bed(int n, int layers, double settle) {
-  const SimulationDef d = bed_def(n, layers);
-  auto s = Simulation::create(d);
-  EXPECT_TRUE(s.ok()) << s.message();
-  const GranuleShape g = make_granule_shape(kRadius, 1.0f, 2500.0f);
-  const float a = 2.0f * (g.centre_distance + g.radius) * 1.02f;
-  LatticeBedDef bed;
-  bed.nx = bed.nz = n;
-  bed.layers = layers;
-  bed.spacing = a;
-  bed.min = {0.5f * a + 0.002f, g.centre_distance + g.radius + 1e-4f, 0.5f * a + 0.002f};
-  bed.seed = 3;
-  EXPECT_TRUE(add_lattice_bed(*s, bed).ok());
-  for (double t = 0; t < settle; t += 1.0 / 120.0) EXPECT_TRUE(s->step(1.0 / 120.0).ok());
-  return std::move(*s);
-}
+using namespace springtest;
+constexpr float kRadius = kBedRadius;
 
 // The same granules at the same places in a new simulation, with or without the springs.
 Simulation copy_of(const Simulation& from, bool springs) {
   auto s = Simulation::create(from.def());
   EXPECT_TRUE(s.ok()) << s.message();
-  for (int b = 0; b < from.body_count(); ++b)
-    EXPECT_TRUE(s->add_granule(from.body_position(BodyId{b}), from.body_orientation(BodyId{b})).ok());
-  if (springs) EXPECT_TRUE(s->set_contact_springs(from.contact_springs()).ok());
+  copy_bed(from, *s, springs);
   return std::move(*s);
 }
 
-// Mean displacement of the granules over `seconds`, in sphere diameters.
-double mean_motion(Simulation& s, double seconds) {
-  std::vector<Vec3> start;
-  for (int b = 0; b < s.body_count(); ++b) start.push_back(s.body_position(BodyId{b}));
-  for (double t = 0; t < seconds; t += 1.0 / 120.0) EXPECT_TRUE(s.step(1.0 / 120.0).ok());
-  double sum = 0;
-  for (int b = 0; b < s.body_count(); ++b) sum += length(s.body_position(BodyId{b}) - start[std::size_t(b)]);
-  return sum / s.body_count() / (2.0 * kRadius);
-}
+double mean_motion(Simulation& s, double seconds) { return mean_motion_d(s, seconds); }
 
 }  // namespace
 
@@ -131,24 +88,9 @@ TEST(CarriedSprings, AParkedGranuleLeavesItsPlaneSprings) {
   d.side_walls = false;
   auto s = Simulation::create(d);
   ASSERT_TRUE(s.ok()) << s.message();
-  const GranuleShape g = make_granule_shape(kRadius, 1.0f, 2500.0f);
-  const BodyId a = *s->add_granule({0.05f, g.centre_distance + 0.5f * kRadius, 0.05f});
-  for (int f = 0; f < 12; ++f) ASSERT_TRUE(s->step(1.0 / 120.0).ok());
-  ASSERT_TRUE(s->set_body_state(a, s->body_position(a), s->body_orientation(a), {0.05f, 0, 0}, {}).ok());
-  ASSERT_TRUE(s->step(1.0 / 240.0).ok());
-  auto planes = [&] {
-    int n = 0;
-    for (const ContactSpring& c : s->contact_springs()) n += c.a.index == a.index && c.plane == 0;
-    return n;
-  };
-  EXPECT_GT(planes(), 0);
-  const Vec3 x = s->body_position(a);
-  const Quat q = s->body_orientation(a);
-  ASSERT_TRUE(s->set_body_enabled(a, false).ok());
-  ASSERT_TRUE(s->step(1.0 / 240.0).ok());
-  ASSERT_TRUE(s->set_body_enabled(a, true).ok());
-  ASSERT_TRUE(s->set_body_state(a, x, q, {}, {}).ok());
-  EXPECT_EQ(planes(), 0);  // (before its next step: none carried over from before it was parked)
+  const auto [before, after] = floor_springs_across_parking(*s);
+  EXPECT_GT(before, 0);
+  EXPECT_EQ(after, 0);  // (before its next step: none carried over from before it was parked)
 }
 
 }  // namespace sandpatch

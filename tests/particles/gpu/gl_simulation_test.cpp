@@ -23,6 +23,7 @@
 #include "tests/particles/gpu/gl_test_util.hpp"
 #include "tests/particles/head_on.hpp"
 #include "tests/particles/jointed_shells.hpp"
+#include "tests/particles/springs_common.hpp"
 
 namespace sandpatch::gpu {
 namespace {
@@ -1064,67 +1065,12 @@ TEST(GlSimulation, BodyStateErrorsAndStagedBodies) {
 
 // ---- contact springs carried from another simulation (gl_springs.cpp) ----
 
-// The CPU test's bed (tests/particles/dem_springs_test.cpp): n x n x layers granules of
-// d = 1 cm in a walled box, settled on the CPU backend for `settle` s.
-constexpr float kBedRadius = 0.005f;  // m
-
-SimulationDef spring_bed_def(int n, int layers) {
-  SimulationDef d;
-  d.sleep_time = 0;
-  d.side_walls = true;
-  d.max_substeps = 1 << 16;  // frames of 1/120 s of stiff centimetre granules
-  const GranuleShape g = make_granule_shape(kBedRadius, 1.0f, 2500.0f);
-  const float a = 2.0f * (g.centre_distance + g.radius) * 1.02f;
-  const float L = n * a + 0.004f;
-  d.particle_radius = kBedRadius;
-  d.bounds_min = {0, 0, 0};
-  d.bounds_max = {L, layers * a + 0.03f, L};
-  d.max_bodies = n * n * layers;
-  d.max_particles = 4 * n * n * layers;
-  return d;
-}
-
-Simulation settled_cpu_bed(int n, int layers, double settle) {
-  auto s = Simulation::create(spring_bed_def(n, layers));
-  EXPECT_TRUE(s.ok()) << s.message();
-  const GranuleShape g = make_granule_shape(kBedRadius, 1.0f, 2500.0f);
-  const float a = 2.0f * (g.centre_distance + g.radius) * 1.02f;
-  LatticeBedDef bed;
-  bed.nx = bed.nz = n;
-  bed.layers = layers;
-  bed.spacing = a;
-  bed.min = {0.5f * a + 0.002f, g.centre_distance + g.radius + 1e-4f, 0.5f * a + 0.002f};
-  bed.seed = 3;
-  EXPECT_TRUE(add_lattice_bed(*s, bed).ok());
-  for (double t = 0; t < settle; t += 1.0 / 120.0) EXPECT_TRUE(s->step(1.0 / 120.0).ok());
-  return std::move(*s);
-}
-
-// The granules of `from` at the same places in a new simulation of the same definition (staged
-// on the GL: set_contact_springs comes before the upload, as in a terrain patch's fill).
-template <class Sim>
-void copy_bed(const Simulation& from, Sim& to, bool springs) {
-  for (int b = 0; b < from.body_count(); ++b)
-    ASSERT_TRUE(to.add_granule(from.body_position(BodyId{b}), from.body_orientation(BodyId{b})).ok());
-  if (springs) {
-    const Status st = to.set_contact_springs(from.contact_springs());
-    ASSERT_TRUE(st.ok()) << st.message();
-  }
-}
-
-// Mean displacement of the granules over `seconds` in frames of 1/120 s, in diameters.
-template <class Sim>
-double mean_motion_d(Sim& s, double seconds) {
-  std::vector<Vec3> start;
-  for (int b = 0; b < s.body_count(); ++b) start.push_back(s.body_position(BodyId{b}));
-  for (double t = 0; t < seconds; t += 1.0 / 120.0) {
-    const Status st = s.step(1.0 / 120.0);
-    EXPECT_TRUE(st.ok()) << st.message();
-  }
-  double sum = 0;
-  for (int b = 0; b < s.body_count(); ++b) sum += length(s.body_position(BodyId{b}) - start[std::size_t(b)]);
-  return sum / s.body_count() / (2.0 * kBedRadius);
-}
+// The CPU test's beds and helpers (tests/particles/springs_common.hpp).
+using springtest::kBedRadius;
+using springtest::copy_bed;
+using springtest::mean_motion_d;
+inline SimulationDef spring_bed_def(int n, int layers) { return springtest::bed_def(n, layers); }
+inline Simulation settled_cpu_bed(int n, int layers, double settle) { return springtest::settled_bed(n, layers, settle); }
 
 double seconds_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -1370,24 +1316,9 @@ TEST(GlSimulation, AParkedGranuleLeavesItsPlaneSprings) {
   d.side_walls = false;
   auto s = GlSimulation::create(d);
   ASSERT_TRUE(s.ok()) << s.message();
-  const GranuleShape g = make_granule_shape(kBedRadius, 1.0f, 2500.0f);
-  const BodyId a = *s->add_granule({0.05f, g.centre_distance + 0.5f * kBedRadius, 0.05f});
-  for (int f = 0; f < 12; ++f) ASSERT_TRUE(s->step(1.0 / 120.0).ok());
-  ASSERT_TRUE(s->set_body_state(a, s->body_position(a), s->body_orientation(a), {0.05f, 0, 0}, {}).ok());
-  ASSERT_TRUE(s->step(1.0 / 240.0).ok());
-  auto planes = [&] {
-    int n = 0;
-    for (const ContactSpring& c : s->contact_springs()) n += c.a.index == a.index && c.plane == 0;
-    return n;
-  };
-  EXPECT_GT(planes(), 0);
-  const Vec3 x = s->body_position(a);
-  const Quat q = s->body_orientation(a);
-  ASSERT_TRUE(s->set_body_enabled(a, false).ok());
-  ASSERT_TRUE(s->step(1.0 / 240.0).ok());
-  ASSERT_TRUE(s->set_body_enabled(a, true).ok());
-  ASSERT_TRUE(s->set_body_state(a, x, q, {}, {}).ok());
-  EXPECT_EQ(planes(), 0);
+  const auto [before, after] = springtest::floor_springs_across_parking(*s);
+  EXPECT_GT(before, 0);
+  EXPECT_EQ(after, 0);
 }
 
 }  // namespace
