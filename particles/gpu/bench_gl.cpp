@@ -106,6 +106,13 @@ int run_bench_dem_gl(int granules, int steps, int substeps, int workgroup, bool 
       return 1;
     }
   }
+  // the settled bed's contact springs too (docs/dem.md "Carried springs"): from positions alone
+  // the bed would slip until its springs grew back, and the GL would time a bed the CPU's
+  // beside it is not
+  if (Status st = gsim->set_contact_springs(cpu->contact_springs()); !st) {
+    std::fprintf(stderr, "bench dem: %s", st.message().c_str());
+    return 1;
+  }
   // (--idle-sims: as many more simulations of the bed, uploaded and never stepped)
   std::vector<GlSimulation> idle;
   for (int k = 0; k < idle_sims; ++k) {
