@@ -310,24 +310,7 @@ constexpr int kTradeApronRung = 5;
 // 18.1 / 18.8 m in 8 s; 8.7 / 8.5 m in 4 s), deepest wheel sinkage 0.12-0.20 m either way.
 constexpr int kTradeSubstepsRung = 6;
 constexpr int kMinStepsPerContact = 10;
-// Then fewer still, down to the floor the normal law allows (steps_floor), rung 7.
-constexpr int kTradeSubstepsAgainRung = 7;
-constexpr int kFloorStepsPerContact = 7;
 }  // namespace
-
-// The fewest substeps per contact time the budget's last rung gives a material of unloading
-// stiffness ratio lambda (1: the linear spring): N with omega_2 dt = pi sqrt(lambda) / N at
-// most 3 pi / 10 (~0.94, half the explicit limit 2 of the stiffest branch; what N = 10 gives
-// the hysteretic sand of the default scene, lambda = 9), never below kFloorStepsPerContact nor
-// above kMinStepsPerContact. So a linear material goes down to N = 7 (omega dt = 0.45), a
-// hysteretic one with lambda >= 9 stays at 10. Measured on scenes/vehicle_drive.json (linear,
-// from six starts; docs/BENCHMARKS.md "A lower substep floor for linear sand"): N = 7 against
-// 10 keeps the car's distance within the spread of its starts; N = 5 halved it.
-int TerrainManager::Impl::steps_floor() const {
-  const double lambda = std::max(1.0, double(def.material.unloading_stiffness_ratio));
-  const int n = int(std::ceil(std::sqrt(lambda) * 10.0 / 3.0 - 1e-9));
-  return std::clamp(n, kFloorStepsPerContact, kMinStepsPerContact);
-}
 
 std::vector<double> TerrainManager::Impl::all_scales() const {
   std::vector<double> v;
@@ -420,12 +403,7 @@ TerrainManager::Impl::BudgetChoice TerrainManager::Impl::choose(const PatchReque
   const int n_half = std::max(kMinStepsPerContact, def.steps_per_contact / 2);
   if (n_half < def.steps_per_contact) {
     c.traded.push_back("substeps");
-    if (attempt(coarsest, apron, kTradeSubstepsRung, n_half)) return c;
-  }
-  const int n_floor = std::min(steps_floor(), def.steps_per_contact);
-  if (n_floor < std::min(n_half, def.steps_per_contact)) {
-    if (c.traded.empty() || c.traded.back() != "substeps") c.traded.push_back("substeps");
-    attempt(coarsest, apron, kTradeSubstepsAgainRung, n_floor);
+    attempt(coarsest, apron, kTradeSubstepsRung, n_half);
   }
   return c;
 }
@@ -445,16 +423,12 @@ TerrainManager::Impl::BudgetChoice TerrainManager::Impl::choose_successor(const 
   c.steps_per_contact = pred.steps_per_contact;
   c.predicted_ms = predict_ms(4.0 * c.granules, dt, own);
   c.fits = !budget_on() || c.predicted_ms <= c.available_ms;
-  // (then half its N, then the floor, as `choose` steps down)
   const int n_half = std::max(kMinStepsPerContact, def.steps_per_contact / 2);
-  const int n_floor = std::min(steps_floor(), n_half);
-  const int rungs[2][2] = {{n_half, kTradeSubstepsRung}, {n_floor, kTradeSubstepsAgainRung}};
-  for (const auto& [n, rung] : rungs) {
-    if (c.fits || !(own > n) || !(c.steps_per_contact <= 0 || c.steps_per_contact > n)) continue;
-    if (c.traded.empty()) c.traded.push_back("substeps");
-    c.rung = rung;
-    c.steps_per_contact = n;
-    c.predicted_ms = predict_ms(4.0 * c.granules, dt, n);
+  if (!c.fits && own > n_half) {
+    c.traded.push_back("substeps");
+    c.rung = kTradeSubstepsRung;
+    c.steps_per_contact = n_half;
+    c.predicted_ms = predict_ms(4.0 * c.granules, dt, n_half);
     c.fits = c.predicted_ms <= c.available_ms;
   }
   c.req.steps_per_contact = c.steps_per_contact;

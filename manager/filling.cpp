@@ -187,7 +187,7 @@ Status TerrainManager::Impl::activate(double time, double dt) {
                             {"traded", c.traded},
                             {"steps_per_contact", free->steps_per_contact > 0 ? free->steps_per_contact : def.steps_per_contact}});
       if (c.body_cap > 0) budget_log.back()["capped_by"] = {{"body", c.capped_by}, {"smallest_dimension_m", c.capped_size_m}};
-      // A patch that does not fit even at the last rung's substeps (rungs 6, 7) joins patches that
+      // A patch that does not fit even with half the substeps (rung 5) joins patches that
       // step at the full N (made when they fitted): those take its N from now on, so the
       // frames in which they step together (a car straddling the edge between two patches)
       // cost what the budget's last rung assumed.

@@ -331,9 +331,6 @@ struct TerrainManager::Impl {
   std::vector<double> all_scales() const;
   int predict_granules(const PatchRequest& r, double s) const;
   BudgetChoice choose(const PatchRequest& r, double dt, double others_ms) const;
-  // The fewest substeps per contact time the budget's last rung takes for this material (its
-  // normal law's stiffest branch), budget.cpp.
-  int steps_floor() const;
 
   // ---- creation (terrain_manager.cpp) ----
   // The demotion's GL depth render when def.use_gl: the context (the GL backend's, or a new

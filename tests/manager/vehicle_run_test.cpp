@@ -225,13 +225,12 @@ TEST(SceneVehicles, ShippedVehicleDrivesOffUnderABudgetNothingFits) {
   // Its tracks' patches travel: a successor is filled at once (its parts in one frame) only when
   // a wheel its predecessor carries would pass the side it reaches beyond within two frames,
   // not for a wheel straddling the side between the two tracks or the chassis riding above
-  // (manager/filling.cpp activate): 2-4 of 7 successors from six starts 0.1-0.2 m apart
-  // (`scripts/vehicle_starts.py` offsets -0.2 ... 0.4, `--frame-budget 0.5 --seconds 4`),
-  // besides the first patch made at start-up, 4 of 7 from this one; all 7 before.
+  // (manager/filling.cpp activate): 3 of 7 successors here, besides the first patch made at
+  // start-up; all 7 before.
   const int urgent = r["pool"]["urgent_fills"].get<int>(), travels = r["pool"]["travels"].get<int>();
   std::printf("patches filled at once %d, successors that took over %d\n", urgent, travels);
   EXPECT_GE(travels, 4);
-  EXPECT_LE(3 * (urgent - 1), 2 * travels) << "successors filled at once, of " << travels;
+  EXPECT_LE(2 * (urgent - 1), travels) << "successors filled at once, of " << travels;
   bool said = false;
   for (const auto& w : r["warnings"]) said = said || w.get<std::string>().starts_with("simulation.frame_budget_ms: ");
   EXPECT_TRUE(said) << r["warnings"].dump();
