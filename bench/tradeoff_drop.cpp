@@ -172,6 +172,9 @@ Result<DropResult> measure_drop(const DropDef& d, const TradeoffKnobs& k) {
     out.deepest = std::max(out.deepest, -fr.bottom);
     out.frames.push_back(fr);
   }
+  // (a sphere still going down at the end never turned: the field reads its bottom at the end,
+  // not the original surface it starts at)
+  if (hit && !turned && !out.frames.empty()) out.rebound_bottom = out.frames.back().bottom;
   if (hit) {
     // frame k0: the first in which the soil pushed the sphere (the hit)
     std::size_t k0 = 0;

@@ -98,7 +98,7 @@ struct DropResult {
   // before the soil first pushed the sphere (m/s; sqrt(2 g H) up to a frame's free fall), the
   // largest upward speed after it (m/s, 0 when it never moved up) and their ratio, the
   // highest its lowest point came once it had stopped going down, relative to the original
-  // surface (m; its lowest point at that time when it never rose again), and
+  // surface (m; its lowest point at the end when it never stopped going down), and
   // the time from the first soil force until its speed stays below 1 % of the impact speed (s).
   double impact_speed = 0;
   double rebound_speed = 0;

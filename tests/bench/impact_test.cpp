@@ -73,6 +73,27 @@ TEST(Uehara, DepthSolvesTheScalingLaw) {
   EXPECT_EQ(uehara_prefactor(mu, rb, rg, D, d, 0.0), 0.0);
 }
 
+// A ball still going down when the run ends never turned upward: the highest its bottom came
+// after the hit is where it is then, below the surface, not the surface itself (the field's
+// starting value, which such a drop used to read: a 7800 kg/m^3 ball still creeping down at
+// the end of a fast test's run read "0.0000 m after", as if it had come back up to the surface).
+// The drop ends 0.05 s after the impact (h = 0.3 m: 0.247 s of free fall).
+TEST(Impact, ABallStillSinkingAtTheEndReadsWhereItIs) {
+  DropDef d = impact_base();
+  d.drop_height = 0.3;
+  d.run_seconds = 0.3;
+  d.trace = true;
+  auto r = measure_drop(d, impact_knobs());
+  ASSERT_TRUE(r.ok()) << r.message();
+  ASSERT_FALSE(r->frames.empty());
+  std::printf("at the end: bottom %.4f m, going down at %.3f m/s; rebound_bottom %.4f m, deepest %.4f m\n",
+              r->frames.back().bottom, r->frames.back().vy, r->rebound_bottom, r->deepest);
+  ASSERT_GT(r->impact_speed, 1.0);
+  ASSERT_LT(r->frames.back().vy, 0.0) << "still going down at the end";
+  EXPECT_LT(r->rebound_bottom, -0.01) << "m: below the surface";
+  EXPECT_NEAR(r->rebound_bottom, r->frames.back().bottom, 1e-12);
+}
+
 // Balls of 800 and 7800 kg/m^3 dropped from 0.2 m: neither leaves the sand (rebound speed at most
 // 5 % of the impact speed; the linear spring gave 15-50 %, docs/validation.md) and the depth
 // grows as rho_b^b with b within 0.2 of the experiments' 1/2 (0.53 here; seeds and settings
