@@ -216,9 +216,10 @@ TEST(SceneVehicles, ShippedVehicleDrivesOffUnderABudgetNothingFits) {
   EXPECT_EQ(off, 0) << "wheel-frames on the heightfield";
   // The chassis rides about 0.3 m over the sand on its wheels: above its join height (two
   // granule sphere diameters and its approach; coupling.cpp join_height), so its 1,776 shell
-  // spheres stay out of the DEM but where it dips toward the sand: 71 frames of 469 (all 469
-  // when every body joined at 0.5 m).
-  EXPECT_LT(chassis_carried, wheel_frames / int(run.wheels.size()) / 4) << "frames with the chassis in a patch";
+  // spheres stay out of the DEM but where it dips toward the sand: 52 frames of 469 from this
+  // start, 55-245 from four others 0.1-0.2 m apart (the car pitches differently on each path;
+  // all 469 when every body joined at 0.5 m).
+  EXPECT_LT(chassis_carried, 3 * (wheel_frames / int(run.wheels.size())) / 4) << "frames with the chassis in a patch";
   EXPECT_GT(moved, 4.0) << "m in 4 s (0.66 m when it sank into its first patch's hollows)";
   // Nothing fitted, and the report says so, with a budget that would have fitted
   const auto r = world.report();
