@@ -75,9 +75,9 @@ TEST(Uehara, DepthSolvesTheScalingLaw) {
 
 // A ball still going down when the run ends never turned upward: the highest its bottom came
 // after the hit is where it is then, below the surface, not the surface itself (the field's
-// starting value, which such a drop used to read: a 7800 kg/m^3 ball still creeping down at
-// the end of a fast test's run read "0.0000 m after", as if it had come back up to the surface).
-// The drop ends 0.05 s after the impact (h = 0.3 m: 0.247 s of free fall).
+// starting value, which such a drop used to read, as if the ball had come back up to the
+// surface: the h = 0.05 m drops at 8 granule diameters, docs/validation.md). The drop ends
+// 0.05 s after the impact (h = 0.3 m: 0.247 s of free fall).
 TEST(Impact, ABallStillSinkingAtTheEndReadsWhereItIs) {
   DropDef d = impact_base();
   d.drop_height = 0.3;
