@@ -13,7 +13,8 @@
 namespace sandpatch::bedtest {
 
 // The lattice of n x n x layers granules of d = 0.01 m spheres (seed 3) in a walled box of
-// side n a + 4 mm: run_bed's, and the bed of the contact springs' tests (springs_common.hpp).
+// side n a + 4 mm: run_bed's, the bed of the contact springs' tests (springs_common.hpp) and,
+// moved 3 cm along x, the shell-list blade test's (dem_test.cpp).
 inline float box_spacing() {
   const GranuleShape g = make_granule_shape(0.005f, 1.0f, 2500.0f);
   return 2.0f * (g.centre_distance + g.radius) * 1.02f;

@@ -13,6 +13,7 @@
 
 #include "particles/bed.hpp"
 #include "particles/contact_simd.hpp"
+#include "tests/particles/bed_common.hpp"
 #include "tests/particles/jointed_shells.hpp"
 
 namespace sandpatch {
@@ -498,8 +499,7 @@ TEST(NeighbourLists, AShellPressingIntoABedFindsEveryPairInTime) {
     d.threads = threads;
     d.side_walls = true;
     d.cell_skin = 0.0025f;
-    const GranuleShape g = make_granule_shape(0.005f, 1.0f, 2500.0f);
-    const float a = 2.0f * (g.centre_distance + g.radius) * 1.02f;
+    const float a = bedtest::box_spacing();
     const int n = 10, layers = 3;
     const float L = n * a + 0.004f;
     d.bounds_min = {0, 0, 0};
@@ -510,12 +510,8 @@ TEST(NeighbourLists, AShellPressingIntoABedFindsEveryPairInTime) {
     ::unsetenv("SANDPATCH_DEM_SHELL_LIST");
     EXPECT_TRUE(s.ok()) << s.message();
     if (!s.ok()) return o;
-    LatticeBedDef bed;
-    bed.nx = bed.nz = n;
-    bed.layers = layers;
-    bed.spacing = a;
-    bed.min = {0.5f * a + 0.032f, g.centre_distance + g.radius + 1e-4f, 0.5f * a + 0.002f};
-    bed.seed = 3;
+    LatticeBedDef bed = bedtest::box_lattice(n, layers);
+    bed.min.x += 0.03f;  // (the blade's first 3 cm)
     EXPECT_TRUE(add_lattice_bed(*s, bed).ok());
     const double dt = 5e-5;
     for (int k = 0; k < 16000; ++k) EXPECT_TRUE(s->step(dt).ok());  // 0.8 s: settled
