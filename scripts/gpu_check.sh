@@ -2,7 +2,8 @@
 # The GL backend's checks on a machine with a GPU, in one run (docs/BENCHMARKS.md "GL backend on a
 # GPU"): the GPU's name and the renderer EGL finds, the GL tests (context, GL-against-CPU
 # cross-checks, a scene on the GL backend, rendering), the DEM throughput of both backends
-# on the same settled beds, the default and Leach scenes on each backend and the car scene on GL.
+# on the same settled beds, the default and Leach scenes on each backend, Leach & Marais'
+# scenarios 1 and 2 at the paper's sizes, and the car scene on GL.
 #
 #   bash scripts/gpu_check.sh BIN_DIR OUT_DIR
 #
@@ -48,6 +49,10 @@ f = r["frames"]
 print("  backend", r["backend"], "threads", r["threads"], "rtf", round(r["real_time_factor"], 3),
       "frames", r["frame_count"], "median_ms", round(f["median_ms"], 2), "max_ms", round(f["max_ms"], 1),
       "hash", r["final_state_hash"], "ledger_pct", round(r["ledger"]["total"]["error_pct"], 2),
+      "spheres_per_substep", round(r["dem"]["total"]["spheres_per_substep"]),
+      "substeps_per_frame", round(r["dem"]["total"]["substeps_per_frame"], 1),
+      "sphere_steps_per_s", "%.4g" % r["dem"]["total"]["sphere_steps_per_s"],
+      "granules", [p["granules"] for p in r["ledger"]["patches"]][:4],
       "gl_submit_ms", round(r["dem"]["total"]["stage_ms"]["gl_submit"]),
       "gl_readback_ms", round(r["dem"]["total"]["stage_ms"]["gl_readback"]),
       "depth_render", [p.get("depth_render") for p in r["ledger"]["patches"]][:3])
@@ -73,10 +78,19 @@ scene() {  # scene NAME BACKEND: a shipped scene for 4 simulated seconds
   [ -f "$times" ] && head -8 "$times" >>"$SUM"
 }
 
+paper() {  # paper NAME BACKEND SECONDS LIMIT: a paper-size Leach & Marais scene (docs/stress.md)
+  step "run_$1_$2" "$4" "$BIN/sandpatch" run "scenes/$1.json" --backend "$2" --seconds "$3" --quiet --out "$OUT/logs/run_$1_$2"
+  report "$OUT/logs/run_$1_$2/report.json"
+}
+
 { nvidia-smi -L; echo "cores: $(nproc)"; } >>"$SUM" 2>&1
 step info 30 "$BIN/sandpatch" info
 step gl_context 60 "$BIN/gl_context_test"
 step gl_simulation 120 "$BIN/particles_gpu_gl_simulation_test"
+# Leach & Marais' scenarios 1 and 2 at the paper's sizes (140,000 granules; 52,000 + 12,000 + 6,000)
+paper leach_1_barrel_paper gl 3 150
+paper leach_2_three_scales_paper gl 4 120
+paper leach_1_barrel_paper cpu 0.8 90
 bench 16000 100
 SANDPATCH_GL_PROFILE=1 step profile_16000 120 "$BIN/sandpatch" bench dem --backend gl --granules 16000 --steps 20 --substeps 100
 grep -E "\.comp|GPU busy" "$OUT/logs/profile_16000.log" >>"$SUM"

@@ -61,10 +61,16 @@ inline constexpr const char* kKernelDefine[kKernelCount] = {nullptr, nullptr, nu
                                                            nullptr, nullptr, "SP_WIDE_PASS", nullptr, nullptr};
 
 // A body of more spheres than this (a shell) is summed, integrated and rebuilt by a workgroup
-// of its own this size (bodies.comp's SP_WIDE_PASS); the others, granules first, by one
-// invocation each. One invocation looping over a shell of a few thousand spheres took most of
-// a scene's body stage (docs/BENCHMARKS.md "The GL backend's host time in scenes").
+// of its own (bodies.comp's SP_WIDE_PASS); the others, granules first, by one invocation
+// each. One invocation looping over a shell of a few thousand spheres took most of a scene's
+// body stage (docs/BENCHMARKS.md "The GL backend's host time in scenes").
 constexpr int kWideSpheres = 32;
+// The invocations of that workgroup: each sums every kWideGroup-th sphere of the shell. A
+// 5 m crate of 48,000 spheres summed by 32 invocations took 70 % of a scene's GPU time
+// (docs/BENCHMARKS.md "Leach & Marais' scenarios 1 and 2 at the paper's sizes on a GPU").
+// Its two shared arrays of vec4 take 2 x 16 x 512 = 16 KiB, half the 32 KiB every GL 4.3
+// driver gives a workgroup.
+constexpr int kWideGroup = 512;
 
 // CPU staging of bodies/particles added since the last upload (generated SoA, as dem.cpp).
 struct ParticleStage {

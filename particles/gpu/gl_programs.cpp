@@ -21,6 +21,7 @@ std::string GlSimulation::Impl::preamble() const {
   s += "#define SP_K " + std::to_string(K) + "\n";
   s += "#define SP_WG " + std::to_string(wg) + "\n";
   s += "#define SP_WIDE " + std::to_string(kWideSpheres) + "\n";
+  s += "#define SP_WIDE_WG " + std::to_string(kWideGroup) + "\n";
   s += "#define SP_BODY_GRANULE " + std::to_string(unsigned(kBodyGranule)) + "u\n";
   s += "#define SP_BODY_STATIC " + std::to_string(unsigned(kBodyStatic)) + "u\n";
   s += "#define SP_BODY_KINEMATIC " + std::to_string(unsigned(kBodyKinematic)) + "u\n";

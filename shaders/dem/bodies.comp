@@ -5,17 +5,18 @@
 // (an asleep frame, dem_bodies.cpp move_kinematic).
 // Compiled twice: without SP_WIDE_PASS one invocation steps one body, except in mode 0 a body
 // of more than SP_WIDE spheres (a shell); with SP_WIDE_PASS (mode 0 only) a workgroup of
-// SP_WIDE invocations steps each body listed in G.wide_body: invocation t sums spheres t,
-// t + SP_WIDE, ... in order, a fixed tree adds the SP_WIDE sums (the same order for any
+// SP_WIDE_WG invocations steps each body listed in G.wide_body: invocation t sums spheres t,
+// t + SP_WIDE_WG, ... in order, a fixed tree adds the SP_WIDE_WG sums (the same order for any
 // SP_WG), the first integrates, and all rebuild the spheres. One invocation looping over a
-// shell of a few thousand spheres took most of a scene's step on a GPU.
+// shell of a few thousand spheres took most of a scene's step on a GPU, and 32 invocations
+// over a crate of 48,000 spheres 70 % of it.
 //   v += dt (F/m + g);  w += dt I^-1 (T - w x I w) (body frame; isotropic granules skip
 //   the gyroscopic term);  x += dt v;  q += dt/2 (w, 0) q, normalised
 // The spheres get the velocity predicted to the next contact stage's time, v + u_pred dt a
 // with a = (v - v_old)/dt this substep's acceleration, translation only (dem_bodies.cpp `bodies`;
 // u_pred = Simulation::velocity_predictor_gain; zero when a body is only rebuilt, modes 1, 2).
 #ifdef SP_WIDE_PASS
-layout(local_size_x = SP_WIDE) in;
+layout(local_size_x = SP_WIDE_WG) in;
 #else
 layout(local_size_x = SP_WG) in;
 #endif
@@ -99,7 +100,7 @@ void add_sphere(uint b, int k, vec3 x, inout vec3 F, inout vec3 T) {
 }
 
 #ifdef SP_WIDE_PASS
-shared vec3 w_F[SP_WIDE], w_T[SP_WIDE];
+shared vec4 w_F[SP_WIDE_WG], w_T[SP_WIDE_WG];  // (vec4: 16 bytes an element on every driver)
 shared vec3 w_x, w_v, w_w;
 shared vec4 w_q;
 shared bool w_moves;
@@ -110,11 +111,11 @@ void main() {
   const int count = B.count[b];
   vec3 F = vec3(0.0), T = vec3(0.0);
   const vec3 x = B.pos[b].xyz;
-  for (int k = t; k < count; k += SP_WIDE) add_sphere(b, k, x, F, T);
-  w_F[t] = F;
-  w_T[t] = T;
+  for (int k = t; k < count; k += SP_WIDE_WG) add_sphere(b, k, x, F, T);
+  w_F[t] = vec4(F, 0.0);
+  w_T[t] = vec4(T, 0.0);
   barrier();
-  for (int h = SP_WIDE / 2; h > 0; h /= 2) {
+  for (int h = SP_WIDE_WG / 2; h > 0; h /= 2) {
     if (t < h) {
       w_F[t] = w_F[t] + w_F[t + h];
       w_T[t] = w_T[t] + w_T[t + h];
@@ -124,14 +125,14 @@ void main() {
   if (t == 0) {
     vec3 xn, vs, wn;
     vec4 qn;
-    w_moves = integrate(b, w_F[0], w_T[0], xn, qn, vs, wn);
+    w_moves = integrate(b, w_F[0].xyz, w_T[0].xyz, xn, qn, vs, wn);
     w_x = xn;
     w_q = qn;
     w_v = vs;
     w_w = wn;
   }
   barrier();
-  if (w_moves && rebuild(b, w_x, w_q, w_v, w_w, B.mass[b].y, t, SP_WIDE) > u_resort_d2) request_resort();  // common.glsl
+  if (w_moves && rebuild(b, w_x, w_q, w_v, w_w, B.mass[b].y, t, SP_WIDE_WG) > u_resort_d2) request_resort();  // common.glsl
 }
 #else
 void main() {
