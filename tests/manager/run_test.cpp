@@ -177,6 +177,27 @@ RunResult default_on_gl(const char* dir, double seconds, bool image, RunOptions*
   return scene.ok() ? run_scene(*scene, opt) : RunResult{};
 }
 
+// A slot too large for the GL backend (4,194,304 granules: a grid of 96 million cells, past
+// its 2^26, and 5.4 GB of contact springs, past any driver's storage block: llvmpipe's 128 MiB,
+// NVIDIA's 2 GiB) is refused as bad input, before its buffers are allocated, naming the
+// scene's pool field that sets the capacity (the GL simulation itself can name only its own
+// SimulationDef fields).
+TEST(Run, GlPoolTooLargeForTheDriverNamesThePoolField) {
+  auto scene = load_default_scene();
+  ASSERT_TRUE(scene.ok());
+  scene->terrain.slots = 1;  // (the pool's whole limit: 4,194,304 granules)
+  scene->terrain.granules_per_slot = 4194304;
+  RunOptions opt;
+  opt.out_dir = test::fresh_dir("run_test", "gl_pool").string();
+  opt.seconds = 0.1;
+  opt.backend = "gl";
+  opt.progress = ProgressStyle::None;
+  const RunResult r = run_scene(*scene, opt);
+  EXPECT_EQ(r.code, ExitCode::BadInput) << r.stage << ": " << r.message;
+  EXPECT_NE(r.message.find("simulation.pool.granules_per_slot = 4194304"), std::string::npos) << r.message;
+  EXPECT_NE(r.message.find("lower them, or use the CPU backend"), std::string::npos) << r.message;
+}
+
 // `run --backend gl`: the terrain manager's pool runs on the GL compute-shader backend
 // (llvmpipe in CI); a patch is promoted, simulated and demoted, and the report says so; the
 // final picture draws the granules straight from the simulation's buffer (shared context).
