@@ -1,12 +1,15 @@
 #!/usr/bin/env python3
 """Writes scenes/leach_*.json: Leach & Marais' three test scenarios (section 6.3), each as a small
 scene for a 2-core machine and a "_paper" variant at the paper's sizes (docs/stress.md says how the
-sizes scale and what was measured). Run from anywhere: python3 scripts/make_leach_scenes.py
+sizes scale and what was measured). Run from anywhere: python3 scripts/make_leach_scenes.py [DIR]
+(DIR: where to write them, default scenes/; tests/apps/scenarios_test.cpp writes them to a
+temporary folder and checks that they are the shipped files).
 """
 import json
 import os
+import sys
 
-SCENES = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "scenes")
+SCENES = sys.argv[1] if len(sys.argv) > 1 else os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "scenes")
 def mat(r, k=2.0e4, e=0.3, unloading=None):
     # the small variants' sand follows docs/calibration.md for bodies that land and must stay
     # (hysteretic spring, unloading_stiffness_ratio 9 with a weak dashpot); the paper variants
