@@ -60,8 +60,12 @@ void check_collision_groups(Make&& make, Step&& step) {
   auto force_on_a = [&](std::int32_t ga, std::int32_t gb, bool with_b, bool granule, Vec3* on_granule = nullptr) {
     auto s = make(d);
     EXPECT_TRUE(s.add_shell(group_sphere(d, group_a(d), ga)).ok());
-    if (with_b) EXPECT_TRUE(s.add_shell(group_sphere(d, group_b(d), gb)).ok());
-    if (granule) EXPECT_TRUE(s.add_granule(group_granule(d)).ok());
+    if (with_b) {
+      EXPECT_TRUE(s.add_shell(group_sphere(d, group_b(d), gb)).ok());
+    }
+    if (granule) {
+      EXPECT_TRUE(s.add_granule(group_granule(d)).ok());
+    }
     step(s);
     if (on_granule) *on_granule = s.body_force({with_b ? 2 : 1});
     return s.body_force({0});
