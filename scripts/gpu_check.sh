@@ -89,10 +89,15 @@ step gl_context 60 "$BIN/gl_context_test"
 step gl_simulation 120 "$BIN/particles_gpu_gl_simulation_test"
 # Leach & Marais' three scenarios at the paper's sizes (140,000 granules; 52,000 + 12,000 + 6,000;
 # the first of ten balls on 83,000)
-paper leach_1_barrel_paper gl 3 150
+paper leach_1_barrel_paper gl 1.2 90
 paper leach_2_three_scales_paper gl 4 120
 paper leach_3_ten_bodies_paper gl 4 90
 paper leach_1_barrel_paper cpu 0.8 90
+# where scenario 2's GL step goes (its crates are shells of 12,000-48,000 spheres)
+SANDPATCH_GL_PROFILE=1 step profile_leach_2_paper 60 "$BIN/sandpatch" run scenes/leach_2_three_scales_paper.json \
+  --backend gl --seconds 0.8 --quiet --out "$OUT/logs/profile_leach_2_paper"
+python3 -c "import json,sys; t=json.load(open(sys.argv[1]))['dem']['total']; print('  gl_kernel_ms', {k: round(v, 1) for k, v in t.get('gl_kernel_ms', {}).items()}, 'stage_ms', {k: round(v) for k, v in t['stage_ms'].items()})" \
+  "$OUT/logs/profile_leach_2_paper/report.json" >>"$SUM" 2>&1
 bench 16000 100
 SANDPATCH_GL_PROFILE=1 step profile_16000 120 "$BIN/sandpatch" bench dem --backend gl --granules 16000 --steps 20 --substeps 100
 grep -E "\.comp|GPU busy" "$OUT/logs/profile_16000.log" >>"$SUM"
