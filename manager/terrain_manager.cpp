@@ -153,10 +153,12 @@ Result<std::unique_ptr<TerrainManager>> TerrainManager::create(const TerrainMana
       opt.profile = I.gl_profile = std::getenv("SANDPATCH_GL_PROFILE") != nullptr;
       auto sim = gpu::GlSimulation::create(cap, opt);
       if (!sim) {
-        // (the capacities it names come from the pool's fields: say which to lower)
+        // (the capacities it names come from the pool's fields: say which to lower; other
+        // refusals, such as the driver's block count, keep their own advice)
         std::vector<Error> es = sim.errors();
         for (Error& e : es)
-          e.detail += (e.detail.empty() ? "" : "; ") + std::string("a slot holds simulation.pool.granules_per_slot = ") +
+          if (e.field.find("SimulationDef") != std::string::npos)
+            e.detail += (e.detail.empty() ? "" : "; ") + std::string("a slot holds simulation.pool.granules_per_slot = ") +
                       std::to_string(def.granules_per_slot) + " granules (4 spheres each) and shell_spheres_per_slot = " +
                       std::to_string(def.shell_particles_per_slot) + ": lower them, or use the CPU backend";
         return es;
