@@ -19,7 +19,8 @@ namespace sandpatch {
 // cross(a, b) lane-wise as math.hpp's. Lane 3 is unused (the radius and the inverse mass
 // are kept in the stores).
 __attribute__((always_inline)) inline float Simulation::Impl::rebuild_body(int i, const __m128 x4, const Quat q,
-                                                                          const __m128 v4, const __m128 w4) {
+                                                                          const __m128 v4, const __m128 w4, int k0,
+                                                                          int k1) {
   // rotation matrix of q (rows), cheaper than 4 quaternion rotations
   const float xx = q.x * q.x, yy = q.y * q.y, zz = q.z * q.z, xy = q.x * q.y, xz = q.x * q.z, yz = q.y * q.z,
               wx = q.w * q.x, wy = q.w * q.y, wz = q.w * q.z;
@@ -34,7 +35,7 @@ __attribute__((always_inline)) inline float Simulation::Impl::rebuild_body(int i
   float d2max = 0;
   // a granule's sphere offsets are the shape's (the values p.offset holds, without the load)
   const bool granule = b.flags[i] & kBodyGranule;
-  for (int k = 0, first = b.first[i], cnt = b.count[i]; k < cnt; ++k) {
+  for (int k = k0, first = b.first[i], cnt = k1 < 0 ? b.count[i] : k1; k < cnt; ++k) {
     const int s = slot_of[first + k];
     const float* O = granule ? &shape_offsets[4 * k] : &p.offset[4 * s];
     const __m128 arm = _mm_add_ps(_mm_add_ps(_mm_mul_ps(c0, _mm_set1_ps(O[0])), _mm_mul_ps(c1, _mm_set1_ps(O[1]))),
@@ -65,6 +66,10 @@ float Simulation::Impl::rebuild_body(int i, Vec3 v, Vec3 w) {
 
 // The same with the body's stored velocities.
 float Simulation::Impl::rebuild_body(int i) { return rebuild_body(i, ld3(b.vel, i), ld3(b.omega, i)); }
+
+float Simulation::Impl::rebuild_spheres(int i, int k0, int k1, Vec3 v, Vec3 w) {
+  return rebuild_body(i, from_vec3(ld3(b.pos, i)), ldq(b.quat, i), from_vec3(v), from_vec3(w), k0, k1);
+}
 
 Simulation::Impl::GatherCtx Simulation::Impl::gather_ctx() const {
   constexpr float inf = std::numeric_limits<float>::infinity();
@@ -165,87 +170,148 @@ __attribute__((always_inline)) inline void Simulation::Impl::granule_update(cons
   d2max = std::max(d2max, rebuild_body(i, xn, q, vp, w));
 }
 
+Vec3 Simulation::Impl::integrate_shell(int i, Vec3 F, Vec3 T, float dt, Vec3* w_out, int& bad) {
+  const std::uint32_t fl = b.flags[i];
+  const Vec3 x = ld3(b.pos, i);
+  st3(b.force, i, F);
+  st3(b.torque, i, T);
+  Vec3 v = ld3(b.vel, i), w = ld3(b.omega, i);
+  const Vec3 v_old = v;
+  Quat q = ldq(b.quat, i);
+  if (fl & kBodyDynamic) {
+    const float invm = b.mass[4 * i + 1];
+    v = v + dt * (F * invm + gravity);
+    const Vec3 iI = ld3(b.inv_inertia, i);
+    // body frame: I dw/dt = T - w x I w
+    Vec3 wb = rotate_inv(q, w), tb = rotate_inv(q, T);
+    Vec3 Iw{iI.x > 0 ? wb.x / iI.x : 0, iI.y > 0 ? wb.y / iI.y : 0, iI.z > 0 ? wb.z / iI.z : 0};
+    Vec3 rhs = tb - cross(wb, Iw);
+    wb = wb + dt * Vec3{rhs.x * iI.x, rhs.y * iI.y, rhs.z * iI.z};
+    w = rotate(q, wb);
+    st3(b.vel, i, v);
+    st3(b.omega, i, w);
+  }
+  Vec3 xn = x + dt * v;
+  q = advance_orientation(q, w, dt);
+  if (!std::isfinite(xn.x + xn.y + xn.z + v.x + v.y + v.z + w.x + w.y + w.z + q.w)) ++bad;
+  st3(b.pos, i, xn);
+  stq(b.quat, i, q);
+  // Velocity predictor: symplectic Euler's v is the velocity of [t_n, t_n+1], half a step
+  // behind the positions the next contact stage sees, so the dashpot would act on a lagged
+  // velocity (to first order the pair moves as if its mass were m_eff - c_n dt/2: e = 0.1
+  // came out +3.3 % at dt = t_contact/50 with the contact 3.3 % short). The spheres get
+  // v + (dt/2) a instead (gain pred_gain = 1/2, less at large damping per substep:
+  // predictor_gain), a = (v - v_old)/dt this substep's acceleration (all forces and
+  // gravity): zero at rest, so resting contacts see what they saw before; zero in a body's
+  // first substep (rebuild_body(i) elsewhere). Translation only: predicting w as well kept
+  // granule piles and beds jittering (rotation about a contact has a smaller point mass,
+  // so a larger damping per substep; measured, docs/dem.md "Step size").
+  // (a shell: granules take granule_update; its spheres are measured from the shell list's build)
+  *w_out = w;
+  return v + pred_gain * (v - v_old);
+}
+
 // ---- body stage: gather each sphere (gather_sphere), sum the spheres' forces in id order,
-// integrate, rebuild the spheres
+// integrate, rebuild the spheres. Wide shells (wide_bodies) in three passes over their chunks:
+// the chunks' sums, each body's step from them, the chunks' spheres rebuilt.
 bool Simulation::Impl::bodies(float dt, float* d2max_out, float* d2shell_out) {
-  const Vec3 g = gravity;
-  const float reach = shape.centre_distance + shape.radius;
   float d2max = 0, d2shell = 0, vmax = 0;
   int bad = 0;
   std::int64_t nwall = 0;
   const int n = nb;
-  const bool ordered = int(body_order.size()) == n;
+  const bool ordered = int(body_order.size()) + int(wide_bodies.size()) == n;
   const std::int32_t* order = body_order.data();
+  const int n_order = ordered ? int(body_order.size()) : n;
   const GatherCtx gctx = gather_ctx();
   const std::uint8_t* doze = def.sleep_regions ? dozing.data() : nullptr;
-#pragma omp parallel for num_threads(threads) schedule(dynamic, 128) reduction(max : d2max, d2shell, vmax) reduction(+ : bad, nwall) if (n > kParallelSpheres / 2 || np > kParallelSpheres)
-  for (int t = 0; t < n; ++t) {
-    const int i = ordered ? order[t] : t;
-    const std::uint32_t fl = b.flags[i];
-    const Vec3 x = ld3(b.pos, i);
-    Vec3 F{}, T{};
-    if (fl & kBodyStatic) {  // no force on a static body (its spheres' sums are only cleared)
-      st3(b.force, i, F);
-      st3(b.torque, i, T);
-      for (int k = 0, first = b.first[i], cnt = b.count[i]; k < cnt; ++k)
-        acc[std::size_t(slot_of[first + k])] = SphereSums{};
-      continue;
+  const int n_chunks = ordered ? int(wide_chunks.size()) : 0;
+  if (n_chunks > 0) {
+    wide_parts.resize(std::size_t(n_chunks));
+    wide_motion.resize(wide_bodies.size());
+  }
+#pragma omp parallel num_threads(threads) if (n > kParallelSpheres / 2 || np > kParallelSpheres)
+  {
+    if (n_chunks > 0) {
+      // the chunks' sums, each in its spheres' order (a static shell's sums are only cleared)
+#pragma omp for schedule(dynamic, 1) reduction(+ : nwall)
+      for (int c = 0; c < n_chunks; ++c) {
+        const WideChunk& ch = wide_chunks[std::size_t(c)];
+        const int i = ch.body, first = b.first[i];
+        WidePart& part = wide_parts[std::size_t(c)];
+        __m128 F = _mm_setzero_ps(), T = _mm_setzero_ps();
+        if (b.flags[i] & kBodyStatic) {
+          for (int k = ch.k0; k < ch.k1; ++k) acc[std::size_t(slot_of[first + k])] = SphereSums{};
+        } else {
+          const __m128 x = xyz0(_mm_loadu_ps(&b.pos[4 * std::size_t(i)]));
+          for (int k = ch.k0; k < ch.k1; ++k) {
+            __m128 Fs, Ts;
+            const __m128 xs = gather_sphere4(gctx, slot_of[first + k], dt, nwall, Fs, Ts);
+            F = _mm_add_ps(F, Fs);
+            T = _mm_add_ps(_mm_add_ps(T, Ts), cross4(_mm_sub_ps(xs, x), Fs));  // T + T_s + (x_s - x) x F_s
+          }
+        }
+        _mm_store_ps(part.F, F);
+        _mm_store_ps(part.T, T);
+      }
+      // each wide body's step from its chunks' sums, in chunk order
+#pragma omp single
+      for (std::size_t w = 0; w < wide_bodies.size(); ++w) {
+        const WideBody& wb = wide_bodies[w];
+        const int i = wb.body;
+        WideMotion& m = wide_motion[w];
+        m.rebuild = !(b.flags[i] & kBodyStatic);
+        if (!m.rebuild) {
+          st3(b.force, i, Vec3{});
+          st3(b.torque, i, Vec3{});
+          continue;
+        }
+        __m128 F = _mm_setzero_ps(), T = _mm_setzero_ps();
+        for (int c = wb.c0; c < wb.c1; ++c) {
+          F = _mm_add_ps(F, _mm_load_ps(wide_parts[std::size_t(c)].F));
+          T = _mm_add_ps(T, _mm_load_ps(wide_parts[std::size_t(c)].T));
+        }
+        m.v = integrate_shell(i, to_vec3(F), to_vec3(T), dt, &m.w, bad);
+      }
+      // (the single's barrier) the chunks' spheres rebuilt
+#pragma omp for schedule(dynamic, 1) reduction(max : d2shell)
+      for (int c = 0; c < n_chunks; ++c) {
+        const WideChunk& ch = wide_chunks[std::size_t(c)];
+        const WideMotion& m = wide_motion[std::size_t(ch.wide)];
+        if (m.rebuild) d2shell = std::max(d2shell, rebuild_spheres(ch.body, ch.k0, ch.k1, m.v, m.w));
+      }
     }
-    if (fl & kBodyGranule) {  // (granules are dynamic)
-      if (doze && doze[i]) {  // asleep in a still region (dem_regions.cpp): its sums are only cleared
-        for (int k = 0, first = b.first[i]; k < 4; ++k) acc[std::size_t(slot_of[first + k])] = SphereSums{};
+#pragma omp for schedule(dynamic, 128) reduction(max : d2max, d2shell, vmax) reduction(+ : bad, nwall)
+    for (int t = 0; t < n_order; ++t) {
+      const int i = ordered ? order[t] : t;
+      const std::uint32_t fl = b.flags[i];
+      if (fl & kBodyStatic) {  // no force on a static body (its spheres' sums are only cleared)
+        st3(b.force, i, Vec3{});
+        st3(b.torque, i, Vec3{});
+        for (int k = 0, first = b.first[i], cnt = b.count[i]; k < cnt; ++k)
+          acc[std::size_t(slot_of[first + k])] = SphereSums{};
         continue;
       }
-      granule_update(gctx, i, dt, nwall, d2max, vmax, bad);
-      continue;
-    }
-    for (int k = 0, first = b.first[i], cnt = b.count[i]; k < cnt; ++k) {
-      const int s = slot_of[first + k];
-      const SphereSum ss = gather_sphere(gctx, s, dt, nwall);
-      const Vec3 f = ss.F;
-      F = F + f;
-      T = T + ss.T + cross(ss.x - x, f);
-    }
-    st3(b.force, i, F);
-    st3(b.torque, i, T);
-    Vec3 v = ld3(b.vel, i), w = ld3(b.omega, i);
-    const Vec3 v_old = v;
-    Quat q = ldq(b.quat, i);
-    if (fl & kBodyDynamic) {
-      const float invm = b.mass[4 * i + 1];
-      v = v + dt * (F * invm + g);
-      const Vec3 iI = ld3(b.inv_inertia, i);
-      if (fl & kBodyGranule) {
-        w = w + T * (dt * iI.x);  // isotropic inertia
-      } else {
-        // body frame: I dw/dt = T - w x I w
-        Vec3 wb = rotate_inv(q, w), tb = rotate_inv(q, T);
-        Vec3 Iw{iI.x > 0 ? wb.x / iI.x : 0, iI.y > 0 ? wb.y / iI.y : 0, iI.z > 0 ? wb.z / iI.z : 0};
-        Vec3 rhs = tb - cross(wb, Iw);
-        wb = wb + dt * Vec3{rhs.x * iI.x, rhs.y * iI.y, rhs.z * iI.z};
-        w = rotate(q, wb);
+      if (fl & kBodyGranule) {  // (granules are dynamic)
+        if (doze && doze[i]) {  // asleep in a still region (dem_regions.cpp): its sums are only cleared
+          for (int k = 0, first = b.first[i]; k < 4; ++k) acc[std::size_t(slot_of[first + k])] = SphereSums{};
+          continue;
+        }
+        granule_update(gctx, i, dt, nwall, d2max, vmax, bad);
+        continue;
       }
-      st3(b.vel, i, v);
-      st3(b.omega, i, w);
-      if (fl & kBodyGranule) vmax = std::max(vmax, std::sqrt(dot(v, v)) + std::sqrt(dot(w, w)) * reach);
+      const Vec3 x = ld3(b.pos, i);
+      Vec3 F{}, T{};
+      for (int k = 0, first = b.first[i], cnt = b.count[i]; k < cnt; ++k) {
+        const int s = slot_of[first + k];
+        const SphereSum ss = gather_sphere(gctx, s, dt, nwall);
+        const Vec3 f = ss.F;
+        F = F + f;
+        T = T + ss.T + cross(ss.x - x, f);
+      }
+      Vec3 w;
+      const Vec3 vp = integrate_shell(i, F, T, dt, &w, bad);
+      d2shell = std::max(d2shell, rebuild_body(i, vp, w));
     }
-    Vec3 xn = x + dt * v;
-    q = advance_orientation(q, w, dt);
-    if (!std::isfinite(xn.x + xn.y + xn.z + v.x + v.y + v.z + w.x + w.y + w.z + q.w)) ++bad;
-    st3(b.pos, i, xn);
-    stq(b.quat, i, q);
-    // Velocity predictor: symplectic Euler's v is the velocity of [t_n, t_n+1], half a step
-    // behind the positions the next contact stage sees, so the dashpot would act on a lagged
-    // velocity (to first order the pair moves as if its mass were m_eff - c_n dt/2: e = 0.1
-    // came out +3.3 % at dt = t_contact/50 with the contact 3.3 % short). The spheres get
-    // v + (dt/2) a instead (gain pred_gain = 1/2, less at large damping per substep:
-    // predictor_gain), a = (v - v_old)/dt this substep's acceleration (all forces and
-    // gravity): zero at rest, so resting contacts see what they saw before; zero in a body's
-    // first substep (rebuild_body(i) elsewhere). Translation only: predicting w as well kept
-    // granule piles and beds jittering (rotation about a contact has a smaller point mass,
-    // so a larger damping per substep; measured, docs/dem.md "Step size").
-    // (a shell: granules take granule_update; its spheres are measured from the shell list's build)
-    d2shell = std::max(d2shell, rebuild_body(i, v + pred_gain * (v - v_old), w));
   }
   *d2max_out = d2max;
   *d2shell_out = d2shell;

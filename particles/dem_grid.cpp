@@ -60,6 +60,17 @@ void Simulation::Impl::sort() {
   std::copy(p.pos.begin(), p.pos.begin() + 4 * std::size_t(np), pos_at_sort.begin());
   {
     std::vector<std::uint8_t> seen(nb, 0);
+    // the wide shells apart (`bodies` steps them in chunks), in body index order
+    wide_chunks.clear();
+    wide_bodies.clear();
+    for (int i = 0; i < nb; ++i) {
+      if ((b.flags[i] & kBodyGranule) || b.count[i] <= kWideShell) continue;
+      seen[i] = 1;
+      const int w = int(wide_bodies.size()), c0 = int(wide_chunks.size());
+      for (int k0 = 0; k0 < b.count[i]; k0 += kWideChunk)
+        wide_chunks.push_back({i, k0, std::min(k0 + kWideChunk, b.count[i]), w});
+      wide_bodies.push_back({i, c0, int(wide_chunks.size())});
+    }
     body_order.clear();
     body_order.reserve(nb);
     for (int s2 = 0; s2 < np; ++s2)

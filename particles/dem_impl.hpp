@@ -163,6 +163,34 @@ struct Simulation::Impl {
   // close in memory (a 64,000-sphere bed does not fit in L2). Each body's sums do not depend
   // on the order, so neither do the results.
   std::vector<std::int32_t> body_order;
+  // Wide shells: a shell (a body that is not a granule) of more than kWideShell spheres is
+  // summed and rebuilt by the body stage in chunks of kWideChunk spheres spread over the
+  // threads (`bodies`), not by one thread; set by sort(), in body index order. Each chunk sums
+  // its spheres in their order and the body adds its chunks in chunk order, so the result is
+  // the same for any thread count. (On one thread the two larger crates of
+  // leach_2_three_scales, 7,842 and 3,152 spheres, are 24 % of their patches' body stage,
+  // which one thread did whatever the thread count: docs/BENCHMARKS.md "Wide shells over the
+  // threads".)
+  static constexpr int kWideShell = 2048;
+  static constexpr int kWideChunk = 512;
+  struct WideChunk {
+    std::int32_t body, k0, k1;  // the body's spheres [k0, k1) (in the body's own order)
+    std::int32_t wide;          // the body's index in wide_bodies
+  };
+  struct WideBody {
+    std::int32_t body, c0, c1;  // its chunks [c0, c1) of wide_chunks
+  };
+  std::vector<WideChunk> wide_chunks;
+  std::vector<WideBody> wide_bodies;
+  struct alignas(16) WidePart {
+    float F[4], T[4];  // N, N m about the body's centre (lane 3 = 0)
+  };
+  std::vector<WidePart> wide_parts;  // chunk -> its sums (scratch of `bodies`)
+  struct WideMotion {
+    Vec3 v, w;    // m/s, rad/s: the velocities its spheres are rebuilt with
+    bool rebuild;  // false for a static shell
+  };
+  std::vector<WideMotion> wide_motion;  // wide body -> (scratch of `bodies`)
   bool need_sort = true;
   float shape_offsets[16] = {};        // the granule's 4 sphere offsets (x, y, z, 0), m, body frame
 
@@ -329,8 +357,11 @@ struct Simulation::Impl {
   // cross(a, b) lane-wise as math.hpp's. Lane 3 is unused (the radius and the inverse mass
   // are kept in the stores).
   float rebuild_body(int i, Vec3 v, Vec3 w);
-  // The same with the body's pose x4 (lane 3 unused), q and v4, w4 (lane 3 = 0) in registers.
-  float rebuild_body(int i, const __m128 x4, const Quat q, const __m128 v4, const __m128 w4);
+  // The same with the body's pose x4 (lane 3 unused), q and v4, w4 (lane 3 = 0) in registers,
+  // for its spheres [k0, k1) (its own order; k1 < 0: to the last).
+  float rebuild_body(int i, const __m128 x4, const Quat q, const __m128 v4, const __m128 w4, int k0 = 0, int k1 = -1);
+  // The same for the body's spheres [k0, k1) only (its own order), from its stored pose.
+  float rebuild_spheres(int i, int k0, int k1, Vec3 v, Vec3 w);
 
   // Counting sort of the particles by cell (stable, serial: deterministic), permuting every
   // particle field, then the neighbour list is rebuilt and the springs carried over.
@@ -477,6 +508,12 @@ struct Simulation::Impl {
   // its order (the same results bit for bit, ~1/3 fewer instructions).
   void granule_update(const GatherCtx& gctx, const int i, const float dt, std::int64_t& nwall, float& d2max,
                       float& vmax, int& bad);
+
+  // A shell's step from its spheres' force F and torque T (about its centre): stores them,
+  // integrates a dynamic one (symplectic Euler, the body-frame Euler equations) and moves a
+  // kinematic one; counts a non-finite state in `bad`. Returns the velocity the spheres are
+  // rebuilt with (the predictor below) and the angular velocity in *w.
+  Vec3 integrate_shell(int i, Vec3 F, Vec3 T, float dt, Vec3* w, int& bad);
 
   // ---- body stage: gather each sphere (gather_sphere), sum the spheres' forces in id order,
   // integrate, rebuild the spheres
