@@ -118,11 +118,18 @@ __attribute__((always_inline)) inline __m128 Simulation::Impl::gather_sphere4(co
   return xyz0(P4);
 }
 
-__attribute__((always_inline)) inline Simulation::Impl::SphereSum Simulation::Impl::gather_sphere(
-    const GatherCtx& g, const int i, const float dt, std::int64_t& nwall) {
-  __m128 F4, T4;
-  const __m128 x4 = gather_sphere4(g, i, dt, nwall, F4, T4);
-  return {to_vec3(F4), to_vec3(T4), to_vec3(x4)};
+// Adds the forces of body i's spheres [k0, k1) (its own order) to F and their torques about
+// the body's centre to T (lane 3 = 0): T + T_s + (x_s - x) x F_s, sphere by sphere.
+__attribute__((always_inline)) inline void Simulation::Impl::sum_spheres(const GatherCtx& gctx, const int i, const int k0,
+                                                                        const int k1, const float dt,
+                                                                        std::int64_t& nwall, __m128& F, __m128& T) {
+  const __m128 x = xyz0(_mm_loadu_ps(&b.pos[4 * std::size_t(i)]));
+  for (int k = k0, first = b.first[i]; k < k1; ++k) {
+    __m128 Fs, Ts;
+    const __m128 xs = gather_sphere4(gctx, slot_of[first + k], dt, nwall, Fs, Ts);
+    F = _mm_add_ps(F, Fs);
+    T = _mm_add_ps(_mm_add_ps(T, Ts), cross4(_mm_sub_ps(xs, x), Fs));
+  }
 }
 
 // The body stage for granule i (dynamic, isotropic inertia): the formulas of the general
@@ -211,7 +218,7 @@ Vec3 Simulation::Impl::integrate_shell(int i, Vec3 F, Vec3 T, float dt, Vec3* w_
   return v + pred_gain * (v - v_old);
 }
 
-// ---- body stage: gather each sphere (gather_sphere), sum the spheres' forces in id order,
+// ---- body stage: gather each sphere (gather_sphere4), sum the spheres' forces in id order,
 // integrate, rebuild the spheres. Wide shells (wide_bodies) in three passes over their chunks:
 // the chunks' sums, each body's step from them, the chunks' spheres rebuilt.
 bool Simulation::Impl::bodies(float dt, float* d2max_out, float* d2shell_out) {
@@ -236,19 +243,13 @@ bool Simulation::Impl::bodies(float dt, float* d2max_out, float* d2shell_out) {
 #pragma omp for schedule(dynamic, 1) reduction(+ : nwall)
       for (int c = 0; c < n_chunks; ++c) {
         const WideChunk& ch = wide_chunks[std::size_t(c)];
-        const int i = ch.body, first = b.first[i];
+        const int i = ch.body;
         WidePart& part = wide_parts[std::size_t(c)];
         __m128 F = _mm_setzero_ps(), T = _mm_setzero_ps();
         if (b.flags[i] & kBodyStatic) {
-          for (int k = ch.k0; k < ch.k1; ++k) acc[std::size_t(slot_of[first + k])] = SphereSums{};
+          for (int k = ch.k0; k < ch.k1; ++k) acc[std::size_t(slot_of[b.first[i] + k])] = SphereSums{};
         } else {
-          const __m128 x = xyz0(_mm_loadu_ps(&b.pos[4 * std::size_t(i)]));
-          for (int k = ch.k0; k < ch.k1; ++k) {
-            __m128 Fs, Ts;
-            const __m128 xs = gather_sphere4(gctx, slot_of[first + k], dt, nwall, Fs, Ts);
-            F = _mm_add_ps(F, Fs);
-            T = _mm_add_ps(_mm_add_ps(T, Ts), cross4(_mm_sub_ps(xs, x), Fs));  // T + T_s + (x_s - x) x F_s
-          }
+          sum_spheres(gctx, i, ch.k0, ch.k1, dt, nwall, F, T);
         }
         _mm_store_ps(part.F, F);
         _mm_store_ps(part.T, T);
@@ -299,17 +300,10 @@ bool Simulation::Impl::bodies(float dt, float* d2max_out, float* d2shell_out) {
         granule_update(gctx, i, dt, nwall, d2max, vmax, bad);
         continue;
       }
-      const Vec3 x = ld3(b.pos, i);
-      Vec3 F{}, T{};
-      for (int k = 0, first = b.first[i], cnt = b.count[i]; k < cnt; ++k) {
-        const int s = slot_of[first + k];
-        const SphereSum ss = gather_sphere(gctx, s, dt, nwall);
-        const Vec3 f = ss.F;
-        F = F + f;
-        T = T + ss.T + cross(ss.x - x, f);
-      }
+      __m128 F = _mm_setzero_ps(), T = _mm_setzero_ps();
+      sum_spheres(gctx, i, 0, b.count[i], dt, nwall, F, T);
       Vec3 w;
-      const Vec3 vp = integrate_shell(i, F, T, dt, &w, bad);
+      const Vec3 vp = integrate_shell(i, to_vec3(F), to_vec3(T), dt, &w, bad);
       d2shell = std::max(d2shell, rebuild_body(i, vp, w));
     }
   }

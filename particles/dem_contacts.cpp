@@ -22,7 +22,7 @@ bool simd::use_avx2_pair_kernel() {
 }
 
 // ---- contact stage, pair pass: each pair is computed once, by its owner's entry, and added
-// to both spheres' sums (acc; read by gather_sphere in the body stage), slab by slab
+// to both spheres' sums (acc; read by gather_sphere4 in the body stage), slab by slab
 void Simulation::Impl::contacts(float dt) {
   const Material& mat = def.material;
   const float kn = mat.normal_stiffness;
@@ -43,7 +43,7 @@ void Simulation::Impl::contacts(float dt) {
   std::uint8_t* TCH = pairs.touch.data();
   std::int64_t npairs = 0;
   const int n = np;
-  law = {kn, cn0, kt, ctr, mu};  // for gather_sphere
+  law = {kn, cn0, kt, ctr, mu};  // for gather_sphere4
   const bool led = ledger;
   const bool hysteretic = mat.unloading_stiffness_ratio > 1.0f;
   const float kn2 = hysteretic ? kn * mat.unloading_stiffness_ratio : kn;  // unloading stiffness, N/m

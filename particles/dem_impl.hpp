@@ -454,7 +454,7 @@ struct Simulation::Impl {
   double max_dt() const;
 
   // ---- contact stage, pair pass: each pair is computed once, by its owner's entry, and added
-  // to both spheres' sums (acc; read by gather_sphere in the body stage), slab by slab
+  // to both spheres' sums (acc; read by gather_sphere4 in the body stage), slab by slab
   void contacts(float dt);
 
   // ---- sphere stage (called by the body stage for each sphere of a body): sphere i takes the
@@ -464,11 +464,7 @@ struct Simulation::Impl {
   struct LawConstants {
     float kn, cn0, kt, ctr, mu;  // N/m, c_n = cn0 / sqrt(1/m_i + 1/m_j), N/m, c_t/c_n, -
   } law{};
-  struct SphereSum {
-    Vec3 F, T;  // N, N m (about the sphere centre)
-    Vec3 x;     // the sphere's centre, m
-  };
-  // What gather_sphere reads, copied to a local of the body stage once per substep: held in
+  // What gather_sphere4 reads, copied to a local of the body stage once per substep: held in
   // members, these were loaded again after every float store (the compiler cannot tell a
   // store to a force from one to a member), ~20 instructions per sphere-step.
   struct GatherCtx {
@@ -491,7 +487,6 @@ struct Simulation::Impl {
   // Sphere i's force F4 and torque T4 about its centre (lane 3 = 0); returns its centre (lane 3 = 0).
   __m128 gather_sphere4(const GatherCtx& g, const int i, const float dt, std::int64_t& nwall, __m128& F4,
                         __m128& T4);
-  SphereSum gather_sphere(const GatherCtx& g, const int i, const float dt, std::int64_t& nwall);
   // Boundaries of sphere i (dynamic): the planes of physics::boundary_plane (floor, side walls,
   // the terrain outside the fill and the fill's sides; shaders/dem/physics_common.glsl, shared
   // with the GL force kernel) in slot order; adds their force and torque (about the sphere
@@ -509,13 +504,17 @@ struct Simulation::Impl {
   void granule_update(const GatherCtx& gctx, const int i, const float dt, std::int64_t& nwall, float& d2max,
                       float& vmax, int& bad);
 
+  // Adds the forces of body i's spheres [k0, k1) to F and their torques about its centre to T
+  // (SSE2, lane 3 = 0; the float operations of the Vec3 sum in its order).
+  void sum_spheres(const GatherCtx& gctx, const int i, const int k0, const int k1, const float dt, std::int64_t& nwall,
+                   __m128& F, __m128& T);
   // A shell's step from its spheres' force F and torque T (about its centre): stores them,
   // integrates a dynamic one (symplectic Euler, the body-frame Euler equations) and moves a
   // kinematic one; counts a non-finite state in `bad`. Returns the velocity the spheres are
   // rebuilt with (the predictor below) and the angular velocity in *w.
   Vec3 integrate_shell(int i, Vec3 F, Vec3 T, float dt, Vec3* w, int& bad);
 
-  // ---- body stage: gather each sphere (gather_sphere), sum the spheres' forces in id order,
+  // ---- body stage: gather each sphere (gather_sphere4), sum the spheres' forces in id order,
   // integrate, rebuild the spheres
   // The largest squared displacement (m^2) of a granule's sphere since the sort into
   // *d2max_out, of a shell's since the shell list's build into *d2shell_out.
