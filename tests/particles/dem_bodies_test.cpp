@@ -3,6 +3,7 @@
 // order that does not depend on the thread count, and every sphere must be rebuilt.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 
@@ -36,7 +37,7 @@ SimulationDef box(int threads) {
   d.bounds_min = {-0.15f, 0, -0.15f};
   d.bounds_max = {0.15f, 0.1f, 0.15f};
   d.particle_radius = kR;
-  d.material.normal_stiffness = 2e4f;  // N/m (the stability guard's bound for the plate landing)
+  d.material.normal_stiffness = 2e4f;  // N/m: stiff enough for the stability guard at the plate's landing speed
   d.sleep_time = 0;
   d.threads = threads;
   d.max_bodies = 4;
@@ -49,11 +50,11 @@ struct PlateRun {
   double rest_force = 0;  // N, the floor's mean upward force on the resting plate
   double tilt = 0;        // largest |q.x|, |q.z| of the plate over the run
   double kin_error = 0;   // m, the kinematic plate's spheres against where its pose puts them
-  double rest_y = 0;    // m, the dynamic plate's height at the end
+  double rest_y = 0;      // m, the dynamic plate's height at the end
 };
 
-// A dynamic plate dropped 2 mm onto the floor and left to rest; beside it (above) a kinematic
-// plate moving sideways at 5 cm/s, touching nothing.
+// A dynamic plate dropped 2 mm onto the floor and left to rest; above it a kinematic plate
+// moving sideways at 5 cm/s, touching nothing.
 PlateRun run(int threads) {
   PlateRun out;
   auto s = Simulation::create(box(threads));
