@@ -260,8 +260,7 @@ bool Simulation::Impl::bodies(float dt, float* d2max_out, float* d2shell_out) {
         const WideBody& wb = wide_bodies[w];
         const int i = wb.body;
         WideMotion& m = wide_motion[w];
-        m.rebuild = !(b.flags[i] & kBodyStatic);
-        if (!m.rebuild) {
+        if (b.flags[i] & kBodyStatic) {
           st3(b.force, i, Vec3{});
           st3(b.torque, i, Vec3{});
           continue;
@@ -278,7 +277,7 @@ bool Simulation::Impl::bodies(float dt, float* d2max_out, float* d2shell_out) {
       for (int c = 0; c < n_chunks; ++c) {
         const WideChunk& ch = wide_chunks[std::size_t(c)];
         const WideMotion& m = wide_motion[std::size_t(ch.wide)];
-        if (m.rebuild) d2shell = std::max(d2shell, rebuild_spheres(ch.body, ch.k0, ch.k1, m.v, m.w));
+        if (!(b.flags[ch.body] & kBodyStatic)) d2shell = std::max(d2shell, rebuild_spheres(ch.body, ch.k0, ch.k1, m.v, m.w));
       }
     }
 #pragma omp for schedule(dynamic, 128) reduction(max : d2max, d2shell, vmax) reduction(+ : bad, nwall)

@@ -104,11 +104,11 @@ void Simulation::Impl::contacts(float dt) {
     xe[2] = xi.z;
     add_pair(i, j, from_vec3(cf.f), from_vec3(cross(nrm, cf.ft)));
   };
-  // The walk over the entries [e0, e1) of sphere i's row in a list (partners nb, springs xs,
+  // The walk over the entries [e0, e1) of sphere i's row in a list (partners pn, springs xs,
   // touch flags tch, largest overlaps dm): a pair apart (|d| >= r_i + r_j, or the same centre)
   // has its spring forgotten; a touching one is counted in `touching` and handed to
   // pair(i, sphere i, touch). The granules' list (slab by slab) and the shell list's.
-  auto walk_row = [&](int i, int e0, int e1, const std::int32_t* nb, float* xs, std::uint8_t* tch, float* dm,
+  auto walk_row = [&](int i, int e0, int e1, const std::int32_t* pn, float* xs, std::uint8_t* tch, float* dm,
                       std::int64_t& touching, auto&& pair) __attribute__((always_inline)) {
     if (e0 == e1) return;
     const float ri = P[4 * i + 3];
@@ -118,7 +118,7 @@ void Simulation::Impl::contacts(float dt) {
     // history left as it is (dem_regions.cpp)
     const bool dozing_i = DZ && DZ[i];
     for (int e = e0; e < e1; ++e) {
-      const int j = nb[e];
+      const int j = pn[e];
       if (dozing_i && DZ[j]) continue;
       const float dx = o.p.x - P[4 * j], dy = o.p.y - P[4 * j + 1], dz = o.p.z - P[4 * j + 2];
       const float rj = P[4 * j + 3];

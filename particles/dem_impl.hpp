@@ -187,8 +187,7 @@ struct Simulation::Impl {
   };
   std::vector<WidePart> wide_parts;  // chunk -> its sums (scratch of `bodies`)
   struct WideMotion {
-    Vec3 v, w;    // m/s, rad/s: the velocities its spheres are rebuilt with
-    bool rebuild;  // false for a static shell
+    Vec3 v, w;  // m/s, rad/s: the velocities its spheres are rebuilt with (a static shell's are not)
   };
   std::vector<WideMotion> wide_motion;  // wide body -> (scratch of `bodies`)
   bool need_sort = true;
