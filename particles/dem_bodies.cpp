@@ -4,6 +4,7 @@
 // next contact stage sees; kinematic moves of an asleep simulation; push_body. dem_impl.hpp.
 #include "particles/dem_impl.hpp"
 
+#include <omp.h>
 #include <algorithm>
 
 #include "particles/dem_control.hpp"
@@ -236,7 +237,33 @@ bool Simulation::Impl::bodies(float dt, float* d2max_out, float* d2shell_out) {
     wide_parts.resize(std::size_t(n_chunks));
     wide_motion.resize(wide_bodies.size());
   }
-#pragma omp parallel num_threads(threads) if (n > kParallelSpheres / 2 || np > kParallelSpheres)
+  // The bodies in `threads` contiguous runs of the body order (which follows the spheres'
+  // grid order), of about equal work: a thread writes the spheres of its run only, so two
+  // threads share cache lines of the sphere arrays only where their runs meet. (Chunks of 128
+  // bodies handed out in turn shared them all over: on two threads the stage ran no faster
+  // than on one; docs/BENCHMARKS.md "The body stage in runs of the body order".) Which thread steps a
+  // body does not change what is computed.
+  const bool parallel = n > kParallelSpheres / 2 || np > kParallelSpheres;
+  // (inside another parallel region, as patches stepped side by side are, the team is one thread)
+  const int runs = parallel && !omp_in_parallel() ? std::max(1, threads) : 1;
+  body_runs.assign(std::size_t(runs) + 1, n_order);
+  body_runs[0] = 0;
+  if (runs > 1) {
+    // work of a body: its spheres (a dozing granule only clears its sums: about an eighth)
+    auto work = [&](int t) {
+      const int i = ordered ? order[t] : t;
+      return (doze && doze[i]) ? 1 : 2 * b.count[i];
+    };
+    std::int64_t total = 0;
+    for (int t = 0; t < n_order; ++t) total += work(t);
+    std::int64_t acc_work = 0;
+    int r = 1;
+    for (int t = 0; t < n_order && r < runs; ++t) {
+      acc_work += work(t);
+      while (r < runs && acc_work * runs >= total * r) body_runs[std::size_t(r++)] = t + 1;
+    }
+  }
+#pragma omp parallel num_threads(threads) if (parallel)
   {
     if (n_chunks > 0) {
       // the chunks' sums, each in its spheres' order (a static shell's sums are only cleared)
@@ -280,8 +307,9 @@ bool Simulation::Impl::bodies(float dt, float* d2max_out, float* d2shell_out) {
         if (!(b.flags[ch.body] & kBodyStatic)) d2shell = std::max(d2shell, rebuild_spheres(ch.body, ch.k0, ch.k1, m.v, m.w));
       }
     }
-#pragma omp for schedule(dynamic, 128) reduction(max : d2max, d2shell, vmax) reduction(+ : bad, nwall)
-    for (int t = 0; t < n_order; ++t) {
+#pragma omp for schedule(static, 1) reduction(max : d2max, d2shell, vmax) reduction(+ : bad, nwall)
+    for (int run = 0; run < runs; ++run)
+    for (int t = body_runs[std::size_t(run)]; t < body_runs[std::size_t(run) + 1]; ++t) {
       const int i = ordered ? order[t] : t;
       const std::uint32_t fl = b.flags[i];
       if (fl & kBodyStatic) {  // no force on a static body (its spheres' sums are only cleared)

@@ -163,6 +163,7 @@ struct Simulation::Impl {
   // close in memory (a 64,000-sphere bed does not fit in L2). Each body's sums do not depend
   // on the order, so neither do the results.
   std::vector<std::int32_t> body_order;
+  std::vector<int> body_runs;  // the body stage's runs of body_order, one a thread (`bodies`)
   // Wide shells: a shell (a body that is not a granule) of more than kWideShell spheres is
   // summed and rebuilt by the body stage in chunks of kWideChunk spheres spread over the
   // threads (`bodies`), not by one thread; set by sort(), in body index order. Each chunk sums
