@@ -653,7 +653,9 @@ TEST(TerrainManager, BodyDrivenAcrossPatchEdgeStaysOnParticles) {
     ASSERT_TRUE(rig.frame().ok()) << rig.error;
     // The patch behind is released one part a frame, the one ahead promoted a part a frame.
     const TerrainManager::FrameWork& w = rig.manager->last_frame_work();
-    if (w.urgent_fills == 0) EXPECT_LE(w.conversion_parts, 1) << "at t = " << rig.t();
+    if (w.urgent_fills == 0) {
+      EXPECT_LE(w.conversion_parts, 1) << "at t = " << rig.t();
+    }
     EXPECT_LE(w.demotion_parts, 1) << "at t = " << rig.t();
   }
   const BodyState st = world.state(*id);
@@ -665,8 +667,9 @@ TEST(TerrainManager, BodyDrivenAcrossPatchEdgeStaysOnParticles) {
   // One conversion a frame: no frame (simulated time) both demotes and promotes.
   for (const auto& a : rep["conversions"])
     for (const auto& b : rep["conversions"])
-      if (a["kind"] == "demoted" && b["kind"] == "promoted" && a["time_s"].get<double>() < 3.99)
+      if (a["kind"] == "demoted" && b["kind"] == "promoted" && a["time_s"].get<double>() < 3.99) {
         EXPECT_NE(a["time_s"].get<double>(), b["time_s"].get<double>()) << "patch " << a["patch"] << " and " << b["patch"];
+      }
   // Over manager seeds 1-5 the ledger closed at -0.4 to -4.2 % (the patch a moving body is
   // filled under loses the granules its shell would overlap: the shell's spheres sit on the
   // body's surface, a granule radius proud of it; docs/manager.md "Volume ledger").
