@@ -241,8 +241,8 @@ bool Simulation::Impl::bodies(float dt, float* d2max_out, float* d2shell_out) {
   // grid order), of about equal work: a thread writes the spheres of its run only, so two
   // threads share cache lines of the sphere arrays only where their runs meet. (Chunks of 128
   // bodies handed out in turn shared them all over: on two threads the stage ran no faster
-  // than on one; docs/BENCHMARKS.md "The body stage in runs of the body order".) Which thread steps a
-  // body does not change what is computed.
+  // than on one; docs/BENCHMARKS.md "The body stage in runs of the body order".) Which
+  // thread steps a body does not change what is computed.
   const bool parallel = n > kParallelSpheres / 2 || np > kParallelSpheres;
   // (inside another parallel region, as patches stepped side by side are, the team is one thread)
   const int runs = parallel && !omp_in_parallel() ? std::max(1, threads) : 1;
@@ -308,30 +308,31 @@ bool Simulation::Impl::bodies(float dt, float* d2max_out, float* d2shell_out) {
       }
     }
 #pragma omp for schedule(static, 1) reduction(max : d2max, d2shell, vmax) reduction(+ : bad, nwall)
-    for (int run = 0; run < runs; ++run)
-    for (int t = body_runs[std::size_t(run)]; t < body_runs[std::size_t(run) + 1]; ++t) {
-      const int i = ordered ? order[t] : t;
-      const std::uint32_t fl = b.flags[i];
-      if (fl & kBodyStatic) {  // no force on a static body (its spheres' sums are only cleared)
-        st3(b.force, i, Vec3{});
-        st3(b.torque, i, Vec3{});
-        for (int k = 0, first = b.first[i], cnt = b.count[i]; k < cnt; ++k)
-          acc[std::size_t(slot_of[first + k])] = SphereSums{};
-        continue;
-      }
-      if (fl & kBodyGranule) {  // (granules are dynamic)
-        if (doze && doze[i]) {  // asleep in a still region (dem_regions.cpp): its sums are only cleared
-          for (int k = 0, first = b.first[i]; k < 4; ++k) acc[std::size_t(slot_of[first + k])] = SphereSums{};
+    for (int run = 0; run < runs; ++run) {
+      for (int t = body_runs[std::size_t(run)]; t < body_runs[std::size_t(run) + 1]; ++t) {
+        const int i = ordered ? order[t] : t;
+        const std::uint32_t fl = b.flags[i];
+        if (fl & kBodyStatic) {  // no force on a static body (its spheres' sums are only cleared)
+          st3(b.force, i, Vec3{});
+          st3(b.torque, i, Vec3{});
+          for (int k = 0, first = b.first[i], cnt = b.count[i]; k < cnt; ++k)
+            acc[std::size_t(slot_of[first + k])] = SphereSums{};
           continue;
         }
-        granule_update(gctx, i, dt, nwall, d2max, vmax, bad);
-        continue;
+        if (fl & kBodyGranule) {  // (granules are dynamic)
+          if (doze && doze[i]) {  // asleep in a still region (dem_regions.cpp): its sums are only cleared
+            for (int k = 0, first = b.first[i]; k < 4; ++k) acc[std::size_t(slot_of[first + k])] = SphereSums{};
+            continue;
+          }
+          granule_update(gctx, i, dt, nwall, d2max, vmax, bad);
+          continue;
+        }
+        __m128 F = _mm_setzero_ps(), T = _mm_setzero_ps();
+        sum_spheres(gctx, i, 0, b.count[i], dt, nwall, F, T);
+        Vec3 w;
+        const Vec3 vp = integrate_shell(i, to_vec3(F), to_vec3(T), dt, &w, bad);
+        d2shell = std::max(d2shell, rebuild_body(i, vp, w));
       }
-      __m128 F = _mm_setzero_ps(), T = _mm_setzero_ps();
-      sum_spheres(gctx, i, 0, b.count[i], dt, nwall, F, T);
-      Vec3 w;
-      const Vec3 vp = integrate_shell(i, to_vec3(F), to_vec3(T), dt, &w, bad);
-      d2shell = std::max(d2shell, rebuild_body(i, vp, w));
     }
   }
   *d2max_out = d2max;
