@@ -4,6 +4,7 @@
 // tests/particles/contact_avx2_test.cpp), and added to both spheres' sums. dem_impl.hpp.
 #include "particles/dem_impl.hpp"
 
+#include <omp.h>
 #include <cstdlib>
 #include <cstring>
 
@@ -19,6 +20,40 @@ bool simd::use_avx2_pair_kernel() {
 #else
   return false;
 #endif
+}
+
+// The slabs of each parity in `runs` contiguous runs of about equal work (dem_impl.hpp
+// slab_runs); a slab's work is counted again when it is stale.
+void Simulation::Impl::plan_slab_runs(int runs) {
+  const int nchunks = int(chunk_start.size()) - 1;
+  const std::int32_t* CS = chunk_start.data();
+  const std::int32_t* NS = nstart.data();
+  const std::uint8_t* DZ = def.sleep_regions ? sphere_dozing.data() : nullptr;
+  if (slab_work_stale || int(slab_work.size()) != nchunks) {
+    slab_work.assign(std::size_t(std::max(0, nchunks)), 0);
+    for (int c = 0; c < nchunks; ++c) {
+      std::int64_t w = 0;
+      // (an awake sphere's row: every pair's distance, the touching ones' law; a sleeping
+      // sphere's: a test of each partner's sleep)
+      for (int i = CS[c]; i < CS[c + 1]; ++i) w += DZ && DZ[i] ? 1 + (NS[i + 1] - NS[i]) / 2 : 2 + 2 * (NS[i + 1] - NS[i]);
+      slab_work[std::size_t(c)] = w;
+    }
+    slab_work_stale = false;
+  }
+  slab_runs.assign(2 * std::size_t(runs + 1), 0);
+  for (int parity = 0; parity < 2; ++parity) {
+    int* R = &slab_runs[std::size_t(parity) * std::size_t(runs + 1)];
+    const int slabs = nchunks > parity ? (nchunks - parity + 1) / 2 : 0;
+    std::int64_t total = 0;
+    for (int k = 0; k < slabs; ++k) total += slab_work[std::size_t(parity + 2 * k)];
+    for (int r = 1; r <= runs; ++r) R[r] = slabs;
+    std::int64_t acc_work = 0;
+    int r = 1;
+    for (int k = 0; k < slabs && r < runs; ++k) {
+      acc_work += slab_work[std::size_t(parity + 2 * k)];
+      while (r < runs && acc_work * runs >= total * r) R[r++] = k + 1;
+    }
+  }
 }
 
 // ---- contact stage, pair pass: each pair is computed once, by its owner's entry, and added
@@ -37,7 +72,6 @@ void Simulation::Impl::contacts(float dt) {
   const std::int32_t* NS = nstart.data();
   const std::int32_t* NB = nbr.data();
   const std::int32_t* CS = chunk_start.data();
-  const int nchunks = int(chunk_start.size()) - 1;
   float* XI = pairs.xi.data();
   float* ACC = acc.data()->v;
   std::uint8_t* TCH = pairs.touch.data();
@@ -135,6 +169,11 @@ void Simulation::Impl::contacts(float dt) {
       pair(i, o, Touch{e, j, dx, dy, dz, rj, rs, d2, xe});
     }
   };
+  // (one run a thread; inside another parallel region, as patches stepped side by side are,
+  // the team is one thread)
+  const int runs = n > kParallelSpheres && !omp_in_parallel() ? std::max(1, threads) : 1;
+  plan_slab_runs(runs);
+  const int* RUNS = slab_runs.data();
 #pragma omp parallel num_threads(threads) if (n > kParallelSpheres)
   {
   // The walk both passes make over slab c: every entry of its spheres' rows (walk_row).
@@ -171,8 +210,10 @@ void Simulation::Impl::contacts(float dt) {
     bt.count = 0;
   };
   for (int parity = 0; parity < 2; ++parity) {
-#pragma omp for schedule(dynamic, 1) reduction(+ : npairs)
-  for (int c = parity; c < nchunks; c += 2) {
+  const int* R = RUNS + std::size_t(parity) * std::size_t(runs + 1);
+#pragma omp for schedule(static, 1) reduction(+ : npairs)
+  for (int run = 0; run < runs; ++run)
+  for (int c = parity + 2 * R[run]; c < parity + 2 * R[run + 1]; c += 2) {
     bt.count = 0;
     walk_slab(c, npairs, [&](int i, const Own& o, const Touch& t) __attribute__((always_inline)) {
       const int k = bt.count++;
@@ -197,8 +238,10 @@ void Simulation::Impl::contacts(float dt) {
   } else {
   // pair pass: each entry computes its pair once
   for (int parity = 0; parity < 2; ++parity) {
-#pragma omp for schedule(dynamic, 1) reduction(+ : npairs, led_n, led_f, led_u)
-  for (int c = parity; c < nchunks; c += 2) {
+  const int* R = RUNS + std::size_t(parity) * std::size_t(runs + 1);
+#pragma omp for schedule(static, 1) reduction(+ : npairs, led_n, led_f, led_u)
+  for (int run = 0; run < runs; ++run)
+  for (int c = parity + 2 * R[run]; c < parity + 2 * R[run + 1]; c += 2) {
     // c_n = 2 zeta sqrt(k_n m_eff); granule beds repeat the same mass pair, so the last value
     // is reused while the pair's inverse masses are the same
     float last_invm_i = -1.0f, last_invm_j = -1.0f, last_cn = 0.0f;

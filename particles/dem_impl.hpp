@@ -164,6 +164,14 @@ struct Simulation::Impl {
   // on the order, so neither do the results.
   std::vector<std::int32_t> body_order;
   std::vector<int> body_runs;  // the body stage's runs of body_order, one a thread (`bodies`)
+  // The pair pass's slabs of each parity in one contiguous run a thread, of about equal work
+  // (`contacts`): a thread then walks about the spheres its body-stage run writes. Each slab's
+  // work (its spheres and list entries, a sleeping sphere's less) is counted again after a sort
+  // or a change of the sleeping regions.
+  std::vector<std::int64_t> slab_work;
+  std::vector<int> slab_runs;  // parity p's runs: [p (runs + 1), (p + 1) (runs + 1)), positions k of slabs p + 2 k
+  bool slab_work_stale = true;
+  void plan_slab_runs(int runs);
   // Wide shells: a shell (a body that is not a granule) of more than kWideShell spheres is
   // summed and rebuilt by the body stage in chunks of kWideChunk spheres spread over the
   // threads (`bodies`), not by one thread; set by sort(), in body index order. Each chunk sums

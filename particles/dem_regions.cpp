@@ -11,6 +11,7 @@ namespace sandpatch {
 
 void Simulation::Impl::refresh_sphere_dozing() {
   for (int s = 0; s < np; ++s) sphere_dozing[std::size_t(s)] = dozing[std::size_t(p.body[s])];
+  slab_work_stale = true;
 }
 
 void Simulation::Impl::update_regions(double dt_frame) {
