@@ -29,6 +29,11 @@ void Simulation::Impl::plan_slab_runs(int runs) {
   const std::int32_t* CS = chunk_start.data();
   const std::int32_t* NS = nstart.data();
   const std::uint8_t* DZ = def.sleep_regions ? sphere_dozing.data() : nullptr;
+  slab_runs.assign(2 * std::size_t(runs + 1), 0);
+  if (runs == 1) {  // (one run: every slab of the parity, nothing to weigh)
+    slab_runs[1] = (nchunks + 1) / 2, slab_runs[3] = nchunks / 2;
+    return;
+  }
   if (slab_work_stale || int(slab_work.size()) != nchunks) {
     slab_work.assign(std::size_t(std::max(0, nchunks)), 0);
     for (int c = 0; c < nchunks; ++c) {
@@ -40,7 +45,6 @@ void Simulation::Impl::plan_slab_runs(int runs) {
     }
     slab_work_stale = false;
   }
-  slab_runs.assign(2 * std::size_t(runs + 1), 0);
   for (int parity = 0; parity < 2; ++parity) {
     int* R = &slab_runs[std::size_t(parity) * std::size_t(runs + 1)];
     const int slabs = nchunks > parity ? (nchunks - parity + 1) / 2 : 0;

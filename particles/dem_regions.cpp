@@ -104,6 +104,7 @@ void Simulation::Impl::update_regions(double dt_frame) {
       --dozing_granules;
     }
     for (int k = 0; k < b.count[i]; ++k) sphere_dozing[std::size_t(slot_of[b.first[i] + k])] = dozing[bi];
+    slab_work_stale = true;
   }
 }
 
