@@ -219,6 +219,20 @@ Vec3 Simulation::Impl::integrate_shell(int i, Vec3 F, Vec3 T, float dt, Vec3* w_
   return v + pred_gain * (v - v_old);
 }
 
+// The body stage's runs (dem_impl.hpp body_runs) of the bodies [0, n_order) (order: their
+// indices, null: the identity); planned again after a sort or a change of the sleeping regions.
+void Simulation::Impl::plan_body_runs(int runs, int n_order, const std::int32_t* order) {
+  if (int(body_runs.size()) == runs + 1 && body_runs.back() == n_order && body_runs_epoch == work_epoch) return;
+  body_runs.assign(std::size_t(runs) + 1, 0);
+  const std::uint8_t* doze = def.sleep_regions ? dozing.data() : nullptr;
+  // work of a body: its spheres (a dozing granule only clears its sums: about an eighth)
+  split_in_runs(n_order, runs, body_runs.data(), [&](int t) {
+    const int i = order ? order[t] : t;
+    return std::int64_t(doze && doze[i] ? 1 : 2 * b.count[i]);
+  });
+  body_runs_epoch = work_epoch;
+}
+
 // ---- body stage: gather each sphere (gather_sphere4), sum the spheres' forces in id order,
 // integrate, rebuild the spheres. Wide shells (wide_bodies) in three passes over their chunks:
 // the chunks' sums, each body's step from them, the chunks' spheres rebuilt.
@@ -246,23 +260,7 @@ bool Simulation::Impl::bodies(float dt, float* d2max_out, float* d2shell_out) {
   const bool parallel = n > kParallelSpheres / 2 || np > kParallelSpheres;
   // (inside another parallel region, as patches stepped side by side are, the team is one thread)
   const int runs = parallel && !omp_in_parallel() ? std::max(1, threads) : 1;
-  body_runs.assign(std::size_t(runs) + 1, n_order);
-  body_runs[0] = 0;
-  if (runs > 1) {
-    // work of a body: its spheres (a dozing granule only clears its sums: about an eighth)
-    auto work = [&](int t) {
-      const int i = ordered ? order[t] : t;
-      return (doze && doze[i]) ? 1 : 2 * b.count[i];
-    };
-    std::int64_t total = 0;
-    for (int t = 0; t < n_order; ++t) total += work(t);
-    std::int64_t acc_work = 0;
-    int r = 1;
-    for (int t = 0; t < n_order && r < runs; ++t) {
-      acc_work += work(t);
-      while (r < runs && acc_work * runs >= total * r) body_runs[std::size_t(r++)] = t + 1;
-    }
-  }
+  plan_body_runs(runs, n_order, ordered ? order : nullptr);
 #pragma omp parallel num_threads(threads) if (parallel)
   {
     if (n_chunks > 0) {

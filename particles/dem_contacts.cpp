@@ -23,19 +23,15 @@ bool simd::use_avx2_pair_kernel() {
 }
 
 // The slabs of each parity in `runs` contiguous runs of about equal work (dem_impl.hpp
-// slab_runs); a slab's work is counted again when it is stale.
+// slab_runs); the slabs' work is counted again after a sort or a change of the sleeping regions.
 void Simulation::Impl::plan_slab_runs(int runs) {
-  const int nchunks = int(chunk_start.size()) - 1;
+  const int nchunks = std::max(0, int(chunk_start.size()) - 1);
   const std::int32_t* CS = chunk_start.data();
   const std::int32_t* NS = nstart.data();
   const std::uint8_t* DZ = def.sleep_regions ? sphere_dozing.data() : nullptr;
   slab_runs.assign(2 * std::size_t(runs + 1), 0);
-  if (runs == 1) {  // (one run: every slab of the parity, nothing to weigh)
-    slab_runs[1] = (nchunks + 1) / 2, slab_runs[3] = nchunks / 2;
-    return;
-  }
-  if (slab_work_stale || int(slab_work.size()) != nchunks) {
-    slab_work.assign(std::size_t(std::max(0, nchunks)), 0);
+  if (runs > 1 && (slab_work_epoch != work_epoch || int(slab_work.size()) != nchunks)) {
+    slab_work.assign(std::size_t(nchunks), 0);
     for (int c = 0; c < nchunks; ++c) {
       std::int64_t w = 0;
       // (an awake sphere's row: every pair's distance, the touching ones' law; a sleeping
@@ -43,21 +39,12 @@ void Simulation::Impl::plan_slab_runs(int runs) {
       for (int i = CS[c]; i < CS[c + 1]; ++i) w += DZ && DZ[i] ? 1 + (NS[i + 1] - NS[i]) / 2 : 2 + 2 * (NS[i + 1] - NS[i]);
       slab_work[std::size_t(c)] = w;
     }
-    slab_work_stale = false;
+    slab_work_epoch = work_epoch;
   }
-  for (int parity = 0; parity < 2; ++parity) {
-    int* R = &slab_runs[std::size_t(parity) * std::size_t(runs + 1)];
-    const int slabs = nchunks > parity ? (nchunks - parity + 1) / 2 : 0;
-    std::int64_t total = 0;
-    for (int k = 0; k < slabs; ++k) total += slab_work[std::size_t(parity + 2 * k)];
-    for (int r = 1; r <= runs; ++r) R[r] = slabs;
-    std::int64_t acc_work = 0;
-    int r = 1;
-    for (int k = 0; k < slabs && r < runs; ++k) {
-      acc_work += slab_work[std::size_t(parity + 2 * k)];
-      while (r < runs && acc_work * runs >= total * r) R[r++] = k + 1;
-    }
-  }
+  for (int parity = 0; parity < 2; ++parity)
+    split_in_runs(nchunks > parity ? (nchunks - parity + 1) / 2 : 0, runs,
+                  &slab_runs[std::size_t(parity) * std::size_t(runs + 1)],
+                  [&](int k) { return runs > 1 ? slab_work[std::size_t(parity + 2 * k)] : 0; });
 }
 
 // ---- contact stage, pair pass: each pair is computed once, by its owner's entry, and added

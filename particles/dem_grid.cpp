@@ -91,7 +91,7 @@ void Simulation::Impl::sort() {
   need_sort = false;
   stats.resorts++;
   build_list(old_slot);
-  slab_work_stale = true;
+  ++work_epoch;
   if (!set_pairs.empty() || !set_planes.empty()) take_set_springs();
   build_shell_list();
 }

@@ -163,15 +163,32 @@ struct Simulation::Impl {
   // close in memory (a 64,000-sphere bed does not fit in L2). Each body's sums do not depend
   // on the order, so neither do the results.
   std::vector<std::int32_t> body_order;
-  std::vector<int> body_runs;  // the body stage's runs of body_order, one a thread (`bodies`)
-  // The pair pass's slabs of each parity in one contiguous run a thread, of about equal work
-  // (`contacts`): a thread then walks about the spheres its body-stage run writes. Each slab's
-  // work (its spheres and list entries, a sleeping sphere's less) is counted again after a sort
-  // or a change of the sleeping regions.
+  // The threads' shares of the two parallel stages, one contiguous run of about equal work a
+  // thread, so a thread walks in the pair pass about the part of the bed whose spheres it
+  // writes in the body stage: the body stage's runs of body_order (`bodies`), and each
+  // parity's runs of the pair pass's slabs (`contacts`; a slab's work: its spheres and list
+  // entries, a sleeping sphere's less). Planned again after a sort or a change of the sleeping
+  // regions (work_epoch counts them).
+  std::vector<int> body_runs;
   std::vector<std::int64_t> slab_work;
   std::vector<int> slab_runs;  // parity p's runs: [p (runs + 1), (p + 1) (runs + 1)), positions k of slabs p + 2 k
-  bool slab_work_stale = true;
+  std::uint64_t work_epoch = 1, body_runs_epoch = 0, slab_work_epoch = 0;
+  void plan_body_runs(int runs, int n_order, const std::int32_t* order);
   void plan_slab_runs(int runs);
+  // Items [0, n) of work w(k) >= 0 in `runs` contiguous runs of about equal work: run r is
+  // [R[r], R[r + 1]), R[0] = 0, R[runs] = n.
+  template <class Work>
+  static void split_in_runs(int n, int runs, int* R, Work&& w) {
+    std::int64_t total = 0;
+    for (int k = 0; k < n; ++k) total += w(k);
+    R[0] = 0;
+    for (int r = 1; r <= runs; ++r) R[r] = n;
+    std::int64_t done = 0;
+    for (int k = 0, r = 1; k < n && r < runs; ++k) {
+      done += w(k);
+      while (r < runs && done * runs >= total * r) R[r++] = k + 1;
+    }
+  }
   // Wide shells: a shell (a body that is not a granule) of more than kWideShell spheres is
   // summed and rebuilt by the body stage in chunks of kWideChunk spheres spread over the
   // threads (`bodies`), not by one thread; set by sort(), in body index order. Each chunk sums

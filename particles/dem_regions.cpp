@@ -11,7 +11,7 @@ namespace sandpatch {
 
 void Simulation::Impl::refresh_sphere_dozing() {
   for (int s = 0; s < np; ++s) sphere_dozing[std::size_t(s)] = dozing[std::size_t(p.body[s])];
-  slab_work_stale = true;
+  ++work_epoch;
 }
 
 void Simulation::Impl::update_regions(double dt_frame) {
@@ -104,7 +104,7 @@ void Simulation::Impl::update_regions(double dt_frame) {
       --dozing_granules;
     }
     for (int k = 0; k < b.count[i]; ++k) sphere_dozing[std::size_t(slot_of[b.first[i] + k])] = dozing[bi];
-    slab_work_stale = true;
+    ++work_epoch;
   }
 }
 
