@@ -208,7 +208,9 @@ TEST(Budget, APatchNoBodyWantsIsHeldWhenItDoesNotFit) {
     for (const auto& p : rig.manager->patches()) {
       if (!p.ready || p.asleep) continue;
       held_seen += !p.stepped;
-      if (p.stepped) EXPECT_GT(p.last_substeps, 0);
+      if (p.stepped) {
+        EXPECT_GT(p.last_substeps, 0);
+      }
     }
   }
   const ojson b = rig.manager->report()["budget"];
