@@ -286,7 +286,8 @@ bool TerrainManager::Impl::overlaps_patch(const PatchRequest& r) const {
 
 // A body in a patch heading past its edge (its predicted contact reaches beyond the region):
 // a patch is asked for ahead of it, abutting the one it is in, over the part of its request
-// that the patch does not cover on the side it passes most. It goes to the front of the
+// that the patch does not cover on a side it passes (the one it passes most that has room), or
+// the patch travels (ask_successor); each patch the request overlaps is looked at. It goes to the front of the
 // queue; filled in chunks over the next frames (at once when the body would reach it within
 // two frames), it takes the body over when it holds most of the body's footprint (one carrier
 // per body, coupling.cpp), and the patch left behind is released when a request needs its
@@ -294,6 +295,7 @@ bool TerrainManager::Impl::overlaps_patch(const PatchRequest& r) const {
 // (before, the patch was demoted and the union promoted in the same frame: a whole patch's
 // work twice in one frame). Returns whether it asked.
 Result<bool> TerrainManager::Impl::extend(const PatchRequest& r, double time, const std::vector<RigidBodyId>& ids) {
+  bool asked = false;
   for (Slot& s : slots) {
     if ((s.state != SlotState::Active && s.state != SlotState::Asleep) || !rect(s).overlaps(r)) continue;
     if (s.superseded) continue;  // (its successor carries the bodies now)
@@ -321,54 +323,64 @@ Result<bool> TerrainManager::Impl::extend(const PatchRequest& r, double time, co
     const PatchRequest t = terrain_rect(*hf);
     const double past[4] = {a.x0 <= t.x0 + e ? -1.0 : (a.x0 + mm[0]) - (r.x0 + ap), a.x1 >= t.x1 - e ? -1.0 : (r.x1 - ap) - (a.x1 - mm[1]),
                             a.z0 <= t.z0 + e ? -1.0 : (a.z0 + mm[2]) - (r.z0 + ap), a.z1 >= t.z1 - e ? -1.0 : (r.z1 - ap) - (a.z1 - mm[3])};
-    const int side = int(std::max_element(past, past + 4) - past);
-    if (!(past[side] > 0)) continue;  // (another patch it overlaps may be the one it passes)
-    if (ask_successor(s, r, side, time)) return true;
-    // The part ahead, at least one tile period deep (patch_region rounds it to whole periods,
-    // and promote() moves it clear of the patch it abuts).
-    const double period = set_for(s.scale).cells * double(hf->spacing());
-    PatchRequest u = r;
-    switch (side) {
-      case 0: u.x1 = a.x0, u.x0 = std::min(r.x0, a.x0 - period); break;
-      case 1: u.x0 = a.x1, u.x1 = std::max(r.x1, a.x1 + period); break;
-      case 2: u.z1 = a.z0, u.z0 = std::min(r.z0, a.z0 - period); break;
-      default: u.z0 = a.z1, u.z1 = std::max(r.z1, a.z1 + period); break;
+    // The sides it passes, most first, past a side where the part ahead would lie in another
+    // live patch (a car's request, over both its track patches, passes the side each shares
+    // with the other by a whole period: looked at alone, that side hid the leading side until
+    // the wheels were two frames from it, and the successor's fill fell whole into that frame).
+    int sides[4] = {0, 1, 2, 3};
+    std::stable_sort(sides, sides + 4, [&](int x, int y) { return past[x] > past[y]; });
+    for (int side : sides) {
+      if (!(past[side] > 0)) break;  // (another patch it overlaps may be the one it passes)
+      if (ask_successor(s, r, side, time)) {
+        asked = true;  // (the next patch the request overlaps may need one too: a car's other track)
+        break;
+      }
+      // The part ahead, at least one tile period deep (patch_region rounds it to whole periods,
+      // and promote() moves it clear of the patch it abuts).
+      const double period = set_for(s.scale).cells * double(hf->spacing());
+      PatchRequest u = r;
+      switch (side) {
+        case 0: u.x1 = a.x0, u.x0 = std::min(r.x0, a.x0 - period); break;
+        case 1: u.x0 = a.x1, u.x1 = std::max(r.x1, a.x1 + period); break;
+        case 2: u.z1 = a.z0, u.z0 = std::min(r.z0, a.z0 - period); break;
+        default: u.z0 = a.z1, u.z1 = std::max(r.z1, a.z1 + period); break;
+      }
+      clip_to_terrain(*hf, u);
+      // (ahead of this patch lies another: the part ahead may be asked for beyond that one, when
+      // the request overlaps it too, as where a body turning crosses the corner of two patches)
+      if (u.x1 - u.x0 < 1e-6 || u.z1 - u.z0 < 1e-6 || overlaps_patch(u) || !has_soil(u)) continue;  // (the next side it passes)
+      // (asked already: the next patch the request overlaps, which may be passed too)
+      if (std::any_of(queue.begin(), queue.end(), [&](const PatchRequest& q) { return q.overlaps(u); })) break;
+      u.time_to_contact = 0;
+      u.abuts = side ^ 1;  // (side 0, x0 of the patch, is its x1; and so on)
+      // (ahead of a body the patch carries, moving toward that side faster than sleep_speed: it
+      // does not wait for the budget, filling.cpp)
+      const Eigen::Vector2d out[4] = {{-1, 0}, {1, 0}, {0, -1}, {0, 1}};
+      for (int k : r.bodies) {
+        if (k < 0 || k >= int(ids.size())) continue;
+        const RigidBodyId b = ids[std::size_t(k)];
+        const Eigen::Vector3f v = world->state(b).linear_velocity;
+        if (out[side].dot(Eigen::Vector2d(v.x(), v.z())) <= def.sleep_speed) continue;
+        for (const Carried& c : s.carried)
+          if (c.enabled && c.body.index == b.index && c.body.generation == b.generation) u.ahead_of_carried = true;
+      }
+      // The budget may trim its apron across the way it extends only (budget.cpp choose).
+      u.apron = budget_on() ? r.apron : 0;
+      u.particle_scale = budget_on() ? 0.0 : s.scale;  // its scale, or the budget's choice again
+      queue.insert(queue.begin(), u);
+      events.push_back({PatchEventKind::Requested, -1, time, 0, 0});
+      ++extensions;
+      return true;
     }
-    clip_to_terrain(*hf, u);
-    // (ahead of this patch lies another: the part ahead may be asked for beyond that one, when
-    // the request overlaps it too, as where a body turning crosses the corner of two patches)
-    if (u.x1 - u.x0 < 1e-6 || u.z1 - u.z0 < 1e-6 || overlaps_patch(u) || !has_soil(u)) continue;
-    for (const PatchRequest& q : queue)
-      if (q.overlaps(u)) return false;  // asked already
-    u.time_to_contact = 0;
-    u.abuts = side ^ 1;  // (side 0, x0 of the patch, is its x1; and so on)
-    // (ahead of a body the patch carries, moving toward that side faster than sleep_speed: it
-    // does not wait for the budget, filling.cpp)
-    const Eigen::Vector2d out[4] = {{-1, 0}, {1, 0}, {0, -1}, {0, 1}};
-    for (int k : r.bodies) {
-      if (k < 0 || k >= int(ids.size())) continue;
-      const RigidBodyId b = ids[std::size_t(k)];
-      const Eigen::Vector3f v = world->state(b).linear_velocity;
-      if (out[side].dot(Eigen::Vector2d(v.x(), v.z())) <= def.sleep_speed) continue;
-      for (const Carried& c : s.carried)
-        if (c.enabled && c.body.index == b.index && c.body.generation == b.generation) u.ahead_of_carried = true;
-    }
-    // The budget may trim its apron across the way it extends only (budget.cpp choose).
-    u.apron = budget_on() ? r.apron : 0;
-    u.particle_scale = budget_on() ? 0.0 : s.scale;  // its scale, or the budget's choice again
-    queue.insert(queue.begin(), u);
-    events.push_back({PatchEventKind::Requested, -1, time, 0, 0});
-    ++extensions;
-    return true;
   }
-  return false;
+  return asked;
 }
 
 // A patch that travels with its bodies (docs/manager.md "A patch that travels with its body"):
 // instead of a patch abutting s ahead (two patches stepping while the bodies straddle their
 // edge), s itself moved by the fewest whole tile periods toward `side` that cover the request
-// r, if every body s carries then lies inside it (4 granule radii from its trailing side) and
-// it keeps part of s. Its fill is cut from the tile only where it reaches past s (whole tile
+// r, if every body s carries then lies inside it (4 granule radii from its trailing side), one
+// of them heads toward `side` and it keeps part of s. Its fill is cut from the tile only where it reaches past s (whole tile
 // periods: the seam is the tiles' own), it takes s's granules over at once when that fill is
 // in (take_over), and s is demoted. Not when s has a successor coming already, carries
 // nothing, is being released, or when the moved region has another floor (sloping ground:
@@ -411,7 +423,13 @@ bool TerrainManager::Impl::ask_successor(Slot& s, const PatchRequest& r, int sid
   for (const Carried& c : s.carried) {
     if (!c.enabled || !world->alive(c.body)) continue;
     carries_any = true;
-    moving = moving || double(dir) * double(world->state(c.body).linear_velocity[c3]) >= toward;
+    // (and heading toward it: at least a quarter as fast toward the side as along it, 14° off
+    // its line, so a car driving on while it drifts across its way does not take its track's
+    // patch sideways over the other track; a patch abutting beside it takes a wheel that
+    // reaches the side. A car turning at the scenes' 0.25 rad keeps travelling with its turn.)
+    const Eigen::Vector3f v = world->state(c.body).linear_velocity;
+    const double to_side = double(dir) * double(v[c3]), along_side = std::abs(double(v[c3 == 0 ? 2 : 0]));
+    moving = moving || (to_side >= toward && to_side >= 0.25 * along_side);
     Eigen::Vector3d blo, bhi;
     world->bounds(c.body, &blo, &bhi);
     const double ground = hf->origin_y() + hf->sample(float(0.5 * (blo.x() + bhi.x()) - hf->origin_x()), float(0.5 * (blo.z() + bhi.z()) - hf->origin_z()));
