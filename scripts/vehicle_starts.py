@@ -4,8 +4,10 @@ A vehicle on granules about as wide as its wheels may drive from one start and d
 from another a few decimetres away (where the tile's granules happen to lie under the wheels),
 so one run says little; this runs the scene once per start and prints, per run, how far the
 first vehicle's chassis went along x, its wheels' mean and deepest sinkage while on particles
-after the first second, the particle scales the frame budget chose, and the frames' real-time
-factor. docs/BENCHMARKS.md "The particle-scale cap from six starts" uses it.
+after the first second, the particle scales the frame budget chose, the frames' real-time
+factor, the longest frame over the frame budget, the frames over it and the patches filled at
+once (report.json frames.max_over_budget, frames.over_budget, pool.urgent_fills).
+docs/BENCHMARKS.md "The particle-scale cap from six starts" uses it.
 
     python3 scripts/vehicle_starts.py SCENE [--offsets 0,0.4,0.8] [--granule-radius R]
                                      [--frame-budget MS|off] [--seconds T] [--sandpatch BIN]
@@ -59,6 +61,10 @@ def run_one(args, scene, offset, workdir):
         "sink_max_m": max(sink) if sink else 0.0,
         "scales": scales,
         "frames_rtf": rep["frames_real_time_factor"],
+        "max_over_budget": rep["frames"].get("max_over_budget", 0.0),
+        "over_budget": rep["frames"].get("over_budget", 0),
+        "frames": rep["frame_count"],
+        "urgent_fills": rep["pool"]["urgent_fills"],
     }
 
 
@@ -91,7 +97,8 @@ def main():
             r = run_one(args, scene, o, workdir)
             print(f"start x {r['start_x']:.2f} m: drove {r['driven_m']:.2f} m, wheel sinkage mean {r['sink_mean_m']:.3f} m, "
                   f"deepest {r['sink_max_m']:.3f} m, particle scales {r['scales']}, frames' real-time factor "
-                  f"{r['frames_rtf']:.2f}", flush=True)
+                  f"{r['frames_rtf']:.2f}, longest frame {r['max_over_budget']:.2f} x the budget, "
+                  f"{r['over_budget']} of {r['frames']} frames over it, {r['urgent_fills']} fills at once", flush=True)
 
 
 if __name__ == "__main__":
