@@ -287,10 +287,10 @@ bool TerrainManager::Impl::overlaps_patch(const PatchRequest& r) const {
 // A body in a patch heading past its edge (its predicted contact reaches beyond the region):
 // a patch is asked for ahead of it, abutting the one it is in, over the part of its request
 // that the patch does not cover on a side it passes (the one it passes most that has room), or
-// the patch travels (ask_successor); each patch the request overlaps is looked at. It goes to the front of the
-// queue; filled in chunks over the next frames (at once when the body would reach it within
-// two frames), it takes the body over when it holds most of the body's footprint (one carrier
-// per body, coupling.cpp), and the patch left behind is released when a request needs its
+// the patch travels (ask_successor); each patch the request overlaps is looked at. It goes to
+// the front of the queue; filled in chunks over the next frames (at once when the body would
+// reach it within two frames), it takes the body over when it holds most of the body's
+// footprint (one carrier per body, coupling.cpp), and the patch left behind is released when a request needs its
 // slot (release_idle) or after idle_timeout. Nothing is demoted and filled again in one frame
 // (before, the patch was demoted and the union promoted in the same frame: a whole patch's
 // work twice in one frame). Returns whether it asked.
@@ -380,9 +380,9 @@ Result<bool> TerrainManager::Impl::extend(const PatchRequest& r, double time, co
 // instead of a patch abutting s ahead (two patches stepping while the bodies straddle their
 // edge), s itself moved by the fewest whole tile periods toward `side` that cover the request
 // r, if every body s carries then lies inside it (4 granule radii from its trailing side), one
-// of them heads toward `side` and it keeps part of s. Its fill is cut from the tile only where it reaches past s (whole tile
-// periods: the seam is the tiles' own), it takes s's granules over at once when that fill is
-// in (take_over), and s is demoted. Not when s has a successor coming already, carries
+// of them heads toward `side`, and it keeps part of s. Its fill is cut from the tile only where
+// it reaches past s (whole tile periods: the seam is the tiles' own), it takes s's granules
+// over at once when that fill is in (take_over), and s is demoted. Not when s has a successor coming already, carries
 // nothing, is being released, or when the moved region has another floor (sloping ground:
 // the granules taken over keep their heights) or leaves the terrain. Returns whether one was
 // asked (now or before).
