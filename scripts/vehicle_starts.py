@@ -61,10 +61,10 @@ def run_one(args, scene, offset, workdir):
         "sink_max_m": max(sink) if sink else 0.0,
         "scales": scales,
         "frames_rtf": rep["frames_real_time_factor"],
-        "max_over_budget": rep["frames"].get("max_over_budget", 0.0),
-        "over_budget": rep["frames"].get("over_budget", 0),
-        "frames": rep["frame_count"],
-        "urgent_fills": rep["pool"]["urgent_fills"],
+        "max_over_budget": rep.get("frames", {}).get("max_over_budget", 0.0),
+        "over_budget": rep.get("frames", {}).get("over_budget", 0),
+        "frames": rep.get("frame_count", 0),
+        "urgent_fills": rep.get("pool", {}).get("urgent_fills", 0),
     }
 
 
