@@ -57,15 +57,13 @@ Status TerrainManager::Impl::activate(double time, double dt) {
             const bool leaving = (q.x0 < p.x0 - e && a.x() < p.x0) || (q.x1 > p.x1 + e && z.x() > p.x1) ||
                                  (q.z0 < p.z0 - e && a.z() < p.z0) || (q.z1 > p.z1 + e && z.z() > p.z1);
             if (!leaving) continue;
-            // (nor one riding above the sand, a chassis on its wheels: it would not join the
-            // successor within these two frames; its front, 0.65 m ahead of the front wheels,
-            // made the car's successors due when they were asked)
-            if (!engages(s, a, z, &inside, join_height(s, b))) continue;
-          } else if (carried_anywhere(b) || !engages(s, a, z, &inside, join_height(s, b))) {
-            // (one another patch carries, or one that would not join a patch within these two
-            // frames: a chassis riding above the sand)
-            continue;
+          } else if (carried_anywhere(b)) {
+            continue;  // (another patch carries it)
           }
+          // Nor one that would not join a patch within these two frames, carried or not: a
+          // chassis riding above the sand (its front, 0.65 m ahead of the front wheels, made the
+          // car's successors due when they were asked).
+          if (!engages(s, a, z, &inside, join_height(s, b))) continue;
         }
         due = true;
       }
