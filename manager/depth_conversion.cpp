@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 
 #include "gl/context.hpp"
 #include "gl/program.hpp"
@@ -200,14 +201,23 @@ void render_heights_cpu_rows(const float* s, std::size_t n, HeightImage& img, in
       const int u1 = std::min(res - 1, int(std::floor((cx + r - x0) / du - 0.5f)));
       const int v0 = std::max(row0, int(std::ceil((cz - r - z0) / dv - 0.5f)));
       const int v1 = std::min(row1 - 1, int(std::floor((cz + r - z0) / dv - 0.5f)));
-      for (int v = v0; v <= v1; ++v)
+      const float r2 = r * r;
+      for (int v = v0; v <= v1; ++v) {
+        const float z = z0 + (v + 0.5f) * dv - cz, z2 = z * z;
+        if (z2 > r2) continue;  // (then x² + z² > r² for every x)
+        // Branch-free along the row, so that it vectorises (sqrt without errno and selects
+        // without traps: manager/CMakeLists.txt): a texel outside the circle (a < 0) keeps its
+        // height. Each texel's operations are those of one texel at a time, in the same order:
+        // the same image bit for bit.
+        float* row = img.h.data() + std::size_t(v) * res;
         for (int u = u0; u <= u1; ++u) {
-          const float x = x0 + (u + 0.5f) * du - cx, z = z0 + (v + 0.5f) * dv - cz;
-          const float d2 = x * x + z * z;
-          if (d2 > r * r) continue;
-          float& h = img.h[std::size_t(v) * res + u];
-          h = std::max(h, cy + std::sqrt(r * r - d2));
+          const float x = x0 + (float(u) + 0.5f) * du - cx;
+          const float a = r2 - (x * x + z2);
+          const float top = a >= 0.0f ? cy + std::sqrt(a > 0.0f ? a : 0.0f) : -std::numeric_limits<float>::infinity();
+          const float h = row[u];
+          row[u] = h < top ? top : h;
         }
+      }
     }
   }
 }

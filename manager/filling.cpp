@@ -60,10 +60,16 @@ Status TerrainManager::Impl::activate(double time, double dt) {
           } else if (carried_anywhere(b)) {
             continue;  // (another patch carries it)
           }
-          // Nor one that would not join a patch within these two frames, carried or not: a
-          // chassis riding above the sand (its front, 0.65 m ahead of the front wheels, made the
-          // car's successors due when they were asked).
-          if (!engages(s, a, z, &inside, join_height(s, b))) continue;
+          // Nor one that would not touch the sand within these two frames, carried or not: its
+          // lowest point (moved two frames on, linearly and, at its reach, by its turning) not
+          // within a granule sphere diameter of the surface. A car's chassis riding above the
+          // sand: its front, 0.65 m ahead of the front wheels, made the car's successors due as
+          // they were asked, and, with the height at which its shell would join a patch
+          // (join_height, which grows as it pitches), still made 3 of 10 due under a 0.5 ms
+          // budget with its lowest corner 0.38 m above the sand.
+          const double reach = 0.5 * (hi - lo).norm();
+          const double turning = double(world->state(b).angular_velocity.norm()) * reach * 2.0 * dt;  // m
+          if (!engages(s, a, z, &inside, 2.0 * radius_world(s) + turning)) continue;
         }
         due = true;
       }
@@ -514,6 +520,25 @@ Status TerrainManager::Impl::cut(Slot& slot, double time, std::size_t units) {
       return float((h->sample(float(xl), float(zl)) - floor_local) / s);
     };
     slot.cutter = std::make_unique<FillCut>(tile, W, D, surface);
+    if (slot.predecessor >= 0) {
+      // A successor places its fill only beyond its predecessor (below): the tile copies inside
+      // the predecessor's region, but for those a period deep along each side the successor
+      // reaches past (their granules decide what is kept across the seam), are not cut. (They
+      // were three quarters of a car's track-patch cut, whose sort of every candidate took
+      // 1.9 ms of one frame.)
+      const GridRegion& q = slots[std::size_t(slot.predecessor)].region;
+      const double P = double(tile.period_xz);
+      auto local = [&](int samples) { return samples * double(sp) / s; };  // (sim units, from region's corner)
+      double x0 = local(q.i0 - region.i0), x1 = local(q.i0 + q.ni - 1 - region.i0);
+      double z0 = local(q.j0 - region.j0), z1 = local(q.j0 + q.nj - 1 - region.j0);
+      if (region.i0 < q.i0) x0 += P;
+      if (region.i0 + region.ni > q.i0 + q.ni) x1 -= P;
+      if (region.j0 < q.j0) z0 += P;
+      if (region.j0 + region.nj > q.j0 + q.nj) z1 -= P;
+      // (widened by a hair: a copy ending on one of its lines lies within, round-off aside)
+      const double e = 1e-4 * P;
+      slot.cutter->skip_copies_within(float(x0 - e), float(x1 + e), float(z0 - e), float(z1 + e));
+    }
     slot.cut_shape = tile.shape;
     slot.cut_rebound = tile.rebound;
     slot.cut_packing = tile.packing_fraction;

@@ -24,38 +24,52 @@ std::array<Vec3, 4> spheres(const PlacedGranule& g, const GranuleShape& s) {
   return out;
 }
 
-// A hash grid of sphere centres with cells of `cell` m.
+// A grid of sphere centres with cells of `cell` m over the box [lo, hi] (points outside it
+// fall in its outer cells, so any point may be stored and asked about). Dense: a fill's box
+// of a few thousand cells, each a list through `next` (a hash map's 27 look-ups per sphere were
+// most of a fill cut's cost).
 class SphereGrid {
  public:
-  explicit SphereGrid(float cell) : cell_(cell) {}
-  void insert(Vec3 p, int copy = 0) { cells_[key(p)].push_back({p, copy}); }
-  // True when some stored centre of another copy than `copy` (-1: any) is closer than `dist` to p.
+  SphereGrid() = default;
+  SphereGrid(float cell, Vec3 lo, Vec3 hi) : cell_(cell), lo_(lo) {
+    auto cells = [&](float a, float b) { return std::clamp(int(std::ceil((b - a) / cell)) + 1, 1, 1 << 10); };
+    n_ = {cells(lo.x, hi.x), cells(lo.y, hi.y), cells(lo.z, hi.z)};
+    head_.assign(std::size_t(n_[0]) * n_[1] * n_[2], -1);
+  }
+  void insert(Vec3 p, int copy = 0) {
+    const auto [i, j, k] = index(p);
+    const std::size_t c = (std::size_t(k) * n_[1] + j) * n_[0] + i;
+    entries_.push_back({p, copy, head_[c]});
+    head_[c] = int(entries_.size()) - 1;
+  }
+  // True when some stored centre of another copy than `copy` (-1: any) is closer than `dist`
+  // (at most `cell`) to p.
   bool near(Vec3 p, float dist, int copy = -1) const {
     const auto [i, j, k] = index(p);
-    for (int a = -1; a <= 1; ++a)
-      for (int b = -1; b <= 1; ++b)
-        for (int c = -1; c <= 1; ++c) {
-          auto it = cells_.find(pack(i + a, j + b, k + c));
-          if (it == cells_.end()) continue;
-          for (const auto& [q, owner] : it->second)
-            if (owner != copy && dot(q - p, q - p) < dist * dist) return true;
-        }
+    for (int c = std::max(0, k - 1); c <= std::min(n_[2] - 1, k + 1); ++c)
+      for (int b = std::max(0, j - 1); b <= std::min(n_[1] - 1, j + 1); ++b)
+        for (int a = std::max(0, i - 1); a <= std::min(n_[0] - 1, i + 1); ++a)
+          for (int e = head_[(std::size_t(c) * n_[1] + b) * n_[0] + a]; e >= 0; e = entries_[std::size_t(e)].next) {
+            const Entry& q = entries_[std::size_t(e)];
+            if (q.copy != copy && dot(q.p - p, q.p - p) < dist * dist) return true;
+          }
     return false;
   }
  private:
-  std::array<std::int64_t, 3> index(Vec3 p) const {
-    return {std::int64_t(std::floor(p.x / cell_)), std::int64_t(std::floor(p.y / cell_)),
-            std::int64_t(std::floor(p.z / cell_))};
+  struct Entry {
+    Vec3 p;
+    int copy;
+    int next;  // the cell's next entry, -1 at its end
+  };
+  std::array<int, 3> index(Vec3 p) const {
+    auto at = [&](float x, float o, int n) { return std::clamp(int(std::floor((x - o) / cell_)), 0, n - 1); };
+    return {at(p.x, lo_.x, n_[0]), at(p.y, lo_.y, n_[1]), at(p.z, lo_.z, n_[2])};
   }
-  static std::int64_t pack(std::int64_t i, std::int64_t j, std::int64_t k) {
-    return (i & 0x1fffff) | ((j & 0x1fffff) << 21) | ((k & 0x1fffff) << 42);
-  }
-  std::int64_t key(Vec3 p) const {
-    const auto [i, j, k] = index(p);
-    return pack(i, j, k);
-  }
-  float cell_;
-  std::unordered_map<std::int64_t, std::vector<std::pair<Vec3, int>>> cells_;
+  float cell_ = 1;
+  Vec3 lo_{0, 0, 0};
+  std::array<int, 3> n_{1, 1, 1};
+  std::vector<int> head_;
+  std::vector<Entry> entries_;
 };
 
 }  // namespace
@@ -94,12 +108,13 @@ struct FillCut::State {
   float r = 0, P = 0, Py = 0, bound = 0;
   int cx = 0, cz = 0, cy = 0;
   int next_copy = 0;                  // 1. the next tile copy to make candidates from
+  float skip[4] = {1, 0, 1, 0};       // copies wholly within [x0, x1] × [z0, z1] are left out (none)
   std::vector<PlacedGranule> cand;
   std::vector<int> cand_copy;         // which copy of the tile a candidate comes from
   std::vector<std::size_t> order;     // 2. candidates lowest first (empty until sorted)
   bool sorted = false;
   std::size_t next = 0;               // 3. the next candidate (in `order`) to cut
-  SphereGrid grid{1.0f};
+  SphereGrid grid;
   std::vector<PlacedGranule> out;
 };
 
@@ -118,7 +133,13 @@ FillCut::FillCut(const GranuleTile& tile, float width, float depth, std::functio
   for (float z = 0; z <= depth + probe; z += probe)
     for (float x = 0; x <= width + probe; x += probe) top = std::max(top, s.surface(std::min(x, width), std::min(z, depth)));
   s.cx = int(std::ceil(width / s.P)), s.cz = int(std::ceil(depth / s.P)), s.cy = int(std::ceil(top / s.Py)) + 1;
-  s.grid = SphereGrid(2.0f * s.r);
+  // (the kept spheres lie within 0.9 r of the box's sides and floor, and at most a granule's
+  // bounding radius above the surface and a sphere radius beyond)
+  s.grid = SphereGrid(2.0f * s.r, Vec3{0, 0, 0}, Vec3{width, top + 2.0f * s.bound, depth});
+}
+
+void FillCut::skip_copies_within(float x0, float x1, float z0, float z1) {
+  s_->skip[0] = x0, s_->skip[1] = x1, s_->skip[2] = z0, s_->skip[3] = z1;
 }
 
 FillCut::~FillCut() = default;
@@ -151,6 +172,7 @@ bool FillCut::step(std::size_t work) {
   while (s.next_copy < copies && done_work < work) {
     const int k = s.next_copy++;
     const int a = k % s.cx, c = (k / s.cx) % s.cz, b = k / (s.cx * s.cz);
+    if (a * P >= s.skip[0] && (a + 1) * P <= s.skip[1] && c * P >= s.skip[2] && (c + 1) * P <= s.skip[3]) continue;
     const bool mx = a % 2 == 1, mz = c % 2 == 1;
     const Eigen::Matrix3f M = Eigen::Vector3f(mx ? -1.0f : 1.0f, 1.0f, mz ? -1.0f : 1.0f).asDiagonal();
     for (const auto& g : tile.granules) {

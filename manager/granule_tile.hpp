@@ -97,6 +97,12 @@ std::vector<PlacedGranule> fill_from_tile(const GranuleTile& tile, float width, 
 class FillCut {
  public:
   FillCut(const GranuleTile& tile, float width, float depth, std::function<float(float x, float z)> surface);
+  // Leaves out the tile copies (columns of copies across x and z, every layer) that lie
+  // wholly within [x0, x1] × [z0, z1] (m, as width and depth): granules the caller will not
+  // place, far enough from the rest that no decision about them changes what is kept
+  // elsewhere (a candidate is tested only against granules of other copies, closer than 1.8 r,
+  // and a copy is a tile period across). Before the first step.
+  void skip_copies_within(float x0, float x1, float z0, float z1);
   ~FillCut();
   FillCut(FillCut&&) noexcept;
   FillCut& operator=(FillCut&&) noexcept;

@@ -324,6 +324,8 @@ void Simulation::Impl::build_list(const std::vector<std::int32_t>& old_slot) {
   nbr.resize(nstart[n]);
   nbr_id.resize(nstart[n]);
   pairs.assign(std::size_t(nstart[n]));
+  const bool indexed = !set_pairs.empty();
+  if (indexed) index_set_pairs(n);
   // the old entry of the pair (owner's old slot oi, partner id), or -1
   auto old_entry = [&](int oi, int partner_id) {
     if (oi < 0 || oi >= old_np) return -1;
@@ -342,13 +344,12 @@ void Simulation::Impl::build_list(const std::vector<std::int32_t>& old_slot) {
         const int jd = p.id[j];
         nbr[e] = j;
         nbr_id[e] = jd;
-        if (!set_pairs.empty()) {  // a spring set from outside (set_contact_springs) wins
-          const auto it = set_pairs.find(id < jd ? spring_key(id, jd) : spring_key(jd, id));
-          if (it != set_pairs.end()) {
+        if (indexed) {  // a spring set from outside (set_contact_springs) wins
+          if (const SetSpring* sp = id < jd ? set_pair(id, jd) : set_pair(jd, id)) {
             const float sgn = id < jd ? 1.0f : -1.0f;  // (kept as the lower id's)
-            for (int c = 0; c < 3; ++c) pairs.xi[3 * e + c] = sgn * it->second.xi[c];
+            for (int c = 0; c < 3; ++c) pairs.xi[3 * e + c] = sgn * sp->xi[c];
             pairs.touch[e] = 1;
-            pairs.dmax[e] = it->second.dmax;
+            pairs.dmax[e] = sp->dmax;
             continue;
           }
         }

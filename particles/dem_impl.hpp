@@ -293,13 +293,26 @@ struct Simulation::Impl {
   // (the boundary-plane springs are particle arrays: p.wall_xi, p.wall_mask, fields.hpp)
 
   // Springs set from outside (set_contact_springs, dem_springs.cpp), taken by the next sort:
-  // pairs by spring_key(lower id, higher id), the spring as the lower id's; plane springs by
-  // sphere id and plane.
+  // pairs by spring_key(lower id, higher id), the spring as the lower id's, in the order set
+  // (a later one of a pair wins); plane springs by sphere id and plane.
   struct SetSpring {
     float xi[3];
     float dmax;
   };
-  std::unordered_map<std::uint64_t, SetSpring> set_pairs;
+  std::vector<std::pair<std::uint64_t, SetSpring>> set_pairs;
+  // The set pairs as the list build reads them (index_set_pairs): by lower id, the rows of a
+  // CSR (set_row: n + 1 starts; set_hi: the higher id; set_spring). A pair is looked up in the
+  // few rows of its lower id, as the old list's entries are (a hash map's look-up per list
+  // entry took 0.5 ms of a car's track patch's first step: docs/BENCHMARKS.md).
+  std::vector<std::int32_t> set_row, set_hi;
+  std::vector<SetSpring> set_spring;
+  void index_set_pairs(int n);
+  const SetSpring* set_pair(std::int32_t lo, std::int32_t hi) const {
+    if (lo < 0 || lo + 1 >= std::int32_t(set_row.size())) return nullptr;
+    for (std::int32_t k = set_row[std::size_t(lo)]; k < set_row[std::size_t(lo) + 1]; ++k)
+      if (set_hi[std::size_t(k)] == hi) return &set_spring[std::size_t(k)];
+    return nullptr;
+  }
   std::vector<std::pair<std::int64_t, SetSpring>> set_planes;  // (id * kWallSlots + plane, spring)
   static std::uint64_t spring_key(std::int32_t lo, std::int32_t hi) {
     return (std::uint64_t(std::uint32_t(lo)) << 32) | std::uint32_t(hi);

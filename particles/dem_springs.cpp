@@ -2,6 +2,7 @@
 // springs"): the tangential springs and largest overlaps of touching granule contacts, by
 // granule and sphere, so a bed rebuilt in another simulation from its positions keeps the
 // forces that held it at rest.
+#include <algorithm>
 #include <cmath>
 #include <string>
 
@@ -61,8 +62,8 @@ Status Simulation::set_contact_springs(const std::vector<ContactSpring>& springs
     }
     const std::int32_t ib = s.b.first[c.b.index] + c.sphere_b;
     const float sgn = ia < ib ? 1.0f : -1.0f;  // kept as the lower id's
-    s.set_pairs[ia < ib ? Impl::spring_key(ia, ib) : Impl::spring_key(ib, ia)] = {
-        {sgn * c.xi.x, sgn * c.xi.y, sgn * c.xi.z}, c.dmax};
+    s.set_pairs.push_back({ia < ib ? Impl::spring_key(ia, ib) : Impl::spring_key(ib, ia),
+                           {{sgn * c.xi.x, sgn * c.xi.y, sgn * c.xi.z}, c.dmax}});
   }
   if (!springs.empty()) s.need_sort = true;  // taken by the next sort's list (build_list)
   return Ok{};
@@ -80,6 +81,28 @@ void Simulation::Impl::take_set_springs() {
   }
   set_planes.clear();
   set_pairs.clear();
+  set_row.clear();
+  set_hi.clear();
+  set_spring.clear();
+}
+
+// The set pairs by lower id (a CSR over ids [0, n)); of a pair set twice, the later. Pairs
+// of an id at or past n (no such sphere) are dropped, as the plane springs are.
+void Simulation::Impl::index_set_pairs(int n) {
+  // (stable: the pairs of one key stay in the order set, and the last of them is kept)
+  std::stable_sort(set_pairs.begin(), set_pairs.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  set_row.assign(std::size_t(n) + 1, 0);
+  set_hi.clear();
+  set_spring.clear();
+  for (std::size_t k = 0; k < set_pairs.size(); ++k) {
+    if (k + 1 < set_pairs.size() && set_pairs[k + 1].first == set_pairs[k].first) continue;  // (a later one wins)
+    const std::int32_t lo = std::int32_t(set_pairs[k].first >> 32), hi = std::int32_t(set_pairs[k].first & 0xffffffffu);
+    if (lo >= n || hi >= n) continue;
+    ++set_row[std::size_t(lo) + 1];
+    set_hi.push_back(hi);
+    set_spring.push_back(set_pairs[k].second);
+  }
+  for (int i = 0; i < n; ++i) set_row[std::size_t(i) + 1] += set_row[std::size_t(i)];
 }
 
 }  // namespace sandpatch

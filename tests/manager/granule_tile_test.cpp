@@ -117,6 +117,43 @@ TEST(GranuleTile, FillCutInStepsEqualsTheWholeCut) {
   }
 }
 
+// A successor's cut leaves out the tile copies inside its predecessor but a period deep from the
+// side it reaches past (skip_copies_within): the granules beyond that side are those of the
+// whole cut, in its order, and the cut takes fewer steps.
+TEST(GranuleTile, FillCutWithoutTheCopiesItSkipsKeepsTheRestAlike) {
+  const GranuleTile& t = tile();
+  const float P = t.period_xz, W = 4.0f * P, D = 2.0f * P, H = 0.6f * t.period_y;
+  auto surf = [&](float x, float z) { return H + 0.1f * t.period_y * std::sin(x / W * 6.0f) * std::cos(z / D * 4.0f); };
+  auto beyond = [&](const std::vector<PlacedGranule>& g) {  // (past the predecessor, x > 3 P)
+    std::vector<PlacedGranule> out;
+    for (const PlacedGranule& p : g)
+      if (p.position.x > 3.0f * P) out.push_back(p);
+    return out;
+  };
+  auto run = [&](bool skip, int* steps) {
+    FillCut cut(t, W, D, surf);
+    if (skip) cut.skip_copies_within(-1e-4f * P, 2.0f * P + 1e-4f * P, -1e-4f * P, D + 1e-4f * P);
+    *steps = 0;
+    while (!cut.step(4096)) ++*steps;
+    return cut.take();
+  };
+  int steps_whole = 0, steps_skip = 0;
+  const std::vector<PlacedGranule> whole = run(false, &steps_whole), skipped = run(true, &steps_skip);
+  const std::vector<PlacedGranule> a = beyond(whole), b = beyond(skipped);
+  ASSERT_GT(a.size(), 20u);
+  ASSERT_EQ(a.size(), b.size());
+  for (std::size_t k = 0; k < a.size(); ++k) {
+    EXPECT_EQ(a[k].position.x, b[k].position.x);
+    EXPECT_EQ(a[k].position.y, b[k].position.y);
+    EXPECT_EQ(a[k].position.z, b[k].position.z);
+    EXPECT_EQ(a[k].orientation.w, b[k].orientation.w);
+  }
+  // (no granule of a skipped copy: none centred within its columns but round the edges)
+  for (const PlacedGranule& p : skipped) EXPECT_GT(p.position.x, 2.0f * P - t.shape.centre_distance - t.shape.radius);
+  EXPECT_LT(skipped.size(), whole.size());
+  EXPECT_LT(steps_skip, steps_whole);
+}
+
 // Fine, stiff granules (r = 1.4 cm at k_n = 1.5e5 N/m: t_c / 20 = 7e-5 s) need 120 substeps
 // in each 1/120 s settling frame, more than a game frame's 64: the tile still settles (it
 // was refused with "max_substeps = 64", which no caller of the manager could raise).

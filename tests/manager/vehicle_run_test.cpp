@@ -227,11 +227,13 @@ TEST(SceneVehicles, ShippedVehicleDrivesOffUnderABudgetNothingFits) {
   // Its tracks' patches travel: a successor is filled at once (its parts in one frame) only when
   // a wheel its predecessor carries would pass the side it reaches beyond within two frames,
   // not for a wheel straddling the side between the two tracks or the chassis riding above
-  // (manager/filling.cpp activate), and it is asked for in time: the car's request spans both
-  // track patches, and the side one shares with the other no longer hides the leading side
-  // (manager/planning.cpp extend). 2 of 10 successors here, besides the first patch made at
-  // start-up; 3 of 7 with only the side passed most looked at (the left track's successors
-  // came when its front wheel was two frames from the edge), all 7 before that.
+  // (manager/filling.cpp activate: it would not touch the sand within those frames), and it is
+  // asked for in time: the car's request spans both track patches, and the side one shares
+  // with the other no longer hides the leading side (manager/planning.cpp extend). 1 of 10
+  // successors here, besides the first patch made at start-up and the left track's first patch
+  // beside it; 4 of 10 when the chassis counted while its shell would join a patch (its join
+  // height grows as it pitches); 3 of 7 with only the side passed most looked at (the left
+  // track's successors came when its front wheel was two frames from the edge), all 7 before.
   const int urgent = r["pool"]["urgent_fills"].get<int>(), travels = r["pool"]["travels"].get<int>();
   std::printf("patches filled at once %d, successors that took over %d\n", urgent, travels);
   EXPECT_GE(travels, 4);
