@@ -152,11 +152,13 @@ std::size_t FillCut::granules() const { return s_->out.size(); }
 
 // A candidate cut (its surface sampled, its spheres tested against the granules placed and
 // inserted) costs many tile granules made candidates (about 0.6 us against 25 ns on the
-// development machine), so it counts 4 units: the last part of a car's fill took 2.3-2.9 ms
-// at one unit, and a cut part takes 0.8-0.9 ms on average at 4. (At 16, 0.3 ms, but fills
-// were ready that many frames later: a box driven onto a patch just made rose 0.88 granule
-// diameters above its rest on granules, past the 0.75 Coupling.FastBoxMeetingPatchesDoesNotHop
-// allows.) docs/manager.md "No frame does a whole patch's work".
+// development machine with a hash grid, about 0.35 us with the dense one), so it counts 4
+// units: the last part of a car's fill took 2.3-2.9 ms at one unit, and a cut part took
+// 0.8-0.9 ms on average at 4 with the hash grid, 0.25 ms with the dense one. (At 16 and the
+// hash grid, 0.3 ms, but fills were ready that many frames later: a box driven onto a patch
+// just made rose 0.88 granule diameters above its rest on granules, past the 0.75
+// Coupling.FastBoxMeetingPatchesDoesNotHop allows.) docs/manager.md "No frame does a whole
+// patch's work".
 constexpr std::size_t kUnitsPerCandidateCut = 4;
 
 bool FillCut::step(std::size_t work) {

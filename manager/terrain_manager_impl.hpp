@@ -417,8 +417,8 @@ struct TerrainManager::Impl {
   Status promote(Slot& slot, const PatchRequest& req, double time);
   Status cut(Slot& slot, double time, std::size_t units);
   // Units of a fill's cut per frame (FillCut: a tile granule made a candidate is one, a
-  // candidate cut four): 0.8-0.9 ms a part on a car's fill, two threads (docs/manager.md "No
-  // frame does a whole patch's work").
+  // candidate cut four): 0.25 ms a part on a car's fill on average, 0.56 ms at most
+  // (docs/manager.md "No frame does a whole patch's work").
   static constexpr std::size_t kCutUnitsPerFrame = 4096;
   static constexpr std::size_t kWhole = std::size_t(-1);
   Status clear_bodies(Slot& slot, const ParticleScale& sc, const GranuleShape& shape, double s);
