@@ -259,6 +259,7 @@ RunResult run_scene(const SceneDef& scene, const RunOptions& opt) {
     if (Status s = csv.close(); !s) return fail(ExitCode::RuntimeFailure, "outputs", s.message());
     written.push_back(csv.bodies_file().string());
     written.push_back(RunCsv::patches_path(csv.bodies_file()).string());
+    written.push_back(RunCsv::frames_path(csv.bodies_file()).string());
   }
   if (manager)
     if (const ojson mr = manager->report(); mr.contains("planned_paths"))

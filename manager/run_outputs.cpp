@@ -395,13 +395,25 @@ const char* RunCsv::body_header() {
   return "t,body,x,y,z,qw,qx,qy,qz,vx,vy,vz,wx,wy,wz,granular_fx,granular_fy,granular_fz,granular_tx,granular_ty,"
          "granular_tz,heightfield_fx,heightfield_fy,heightfield_fz,sinkage,on_particles";
 }
+std::filesystem::path RunCsv::frames_path(const std::filesystem::path& bodies) {
+  std::filesystem::path p = bodies;
+  const std::string stem = p.extension() == ".csv" ? p.stem().string() : p.filename().string();
+  return p.replace_filename(stem + "_frames.csv");
+}
+
 const char* RunCsv::patch_header() { return "t,patch,state,granules,spheres,substeps,step_ms,rebuilds"; }
+const char* RunCsv::frame_header() {
+  return "t,frame_ms,budget_ms,spawn_ms,lod_ms,activation_ms,dem_ms,bodies_ms,sleep_ms,demotion_ms,conversion_parts,"
+         "urgent_fills,promotions,granules_uploaded,ready,demotion_parts,demotions,wakes,patches_stepped,side_by_side,"
+         "substeps,sphere_steps";
+}
 
 Status RunCsv::open(const std::filesystem::path& bodies) {
   discard();
   path_ = bodies;
   patches_ = patches_path(bodies);
-  for (const auto& p : {path_, patches_}) {
+  frames_ = frames_path(bodies);
+  for (const auto& p : {path_, patches_, frames_}) {
     std::error_code ec;
     if (p.has_parent_path()) std::filesystem::create_directories(p.parent_path(), ec);
   }
@@ -412,8 +424,14 @@ Status RunCsv::open(const std::filesystem::path& bodies) {
     discard();
     return Error{patches_.string(), "", "", "must be a writable file", "cannot create " + temp_of(patches_).string()};
   }
+  frame_rows_ = std::fopen(temp_of(frames_).c_str(), "wb");
+  if (!frame_rows_) {
+    discard();
+    return Error{frames_.string(), "", "", "must be a writable file", "cannot create " + temp_of(frames_).string()};
+  }
   std::fprintf(bodies_, "%s\n", body_header());
   std::fprintf(patch_rows_, "%s\n", patch_header());
+  std::fprintf(frame_rows_, "%s\n", frame_header());
   return Ok{};
 }
 
@@ -440,25 +458,41 @@ Status RunCsv::frame(const World& world, double t) {
       std::fprintf(patch_rows_, "%.9g,%d,%s,%d,%d,%d,%.6g,%d\n", t, p.patch,
                    !p.ready ? "filling" : p.asleep ? "asleep" : p.stepped ? "active" : "held", p.granules, p.last_spheres,
                    p.stepped ? p.last_substeps : 0, p.stepped ? p.last_step_ms : 0.0, p.stepped ? p.last_rebuilds : 0);
-  if (std::ferror(bodies_) || std::ferror(patch_rows_)) return Error{path_.string(), "", "", "must be writable", "write failed"};
+  {
+    const World::FrameRecord& f = world.last_frame();
+    const auto& st = f.stage_ms;
+    TerrainManager::FrameWork k;
+    if (const TerrainManager* m = world.manager()) k = m->last_frame_work();
+    std::fprintf(frame_rows_, "%.9g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%lld,%lld\n", t,
+                 f.wall_ms, std::isfinite(f.budget_ms) ? f.budget_ms : 0.0, st[int(Stage::Spawn)], st[int(Stage::Lod)],
+                 st[int(Stage::Activation)], st[int(Stage::Dem)], st[int(Stage::Bodies)], st[int(Stage::Sleep)],
+                 st[int(Stage::Demotion)], k.conversion_parts, k.urgent_fills, k.promotions, k.granules_uploaded, k.ready,
+                 k.demotion_parts, k.demotions, k.wakes, k.patches_stepped, k.side_by_side, (long long)k.substeps,
+                 (long long)k.sphere_steps);
+  }
+  if (std::ferror(bodies_) || std::ferror(patch_rows_) || std::ferror(frame_rows_))
+    return Error{path_.string(), "", "", "must be writable", "write failed"};
   return Ok{};
 }
 
 Status RunCsv::close() {
   if (!is_open()) return Ok{};
-  const bool bad = std::fclose(bodies_) != 0;
-  const bool bad_p = std::fclose(patch_rows_) != 0;
-  bodies_ = patch_rows_ = nullptr;
-  std::error_code ec;
-  if (!bad) std::filesystem::rename(temp_of(path_), path_, ec);
-  if (bad || ec) {
+  const bool bad = std::fclose(bodies_) != 0, bad_p = std::fclose(patch_rows_) != 0, bad_f = std::fclose(frame_rows_) != 0;
+  bodies_ = patch_rows_ = frame_rows_ = nullptr;
+  if (bad || bad_p || bad_f) {
     discard();
-    return Error{path_.string(), "", "", "must be writable", ec ? ec.message() : "write failed"};
+    return Error{(bad ? path_ : bad_p ? patches_ : frames_).string(), "", "", "must be writable", "write failed"};
   }
-  if (!bad_p) std::filesystem::rename(temp_of(patches_), patches_, ec);
-  if (bad_p || ec) {
+  // (renamed one by one; when one fails, those renamed already are removed: none is left half)
+  const std::filesystem::path files[3] = {frames_, patches_, path_};
+  for (int n = 0; n < 3; ++n) {
+    std::error_code ec;
+    std::filesystem::rename(temp_of(files[n]), files[n], ec);
+    if (!ec) continue;
+    const std::string why = ec.message();
+    for (int m = 0; m < n; ++m) std::filesystem::remove(files[m], ec);
     discard();
-    return Error{patches_.string(), "", "", "must be writable", ec ? ec.message() : "write failed"};
+    return Error{files[n].string(), "", "", "must be writable", why};
   }
   return Ok{};
 }
@@ -466,10 +500,12 @@ Status RunCsv::close() {
 void RunCsv::discard() {
   if (bodies_) std::fclose(bodies_);
   if (patch_rows_) std::fclose(patch_rows_);
-  bodies_ = patch_rows_ = nullptr;
+  if (frame_rows_) std::fclose(frame_rows_);
+  bodies_ = patch_rows_ = frame_rows_ = nullptr;
   std::error_code ec;
   if (!path_.empty()) std::filesystem::remove(temp_of(path_), ec);
   if (!patches_.empty()) std::filesystem::remove(temp_of(patches_), ec);
+  if (!frames_.empty()) std::filesystem::remove(temp_of(frames_), ec);
 }
 
 RunCsv::~RunCsv() { discard(); }

@@ -121,8 +121,10 @@ class VideoWriter {
 
 // The run's time series (`sandpatch run --csv FILE`, scene outputs.csv; docs/cli.md "CSV"):
 // FILE gets one row per frame per body, FILE's stem + "_patches.csv" one row per frame per
-// live patch. Both are written as the run goes into temporary files beside them, renamed
-// when the run ends well (close()); a run that fails or is refused leaves neither.
+// live patch, its stem + "_frames.csv" one row per frame (its wall time, each stage's, the
+// budget and the terrain manager's work in it). All are written as the run goes into
+// temporary files beside them, renamed when the run ends well (close()); a run that fails or
+// is refused leaves none.
 class RunCsv {
  public:
   RunCsv() = default;
@@ -131,22 +133,26 @@ class RunCsv {
   RunCsv& operator=(const RunCsv&) = delete;
   // The patch file beside a body file: "a/bodies.csv" -> "a/bodies_patches.csv".
   static std::filesystem::path patches_path(const std::filesystem::path& bodies);
+  // The frame file beside a body file: "a/bodies.csv" -> "a/bodies_frames.csv".
+  static std::filesystem::path frames_path(const std::filesystem::path& bodies);
   static const char* body_header();   // the body file's first line (without the newline)
   static const char* patch_header();
-  // Creates both temporary files and writes the headers; errors name the path.
+  static const char* frame_header();
+  // Creates the temporary files and writes the headers; errors name the path.
   Status open(const std::filesystem::path& bodies);
   bool is_open() const { return bodies_ != nullptr; }
   // The rows of the state after a frame at simulated time t (s).
   Status frame(const World& world, double t);
-  // Flushes and renames both into place.
+  // Flushes and renames them into place.
   Status close();
   const std::filesystem::path& bodies_file() const { return path_; }
 
  private:
   void discard();
-  std::filesystem::path path_, patches_;
+  std::filesystem::path path_, patches_, frames_;
   std::FILE* bodies_ = nullptr;
   std::FILE* patch_rows_ = nullptr;
+  std::FILE* frame_rows_ = nullptr;
 };
 
 }  // namespace sandpatch

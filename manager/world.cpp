@@ -361,7 +361,8 @@ Status World::step(double dt, int substeps) {
   ++steps_;
   const bool awake = manager_ && (manager_->active_patches() > manager_->asleep_patches());
   const double budget = manager_ ? manager_->budget_ms(dt) : std::numeric_limits<double>::infinity();
-  last_frame_ = {std::chrono::duration<double, std::milli>(Clock::now() - f0).count(), conversion, awake, budget};
+  last_frame_ = {std::chrono::duration<double, std::milli>(Clock::now() - f0).count(), conversion, awake, budget, {}};
+  for (int k = 0; k < int(Stage::Count); ++k) last_frame_.stage_ms[k] = profile_.timer(Stage(k)).total_ms - stage0[k];
   if (frame_ms_.size() < kFrameWindow) frame_ms_.push_back(last_frame_.wall_ms);
   else frame_ms_[std::size_t(steps_ - 1) % kFrameWindow] = last_frame_.wall_ms;
   if (awake) {
@@ -379,7 +380,7 @@ Status World::step(double dt, int substeps) {
     WorstFrame w;
     w.t = t;
     w.total_ms = last_frame_.wall_ms;
-    for (int k = 0; k < int(Stage::Count); ++k) w.stage_ms[k] = profile_.timer(Stage(k)).total_ms - stage0[k];
+    w.stage_ms = last_frame_.stage_ms;
     if (manager_) w.work = manager_->last_frame_work();
     auto at = std::find_if(worst_.begin(), worst_.end(), [&](const WorstFrame& o) { return o.total_ms < w.total_ms; });
     worst_.insert(at, w);

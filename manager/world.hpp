@@ -254,6 +254,7 @@ class World {
     bool conversion = false;  // a part of a promotion or a demotion ran in it (TerrainManager::FrameWork)
     bool patch_awake = false;  // a patch was simulating (filling, or ready and not asleep)
     double budget_ms = 0;      // the frame budget (infinity: none)
+    std::array<double, int(Stage::Count)> stage_ms{};  // wall, each stage's part of it
   };
   const FrameRecord& last_frame() const { return last_frame_; }
   // The longest frames of the run (kWorstFrames, longest first): when, their wall ms, each

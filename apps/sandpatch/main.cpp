@@ -127,7 +127,7 @@ void add_run(CLI::App& app, RunCli& a) {
   run->add_flag("--shells", a.shells, "Images and video also draw the bodies' particle shells (a debug overlay)");
   run->add_option("--video", a.video, "Also write a video of the scene's first camera to this file, through ffmpeg");
   run->add_option("--video-fps", a.video_fps, "Video frames per simulated second (default 30; at most 1 / dt)");
-  run->add_option("--csv", a.csv, "Also write each body's pose, velocity, soil forces and sinkage per frame to this CSV file (patches: its stem + _patches.csv)");
+  run->add_option("--csv", a.csv, "Also write each body's pose, velocity, soil forces and sinkage per frame to this CSV file (patches: its stem + _patches.csv; frames: + _frames.csv)");
 }
 
 struct RenderCli {

@@ -194,6 +194,26 @@ TEST(RunCsv, OneRowPerFramePerBodyAndTheLastMatchesTheReport) {
   EXPECT_NEAR(std::stod(ball[3]), 2.2, 0.01);
   EXPECT_NEAR(std::stod(ball[24]), -(2.2 - 0.2 - 1.0), 0.01);
   EXPECT_EQ(ball[25], "0");
+  // The frame file: one row per frame, in time order; the longest frame is the report's, and
+  // each frame's stages add up to no more than it.
+  const auto frames = lines_of(dir / "series" / "bodies_frames.csv");
+  ASSERT_EQ(frames.size(), 1u + 60u);
+  EXPECT_EQ(frames[0], RunCsv::frame_header());
+  const std::size_t columns = split_csv(frames[0]).size();
+  double longest = 0, t_before = 0;
+  for (std::size_t k = 1; k < frames.size(); ++k) {
+    const auto f = split_csv(frames[k]);
+    ASSERT_EQ(f.size(), columns) << frames[k];
+    EXPECT_GT(std::stod(f[0]), t_before);
+    t_before = std::stod(f[0]);
+    const double ms = std::stod(f[1]);
+    double stages = 0;
+    for (std::size_t c = 3; c <= 9; ++c) stages += std::stod(f[c]);
+    EXPECT_LE(stages, ms * (1 + 1e-5) + 1e-6) << frames[k];
+    longest = std::max(longest, ms);
+  }
+  EXPECT_NEAR(longest, report["frames"]["max_ms"].get<double>(), 1e-5 * longest);
+  EXPECT_FALSE(fs::exists(dir / "series" / "bodies_frames.csv.part"));
 }
 
 // The shipped plate press parses: a kinematic plate on keyframes, a CSV output.
