@@ -31,6 +31,9 @@ class DemBackend {
   // OpenMP threads of the following steps (0 = OpenMP's default); the results do not depend
   // on it. Backends that do not run on the CPU's threads ignore it.
   virtual Status set_threads(int) { return Ok{}; }
+  // The lists the next step would begin by building, built now (Simulation::build_lists_now);
+  // backends that build them elsewhere ignore it.
+  virtual void build_lists_now() {}
   virtual std::int32_t body_group(BodyId b) const = 0;
   virtual Status step(double dt_frame) = 0;
   // DEM substeps a frame of dt_frame seconds takes (dt_sub <= t_c / N), or the error step() gives.
@@ -90,6 +93,9 @@ class DemBackendOf final : public DemBackend {
   Status set_threads(int n) override {
     if constexpr (requires(Sim& s) { s.set_threads(n); }) return sim_.set_threads(n);
     return Ok{};
+  }
+  void build_lists_now() override {
+    if constexpr (requires(Sim& s) { s.build_lists_now(); }) sim_.build_lists_now();
   }
   std::int32_t body_group(BodyId b) const override { return sim_.body_group(b); }
   Status step(double dt) override { return sim_.step(dt); }

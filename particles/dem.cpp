@@ -344,6 +344,10 @@ Status Simulation::step(double dt_frame) {
     if (auto st = s.check_impacts(); !st) return st;
   s.stats = StepStats{};
   s.stats.guard_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_guard).count();
+  // (lists built ahead of the step, build_lists_now)
+  s.stats.resorts = s.early_lists.resorts, s.stats.shell_lists = s.early_lists.shell_lists;
+  s.stats.sort_seconds = s.early_lists.sort_seconds;
+  s.early_lists = {};
   s.stats.substeps = *ns;
   s.stats.substep_dt = dt_frame / *ns;
   if (s.asleep) {
@@ -358,6 +362,18 @@ Status Simulation::step(double dt_frame) {
     if (auto st = s.substep(dt); !st) return st;
   update_sleep(s.def, s.granule_vmax, dt_frame, s.below_time, s.asleep);  // dem_control.hpp
   return Ok{};
+}
+
+void Simulation::build_lists_now() {
+  Impl& s = *impl_;
+  if (s.asleep || !(s.need_sort || s.need_shell_list)) return;
+  const StepStats keep = s.stats;  // (the last step's, read until the next)
+  const auto t0 = std::chrono::steady_clock::now();
+  s.refresh_lists();
+  s.early_lists.resorts += s.stats.resorts - keep.resorts;
+  s.early_lists.shell_lists += s.stats.shell_lists - keep.shell_lists;
+  s.early_lists.sort_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  s.stats = keep;
 }
 
 double Simulation::contact_time() const { return impl_->contact_time_(); }

@@ -309,6 +309,13 @@ class Simulation {
   // OpenMP threads of the following steps (0 = OpenMP's default); the results do not depend
   // on it. Negative counts are refused.
   Status set_threads(int threads);
+  // Sorts the spheres into the grid and builds the neighbour lists now, on this simulation's
+  // threads, when its next step would begin with that (granules added, a shell enabled or
+  // parked, springs set); else nothing. The step then starts from them: the same results.
+  // The next step's stats count it. (The terrain manager, before its patches step side by
+  // side one thread each, builds a patch's lists this way on all threads: docs/manager.md
+  // "Patches side by side".)
+  void build_lists_now();
   // The substep bound N of the following steps (dt_sub <= t_c / N: SimulationDef::
   // accuracy_steps_per_contact), for a frame budget that lowers a live patch's cost; N >= 2,
   // else refused naming the field. The state is kept: the next step takes the new substeps.

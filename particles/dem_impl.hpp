@@ -217,6 +217,11 @@ struct Simulation::Impl {
   };
   std::vector<WideMotion> wide_motion;  // wide body -> (scratch of `bodies`)
   bool need_sort = true;
+  // Lists built ahead of the next step (Simulation::build_lists_now): its stats count them.
+  struct EarlyLists {
+    int resorts = 0, shell_lists = 0;
+    double sort_seconds = 0;
+  } early_lists;
   float shape_offsets[16] = {};        // the granule's 4 sphere offsets (x, y, z, 0), m, body frame
 
   // Verlet neighbour list (CSR, sorted order, no cap), one entry per pair: for sphere i the
