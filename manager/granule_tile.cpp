@@ -7,7 +7,6 @@
 #include <map>
 #include <mutex>
 #include <numbers>
-#include <unordered_map>
 
 #include <Eigen/Geometry>
 
@@ -32,8 +31,17 @@ class SphereGrid {
  public:
   SphereGrid() = default;
   SphereGrid(float cell, Vec3 lo, Vec3 hi) : cell_(cell), lo_(lo) {
-    auto cells = [&](float a, float b) { return std::clamp(int(std::ceil((b - a) / cell)) + 1, 1, 1 << 10); };
-    n_ = {cells(lo.x, hi.x), cells(lo.y, hi.y), cells(lo.z, hi.z)};
+    // (at most kMaxCells: a larger box takes larger cells, which finds the same neighbours)
+    constexpr double kMaxCells = 1 << 22;
+    auto cells = [&](float a, float b) {
+      const double n = std::ceil(double(b - a) / double(cell_)) + 1;
+      return std::isfinite(n) ? int(std::clamp(n, 1.0, kMaxCells)) : 1;
+    };
+    for (;;) {
+      n_ = {cells(lo.x, hi.x), cells(lo.y, hi.y), cells(lo.z, hi.z)};
+      if (double(n_[0]) * n_[1] * n_[2] <= kMaxCells) break;
+      cell_ *= 2;
+    }
     head_.assign(std::size_t(n_[0]) * n_[1] * n_[2], -1);
   }
   void insert(Vec3 p, int copy = 0) {
@@ -43,7 +51,7 @@ class SphereGrid {
     head_[c] = int(entries_.size()) - 1;
   }
   // True when some stored centre of another copy than `copy` (-1: any) is closer than `dist`
-  // (at most `cell`) to p.
+  // (at most the cell asked for) to p.
   bool near(Vec3 p, float dist, int copy = -1) const {
     const auto [i, j, k] = index(p);
     for (int c = std::max(0, k - 1); c <= std::min(n_[2] - 1, k + 1); ++c)
