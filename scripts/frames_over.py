@@ -7,10 +7,12 @@ or demotion stage above 0.5 ms), a take-over (`ready`), or the DEM alone.
 """
 import argparse
 import csv
+import signal
 import statistics
 
 
 def main():
+    signal.signal(signal.SIGPIPE, signal.SIG_DFL)  # (quiet when piped into head)
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("frames")
     ap.add_argument("--factor", type=float, default=1.5)
