@@ -403,9 +403,15 @@ std::filesystem::path RunCsv::frames_path(const std::filesystem::path& bodies) {
 
 const char* RunCsv::patch_header() { return "t,patch,state,granules,spheres,substeps,step_ms,rebuilds"; }
 const char* RunCsv::frame_header() {
-  return "t,frame_ms,budget_ms,spawn_ms,lod_ms,activation_ms,dem_ms,bodies_ms,sleep_ms,demotion_ms,conversion_parts,"
-         "urgent_fills,promotions,granules_uploaded,ready,demotion_parts,demotions,wakes,patches_stepped,side_by_side,"
-         "substeps,sphere_steps";
+  // (the stages' columns from the frame's own list of stages, all but the outputs)
+  static const std::string header = [] {
+    std::string h = "t,frame_ms,budget_ms";
+    for (int k = 0; k < int(Stage::Count); ++k)
+      if (Stage(k) != Stage::Outputs) h += std::string(",") + kStageNames[std::size_t(k)] + "_ms";
+    return h + ",conversion_parts,urgent_fills,promotions,granules_uploaded,ready,demotion_parts,demotions,wakes,"
+               "patches_stepped,side_by_side,substeps,sphere_steps";
+  }();
+  return header.c_str();
 }
 
 Status RunCsv::open(const std::filesystem::path& bodies) {
@@ -463,12 +469,12 @@ Status RunCsv::frame(const World& world, double t) {
     const auto& st = f.stage_ms;
     TerrainManager::FrameWork k;
     if (const TerrainManager* m = world.manager()) k = m->last_frame_work();
-    std::fprintf(frame_rows_, "%.9g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%lld,%lld\n", t,
-                 f.wall_ms, std::isfinite(f.budget_ms) ? f.budget_ms : 0.0, st[int(Stage::Spawn)], st[int(Stage::Lod)],
-                 st[int(Stage::Activation)], st[int(Stage::Dem)], st[int(Stage::Bodies)], st[int(Stage::Sleep)],
-                 st[int(Stage::Demotion)], k.conversion_parts, k.urgent_fills, k.promotions, k.granules_uploaded, k.ready,
-                 k.demotion_parts, k.demotions, k.wakes, k.patches_stepped, k.side_by_side, (long long)k.substeps,
-                 (long long)k.sphere_steps);
+    std::fprintf(frame_rows_, "%.9g,%.6g,%.6g", t, f.wall_ms, std::isfinite(f.budget_ms) ? f.budget_ms : 0.0);
+    for (int s = 0; s < int(Stage::Count); ++s)
+      if (Stage(s) != Stage::Outputs) std::fprintf(frame_rows_, ",%.6g", st[std::size_t(s)]);
+    std::fprintf(frame_rows_, ",%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%lld,%lld\n", k.conversion_parts, k.urgent_fills,
+                 k.promotions, k.granules_uploaded, k.ready, k.demotion_parts, k.demotions, k.wakes, k.patches_stepped,
+                 k.side_by_side, (long long)k.substeps, (long long)k.sphere_steps);
   }
   if (std::ferror(bodies_) || std::ferror(patch_rows_) || std::ferror(frame_rows_))
     return Error{path_.string(), "", "", "must be writable", "write failed"};
