@@ -125,7 +125,7 @@ Status TerrainManager::Impl::activate(double time, double dt) {
     if (free == slots.end()) {
       // A patch no body is over gives its slot to the request: demoted one part a frame,
       // the request promoted in the frame after the last part.
-      auto r = release_idle(time);
+      auto r = release_idle(time, it->successor_of >= 0 || it->ahead_of_carried);
       if (!r) return r.errors();
       break;
     }

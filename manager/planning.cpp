@@ -476,8 +476,11 @@ bool TerrainManager::Impl::ask_successor(Slot& s, const PatchRequest& r, int sid
 }
 
 // Whether a body is over a patch, or near it (within half lod.apron of its region, below
-// engage_height over its surface), or it carries one: such a patch is not released.
+// engage_height over its surface), or it carries one: such a patch is not released. One that
+// never carried a body (released only for a body another patch carries: release_idle) is
+// wanted while a body no patch carries lies over it.
 bool TerrainManager::Impl::wanted_for_release(const Slot& s) const {
+  if (s.carried.empty()) return uncarried_body_over(s);
   for (const Carried& c : s.carried)
     if (c.enabled && world->alive(c.body)) return true;
   const PatchRequest a = rect(s);
@@ -504,12 +507,30 @@ Status TerrainManager::Impl::release(Slot& s, double time) {
   return Ok{};
 }
 
-Result<bool> TerrainManager::Impl::release_idle(double time) {
+// Whether a body no patch carries lies over s (its footprint over s's region, at any height:
+// a body falling onto it).
+bool TerrainManager::Impl::uncarried_body_over(const Slot& s) const {
+  const PatchRequest a = rect(s);
+  for (RigidBodyId b : world->bodies()) {
+    if (carried_anywhere(b)) continue;
+    Eigen::Vector3d lo, hi;
+    world->bounds(b, &lo, &hi);
+    if (lo.x() < a.x1 && hi.x() > a.x0 && lo.z() < a.z1 && hi.z() > a.z0) return true;
+  }
+  return false;
+}
+
+// A patch no body has reached yet is kept for the body it was made for, except from a
+// request for a body a patch carries: then one that no body it could carry lies over is
+// released (a car's patch asked for beside a wheel that drove on alongside kept one of three
+// slots, asleep or held by the budget, and the car's successors waited for it: its wheels ran
+// on the heightfield; docs/manager.md "A patch that travels with its body").
+Result<bool> TerrainManager::Impl::release_idle(double time, bool for_carried) {
   for (Slot& s : slots)
     if (s.demotion.releasing) return true;
   for (Slot& s : slots) {
-    if (!s.ready() || s.carried.empty()) continue;  // a patch no body has reached yet is kept
-    if (wanted_for_release(s)) continue;
+    if (!s.ready()) continue;
+    if ((s.carried.empty() && !for_carried) || wanted_for_release(s)) continue;
     if (Status st = release(s, time); !st) return st.errors();
     return true;
   }

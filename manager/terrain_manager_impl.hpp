@@ -400,8 +400,11 @@ struct TerrainManager::Impl {
   Status trade_live_substeps(const Slot& to, double time);  // filling.cpp
   // A patch no body is over given up: held, demoted one part a frame (planning.cpp).
   Status release(Slot& s, double time);
-  Result<bool> release_idle(double time);
+  // `for_carried`: the request waiting for a slot is for a body a patch carries (its
+  // successor, or the patch abutting ahead of it).
+  Result<bool> release_idle(double time, bool for_carried);
   bool wanted_for_release(const Slot& s) const;
+  bool uncarried_body_over(const Slot& s) const;
 
   // ---- filling (filling.cpp): Stage::Activation ----
   // Serves the queue while slots are free, then uploads a chunk of every filling patch.

@@ -745,6 +745,42 @@ TEST(TerrainManager, APatchTravelsWithTheBodyItCarries) {
   EXPECT_LT(on.worst_patch_error, 1.0) << "% of a patch's volume";
 }
 
+// A patch no body ever reached does not keep a slot from a body a patch carries: the driven
+// sphere's patch travels with it while a patch asked for beside its way (request_patch,
+// abutting the sphere's patch on its side, as a car's patch asked for beside a wheel that then
+// drove on alongside) holds the pool's other slot, carrying nothing, its idle_timeout (120 s)
+// far off. The patch beside is released for the sphere's first successor (before, a patch
+// that had never carried a body was never released for a request: the sphere waited at its
+// patch's edge, 27-28 of 180 frames on the heightfield, and its patch never travelled).
+TEST(TerrainManager, APatchNoBodyReachedGivesItsSlotToACarriedBodysSuccessor) {
+  test::Rig rig(test::terrain_8m("flat"));
+  auto def = driven_sphere_def();
+  ASSERT_EQ(def.slots, 2);
+  auto id = start_driven_sphere(rig, def);
+  ASSERT_TRUE(id.ok()) << id.message();
+  TerrainManager& m = *rig.manager;
+  m.request_patch(2.6, 4.3, 3.4, 4.9, 0.0);
+  BulletWorld& world = *rig.world;
+  int off_particles = 0, driven = 0;
+  for (int f = 0; f < 240; ++f) {
+    if (rig.t() >= 1.0) {  // landed and settled: drive it
+      BodyState st = world.state(*id);
+      st.linear_velocity = {0.4f, st.linear_velocity.y(), 0.0f};
+      world.set_state(*id, st);
+      ++driven;
+      off_particles += world.terrain_collision(*id);
+    }
+    ASSERT_TRUE(rig.frame().ok()) << rig.error;
+  }
+  const auto rep = m.report();
+  const int travels = rep["pool"]["travels"].get<int>();
+  std::printf("beside: x %.2f m, %d travels, %d of %d frames off particles, %d conversions\n", world.state(*id).position.x(), travels,
+              off_particles, driven, int(rep["conversions"].size()));
+  EXPECT_GE(travels, 1) << "the sphere's patch travelled with it";
+  EXPECT_EQ(off_particles, 0) << "frames the sphere spent on the heightfield, of " << driven;
+  EXPECT_GT(world.state(*id).position.x(), 3.0 + 0.8);
+}
+
 // No frame does a whole patch's work (docs/manager.md "No frame does a whole patch's work"):
 // two spheres dropped side by side ask for two patches in the same frame; each is promoted
 // over several frames (its slot's reset, its fill cut 4096 units a frame, uploads of
