@@ -418,8 +418,48 @@ void BulletWorld::terrain_changed(const GridRegion& changed) {
       m.build_tile(t, /*keep_edges=*/true);
       m.world->addCollisionObject(t.object.get(), Impl::kGroupTerrain, Impl::kGroupBody);
     }
-    m.refresh_edges(t, changed);
+    // (renewed before a body comes near, or by renew_edges: about 1 ms for a car's track
+    // patch, the costliest part of its demotion's write; docs/BENCHMARKS.md "Internal edges
+    // renewed after the write")
+    if (!t.edges) continue;
+    const GridRegion c = intersect(changed, m.terrain->tile_region(t.tx, t.tz));
+    if (!c.empty()) t.stale.push_back(c);
   }
+}
+
+int BulletWorld::stale_edge_samples() const {
+  int n = 0;
+  for (const auto& t : impl_->tiles)
+    for (const GridRegion& r : t.stale) n += r.ni * r.nj;
+  return n;
+}
+
+int BulletWorld::renew_edges(int max_cells) {
+  auto& m = *impl_;
+  for (auto& t : m.tiles) {
+    while (!t.stale.empty()) {
+      GridRegion& r = t.stale.front();
+      if (max_cells <= 0) {
+        const GridRegion whole = r;
+        t.stale.erase(t.stale.begin());
+        m.refresh_edges(t, whole);  // (a whole tile's renewal clears the rest: build_edges)
+        continue;
+      }
+      // A strip across the region's longer side: whole columns (or rows) of it.
+      GridRegion strip = r;
+      if (r.ni >= r.nj) {
+        strip.ni = std::clamp(max_cells / std::max(1, r.nj), 1, r.ni);
+        r.i0 += strip.ni, r.ni -= strip.ni;
+      } else {
+        strip.nj = std::clamp(max_cells / std::max(1, r.ni), 1, r.nj);
+        r.j0 += strip.nj, r.nj -= strip.nj;
+      }
+      if (r.empty()) t.stale.erase(t.stale.begin());
+      m.refresh_edges(t, strip);
+      return stale_edge_samples();
+    }
+  }
+  return 0;
 }
 
 int BulletWorld::terrain_tile_count() const { return int(impl_->tiles.size()); }
@@ -445,6 +485,7 @@ BulletWorld::Stats BulletWorld::stats() const {
   for (const auto& t : m.tiles) s.edge_maps += t.edges != nullptr;
   s.edge_maps_built = m.edge_maps_built;
   s.edge_maps_refreshed = m.edge_maps_refreshed;
+  s.stale_edge_samples = stale_edge_samples();
   // btCollisionWorld::updateAabbs visits an object when forceUpdateAllAabbs is on or the object is active.
   s.aabb_updates_per_step = 0;
   const btCollisionObjectArray& objects = m.world->getCollisionObjectArray();

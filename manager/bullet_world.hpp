@@ -178,10 +178,17 @@ class BulletWorld {
   void step_frame(float dt, int substeps);
 
   // After the heightfield was edited: re-reads the heights of the tiles that hold a changed
-  // sample, updates their vertical bounds where the heights left them, and renews their
-  // internal-edge info around the change (not the whole tile's). No argument: every sample.
+  // sample and updates their vertical bounds where the heights left them. Their internal-edge
+  // info around the change (not the whole tile's) is renewed later: before a body comes within
+  // reach of it (the step's ensure_edges: a body never touches a triangle whose info is stale),
+  // or by renew_edges. No argument: every sample.
   void terrain_changed();
   void terrain_changed(const GridRegion& changed);  // samples
+  // Renews stale internal-edge info (terrain_changed): the first stale region's next strip of
+  // whole sample columns or rows (across its longer side) of about `max_cells` cells, at least
+  // one; max_cells <= 0: every stale region. Returns the samples still stale.
+  int renew_edges(int max_cells);
+  int stale_edge_samples() const;  // changed samples whose internal-edge info waits (Stats)
 
   int terrain_tile_count() const;
 
@@ -205,6 +212,7 @@ class BulletWorld {
     int edge_maps = 0;              // tiles with internal-edge info now (built when a body first comes near)
     int edge_maps_built = 0;        // internal-edge infos built over the world's life (rebuilds included)
     int edge_maps_refreshed = 0;    // partial renewals after terrain_changed (around the change only)
+    int stale_edge_samples = 0;     // changed samples whose internal-edge info waits to be renewed
   };
   Stats stats() const;
 

@@ -40,6 +40,9 @@ struct BulletWorld::Impl {
     // until a body first comes near the tile. Building it for every tile up front cost
     // ~4 µs and ~60 bytes per sample: 849 s and most of 4.6 GB for an 8192² terrain.
     std::unique_ptr<btTriangleInfoMap> edges;
+    // Regions of changed samples (whole terrain) whose internal-edge info is renewed later
+    // (terrain_changed): before a body comes near one (ensure_edges) or by renew_edges.
+    std::vector<GridRegion> stale;
     std::unique_ptr<btCollisionObject> object;
   };
   std::vector<Tile> tiles;
@@ -239,6 +242,7 @@ struct BulletWorld::Impl {
 
   static constexpr std::size_t kEagerEdgeTiles = 64;  // at most about 1 s at start-up
   void build_edges(Tile& t) {
+    t.stale.clear();
     t.edges = std::make_unique<btTriangleInfoMap>();
     t.shape->setTriangleInfoMap(nullptr);  // btGenerateInternalEdgeInfo skips a shape that has one
     btGenerateInternalEdgeInfo(t.shape.get(), t.edges.get());  // also hands the map to the shape
@@ -319,10 +323,34 @@ struct BulletWorld::Impl {
       if (!tile_range(lo.x(), hi.x(), hf.samples_x(), hf.tiles_x(), &tx0, &tx1) ||
           !tile_range(lo.z(), hi.z(), hf.samples_z(), hf.tiles_z(), &tz0, &tz1))
         continue;
+      // (the samples under the same window, for the stale regions it reaches)
+      const int si0 = int(std::floor((lo.x() - grow) / sp)), si1 = int(std::ceil((hi.x() + grow) / sp));
+      const int sj0 = int(std::floor((lo.z() - grow) / sp)), sj1 = int(std::ceil((hi.z() + grow) / sp));
+      const GridRegion window{si0, sj0, si1 - si0 + 1, sj1 - sj0 + 1};
       for (int tz = tz0; tz <= tz1; ++tz)
         for (int tx = tx0; tx <= tx1; ++tx) {
           Tile& t = tiles[std::size_t(tz) * hf.tiles_x() + tx];
-          if (!t.edges) build_edges(t);
+          if (!t.edges) {
+            build_edges(t);
+            continue;
+          }
+          // (the part of a stale region within the window now; the rest, up to four
+          // rectangles around it, stays stale)
+          for (std::size_t k = 0; k < t.stale.size();) {
+            const GridRegion r = t.stale[k], c = intersect(r, window);
+            if (c.empty()) {
+              ++k;
+              continue;
+            }
+            t.stale.erase(t.stale.begin() + std::ptrdiff_t(k));
+            const GridRegion rest[4] = {{r.i0, r.j0, r.ni, c.j0 - r.j0},
+                                        {r.i0, c.j0 + c.nj, r.ni, r.j0 + r.nj - (c.j0 + c.nj)},
+                                        {r.i0, c.j0, c.i0 - r.i0, c.nj},
+                                        {c.i0 + c.ni, c.j0, r.i0 + r.ni - (c.i0 + c.ni), c.nj}};
+            for (const GridRegion& q : rest)
+              if (!q.empty()) t.stale.push_back(q);
+            refresh_edges(t, c);  // (a whole tile's renewal clears the rest: build_edges)
+          }
         }
     }
   }

@@ -60,6 +60,10 @@ std::vector<float> floor_under_body(const Slot& slot, const Carried& c, const st
 // rows on two cores, the bands through the patch's middle the most, beside the 7–11 ms of the
 // patch stepping in the same frame (docs/BENCHMARKS.md "A patch that travels with its body").
 constexpr int kDepthRowsPerPart = 64;
+// Samples of stale internal-edge info renewed a frame (demote_idle): a strip of whole columns
+// of a changed region, computed with a cell more around it (docs/BENCHMARKS.md "Internal edges
+// renewed after the write").
+constexpr int kEdgeCellsPerPart = 64;
 
 // One part a frame, of one patch: a demotion is three renders' and writes' worth of work (the
 // fill's surface, the surface now, the heights written), and doing it all in one frame was
@@ -89,6 +93,17 @@ Status TerrainManager::Impl::demote_idle(double time) {
       ++early_releases;
       return release(s, time);
     }
+  // Bullet's internal-edge info of the heights the writes changed, left for later by
+  // terrain_changed (about 1 ms for a car's track patch, most of its write): a strip of about
+  // kEdgeCellsPerPart cells a frame (0.2-0.3 ms), so stale regions do not pile up. (A body
+  // coming near a stale region has it renewed before its step: BulletWorld::ensure_edges.)
+  if (world->stale_edge_samples() > 0) {
+    const auto t0 = Clock::now();
+    world->renew_edges(kEdgeCellsPerPart);
+    time_part(Part::Edges, ms_since(t0));
+    ++work.conversion_parts;
+    return Ok{};
+  }
   return render_baselines(time, /*whole=*/false);
 }
 

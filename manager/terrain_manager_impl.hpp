@@ -88,8 +88,8 @@ struct TerrainManager::Impl {
   TerrainManager::FrameWork work;               // this frame's work (reset by before_bodies)
   // Wall time of the conversion parts run one a frame, by kind (report: conversion_parts):
   // what a frame that runs one pays (docs/manager.md "No frame does a whole patch's work").
-  enum class Part { Reset, Cut, Upload, Render, HatMeans, Write };
-  static constexpr std::array<const char*, 6> kPartNames{"reset", "cut", "upload", "render", "hat_means", "write"};
+  enum class Part { Reset, Cut, Upload, Render, HatMeans, Write, Edges };
+  static constexpr std::array<const char*, 7> kPartNames{"reset", "cut", "upload", "render", "hat_means", "write", "edges"};
   struct PartTime {
     long long count = 0;
     double total_ms = 0, max_ms = 0;

@@ -183,36 +183,69 @@ TEST(BulletWorld, SeesHeightfieldEditsWithoutCopy) {
 // After a demotion writes a crater (inside the tile's height range) or a mound (above it), the
 // tile's internal-edge info is renewed around the change only, and it is what a full build on
 // the new heights gives: the same triangles, the same flags, angles within 1e-5 rad (the
-// sub-heightfield's vertices are the same points, shifted). No whole map is built again.
+// sub-heightfield's vertices are the same points, shifted). No whole map is built again. The
+// renewal waits (terrain_changed marks the change stale) until renew_edges: all at once, or a
+// strip of 8 cells at a time (every strip computed with its neighbours: the same entries).
 TEST(BulletWorld, TerrainChangeRenewsEdgeInfoAroundTheChangeOnly) {
-  for (const float dh : {-0.3f, 2.0f}) {
-    Heightfield hf = flat(41, 0.5f, 40);  // one tile of 40 cells
-    for (int j = 0; j < 41; ++j)
-      for (int i = 0; i < 41; ++i) hf.set_height(i, j, 0.05f * std::sin(0.7f * i) * std::cos(0.5f * j));
-    auto w = BulletWorld::create(hf, {0, -9.81f, 0});
-    ASSERT_TRUE(w.ok());
-    ASSERT_EQ((*w)->stats().edge_maps_built, 1);  // small terrains build it at once
-    const GridRegion r{12, 17, 6, 5};
-    for (int j = r.j0; j < r.j0 + r.nj; ++j)
-      for (int i = r.i0; i < r.i0 + r.ni; ++i) hf.set_height(i, j, hf.height(i, j) + dh * (1.0f + 0.1f * float(i - j)));
-    (*w)->terrain_changed(r);
-    EXPECT_EQ((*w)->stats().edge_maps_built, 1) << "dh " << dh;
-    EXPECT_EQ((*w)->stats().edge_maps_refreshed, 1) << "dh " << dh;
-    const auto renewed = (*w)->tile_edge_info(0);
-    auto fresh_world = BulletWorld::create(hf, {0, -9.81f, 0});
-    ASSERT_TRUE(fresh_world.ok());
-    const auto full = (*fresh_world)->tile_edge_info(0);
-    ASSERT_EQ(renewed.size(), full.size()) << "dh " << dh;
-    int differ = 0;
-    for (std::size_t k = 0; k < full.size(); ++k) {
-      const bool same = renewed[k].key == full[k].key && renewed[k].flags == full[k].flags &&
-                        std::abs(renewed[k].angles[0] - full[k].angles[0]) < 1e-5f &&
-                        std::abs(renewed[k].angles[1] - full[k].angles[1]) < 1e-5f &&
-                        std::abs(renewed[k].angles[2] - full[k].angles[2]) < 1e-5f;
-      differ += !same;
+  for (const int strip : {0, 8})
+    for (const float dh : {-0.3f, 2.0f}) {
+      Heightfield hf = flat(41, 0.5f, 40);  // one tile of 40 cells
+      for (int j = 0; j < 41; ++j)
+        for (int i = 0; i < 41; ++i) hf.set_height(i, j, 0.05f * std::sin(0.7f * i) * std::cos(0.5f * j));
+      auto w = BulletWorld::create(hf, {0, -9.81f, 0});
+      ASSERT_TRUE(w.ok());
+      ASSERT_EQ((*w)->stats().edge_maps_built, 1);  // small terrains build it at once
+      const auto before = (*w)->tile_edge_info(0);
+      const GridRegion r{12, 17, 6, 5};
+      for (int j = r.j0; j < r.j0 + r.nj; ++j)
+        for (int i = r.i0; i < r.i0 + r.ni; ++i) hf.set_height(i, j, hf.height(i, j) + dh * (1.0f + 0.1f * float(i - j)));
+      (*w)->terrain_changed(r);
+      EXPECT_EQ((*w)->stats().edge_maps_refreshed, 0) << "dh " << dh << ": renewed before renew_edges";
+      EXPECT_EQ((*w)->stats().stale_edge_samples, 30) << "dh " << dh;
+      EXPECT_EQ((*w)->tile_edge_info(0).size(), before.size());
+      int renewals = 0;
+      for (int left = 1; left > 0 && renewals < 100; ++renewals) left = (*w)->renew_edges(strip);
+      EXPECT_EQ((*w)->stats().stale_edge_samples, 0);
+      EXPECT_EQ((*w)->stats().edge_maps_built, 1) << "dh " << dh;
+      if (strip == 0) EXPECT_EQ((*w)->stats().edge_maps_refreshed, 1) << "dh " << dh;
+      else EXPECT_GE((*w)->stats().edge_maps_refreshed, 30 / strip) << "dh " << dh << ": strips of " << strip << " cells";
+      const auto renewed = (*w)->tile_edge_info(0);
+      auto fresh_world = BulletWorld::create(hf, {0, -9.81f, 0});
+      ASSERT_TRUE(fresh_world.ok());
+      const auto full = (*fresh_world)->tile_edge_info(0);
+      ASSERT_EQ(renewed.size(), full.size()) << "dh " << dh;
+      int differ = 0;
+      for (std::size_t k = 0; k < full.size(); ++k) {
+        const bool same = renewed[k].key == full[k].key && renewed[k].flags == full[k].flags &&
+                          std::abs(renewed[k].angles[0] - full[k].angles[0]) < 1e-5f &&
+                          std::abs(renewed[k].angles[1] - full[k].angles[1]) < 1e-5f &&
+                          std::abs(renewed[k].angles[2] - full[k].angles[2]) < 1e-5f;
+        differ += !same;
+      }
+      EXPECT_EQ(differ, 0) << "dh " << dh << ", strips of " << strip << ": entries differing from a full build";
     }
-    EXPECT_EQ(differ, 0) << "dh " << dh << ": entries differing from a full build";
+}
+
+// A body never touches stale internal-edge info: a change within a metre of a resting ball is
+// renewed before the ball's next step, one 10 m away waits for renew_edges.
+TEST(BulletWorld, ChangedEdgesNearABodyAreRenewedBeforeItsStep) {
+  Heightfield hf = flat(41, 0.5f, 40);  // one tile of 40 cells, 20 m
+  auto w = BulletWorld::create(hf, {0, -9.81f, 0});
+  ASSERT_TRUE(w.ok());
+  auto id = (*w)->add_body(ball({4.0, 0.5, 4.0}));
+  ASSERT_TRUE(id.ok());
+  const GridRegion near{9, 9, 3, 3}, far{30, 30, 3, 3};  // samples 4.5-5.5 m and 15-16 m
+  for (const GridRegion& r : {near, far}) {
+    for (int j = r.j0; j < r.j0 + r.nj; ++j)
+      for (int i = r.i0; i < r.i0 + r.ni; ++i) hf.set_height(i, j, -0.2f);
+    (*w)->terrain_changed(r);
   }
+  EXPECT_EQ((*w)->stats().stale_edge_samples, 18);
+  (*w)->step(1.0f / 60.0f);
+  EXPECT_EQ((*w)->stats().stale_edge_samples, 9) << "the change near the ball renewed, the far one waiting";
+  EXPECT_EQ((*w)->stats().edge_maps_refreshed, 1);
+  EXPECT_EQ((*w)->renew_edges(0), 0);
+  EXPECT_EQ((*w)->stats().edge_maps_refreshed, 2);
 }
 
 // An idle tile costs a step nothing, counted rather than timed (BulletWorld::stats): the same

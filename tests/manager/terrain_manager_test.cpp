@@ -687,7 +687,7 @@ TEST(TerrainManager, BodyDrivenAcrossPatchEdgeStaysOnParticles) {
 // and every patch's volume ledger closes within 1 %.
 TEST(TerrainManager, APatchTravelsWithTheBodyItCarries) {
   struct Outcome {
-    int two_stepping = 0, off_particles = 0, driven = 0, travels = 0, extensions = 0;
+    int two_stepping = 0, off_particles = 0, driven = 0, travels = 0, extensions = 0, edge_parts = 0;
     long long springs = 0;  // contact springs handed over with the granules taken
     double worst_patch_error = 0, hop = 0, x = 0;
   };
@@ -720,6 +720,7 @@ TEST(TerrainManager, APatchTravelsWithTheBodyItCarries) {
     o.x = world.state(*id).position.x();
     ASSERT_TRUE(rig.demote_all().ok()) << rig.error;
     const auto rep = rig.manager->report();
+    o.edge_parts = rep["conversion_parts"]["edges"]["count"].get<int>();
     o.travels = rep["pool"]["travels"].get<int>();
     o.springs = rep["pool"]["springs_handed_over"].get<long long>();
     o.extensions = rep["pool"]["extensions"].get<int>();
@@ -735,6 +736,9 @@ TEST(TerrainManager, APatchTravelsWithTheBodyItCarries) {
               off.extensions, off.two_stepping, off.off_particles, off.driven);
   EXPECT_GT(on.x, 3.0 + 0.8) << "the sphere was driven past the first patch's edge";
   EXPECT_GE(on.travels, 1);
+  // The sphere rides the successor (no contact with the heightfield) while its predecessor's
+  // heights are written: Bullet's internal-edge info there is renewed in parts of its own.
+  EXPECT_GE(on.edge_parts, on.travels) << "edges parts";
   // The granules taken over keep their contacts' springs (docs/dem.md "Carried springs"): a
   // settled bed holds a few per granule.
   EXPECT_GT(on.springs, 100 * on.travels) << "springs handed over in " << on.travels << " take-overs";
@@ -801,14 +805,18 @@ TEST(TerrainManager, NoFrameDoesMoreThanOneConversionPart) {
   ASSERT_TRUE(rig.start(def).ok()) << rig.error;
   TerrainManager& m = *rig.manager;
   int part_frames = 0, promotion_frames = 0, demotion_frames = 0, promotions = 0, demotions = 0, urgent = 0;
-  int most_uploaded = 0, frames_to_ready = -1;
-  for (int f = 0; f < 360 && demotions < 2; ++f) {
+  int most_uploaded = 0, frames_to_ready = -1, edge_frames = 0;
+  // (after the second write, the frames that renew Bullet's internal-edge info of its heights)
+  for (int f = 0; f < 360 && (demotions < 2 || rig.world->stale_edge_samples() > 0); ++f) {
+    const int stale = rig.world->stale_edge_samples();
     ASSERT_TRUE(rig.frame().ok()) << rig.error;
     const TerrainManager::FrameWork& w = m.last_frame_work();
     EXPECT_LE(w.conversion_parts, 1) << "frame " << f;
     EXPECT_LE(w.granules_uploaded, def.fill_granules_per_frame) << "frame " << f;
     EXPECT_LE(w.demotion_parts, 1) << "frame " << f;
     EXPECT_LE(w.depth_renders, 1) << "frame " << f;
+    // (less stale, without a conversion part: the spheres' steps renewed what lies near them)
+    edge_frames += w.conversion_parts == 0 && rig.world->stale_edge_samples() < stale;
     part_frames += w.conversion_parts > 0;
     promotion_frames += w.conversion_parts > 0 && w.demotion_parts == 0;
     demotion_frames += w.demotion_parts > 0;
@@ -835,8 +843,14 @@ TEST(TerrainManager, NoFrameDoesMoreThanOneConversionPart) {
   EXPECT_EQ(kinds["reset"]["count"].get<int>(), 2);
   EXPECT_EQ(kinds["hat_means"]["count"].get<int>(), 4) << "each image's, of each patch";
   EXPECT_EQ(kinds["write"]["count"].get<int>(), 2);
+  // Bullet's internal-edge info of the written heights: renewed where the spheres rest before
+  // their next step, the rest in parts of its own (BulletWorld::renew_edges), all of it by the
+  // end.
+  const int edge_parts = kinds["edges"]["count"].get<int>();
+  EXPECT_GE(edge_frames, 1) << "renewed around a sphere";
+  EXPECT_EQ(rig.world->stale_edge_samples(), 0);
   EXPECT_EQ(kinds["render"]["count"].get<int>(), parts - 6);
-  EXPECT_EQ(kinds["cut"]["count"].get<int>() + kinds["upload"]["count"].get<int>() + 2, promotion_frames);
+  EXPECT_EQ(kinds["cut"]["count"].get<int>() + kinds["upload"]["count"].get<int>() + 2 + edge_parts, promotion_frames);
   for (const auto& [kind, t] : kinds.items()) EXPECT_LE(t["mean_ms"].get<double>(), t["max_ms"].get<double>()) << kind;
   // Each promotion: a reset, at least one part of the cut, and its uploads (at most 64 a frame).
   int granules = 0, uploads = 0;
