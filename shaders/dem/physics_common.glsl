@@ -258,6 +258,20 @@ SP_INLINE bool boundary_plane(Boundaries b, SP_TERRAIN_GRID t, int slot, vec3 p,
     const float hh = terrain_height(t, p.x, p.z);
     n = terrain_normal(t, p.x, p.z);
     dist = (p.y - hh) * n.y;
+    // Below the surface, past the rectangle's side by less than it is deep: the side's face
+    // (slots 1-4 from inside) pushes it back into the rectangle, the overlap growing from r as
+    // the centre crosses it. (Pushed up instead, a granule a wheel shoved across a side 0.3 m
+    // under the surface took 7 r of overlap at once and was fired out of the sand, and the
+    // car's shells with it: a run ended in NaN; docs/dem.md "Contact model", boundaries.)
+    if (dist < 0.0f) {
+      const float ox = p.x < t.fill_min_x ? t.fill_min_x - p.x : (p.x > t.fill_max_x ? t.fill_max_x - p.x : 0.0f);
+      const float oz = p.z < t.fill_min_z ? t.fill_min_z - p.z : (p.z > t.fill_max_z ? t.fill_max_z - p.z : 0.0f);
+      const float back = sqrt(ox * ox + oz * oz);  // m, to the rectangle (the way back in)
+      if (back < -dist) {
+        n = vec3(ox, 0.0f, oz) * (1.0f / back);
+        dist = -back;
+      }
+    }
     return dist < r;
   }
   if (b.walls) {

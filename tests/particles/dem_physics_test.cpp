@@ -90,6 +90,22 @@ TEST(DemPhysics, TerrainSurfaceAndFillSides) {
   // far above the edge: no contact
   EXPECT_FALSE(physics::boundary_plane(b, t, 1, Vec3{t.fill_min_x + 0.002f, hs + 0.01f, 0.1f}, r, n, dist));
   EXPECT_FALSE(physics::boundary_plane(b, t, 5, Vec3{0.1f, 1.0f, 0.1f}, r, n, dist));  // inside: no surface
+  // past the side x = fill_min_x by 2 mm, 20 mm below the outside surface: pushed back through
+  // the side (overlap r + 2 mm), not up through 20 mm of soil; 1 mm below it: up, the nearer
+  const float hb = physics::terrain_height(t, t.fill_min_x - 0.002f, 0.1f);
+  ASSERT_TRUE(physics::boundary_plane(b, t, 5, Vec3{t.fill_min_x - 0.002f, hb - 0.02f, 0.1f}, r, n, dist));
+  EXPECT_NEAR(n.x, 1.0f, 1e-6f);
+  EXPECT_EQ(n.y, 0.0f);
+  EXPECT_NEAR(dist, -0.002f, 1e-6f);
+  ASSERT_TRUE(physics::boundary_plane(b, t, 5, Vec3{t.fill_min_x - 0.002f, hb - 0.001f, 0.1f}, r, n, dist));
+  EXPECT_GT(n.y, 0.9f);
+  EXPECT_NEAR(dist, -0.001f * n.y, 1e-6f);
+  // past a corner (2 mm in x, 3 mm in z) deep below: back toward the corner, 3.6 mm
+  const float hc = physics::terrain_height(t, t.fill_min_x - 0.002f, t.fill_min_z - 0.003f);
+  ASSERT_TRUE(physics::boundary_plane(b, t, 5, Vec3{t.fill_min_x - 0.002f, hc - 0.02f, t.fill_min_z - 0.003f}, r, n, dist));
+  EXPECT_NEAR(dist, -std::sqrt(0.002f * 0.002f + 0.003f * 0.003f), 1e-6f);
+  EXPECT_NEAR(n.x, 0.002f / -dist, 1e-5f);
+  EXPECT_NEAR(n.z, 0.003f / -dist, 1e-5f);
 }
 
 }  // namespace sandpatch
