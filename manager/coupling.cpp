@@ -405,6 +405,12 @@ void TerrainManager::Impl::choose_carriers() {
     next[body_key(b)] = best;
   }
   carrier.swap(next);
+  // A body no patch carries meets the heightfield, whatever patch last carried it (one that
+  // is being released, held and not coupled, left a car's wheel with its heightfield
+  // collision off: it fell through the terrain for 0.15 s, and the patch that took it up
+  // next found it 0.3 m deep in its granules).
+  for (RigidBodyId b : world->bodies())
+    if (!carried_anywhere(b)) world->set_terrain_collision(b, true);
 }
 
 // A body lying on the terrain: its lowest point within one granule diameter (at the coarsest

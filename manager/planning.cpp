@@ -478,9 +478,9 @@ bool TerrainManager::Impl::ask_successor(Slot& s, const PatchRequest& r, int sid
 // Whether a body is over a patch, or near it (within half lod.apron of its region, below
 // engage_height over its surface), or it carries one: such a patch is not released. One that
 // never carried a body (released only for a body another patch carries: release_idle) is
-// wanted while a body no patch carries lies over it.
+// wanted while a body is coming to it (body_coming).
 bool TerrainManager::Impl::wanted_for_release(const Slot& s) const {
-  if (s.carried.empty()) return uncarried_body_over(s);
+  if (s.carried.empty()) return body_coming(s);
   for (const Carried& c : s.carried)
     if (c.enabled && world->alive(c.body)) return true;
   const PatchRequest a = rect(s);
@@ -507,22 +507,27 @@ Status TerrainManager::Impl::release(Slot& s, double time) {
   return Ok{};
 }
 
-// Whether a body no patch carries lies over s (its footprint over s's region, at any height:
-// a body falling onto it).
-bool TerrainManager::Impl::uncarried_body_over(const Slot& s) const {
+// Whether a body is coming to s: one no patch carries lies over it (its footprint over s's
+// region, at any height: a body falling onto it), or one another patch carries has its
+// centre over it (a patch just filled ahead of a wheel that its old patch still carries: the
+// wheel is handed over at the next coupling).
+bool TerrainManager::Impl::body_coming(const Slot& s) const {
   const PatchRequest a = rect(s);
   for (RigidBodyId b : world->bodies()) {
-    if (carried_anywhere(b)) continue;
     Eigen::Vector3d lo, hi;
     world->bounds(b, &lo, &hi);
-    if (lo.x() < a.x1 && hi.x() > a.x0 && lo.z() < a.z1 && hi.z() > a.z0) return true;
+    if (!carried_anywhere(b)) {
+      if (lo.x() < a.x1 && hi.x() > a.x0 && lo.z() < a.z1 && hi.z() > a.z0) return true;
+      continue;
+    }
+    const double cx = 0.5 * (lo.x() + hi.x()), cz = 0.5 * (lo.z() + hi.z());
+    if (cx > a.x0 && cx < a.x1 && cz > a.z0 && cz < a.z1) return true;
   }
   return false;
 }
 
 // A patch no body has reached yet is kept for the body it was made for, except from a
-// request for a body a patch carries: then one that no body it could carry lies over is
-// released (a car's patch asked for beside a wheel that drove on alongside kept one of three
+// request for a body a patch carries: then one that no body is coming to is released (a car's patch asked for beside a wheel that drove on alongside kept one of three
 // slots, asleep or held by the budget, and the car's successors waited for it: its wheels ran
 // on the heightfield; docs/manager.md "A patch that travels with its body").
 Result<bool> TerrainManager::Impl::release_idle(double time, bool for_carried) {

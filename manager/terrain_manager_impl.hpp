@@ -404,7 +404,7 @@ struct TerrainManager::Impl {
   // successor, or the patch abutting ahead of it).
   Result<bool> release_idle(double time, bool for_carried);
   bool wanted_for_release(const Slot& s) const;
-  bool uncarried_body_over(const Slot& s) const;
+  bool body_coming(const Slot& s) const;
 
   // ---- filling (filling.cpp): Stage::Activation ----
   // Serves the queue while slots are free, then uploads a chunk of every filling patch.
