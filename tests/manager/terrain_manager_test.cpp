@@ -630,6 +630,18 @@ static Result<RigidBodyId> start_driven_sphere(test::Rig& rig, const TerrainMana
   return id;
 }
 
+// Once the sphere has landed and settled (t >= 1 s), it is driven along x at 0.4 m/s before
+// each frame: `driven` counts those frames, `off_particles` those in which it met the
+// heightfield rather than a patch's granules.
+static void drive_sphere(test::Rig& rig, RigidBodyId id, int& driven, int& off_particles) {
+  if (rig.t() < 1.0) return;
+  BodyState st = rig.world->state(id);
+  st.linear_velocity = {0.4f, st.linear_velocity.y(), 0.0f};
+  rig.world->set_state(id, st);
+  ++driven;
+  off_particles += rig.world->terrain_collision(id);
+}
+
 // A body driven across a patch's edge (Leach & Marais left it open): a sphere
 // resting in the sand is pushed sideways at 0.4 m/s for 3 s, 1.2 m, past the edge of the
 // patch it landed on. A patch is asked for ahead of it, filled while it comes, and takes it
@@ -643,13 +655,7 @@ TEST(TerrainManager, BodyDrivenAcrossPatchEdgeStaysOnParticles) {
   BulletWorld& world = *rig.world;
   int off_particles = 0, driven = 0;
   for (int f = 0; f < 240; ++f) {
-    if (rig.t() >= 1.0) {  // landed and settled: drive it
-      BodyState st = world.state(*id);
-      st.linear_velocity = {0.4f, st.linear_velocity.y(), 0.0f};
-      world.set_state(*id, st);
-      ++driven;
-      off_particles += world.terrain_collision(*id);
-    }
+    drive_sphere(rig, *id, driven, off_particles);
     ASSERT_TRUE(rig.frame().ok()) << rig.error;
     // The patch behind is released one part a frame, the one ahead promoted a part a frame.
     const TerrainManager::FrameWork& w = rig.manager->last_frame_work();
@@ -767,13 +773,7 @@ TEST(TerrainManager, APatchNoBodyReachedGivesItsSlotToACarriedBodysSuccessor) {
   BulletWorld& world = *rig.world;
   int off_particles = 0, driven = 0;
   for (int f = 0; f < 240; ++f) {
-    if (rig.t() >= 1.0) {  // landed and settled: drive it
-      BodyState st = world.state(*id);
-      st.linear_velocity = {0.4f, st.linear_velocity.y(), 0.0f};
-      world.set_state(*id, st);
-      ++driven;
-      off_particles += world.terrain_collision(*id);
-    }
+    drive_sphere(rig, *id, driven, off_particles);
     ASSERT_TRUE(rig.frame().ok()) << rig.error;
   }
   const auto rep = m.report();
