@@ -309,7 +309,7 @@ struct BulletWorld::Impl {
       btVector3 lo, hi;
       b.rb->getCollisionShape()->getAabb(b.rb->getWorldTransform(), lo, hi);
       const float grow = kEdgeReach + 2.0f * dt * b.rb->getLinearVelocity().length();
-      if (!std::isfinite(grow)) continue;  // a broken body: run.cpp reports it after the step
+      if (!std::isfinite(grow + lo.x() + lo.z() + hi.x() + hi.z())) continue;  // a broken body: run.cpp reports it after the step
       // Tile t holds samples [t·cells, (t+1)·cells] (neighbours share the edge sample; the
       // last tile takes the rest): the samples under [a − grow, c + grow] (m, local).
       auto tile_range = [&](float a, float c, int samples, int count, int* t0, int* t1) {

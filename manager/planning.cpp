@@ -527,9 +527,10 @@ bool TerrainManager::Impl::body_coming(const Slot& s) const {
 }
 
 // A patch no body has reached yet is kept for the body it was made for, except from a
-// request for a body a patch carries: then one that no body is coming to is released (a car's patch asked for beside a wheel that drove on alongside kept one of three
-// slots, asleep or held by the budget, and the car's successors waited for it: its wheels ran
-// on the heightfield; docs/manager.md "A patch that travels with its body").
+// request for a body a patch carries: then one that no body is coming to is released (a car's
+// patch asked for beside a wheel that drove on alongside kept one of three slots, asleep or
+// held by the budget, and the car's successors waited for it: its wheels ran on the
+// heightfield; docs/manager.md "No frame does a whole patch's work", "Release").
 Result<bool> TerrainManager::Impl::release_idle(double time, bool for_carried) {
   for (Slot& s : slots)
     if (s.demotion.releasing) return true;
