@@ -549,11 +549,12 @@ Status TerrainManager::Impl::couple_before(Slot& slot, double dt) {
       if (Status e = slot.sim->set_body_enabled(c.shell, touch); !e) return e.errors();
       c.enabled = touch;
     }
-    // Only the carrier decides the heightfield collision; a body no patch carries meets it, and
-    // so does one its carrier lets go of (a joined body that felt no soil above its join
-    // height, above: its collision stayed as the carrier last set it, off).
+    // Only the carrier decides the heightfield collision (a body no patch carries meets it:
+    // choose_carriers, just before); one its carrier lets go of meets it too (a joined body
+    // that felt no soil above its join height, above: its collision stayed as the carrier last
+    // set it, off).
     if (touch) world->set_terrain_collision(b, !inside);
-    else if (!carried_anywhere(b) || carries(self, b)) world->set_terrain_collision(b, true);
+    else if (carries(self, b)) world->set_terrain_collision(b, true);
     if (!touch) continue;
     // The shell starts the frame where Bullet has the body.
     c.v0 = st.linear_velocity;
